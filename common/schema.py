@@ -1,0 +1,106 @@
+"""The configuration schema: every key a program accepts, with its unit and bounds.
+
+One table per part of the system; :mod:`haptic.common.config` holds the rules that apply it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from haptic.common.config import Field, Schema
+
+
+def _leading_nonzero(coefficients: list[float]) -> str | None:
+    if coefficients[0] == 0.0 and any(c != 0.0 for c in coefficients):
+        return "leading coefficient (highest power of s first) must be non-zero"
+    return None
+
+
+def _nonzero_polynomial(coefficients: list[float]) -> str | None:
+    if all(c == 0.0 for c in coefficients):
+        return "must not be the zero polynomial"
+    return _leading_nonzero(coefficients)
+
+
+def _diagonal_nonsingular(matrix: Any) -> str | None:
+    if matrix[0][1] != 0.0 or matrix[1][0] != 0.0:
+        return "must be diagonal (the x and y axes are independent)"
+    if matrix[0][0] == 0.0 or matrix[1][1] == 0.0:
+        return "is singular (a zero diagonal element); it must be invertible"
+    return None
+
+
+def _polynomial(doc: str) -> Field:
+    return Field("float_list", doc, check=_leading_nonzero)
+
+
+def _denominator(doc: str) -> Field:
+    return Field("float_list", doc, check=_nonzero_polynomial)
+
+
+AXIS_SCHEMA: Schema = {
+    "handle_actuator_gh_num": _polynomial(
+        "Gh numerator in s: handle actuator with operator, position command (m) to handle "
+        "position (m), dimensionless (paper eqs 31, 32)."
+    ),
+    "handle_actuator_gh_den": _denominator("Gh denominator in s."),
+    "operator_impedance_th": _polynomial(
+        "Th, operator arm impedance polynomial in s, N/m: [kg, N s/m, N/m] (eq 33)."
+    ),
+    "environment_impedance_tt": _polynomial(
+        "Tt, environment impedance polynomial in s, N/m (eq 33)."
+    ),
+    "handle_compliance_sh_num": _polynomial("Sh numerator, handle compliance, m/N."),
+    "handle_compliance_sh_den": _denominator("Sh denominator."),
+    "tool_compliance_st_num": _polynomial("St numerator, tool compliance, m/N."),
+    "tool_compliance_st_den": _denominator("St denominator."),
+    "tool_mass_kg": Field("float", "Mt, virtual tool mass, kg (eq 5).", minimum=0.0),
+    "tool_damping_N_s_per_m": Field(
+        "float", "Bt, viscous damping of tool actuator and clay, N s/m (eq 5).", minimum=0.0
+    ),
+    "tool_stiffness_N_per_m": Field("float", "Kt, tool spring stiffness, N/m (eq 5).", minimum=0.0),
+}
+
+MODEL_SCHEMA: Schema = {
+    "sample_period_s": Field(
+        "float", "Ts, the control period of both sides, s.", minimum=0.0, exclusive_minimum=True
+    ),
+    "position_ratio_ah1": Field(
+        "matrix2", "Ah1, diagonal position ratio, yt = Ah1 yh, dimensionless.",
+        check=_diagonal_nonsingular,
+    ),
+    "force_ratio_ah2": Field(
+        "matrix2", "Ah2, diagonal force ratio, ft = Ah2 fh^e, dimensionless.",
+        check=_diagonal_nonsingular,
+    ),
+    "ch1": {
+        "gain_k": Field("float", "k in Ch1 = k num/den, m/N per unit of num/den.", minimum=0.0,
+                        exclusive_minimum=True),
+        "num": _polynomial("Ch1 numerator in s (before the gain k)."),
+        "den": _denominator("Ch1 denominator in s."),
+    },
+    "x": AXIS_SCHEMA,
+    "y": AXIS_SCHEMA,
+}
+
+ANALYSIS_SCHEMA: Schema = {
+    "round_trip_delay_s": Field(
+        "float", "Round-trip network delay tau analysed by default, s.", minimum=0.0
+    ),
+    "max_frequency_rad_s": Field(
+        "float", "Upper end of the frequency grid, rad/s.", minimum=0.0, exclusive_minimum=True
+    ),
+    "max_delay_s": Field(
+        "float", "Largest round-trip delay searched for margins and maps, s.", minimum=0.0,
+        exclusive_minimum=True,
+    ),
+    "max_gain_k": Field(
+        "float", "Largest Ch1 gain k searched for k_max, m/N.", minimum=0.0,
+        exclusive_minimum=True,
+    ),
+}
+
+SCHEMA: Schema = {
+    "model": MODEL_SCHEMA,
+    "analysis": ANALYSIS_SCHEMA,
+}
