@@ -3,8 +3,9 @@
 Rules, the same for every program:
 
 - The shipped defaults (``defaults/paper.toml``) are the paper's values.
-- A user file replaces whole tables: every plain key of a table it contains must be present
-  (a missing key is an error), while sub-tables it leaves out keep their defaults.
+- A user file replaces whole tables: a table that sets any plain key must set all of them
+  (a missing key is an error); tables it leaves out, or mentions only as the parent of a
+  sub-table, keep their defaults.
 - Unknown tables or keys, wrong types and out-of-range values are errors.
 - Every error is a :class:`ConfigError` whose message names the dotted key; programs print it
   on one line and exit with status 2 (see :func:`exit_on_config_error`).
@@ -135,12 +136,18 @@ def validate_table(
         if name not in schema:
             raise ConfigError(_join(prefix, name), "unknown key")
     result: dict[str, Any] = {}
+    # A table that gives none of its own plain keys (only sub-tables, as [model.ch1] alone
+    # implies [model]) keeps the default plain keys; one that gives any must give them all.
+    gives_plain_keys = any(isinstance(schema[name], Field) for name in table)
     for name, spec in schema.items():
         key = _join(prefix, name)
         if isinstance(spec, Field):
-            if name not in table:
+            if name in table:
+                result[name] = _validate_field(key, spec, table[name])
+            elif not gives_plain_keys and name in defaults:
+                result[name] = defaults[name]
+            else:
                 raise ConfigError(key, "missing key")
-            result[name] = _validate_field(key, spec, table[name])
         elif name in table:
             result[name] = validate_table(table[name], spec, defaults.get(name, {}), key)
         elif name in defaults:

@@ -25,9 +25,23 @@ from haptic.common.config import ConfigError
 AXES = ("x", "y")
 
 
+#: Coefficients smaller than this fraction of a polynomial's largest are rounding noise.
+NEGLIGIBLE_COEFFICIENT = 1e-14
+
+
+def clean_polynomial(coefficients: list[float] | np.ndarray) -> np.ndarray:
+    """Coefficients (highest power first) with negligible ones set to zero and leading
+    zeros dropped; the zero polynomial is [0.0]."""
+    values = np.atleast_1d(np.asarray(coefficients, float)).copy()
+    scale = float(np.max(np.abs(values))) if values.size else 0.0
+    values[np.abs(values) < NEGLIGIBLE_COEFFICIENT * scale] = 0.0
+    nonzero = np.flatnonzero(values)
+    return np.array([0.0]) if nonzero.size == 0 else values[nonzero[0]:]
+
+
 def tf(num: list[float] | np.ndarray, den: list[float] | np.ndarray) -> control.TransferFunction:
     """A SISO continuous-time transfer function from coefficient lists (highest power first)."""
-    return control.tf(np.atleast_1d(np.asarray(num, float)), np.atleast_1d(np.asarray(den, float)))
+    return control.tf(clean_polynomial(num), clean_polynomial(den))
 
 
 def polynomial_degree(coefficients: np.ndarray) -> int:
@@ -76,7 +90,8 @@ class AxisModel:
     @property
     def tool_actuator_gt(self) -> control.TransferFunction:
         """Gt = 1/(Mt s^2 + Bt s + Kt), actuator force (N) -> tool position (m) (eq 5)."""
-        return tf([1.0], [self.tool_mass_kg, self.tool_damping_N_s_per_m, self.tool_stiffness_N_per_m])
+        return tf([1.0], [self.tool_mass_kg, self.tool_damping_N_s_per_m,
+                          self.tool_stiffness_N_per_m])
 
     def with_environment(self, impedance_N_per_m: np.ndarray) -> AxisModel:
         """A copy with another environment impedance Tt (e.g. the clay as B s)."""

@@ -30,6 +30,17 @@ def _diagonal_nonsingular(matrix: Any) -> str | None:
     return None
 
 
+#: Smallest non-zero tool parameter accepted (in its own SI unit): below it the value is
+#: rounding noise that would make Gt's response overflow.
+SMALLEST_NONZERO_PARAMETER = 1e-9
+
+
+def _zero_or_meaningful(value: float) -> str | None:
+    if 0.0 < value < SMALLEST_NONZERO_PARAMETER:
+        return f"must be 0 or at least {SMALLEST_NONZERO_PARAMETER:g} (got {value:g})"
+    return None
+
+
 def _polynomial(doc: str) -> Field:
     return Field("float_list", doc, check=_leading_nonzero)
 
@@ -54,11 +65,14 @@ AXIS_SCHEMA: Schema = {
     "handle_compliance_sh_den": _denominator("Sh denominator."),
     "tool_compliance_st_num": _polynomial("St numerator, tool compliance, m/N."),
     "tool_compliance_st_den": _denominator("St denominator."),
-    "tool_mass_kg": Field("float", "Mt, virtual tool mass, kg (eq 5).", minimum=0.0),
+    "tool_mass_kg": Field("float", "Mt, virtual tool mass, kg (eq 5).", minimum=0.0,
+                          check=_zero_or_meaningful),
     "tool_damping_N_s_per_m": Field(
-        "float", "Bt, viscous damping of tool actuator and clay, N s/m (eq 5).", minimum=0.0
+        "float", "Bt, viscous damping of tool actuator and clay, N s/m (eq 5).", minimum=0.0,
+        check=_zero_or_meaningful,
     ),
-    "tool_stiffness_N_per_m": Field("float", "Kt, tool spring stiffness, N/m (eq 5).", minimum=0.0),
+    "tool_stiffness_N_per_m": Field("float", "Kt, tool spring stiffness, N/m (eq 5).", minimum=0.0,
+                                    check=_zero_or_meaningful),
 }
 
 MODEL_SCHEMA: Schema = {

@@ -79,9 +79,9 @@ def cancel_common_roots(
                 continue
         kept_zeros.append(zero)
     gain = num[0] / den[0]
-    new_num = gain * np.real_if_close(np.poly(kept_zeros), tol=1e6) if kept_zeros else np.array([gain])
-    new_den = np.real_if_close(np.poly(poles), tol=1e6) if poles else np.array([1.0])
-    return np.real(np.atleast_1d(new_num)), np.real(np.atleast_1d(new_den))
+    new_num = gain * np.real(np.poly(kept_zeros)) if kept_zeros else np.array([gain])
+    new_den = np.real(np.poly(poles)) if poles else np.array([1.0])
+    return np.atleast_1d(new_num), np.atleast_1d(new_den)
 
 
 def minimal_tf(system: control.TransferFunction) -> control.TransferFunction:
@@ -113,7 +113,8 @@ def synthesize_axis(axis: AxisModel, ch1: control.TransferFunction) -> AxisCompe
     label = f"axis {axis.name}"
     for name, system in (("Ch1", ch1), ("Gh", gh), ("Sh", axis.handle_compliance_sh),
                          ("St", axis.tool_compliance_st), ("Gt", gt)):
-        _refuse_unstable(f"{label}: {name}", system, "the analysis assumes stable or marginal parts")
+        _refuse_unstable(f"{label}: {name}", system,
+                         "the analysis assumes stable or marginal parts")
     u11 = minimal_tf(gh * ch1 + axis.handle_compliance_sh)
     compensators = {
         "Ct1": minimal_tf(u11 / (gh * ah2)),
@@ -125,14 +126,18 @@ def synthesize_axis(axis: AxisModel, ch1: control.TransferFunction) -> AxisCompe
         "Ch2": "Ch2 = -Ah1 (Gh Ch1 + Sh)/Gt divides by Gt",
         "Ct2": "Ct2 = (-Ah1 Ah2^-1 (Gh Ch1 + Sh) - St)/Gt divides by Gt",
     }
+    remedy = {
+        "Ct1": "Sh must roll off at least as fast as Gh",
+        "Ch2": "Gh Ch1 + Sh must roll off at least as fast as Gt; give Ch1 more poles",
+        "Ct2": "Gh Ch1 + Sh and St must roll off at least as fast as Gt; give Ch1 more poles",
+    }
     for name, system in compensators.items():
         num, den = tf_coefficients(system)
         num_degree, den_degree = polynomial_degree(num), polynomial_degree(den)
         if num_degree > den_degree:
             raise SynthesisError(
                 f"{label}: {name} is improper (numerator degree {num_degree} > denominator "
-                f"degree {den_degree}): {origin[name]}, so Gh Ch1 + Sh must roll off at least "
-                f"as fast as Gt; give Ch1 more poles"
+                f"degree {den_degree}): {origin[name]}, so {remedy[name]}"
             )
         _refuse_unstable(f"{label}: {name}", system, f"{origin[name]}, which has that zero")
     return AxisCompensators(

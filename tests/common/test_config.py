@@ -1,0 +1,88 @@
+"""Configuration loading and validation: every bad key is named, nothing passes silently."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from haptic.common.config import ConfigError, load_config, override
+from haptic.common.model import model_from_config
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "run.toml"
+    path.write_text(text)
+    return path
+
+
+def test_defaults_are_the_papers_values(paper_config: dict) -> None:
+    model = paper_config["model"]
+    assert model["sample_period_s"] == pytest.approx(0.54e-3)
+    assert model["ch1"]["den"] == [1.0, 10.0, 0.0]
+    assert model["x"]["handle_actuator_gh_den"] == [0.005, 0.4, 18.0, 1.0]
+    assert model["y"]["handle_actuator_gh_num"] == [8.0, 1.0]
+    assert model["x"]["operator_impedance_th"] == [0.25, 2.0, 6.0]
+    assert model["x"]["tool_damping_N_s_per_m"] == 100.0
+
+
+def test_a_sub_table_alone_keeps_the_parent_defaults(tmp_path: Path) -> None:
+    config = load_config(write(tmp_path, "[model.ch1]\ngain_k = 3.0\nnum = [1.0]\n"
+                                         "den = [1.0, 10.0, 0.0]\n"))
+    assert config["model"]["ch1"]["gain_k"] == 3.0
+    assert config["model"]["sample_period_s"] == pytest.approx(0.54e-3)
+
+
+@pytest.mark.parametrize(
+    ("text", "key", "message"),
+    [
+        ("[model.ch1]\ngain_k = 3.0\nnum = [1.0]\nden = [1.0, 10.0, 0.0]\nextra = 1\n",
+         "model.ch1.extra", "unknown key"),
+        ("[model.ch1]\ngain_k = 3.0\nnum = [1.0]\n", "model.ch1.den", "missing key"),
+        ("[nonsense]\n", "nonsense", "unknown key"),
+        ("[model]\nsample_period_s = -0.001\nposition_ratio_ah1 = [[1,0],[0,1]]\n"
+         "force_ratio_ah2 = [[1,0],[0,1]]\n", "model.sample_period_s", "must be > 0"),
+        ("[model]\nsample_period_s = 0.0\nposition_ratio_ah1 = [[1,0],[0,1]]\n"
+         "force_ratio_ah2 = [[1,0],[0,1]]\n", "model.sample_period_s", "must be > 0"),
+        ("[model]\nsample_period_s = 0.001\nposition_ratio_ah1 = [[1,0],[0,0]]\n"
+         "force_ratio_ah2 = [[1,0],[0,1]]\n", "model.position_ratio_ah1", "singular"),
+        ("[model]\nsample_period_s = 0.001\nposition_ratio_ah1 = [[1,0.5],[0,1]]\n"
+         "force_ratio_ah2 = [[1,0],[0,1]]\n", "model.position_ratio_ah1", "diagonal"),
+        ("[model]\nsample_period_s = 'fast'\nposition_ratio_ah1 = [[1,0],[0,1]]\n"
+         "force_ratio_ah2 = [[1,0],[0,1]]\n", "model.sample_period_s", "finite number"),
+        ("[analysis]\nround_trip_delay_s = nan\nmax_frequency_rad_s = 1e4\nmax_delay_s = 1.0\n"
+         "max_gain_k = 100.0\n", "analysis.round_trip_delay_s", "finite"),
+        ("[model.ch1]\ngain_k = 3.0\nnum = [1.0]\nden = [0.0, 0.0]\n", "model.ch1.den",
+         "zero polynomial"),
+        ("model = [", "", "not valid TOML"),
+    ],
+)
+def test_bad_files_name_the_key(tmp_path: Path, text: str, key: str, message: str) -> None:
+    with pytest.raises(ConfigError) as caught:
+        load_config(write(tmp_path, text))
+    assert caught.value.key == key
+    assert message in str(caught.value)
+
+
+def test_improper_ch1_is_refused_naming_the_key(tmp_path: Path) -> None:
+    config = load_config(write(tmp_path, "[model.ch1]\ngain_k = 1.0\nnum = [1.0, 0.0, 0.0, 0.0]\n"
+                                         "den = [1.0, 10.0, 0.0]\n"))
+    with pytest.raises(ConfigError) as caught:
+        model_from_config(config)
+    assert caught.value.key == "model.ch1.num"
+    assert "improper" in str(caught.value)
+
+
+def test_missing_file_is_a_config_error(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="cannot read config file"):
+        load_config(tmp_path / "absent.toml")
+
+
+def test_override_validates_the_value(paper_config: dict) -> None:
+    changed = override(paper_config, "model.ch1.gain_k", 13)
+    assert changed["model"]["ch1"]["gain_k"] == 13.0
+    assert paper_config["model"]["ch1"]["gain_k"] == 1.0
+    with pytest.raises(ConfigError, match="model.ch1.gain_k"):
+        override(paper_config, "model.ch1.gain_k", -1.0)
+    with pytest.raises(ConfigError, match="unknown key"):
+        override(paper_config, "model.ch1.gain", 1.0)
