@@ -6,9 +6,10 @@ With ``U11 = Gh Ch1 + Sh`` and the ratios ``Ah1`` (positions) and ``Ah2`` (force
     Ch2 = -Ah1 U11 / Gt                      (eq 22)
     Ct2 = (-Ah1 Ah2^-1 U11 - St) / Gt        (eq 23)
 
-which make ``yt = Ah1 yh`` (eq 12) and ``ft = Ah2 fh^e`` (eq 20) hold. Common factors are
-cancelled exactly where they are common (root matching with a relative tolerance), so the
-results are minimal. A design is refused with :class:`SynthesisError` when a compensator is
+which make ``yt = Ah1 yh`` (eq 12) and ``ft = Ah2 fh^e`` (eq 20) hold. The structural
+cancellations (Gh in Ct1 when Sh = 0; Ch1's integrator against a tool without spring) are
+done exactly, in polynomial arithmetic; nothing is cancelled by numerical root matching.
+A design is refused with :class:`SynthesisError` when a compensator is
 improper (more zeros than poles: it would need future inputs) or not realisable as a stable
 block (a pole in the open right half-plane: Gt or, with Sh != 0, Gh non-minimum phase, or an
 unstable Ch1).
@@ -23,8 +24,6 @@ import numpy as np
 
 from haptic.common.model import AxisModel, TeleopModel, polynomial_degree, tf, tf_coefficients
 
-#: Relative distance under which a pole and a zero are taken as the same root and cancelled.
-CANCELLATION_TOLERANCE = 1e-6
 #: Real part (1/s) above which a pole counts as in the open right half-plane.
 RHP_TOLERANCE = 1e-9
 
@@ -58,30 +57,27 @@ def _strip(coefficients: np.ndarray) -> np.ndarray:
     return np.array([0.0]) if nonzero.size == 0 else coefficients[nonzero[0]:]
 
 
-def cancel_common_roots(
-    num: np.ndarray, den: np.ndarray, tolerance: float = CANCELLATION_TOLERANCE
-) -> tuple[np.ndarray, np.ndarray]:
-    """Cancel roots shared by numerator and denominator (relative ``tolerance``).
+def _trailing_zeros(polynomial: np.ndarray) -> int:
+    nonzero = np.flatnonzero(polynomial)
+    return 0 if nonzero.size == 0 else len(polynomial) - 1 - int(nonzero[-1])
 
-    Returns (num, den) scaled so that the denominator is monic.
+
+def cancel_common_roots(num: np.ndarray, den: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cancel the roots at s = 0 that numerator and denominator share (exact trailing zeros,
+    such as Ch1's integrator against a tool without spring); returns (num, den) with a monic
+    denominator.
+
+    Other cancellations are structural and done symbolically by the synthesis; a pole-zero
+    pair that merely coincides numerically is left in place: it costs a stable state (an
+    unstable one is refused), never accuracy, which root matching with a tolerance would.
     """
     num, den = _strip(np.asarray(num, float)), _strip(np.asarray(den, float))
     if polynomial_degree(num) < 0:
         return np.array([0.0]), np.array([1.0])
-    zeros, poles = list(np.roots(num)), list(np.roots(den))
-    kept_zeros = []
-    for zero in zeros:
-        distances = [abs(zero - pole) for pole in poles]
-        if distances:
-            best = int(np.argmin(distances))
-            if distances[best] <= tolerance * max(1.0, abs(zero)):
-                poles.pop(best)
-                continue
-        kept_zeros.append(zero)
-    gain = num[0] / den[0]
-    new_num = gain * np.real(np.poly(kept_zeros)) if kept_zeros else np.array([gain])
-    new_den = np.real(np.poly(poles)) if poles else np.array([1.0])
-    return np.atleast_1d(new_num), np.atleast_1d(new_den)
+    common = min(_trailing_zeros(num), _trailing_zeros(den))
+    if common:
+        num, den = num[:-common], den[:-common]
+    return num / den[0], den / den[0]
 
 
 def minimal_tf(system: control.TransferFunction) -> control.TransferFunction:
@@ -115,11 +111,32 @@ def synthesize_axis(axis: AxisModel, ch1: control.TransferFunction) -> AxisCompe
                          ("St", axis.tool_compliance_st), ("Gt", gt)):
         _refuse_unstable(f"{label}: {name}", system,
                          "the analysis assumes stable or marginal parts")
-    u11 = minimal_tf(gh * ch1 + axis.handle_compliance_sh)
+    # Polynomial arithmetic that keeps the structural cancellations exact: Gh's denominator
+    # never enters Ct1, and a zero compliance drops its factors.
+    gh_num, gh_den = tf_coefficients(gh)
+    ch1_num, ch1_den = tf_coefficients(ch1)
+    sh_num, sh_den = tf_coefficients(axis.handle_compliance_sh)
+    st_num, st_den = tf_coefficients(axis.tool_compliance_st)
+    _, gt_inverse = tf_coefficients(gt)  # Gt = 1/(Mt s^2 + Bt s + Kt)
+    mul = np.polymul
+    ratio = ah1 / ah2
+    if polynomial_degree(sh_num) < 0:  # Sh = 0: U11 = Gh Ch1, Ct1 = Ch1 / Ah2
+        u11_num, u11_den = mul(gh_num, ch1_num), mul(gh_den, ch1_den)
+        ct1 = (ch1_num, ah2 * ch1_den)
+    else:  # U11 = Gh Ch1 + Sh = u11_num / (gh_den ch1_den sh_den)
+        u11_num = np.polyadd(mul(mul(gh_num, ch1_num), sh_den),
+                             mul(mul(sh_num, gh_den), ch1_den))
+        u11_den = mul(mul(gh_den, ch1_den), sh_den)
+        ct1 = (u11_num, ah2 * mul(mul(ch1_den, sh_den), gh_num))
+    if polynomial_degree(st_num) < 0:  # St = 0: Ct2 = -Ah1 Ah2^-1 U11 / Gt
+        ct2 = (-ratio * mul(u11_num, gt_inverse), u11_den)
+    else:
+        ct2_num = np.polyadd(-ratio * mul(u11_num, st_den), -1.0 * mul(st_num, u11_den))
+        ct2 = (mul(ct2_num, gt_inverse), mul(u11_den, st_den))
     compensators = {
-        "Ct1": minimal_tf(u11 / (gh * ah2)),
-        "Ch2": minimal_tf(-ah1 * u11 / gt),
-        "Ct2": minimal_tf((-(ah1 / ah2) * u11 - axis.tool_compliance_st) / gt),
+        "Ct1": tf(*cancel_common_roots(*ct1)),
+        "Ch2": tf(*cancel_common_roots(-ah1 * mul(u11_num, gt_inverse), u11_den)),
+        "Ct2": tf(*cancel_common_roots(*ct2)),
     }
     origin = {
         "Ct1": "Ct1 = (Gh Ch1 + Sh)/(Gh Ah2) divides by Gh",
