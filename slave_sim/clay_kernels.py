@@ -3,8 +3,8 @@
 One thread per row of each lane's footprint window: ``wp.tid()`` gives (lane, row) inside a
 window of ``window_y x window_x`` cells placed around that lane's tool position, so one launch
 covers every lane and never touches the rest of the grid; a thread walks its row and adds its
-row's sums to the lane's accumulators once (few atomics, little per-thread overhead on CPU). The arithmetic matches
-:mod:`haptic.slave_sim.clay_numpy` operation for operation (float64 throughout).
+row's sums to the lane's accumulators once (few atomics, little per-thread overhead on CPU).
+The arithmetic matches :mod:`haptic.slave_sim.clay_numpy` operation for operation (float64).
 """
 
 from __future__ import annotations

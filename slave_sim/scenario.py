@@ -187,8 +187,9 @@ class Scenario:
         from dataclasses import replace
 
         if environment not in ENVIRONMENT_KINDS:
+            kinds = ", ".join(ENVIRONMENT_KINDS)
             raise ConfigError("scenario.environment",
-                              f"must be one of {', '.join(ENVIRONMENT_KINDS)} (got {environment!r})")
+                              f"must be one of {kinds} (got {environment!r})")
         return replace(self, environment=environment)
 
 
@@ -202,7 +203,8 @@ def _validate_workpiece(table: Any) -> list[str]:
         raise ConfigError("workpiece.blocks", "missing key")
     names = table["blocks"]
     if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
-        raise ConfigError("workpiece.blocks", f"must be a non-empty list of block names (got {names!r})")
+        raise ConfigError("workpiece.blocks",
+                          f"must be a non-empty list of block names (got {names!r})")
     seen: set[str] = set()
     for name in names:
         if name in seen:
@@ -217,11 +219,13 @@ def _validate_block(name: str, table: Any) -> BlockSpec:
         raise ConfigError(key, "must be a table")
     shape = table.get("shape")
     if shape not in BLOCK_SHAPES:
-        raise ConfigError(f"{key}.shape", f"must be one of {', '.join(BLOCK_SHAPES)} (got {shape!r})")
+        shapes = ", ".join(BLOCK_SHAPES)
+        raise ConfigError(f"{key}.shape", f"must be one of {shapes} (got {shape!r})")
     damping = table.get("damping_N_s_per_m")
     if isinstance(damping, int | float) and not isinstance(damping, bool) and damping < 0:
         raise ConfigError(f"{key}.damping_N_s_per_m",
-                          f"block {name!r} has a negative damping ({damping:g} N s/m); must be >= 0")
+                          f"block {name!r} has a negative damping ({damping:g} N s/m); "
+                          "must be >= 0")
     checked = validate_table(table, BOX_SCHEMA if shape == "box" else DISC_SCHEMA, {}, key)
     if shape == "box":
         return BlockSpec(name, shape, checked["height_m"], checked["damping_N_s_per_m"],
