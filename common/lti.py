@@ -71,7 +71,8 @@ class DiscreteLTI:
         lanes = output.shape[0]
         states = np.empty((lanes, n))
         for lane in range(lanes):
-            rhs = np.concatenate([self.B @ held_input[lane], output[lane] - self.D @ held_input[lane]])
+            rhs = np.concatenate([self.B @ held_input[lane],
+                                  output[lane] - self.D @ held_input[lane]])
             states[lane] = np.linalg.lstsq(system, rhs, rcond=None)[0]
         return states
 

@@ -76,7 +76,8 @@ class AxisModel:
     @property
     def tool_actuator_gt(self) -> control.TransferFunction:
         """Gt = 1/(Mt s^2 + Bt s + Kt), actuator force (N) -> tool position (m) (eq 5)."""
-        return tf([1.0], [self.tool_mass_kg, self.tool_damping_N_s_per_m, self.tool_stiffness_N_per_m])
+        return tf([1.0], [self.tool_mass_kg, self.tool_damping_N_s_per_m,
+                          self.tool_stiffness_N_per_m])
 
     def with_environment(self, impedance_N_per_m: np.ndarray) -> AxisModel:
         """A copy with another environment impedance Tt (e.g. the clay as B s)."""

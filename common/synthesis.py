@@ -79,7 +79,8 @@ def cancel_common_roots(
                 continue
         kept_zeros.append(zero)
     gain = num[0] / den[0]
-    new_num = gain * np.real_if_close(np.poly(kept_zeros), tol=1e6) if kept_zeros else np.array([gain])
+    new_num = (gain * np.real_if_close(np.poly(kept_zeros), tol=1e6) if kept_zeros
+               else np.array([gain]))
     new_den = np.real_if_close(np.poly(poles), tol=1e6) if poles else np.array([1.0])
     return np.real(np.atleast_1d(new_num)), np.real(np.atleast_1d(new_den))
 
@@ -113,7 +114,8 @@ def synthesize_axis(axis: AxisModel, ch1: control.TransferFunction) -> AxisCompe
     label = f"axis {axis.name}"
     for name, system in (("Ch1", ch1), ("Gh", gh), ("Sh", axis.handle_compliance_sh),
                          ("St", axis.tool_compliance_st), ("Gt", gt)):
-        _refuse_unstable(f"{label}: {name}", system, "the analysis assumes stable or marginal parts")
+        _refuse_unstable(f"{label}: {name}", system,
+                         "the analysis assumes stable or marginal parts")
     u11 = minimal_tf(gh * ch1 + axis.handle_compliance_sh)
     compensators = {
         "Ct1": minimal_tf(u11 / (gh * ah2)),
