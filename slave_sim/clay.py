@@ -111,6 +111,22 @@ class ClayState:
         """Number of independent workpieces."""
         return self.removed_total_m3.shape[0]
 
+    def set_block_damping(self, damping_N_s_per_m: np.ndarray) -> None:
+        """Give each lane its own block dampings, shape (lanes, n_blocks) or (n_blocks,),
+        N s/m (a sweep over clay stiffness); works on any device."""
+        values = np.broadcast_to(np.asarray(damping_N_s_per_m, float),
+                                 (self.lanes, len(self.workpiece.block_names)))
+        if values.min() < 0.0:
+            raise ValueError("block damping must be >= 0 N s/m")
+        if hasattr(self.damping, "assign"):
+            self.damping.assign(np.ascontiguousarray(values))
+        else:
+            self.damping[...] = values
+
+    def block_damping_N_s_per_m(self) -> np.ndarray:
+        """The lanes' block dampings (lanes, n_blocks), N s/m (a copy)."""
+        return np.array(self.damping.numpy() if hasattr(self.damping, "numpy") else self.damping)
+
     def heights_m(self) -> np.ndarray:
         """The height field as numpy (lanes, cells_y, cells_x), m (a copy)."""
         return np.array(self.heights.numpy() if hasattr(self.heights, "numpy") else self.heights)
@@ -132,9 +148,7 @@ class ClayState:
             initial_heights_m=wp_.heights_m,
             block_id=wp_.block_id,
             block_names=np.array(wp_.block_names),
-            block_damping_N_s_per_m=np.asarray(self.damping.numpy()
-                                               if hasattr(self.damping, "numpy")
-                                               else self.damping)[lane],
+            block_damping_N_s_per_m=self.block_damping_N_s_per_m()[lane],
             x_range_m=np.array(wp_.grid.x_range_m),
             y_range_m=np.array(wp_.grid.y_range_m),
             removed_total_m3=self.removed_total_m3[lane],

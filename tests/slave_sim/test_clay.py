@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptic.slave_sim.clay import NumpyClay, WarpClay, make_clay
+from haptic.slave_sim.clay import NumpyClay, WarpClay, make_clay, resolve_device
 from haptic.slave_sim.scenario import load_scenario
 
 SAMPLE_PERIOD_S = 0.00054
@@ -104,7 +104,12 @@ def test_start_inside_the_clay_gives_no_force_spike(variable_rate) -> None:
 def test_lanes_are_independent_and_take_their_own_damping(variable_rate, drive) -> None:
     clay = WarpClay(variable_rate, SAMPLE_PERIOD_S, device="cpu")
     state = clay.initial_state(2)
-    state.damping.numpy()[1] *= 0.5  # lane 1: a softer clay everywhere
+    damping = state.block_damping_N_s_per_m()
+    damping[1] *= 0.5  # lane 1: a softer clay everywhere
+    state.set_block_damping(damping)
+    np.testing.assert_array_equal(state.block_damping_N_s_per_m(), damping)
+    with pytest.raises(ValueError):
+        state.set_block_damping(-damping)
     start = np.array([[0.025, 0.0], [0.025, 0.0]])
     _, results = drive(clay, state, start, [[SPEED_M_S, 0.0]] * 2, 600)
     late = np.array([r.force_N[:, 0] for r in results[-100:]]).mean(axis=0)
@@ -146,3 +151,13 @@ def test_save_and_render(tmp_path, cut_across_all_blocks) -> None:
     assert list(saved["block_names"]) == ["p100", "p80", "p60", "p40", "p20"]
     state.render_png(tmp_path / "clay.png", positions)
     assert (tmp_path / "clay.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_device_auto_picks_cuda_only_when_present() -> None:
+    import warp as wp
+
+    expected = "cuda" if wp.get_cuda_device_count() > 0 else "cpu"
+    assert resolve_device("auto") == expected
+    assert resolve_device("cpu") == "cpu"
+    with pytest.raises(ValueError, match="implementation"):
+        make_clay(load_scenario("constant-rate"), SAMPLE_PERIOD_S, "taichi")

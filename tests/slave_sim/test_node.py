@@ -160,3 +160,16 @@ def test_node_from_config_and_its_errors(tmp_path) -> None:
     with pytest.raises(ConfigError) as error:
         SlaveNode.from_config(massless)
     assert error.value.key == "model.x.tool_mass_kg"
+
+
+def test_tool_started_inside_the_clay_feels_no_spike(model) -> None:
+    scenario = load_scenario("variable-rate").with_grid(512, 128)
+    node = SlaveNode(model, scenario, device="cpu")
+    state = node.initial_state(1, start_position_m=np.array([0.035, 0.0]))  # inside p100
+    worst = 0.0
+    for _ in range(400):
+        out = node.step(state, np.array([[3.0, 0.0]]), state.tool_position_m())
+        speed = np.linalg.norm(out.tool_velocity_m_s[0])
+        if out.cutting[0]:
+            worst = max(worst, np.linalg.norm(out.tool_force_N[0]) / (100.0 * speed))
+    assert 0.5 < worst <= 2.0  # it cuts, at most B_max |v|, far below a spike
