@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 from haptic.common.config import Field, Schema
+from haptic.slave_sim.schema import SLAVE_SCHEMA
 
 
 def _leading_nonzero(coefficients: list[float]) -> str | None:
@@ -117,4 +118,5 @@ ANALYSIS_SCHEMA: Schema = {
 SCHEMA: Schema = {
     "model": MODEL_SCHEMA,
     "analysis": ANALYSIS_SCHEMA,
+    "slave": SLAVE_SCHEMA,
 }

@@ -1,0 +1,214 @@
+"""The slave node: the Ch2/Ct2 compensators, the virtual tool and its environment, stepped
+at Ts over many independent lanes.
+
+One step, per lane and axis (docs/clay.md, "Slave node")::
+
+    vt   = -Ch2 fh_recv + Ct2 ft_prev     compensators (Tustin, one MIMO block)
+    x'   = A x + B vt                     tool plant Gt (ZOH): position yt, velocity
+    ft   = environment(yt, velocity, ...) clay (or linear Tt yt) at the new tool state
+
+``ft_prev`` is the environment force of the previous step, computed from the tool state the
+compensators now act on, so there is no algebraic loop. ``ft`` goes back to the master and
+feeds Ct2 at the next step. The node holds no mutable state: everything that changes lives
+in a :class:`SlaveState` the caller owns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from haptic.common.lti import DiscreteLTI, Path, combine, discretize
+from haptic.common.model import TeleopModel, model_from_config
+from haptic.common.synthesis import synthesize
+from haptic.slave_sim.environment import make_environment
+from haptic.slave_sim.scenario import Scenario, load_scenario
+from haptic.slave_sim.tool import POSITION_COLUMNS, VELOCITY_COLUMNS, tool_constants, tool_plant
+
+COMPENSATOR_INPUTS = ("fh_x", "fh_y", "ft_x", "ft_y")
+COMPENSATOR_OUTPUTS = ("vt_x", "vt_y")
+
+
+def slave_compensators(model: TeleopModel) -> DiscreteLTI:
+    """vt = -Ch2 fh + Ct2 ft for both axes as one MIMO block (Tustin): inputs
+    (fh_x, fh_y, ft_x, ft_y) N, outputs (vt_x, vt_y) N."""
+    paths = []
+    n_axes = len(model.axes)
+    for index, axis in enumerate(synthesize(model)):
+        ts = model.sample_period_s
+        ch2 = discretize(axis.ch2, ts, "tustin", f"fh_{axis.axis}", f"vt_{axis.axis}")
+        ct2 = discretize(axis.ct2, ts, "tustin", f"ft_{axis.axis}", f"vt_{axis.axis}")
+        paths.append(Path(ch2, source=index, target=index, gain=-1.0))
+        paths.append(Path(ct2, source=n_axes + index, target=index, gain=1.0))
+    return combine(paths, COMPENSATOR_INPUTS, COMPENSATOR_OUTPUTS)
+
+
+@dataclass(eq=False)
+class SlaveState:
+    """Everything that changes in a slave node, lanes on the leading axis.
+
+    ``compensator`` (lanes, n) and ``tool`` (lanes, 4: yt_x m, dyt_x m/s, yt_y, dyt_y)
+    states; ``tool_force_N`` (lanes, 2) the environment force of the last step (ft);
+    ``actuator_force_N`` (lanes, 2) the last vt; ``handle_position_m`` (lanes, 2) the last
+    received handle position; ``halted`` (lanes,) lanes in the safe state; ``environment``
+    the environment's own state (a ClayState for the clay); ``step_count`` steps taken.
+    """
+
+    compensator: np.ndarray
+    tool: np.ndarray
+    tool_force_N: np.ndarray
+    actuator_force_N: np.ndarray
+    handle_position_m: np.ndarray
+    halted: np.ndarray
+    environment: Any
+    step_count: int = 0
+
+    @property
+    def lanes(self) -> int:
+        """Number of independent lanes."""
+        return self.tool.shape[0]
+
+    def tool_position_m(self) -> np.ndarray:
+        """Tool positions (lanes, 2), m (a copy)."""
+        return self.tool[:, POSITION_COLUMNS]
+
+    def tool_velocity_m_s(self) -> np.ndarray:
+        """Tool velocities (lanes, 2), m/s (a copy)."""
+        return self.tool[:, VELOCITY_COLUMNS]
+
+
+@dataclass(frozen=True)
+class SlaveOutputs:
+    """One step's outputs, per lane (arrays (lanes, 2) unless said otherwise).
+
+    ``tool_position_m``, ``tool_velocity_m_s``: the tool after the step; ``tool_force_N``: ft,
+    the force the tool applies to the clay (sent to the master); ``actuator_force_N``: vt
+    applied over the step; ``cutting`` (lanes,): material removed this step;
+    ``engagement`` (lanes,): 0..1 of the reference cut; ``removed_volume_m3`` (lanes,);
+    ``tracking_error_m``: yt - Ah1 yh_recv (diagnostic).
+    """
+
+    tool_position_m: np.ndarray
+    tool_velocity_m_s: np.ndarray
+    tool_force_N: np.ndarray
+    actuator_force_N: np.ndarray
+    cutting: np.ndarray
+    engagement: np.ndarray
+    removed_volume_m3: np.ndarray
+    tracking_error_m: np.ndarray
+
+
+class SlaveNode:
+    """The slave side as one block: inputs handle force fh_recv (N) and handle position
+    yh_recv (m) as received from the master, outputs :class:`SlaveOutputs`.
+
+    ``environment`` is the name of the tool's environment ("clay" or "linear"; ``None``: the
+    scenario's), ``clay_impl`` "warp" or "numpy", ``device`` the Warp device ("auto").
+    """
+
+    def __init__(self, model: TeleopModel, scenario: Scenario, environment: str | None = None,
+                 clay_impl: str = "warp", device: str = "auto") -> None:
+        self.model = model
+        self.scenario = scenario
+        self.sample_period_s = model.sample_period_s
+        self.compensators = slave_compensators(model)
+        self.plant = tool_plant(model)
+        mass, damping, stiffness = tool_constants(model)
+        self._inv_mass = 1.0 / mass
+        self._damping = damping
+        self._stiffness = stiffness
+        self._position_ratio = np.array([a.position_ratio_ah1 for a in model.axes])
+        self.environment_kind = environment or scenario.environment
+        self.environment = make_environment(self.environment_kind, model, scenario, clay_impl,
+                                            device)
+        self._plant_a_t = self.plant.A.T.copy()
+        self._plant_b_t = self.plant.B.T.copy()
+
+    @classmethod
+    def from_config(cls, config: dict[str, Any], scenario: Scenario | None = None) -> SlaveNode:
+        """The node of a validated configuration (``[model]`` and ``[slave]``)."""
+        section = config["slave"]
+        scenario = scenario or load_scenario(section["scenario"])
+        environment = None if section["environment"] == "scenario" else section["environment"]
+        return cls(model_from_config(config), scenario, environment, section["clay_impl"],
+                   section["device"])
+
+    def initial_state(self, lanes: int = 1, start_position_m: np.ndarray | None = None
+                      ) -> SlaveState:
+        """``lanes`` lanes at rest with the tool at ``start_position_m`` ((2,) or (lanes, 2),
+        m; default: the scenario's start) and fresh workpieces."""
+        start = np.broadcast_to(
+            np.asarray(self.scenario.tool.start_position_m if start_position_m is None
+                       else start_position_m, float), (lanes, 2))
+        tool = np.zeros((lanes, 4))
+        tool[:, POSITION_COLUMNS] = start
+        return SlaveState(
+            compensator=self.compensators.initial_state(lanes),
+            tool=tool,
+            tool_force_N=np.zeros((lanes, 2)),
+            actuator_force_N=np.zeros((lanes, 2)),
+            handle_position_m=start / self._position_ratio,
+            halted=np.zeros(lanes, bool),
+            environment=self.environment.initial_state(lanes),
+        )
+
+    def step(self, state: SlaveState, handle_force_N: np.ndarray,
+             handle_position_m: np.ndarray) -> SlaveOutputs:
+        """Advance every lane by one period Ts; inputs (lanes, 2) in N and m."""
+        inputs = np.concatenate((handle_force_N, state.tool_force_N), axis=1)
+        actuator = self.compensators.step(state.compensator, inputs)
+        halted = state.halted.any()
+        if halted:
+            actuator[state.halted] = 0.0
+        tool = state.tool
+        previous = tool[:, POSITION_COLUMNS]
+        held = tool.copy() if halted else None
+        tool[...] = tool @ self._plant_a_t + actuator @ self._plant_b_t
+        if halted:
+            tool[state.halted] = held[state.halted]
+        position = tool[:, POSITION_COLUMNS]
+        velocity = tool[:, VELOCITY_COLUMNS]
+        acceleration = (actuator - self._damping * velocity
+                        - self._stiffness * position) * self._inv_mass
+        result = self.environment.step(state.environment, previous, position, velocity,
+                                       acceleration)
+        force = result.force_N
+        if halted:
+            force = force.copy()
+            force[state.halted] = 0.0
+        state.tool_force_N = force
+        state.actuator_force_N = actuator
+        state.handle_position_m = handle_position_m
+        state.step_count += 1
+        return SlaveOutputs(
+            tool_position_m=position,
+            tool_velocity_m_s=velocity,
+            tool_force_N=force,
+            actuator_force_N=actuator,
+            cutting=result.cutting,
+            engagement=result.engagement,
+            removed_volume_m3=result.removed_volume_m3,
+            tracking_error_m=position - self._position_ratio * handle_position_m,
+        )
+
+    def safe_stop(self, state: SlaveState, lanes: np.ndarray | slice | None = None) -> None:
+        """Put ``lanes`` (default: all) in the safe state: the tool stops where it is (zero
+        velocity), the actuator force and the force sent back are zero, and the compensator
+        states are cleared. Halted lanes stay put and send zero force until :meth:`resume`."""
+        index = slice(None) if lanes is None else lanes
+        state.halted[index] = True
+        state.tool[index, 1] = 0.0
+        state.tool[index, 3] = 0.0
+        state.compensator[index] = 0.0
+        state.actuator_force_N[index] = 0.0
+        state.tool_force_N = state.tool_force_N.copy()
+        state.tool_force_N[index] = 0.0
+
+    def resume(self, state: SlaveState, lanes: np.ndarray | slice | None = None) -> None:
+        """Leave the safe state: ``lanes`` start again at rest from where the tool stopped,
+        with cleared compensator states (no jump in the actuator force)."""
+        index = slice(None) if lanes is None else lanes
+        state.compensator[index] = 0.0
+        state.halted[index] = False

@@ -1,0 +1,163 @@
+"""The clay model: forces against B v, conservation, smooth onset, Warp against numpy."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from haptic.slave_sim.clay import NumpyClay, WarpClay, make_clay, resolve_device
+from haptic.slave_sim.scenario import load_scenario
+
+SAMPLE_PERIOD_S = 0.00054
+SPEED_M_S = 0.04
+BLOCKS = [(0.02, 0.05, 100.0), (0.05, 0.08, 80.0), (0.08, 0.11, 60.0), (0.11, 0.14, 40.0),
+          (0.14, 0.17, 20.0)]
+
+
+@pytest.fixture(scope="module")
+def cut_across_all_blocks(variable_rate, drive):
+    """Lane 0 cuts along +x through all five blocks at constant speed."""
+    clay = WarpClay(variable_rate, SAMPLE_PERIOD_S, device="cpu")
+    state = clay.initial_state(1)
+    steps = int(0.18 / (SPEED_M_S * SAMPLE_PERIOD_S))
+    positions, results = drive(clay, state, [[0.0, 0.0]], [[SPEED_M_S, 0.0]], steps)
+    return clay, state, positions[:, 0], results
+
+
+def test_steady_force_in_each_block_is_b_v(cut_across_all_blocks) -> None:
+    _, _, positions, results = cut_across_all_blocks
+    x = positions[:, 0]
+    force = np.array([r.force_N[0] for r in results])
+    for start, end, damping in BLOCKS:
+        steady = (x > start + 0.008) & (x < end - 0.008)
+        mean = force[steady].mean(axis=0)
+        assert mean[0] == pytest.approx(damping * SPEED_M_S, rel=0.05), (damping, mean)
+        assert abs(mean[1]) < 1e-9
+        # the force pushes the clay along the tool's velocity: the clay's reaction opposes it
+        assert (force[steady, 0] > 0).all()
+
+
+def test_no_force_out_of_contact(cut_across_all_blocks) -> None:
+    _, _, positions, results = cut_across_all_blocks
+    clear = positions[:, 0] < 0.02 - 0.0056  # the tool's chamfer has not reached the clay
+    assert clear.any()
+    assert all(not r.cutting[0] and not r.force_N.any() for r, c in zip(results, clear, strict=True)
+               if c)
+
+
+def test_removed_volume_is_conserved_and_matches_the_swept_volume(cut_across_all_blocks) -> None:
+    clay, state, positions, results = cut_across_all_blocks
+    removed = np.array([r.removed_volume_m3[0] for r in results])
+    assert (removed >= 0).all()
+    assert removed.sum() == pytest.approx(state.removed_total_m3[0], rel=1e-12)
+    assert abs(state.conservation_error_m3()[0]) < 1e-5 * state.removed_total_m3[0]
+    tool = clay.scenario.tool
+    analytic = 2 * tool.radius_m * tool.reference_depth_m * SPEED_M_S * SAMPLE_PERIOD_S
+    steady = (positions[:, 0] > 0.03) & (positions[:, 0] < 0.16)
+    assert removed[steady].mean() == pytest.approx(analytic, rel=0.01)
+    heights = state.heights_m()
+    assert heights.min() >= 0.0
+    assert (heights <= clay.workpiece.heights_m[None] + 1e-15).all()
+    # the groove is cut to the tool's bottom along the path
+    row = np.argmin(abs(clay.workpiece.cell_centers_m()[1]))
+    columns = (clay.workpiece.cell_centers_m()[0] > 0.03) & (
+        clay.workpiece.cell_centers_m()[0] < 0.16)
+    assert heights[0, row, columns] == pytest.approx(tool.bottom_height_m)
+
+
+def test_force_follows_the_velocity_on_both_axes(variable_rate, drive) -> None:
+    clay = WarpClay(variable_rate, SAMPLE_PERIOD_S, device="cpu")
+    state = clay.initial_state(3)
+    speed = SPEED_M_S
+    start = np.array([[0.065, -0.015], [0.095, 0.015], [0.12, -0.012]])
+    velocity = np.array([[0.0, speed], [0.0, -speed], [speed / np.sqrt(2), speed / np.sqrt(2)]])
+    _, results = drive(clay, state, start, velocity, int(0.018 / (speed * SAMPLE_PERIOD_S)))
+    late = np.array([r.force_N for r in results[-200:]]).mean(axis=0)
+    expected_damping = np.array([80.0, 60.0, 40.0])
+    np.testing.assert_allclose(late, expected_damping[:, None] * velocity, rtol=0.05, atol=1e-9)
+
+
+def test_start_inside_the_clay_gives_no_force_spike(variable_rate) -> None:
+    clay = WarpClay(variable_rate, SAMPLE_PERIOD_S, device="cpu")
+    state = clay.initial_state(1)
+    damping_max = 100.0
+    position = np.array([[0.035, 0.0]])
+    # accelerate from rest at 2 m/s^2, inside the first block
+    worst = 0.0
+    forces = []
+    for k in range(400):
+        speed = 2.0 * (k + 1) * SAMPLE_PERIOD_S
+        previous = position
+        position = previous + np.array([[speed * SAMPLE_PERIOD_S, 0.0]])
+        result = clay.step(state, previous, position, np.array([[speed, 0.0]]))
+        forces.append(result.force_N[0, 0])
+        worst = max(worst, np.linalg.norm(result.force_N[0]) / (damping_max * speed))
+    assert worst <= 2.0
+    assert max(forces) < 2.0 * damping_max * 2.0 * 400 * SAMPLE_PERIOD_S
+    # a stationary tool inside the clay stops feeling force once its footprint is cleared
+    still = np.array([[0.0, 0.0]])
+    for _ in range(20):
+        result = clay.step(state, position, position, still)
+    assert not result.cutting[0] and not result.force_N.any()
+
+
+def test_lanes_are_independent_and_take_their_own_damping(variable_rate, drive) -> None:
+    clay = WarpClay(variable_rate, SAMPLE_PERIOD_S, device="cpu")
+    state = clay.initial_state(2)
+    damping = state.block_damping_N_s_per_m()
+    damping[1] *= 0.5  # lane 1: a softer clay everywhere
+    state.set_block_damping(damping)
+    np.testing.assert_array_equal(state.block_damping_N_s_per_m(), damping)
+    with pytest.raises(ValueError):
+        state.set_block_damping(-damping)
+    start = np.array([[0.025, 0.0], [0.025, 0.0]])
+    _, results = drive(clay, state, start, [[SPEED_M_S, 0.0]] * 2, 600)
+    late = np.array([r.force_N[:, 0] for r in results[-100:]]).mean(axis=0)
+    assert late[1] == pytest.approx(0.5 * late[0], rel=1e-9)
+    np.testing.assert_array_equal(state.heights_m()[0], state.heights_m()[1])
+
+
+def test_warp_kernels_and_numpy_reference_agree() -> None:
+    scenario = load_scenario("arbitrary").with_grid(400, 200)
+    warp_clay = make_clay(scenario, SAMPLE_PERIOD_S, "warp", "cpu")
+    numpy_clay = make_clay(scenario, SAMPLE_PERIOD_S, "numpy")
+    assert isinstance(numpy_clay, NumpyClay)
+    lanes = 4
+    warp_state, numpy_state = warp_clay.initial_state(lanes), numpy_clay.initial_state(lanes)
+    rng = np.random.default_rng(1234)
+    position = rng.uniform([0.0, -0.05], [0.2, 0.05], size=(lanes, 2))
+    velocity = rng.normal(0.0, 0.3, size=(lanes, 2))
+    for _ in range(1500):
+        velocity += rng.normal(0.0, 0.05, size=(lanes, 2))
+        velocity = np.clip(velocity, -0.5, 0.5)
+        previous = position
+        position = np.clip(previous + velocity * SAMPLE_PERIOD_S, [0.0, -0.05], [0.2, 0.05])
+        a = warp_clay.step(warp_state, previous, position, velocity)
+        b = numpy_clay.step(numpy_state, previous, position, velocity)
+        np.testing.assert_allclose(a.removed_volume_m3, b.removed_volume_m3, rtol=1e-9,
+                                   atol=1e-18)
+        np.testing.assert_allclose(a.force_N, b.force_N, rtol=1e-9, atol=1e-12)
+        np.testing.assert_array_equal(a.cutting, b.cutting)
+    assert warp_state.removed_total_m3.min() > 0
+    np.testing.assert_allclose(warp_state.heights_m(), numpy_state.heights_m(), rtol=0,
+                               atol=1e-15)
+
+
+def test_save_and_render(tmp_path, cut_across_all_blocks) -> None:
+    _, state, positions, _ = cut_across_all_blocks
+    state.save_npz(tmp_path / "clay.npz")
+    saved = np.load(tmp_path / "clay.npz")
+    np.testing.assert_array_equal(saved["heights_m"], state.heights_m()[0])
+    assert list(saved["block_names"]) == ["p100", "p80", "p60", "p40", "p20"]
+    state.render_png(tmp_path / "clay.png", positions)
+    assert (tmp_path / "clay.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_device_auto_picks_cuda_only_when_present() -> None:
+    import warp as wp
+
+    expected = "cuda" if wp.get_cuda_device_count() > 0 else "cpu"
+    assert resolve_device("auto") == expected
+    assert resolve_device("cpu") == "cpu"
+    with pytest.raises(ValueError, match="implementation"):
+        make_clay(load_scenario("constant-rate"), SAMPLE_PERIOD_S, "taichi")
