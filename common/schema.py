@@ -104,3 +104,7 @@ SCHEMA: Schema = {
     "model": MODEL_SCHEMA,
     "analysis": ANALYSIS_SCHEMA,
 }
+
+from haptic.master.schema import MASTER_SCHEMA  # noqa: E402
+
+SCHEMA["master"] = MASTER_SCHEMA
