@@ -84,7 +84,11 @@ class CanHandleDriver(HandleHardware):
         them (NMT) and take a first sample."""
         if self._state is not LifecycleState.UNCONFIGURED:
             return
-        self._bus = can.Bus(**self.bus_options)
+        try:
+            self._bus = can.Bus(**self.bus_options)
+        except (can.CanError, OSError, ValueError, ImportError) as error:
+            options = ", ".join(f"{k}={v}" for k, v in self.bus_options.items())
+            raise HardwareError(f"cannot open the CAN bus ({options}): {error}") from None
         try:
             for node in self.settings.node_ids:
                 self._nmt(cia402.NMT_PRE_OPERATIONAL, node)
