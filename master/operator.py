@@ -79,10 +79,11 @@ class OperatorModel:
         state by ``period_s``. ``handle_offset_m`` is the handle position relative to where
         the operator grasped it; ``tool_force_N`` is the tool force the operator feels."""
         time_s = state.time_s
-        envelope = _envelope(time_s, self._p("onset"), self._p("rise"))
         if self.kind == "constant":
+            envelope = _envelope(time_s, self._p("onset"), self._p("rise"))
             force = envelope * np.array([self._p("fx"), self._p("fy")])
         elif self.kind == "regulate":
+            envelope = _envelope(time_s, self._p("onset"), self._p("rise"))
             force = envelope * self._regulate(state, tool_force_N, period_s, envelope)
         else:
             force = self._track(time_s, handle_offset_m, handle_velocity_m_per_s)
