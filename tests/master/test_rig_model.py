@@ -147,3 +147,42 @@ def test_rig_refuses_an_improper_or_integrating_gh() -> None:
     with pytest.raises(ValueError, match="pole at s = 0"):
         RigModel([control.tf([1.0], [1.0, 0.0]), control.tf([1.0], [1.0, 1.0])], impedance,
                  0.001, operator)
+
+
+def _lockstep_closed_loop_error(model, divisor: int) -> float:
+    """Max deviation (m) of the lockstep rig + master node from the continuous closed loop
+    Gh Ch1 / (1 + Gh Ch1 Th) for a ramped constant operator force, at Ts / divisor."""
+    import dataclasses
+
+    from haptic.master.node import MasterNode
+    from haptic.master.settings import master_settings
+
+    model = dataclasses.replace(model, sample_period_s=model.sample_period_s / divisor)
+    safety = dataclasses.replace(master_settings(load_config()).safety, ramp_time_s=0.0)
+    node = MasterNode.from_model(model, safety)
+    rig = _rig(model, "constant:fx=0.6,fy=0,onset=0.05,rise=0.05")
+    rig_state = rig.initial_state(np.zeros((1, 2)), np.random.default_rng(0))
+    node_state = node.activate(np.zeros((1, 2)))
+    command = np.zeros((1, 2))
+    ts = model.sample_period_s
+    steps = round(0.6 / ts)
+    positions = np.empty(steps)
+    for k in range(steps):
+        sample = rig.step(rig_state, command, np.zeros((1, 2)))
+        command = node.step(node_state, sample.handle_force_measured_N,
+                            sample.handle_position_m, np.zeros((1, 2)))
+        positions[k] = sample.handle_position_m[0, 0]
+    times = np.arange(steps) * ts
+    parts = model.axis("x")
+    closed = control.feedback(parts.handle_actuator_gh * model.ch1,
+                              control.tf(parts.operator_impedance_th_N_per_m, [1.0]))
+    intent = 0.6 * np.clip((times - 0.05) / 0.05, 0.0, 1.0)
+    _, predicted = control.forced_response(closed, times, intent)
+    return float(np.max(np.abs(positions - predicted)))
+
+
+def test_lockstep_closed_loop_converges_to_the_continuous_model_as_ts_shrinks(model) -> None:
+    coarse = _lockstep_closed_loop_error(model, 1)
+    fine = _lockstep_closed_loop_error(model, 4)
+    assert coarse < 5e-4
+    assert 3.0 < coarse / fine < 5.0  # first order in Ts
