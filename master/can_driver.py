@@ -67,6 +67,8 @@ class CanHandleDriver(HandleHardware):
         self._sensor_counter: int | None = None
         self._pending_faults: list[str] = []
         self.last_reading: HandleReading | None = None
+        #: Frames that arrived after their cycle's timeout and were discarded.
+        self.late_frames = 0
 
     # --- lifecycle -------------------------------------------------------------------
 
@@ -182,6 +184,7 @@ class CanHandleDriver(HandleHardware):
             raise HardwareError("read needs a configured driver")
         faults = self._pending_faults
         self._pending_faults = []
+        self._discard_late_frames(faults)
         self._bus.send(can.Message(arbitration_id=cia402.SYNC_COB_ID, data=b"",
                                    is_extended_id=False))
         self._cycle += 1
@@ -236,6 +239,19 @@ class CanHandleDriver(HandleHardware):
         reading = HandleReading(force_N, position_m, self._cycle, tuple(faults))
         self.last_reading = reading
         return reading
+
+    def _discard_late_frames(self, faults: list[str]) -> None:
+        """Drop frames left from an earlier SYNC (they arrived after its timeout, which that
+        cycle reported as missing); an EMCY among them is still reported."""
+        assert self._bus is not None
+        emcy_ids = {cia402.EMCY_BASE + node: axis
+                    for axis, node in enumerate(self.settings.node_ids)}
+        while (message := self._bus.recv(timeout=0.0)) is not None:
+            self.late_frames += 1
+            if message.arbitration_id in emcy_ids:
+                code, register = cia402.decode_emcy(bytes(message.data))
+                faults.append(f"{AXES[emcy_ids[message.arbitration_id]]} drive EMCY error "
+                              f"code 0x{code:04X} (register 0x{register:02X})")
 
     def _sensor_force(self, data: bytes, faults: list[str]) -> np.ndarray:
         try:

@@ -133,7 +133,7 @@ def test_the_can_backend_runs_unchanged_against_the_simulated_devices() -> None:
 
 
 def test_missing_pdo_is_reported_and_the_master_goes_safe() -> None:
-    config = _config("constant:fx=1,fy=0,onset=0.02", master__sim__pdo_timeout_s=0.05)
+    config = _config("constant:fx=1,fy=0,onset=0.02", master__sim__pdo_timeout_s=0.25)
     hardware = create_hardware("sim", config)
 
     def drop(cycle: int) -> None:
@@ -146,10 +146,11 @@ def test_missing_pdo_is_reported_and_the_master_goes_safe() -> None:
     assert summary.safe_state
     assert any("missing TPDO1 from the y drive (node 2)" in f for f in summary.hardware_faults)
     trip = [e for e in summary.events if e.kind == "trip"][0]
-    assert "missing TPDO1" in trip.reason and trip.step == 301
+    assert "missing TPDO1" in trip.reason and trip.step == 301, (trip, summary.hardware_faults)
     commands = summary.trace.handle_command_m
     assert np.all(np.isfinite(commands))
     np.testing.assert_array_equal(commands[301:], np.repeat(commands[301:302], 99, axis=0))
+    assert hardware.driver.late_frames == 0  # the dropped frame was never sent
 
 
 def test_drive_fault_during_a_run_is_reported_and_the_master_goes_safe() -> None:
