@@ -157,15 +157,16 @@ class MasterNode:
         period = self.period_s
 
         # 1. Non-finite inputs: the lane trips and holds its last finite position.
-        for name, values in (("handle force", fh), ("handle position", yh), ("tool force", ft)):
-            bad = ~np.isfinite(values)
-            for lane, axis in zip(*np.nonzero(bad), strict=True):
-                self._trip(state, int(lane), f"non-finite {name}", AXES[axis])
-        measured = np.where(np.isfinite(yh), yh, state.last_position_m)
+        fh_ok, yh_ok, ft_ok = np.isfinite(fh), np.isfinite(yh), np.isfinite(ft)
+        if not (fh_ok.all() and yh_ok.all() and ft_ok.all()):
+            for name, ok in (("handle force", fh_ok), ("handle position", yh_ok),
+                             ("tool force", ft_ok)):
+                self._trip_where(state, ~ok, f"non-finite {name}")
+        measured = np.where(yh_ok, yh, state.last_position_m)
         velocity = (measured - state.last_position_m) / period
         state.last_position_m[...] = measured
-        fh = np.nan_to_num(fh, nan=0.0, posinf=0.0, neginf=0.0)
-        ft = np.nan_to_num(ft, nan=0.0, posinf=0.0, neginf=0.0)
+        fh = np.where(fh_ok, fh, 0.0)
+        ft = np.where(ft_ok, ft, 0.0)
 
         # 2. Trips on measured force, speed and position.
         self._trip_where(state, np.abs(fh) > safety.force_trip_N,
@@ -181,8 +182,8 @@ class MasterNode:
         limit = safety.force_limit_N
         self._note_limits(state, 0, np.abs(fh) > limit, f"handle force saturated at {limit:g} N")
         self._note_limits(state, 1, np.abs(ft) > limit, f"tool force saturated at {limit:g} N")
-        fh = np.clip(fh, -limit, limit)
-        ft = np.clip(ft, -limit, limit)
+        fh = np.minimum(np.maximum(fh, -limit), limit)
+        ft = np.minimum(np.maximum(ft, -limit), limit)
 
         # 4. Force ramp after activation.
         small = np.all(np.abs(fh) < safety.ramp_small_force_N, axis=1)
@@ -190,7 +191,7 @@ class MasterNode:
         state.small_force_count[...] = np.where(small, state.small_force_count + 1, 0)
         opening = waiting & (state.small_force_count >= safety.ramp_small_samples)
         state.forces_enabled |= opening
-        for lane in np.flatnonzero(opening):
+        for lane in np.flatnonzero(opening) if opening.any() else ():
             state.events.append(SafetyEvent(state.step, state.step * period, int(lane),
                                             "enable", "forces enabled after "
                                             f"{safety.ramp_small_samples} small-force samples"))
@@ -204,9 +205,12 @@ class MasterNode:
 
         # The compensator: a position offset from the origin; frozen in faulted lanes.
         inputs = scale[:, None] * np.concatenate([fh, ft], axis=1)
-        frozen = state.compensator[state.faulted].copy()
+        any_faulted = bool(state.faulted.any())
+        if any_faulted:
+            frozen = state.compensator[state.faulted].copy()
         offset = self.compensator.step(state.compensator, inputs)
-        state.compensator[state.faulted] = frozen
+        if any_faulted:
+            state.compensator[state.faulted] = frozen
         raw = state.origin_m + offset
 
         # 5. Command rate and workspace limits, re-basing the offset when they act.
@@ -214,10 +218,10 @@ class MasterNode:
         delta = raw - state.last_command_m
         self._note_limits(state, 2, np.abs(delta) > max_step,
                           f"command rate limited to {safety.velocity_limit_m_per_s:g} m/s")
-        command = state.last_command_m + np.clip(delta, -max_step, max_step)
+        command = state.last_command_m + np.minimum(np.maximum(delta, -max_step), max_step)
         outside_box = (command < self._workspace_min) | (command > self._workspace_max)
         self._note_limits(state, 3, outside_box, "command clamped to the workspace")
-        command = np.clip(command, self._workspace_min, self._workspace_max)
+        command = np.minimum(np.maximum(command, self._workspace_min), self._workspace_max)
         state.origin_m += command - raw
 
         command = np.where(state.faulted[:, None], state.hold_m, command)
@@ -226,16 +230,20 @@ class MasterNode:
         return command.copy()
 
     def _trip_where(self, state: MasterNodeState, condition: np.ndarray, reason: str) -> None:
+        if not condition.any():
+            return
         for lane, axis in zip(*np.nonzero(condition), strict=True):
             self._trip(state, int(lane), reason, AXES[axis])
 
     def _note_limits(self, state: MasterNodeState, which: int, active: np.ndarray,
                      reason: str) -> None:
         starting = active & ~state.limiting[:, which, :] & ~state.faulted[:, None]
+        state.limiting[:, which, :] = active
+        if not starting.any():
+            return
         for lane, axis in zip(*np.nonzero(starting), strict=True):
             state.events.append(SafetyEvent(state.step, state.step * self.period_s, int(lane),
                                             "saturate", reason, AXES[axis]))
-        state.limiting[:, which, :] = active
 
 
 def _mask(lanes: np.ndarray, count: int) -> np.ndarray:
