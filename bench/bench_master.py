@@ -105,7 +105,7 @@ def main() -> None:
         print(json.dumps(results))
         return
     for name, figures in results.items():
-        text = ", ".join(f"{k} {v:.1f}" if isinstance(v, float) else f"{k} {v}"
+        text = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
                          for k, v in figures.items())
         print(f"{name:28s} {text}")
 
