@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 from haptic.common.config import Field, Schema
+from haptic.master.schema import MASTER_SCHEMA
 from haptic.slave_sim.schema import SLAVE_SCHEMA
 
 
@@ -119,4 +120,5 @@ SCHEMA: Schema = {
     "model": MODEL_SCHEMA,
     "analysis": ANALYSIS_SCHEMA,
     "slave": SLAVE_SCHEMA,
+    "master": MASTER_SCHEMA,
 }

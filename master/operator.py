@@ -1,0 +1,181 @@
+"""Operator models for the simulated rig: the intent force ``uh`` (N) the operator's arm
+produces, per axis (x, y), vectorised over lanes.
+
+The force the handle's sensor measures is ``fh = uh - Th yh`` (the arm impedance Th acts on
+the handle's motion, see :mod:`haptic.master.rig_model`); these models give ``uh`` only.
+Three scripted intents, chosen by a spec string ``kind:key=value,...``:
+
+- ``constant:fx=3,fy=0,onset=0.05,rise=0.02`` - a constant force (N) per axis, applied from
+  ``onset`` (s) and ramped in linearly over ``rise`` (s).
+- ``regulate:fx=3.6,fy=0,kp=0.5,ki=4,lag=0.1,max=20,onset=0,rise=0`` - the paper's
+  operator who corrects the applied force to hold a cutting force: the felt tool force
+  ``ft`` passes a first-order perception lag (time constant ``lag`` s), and a PI regulator
+  adds ``kp e + ki integral(e)`` to the expected force, ``e = target - ft_felt``;
+  ``uh = target + kp e + ki int e`` is limited to +-``max`` N with conditional integration
+  (no wind-up while limited).
+- ``track:shape=ramp,vx=0.038,vy=0,kp=200,kd=20,max=20,onset=0`` or
+  ``track:shape=sine,ax=0.02,ay=0,freq=0.5,...`` - a position-trajectory follower: the arm
+  pulls the handle towards a scripted trajectory r(t) (relative to where it grasped the
+  handle) with a spring ``kp`` (N/m) and damper ``kd`` (N s/m), ``uh = kp (r - y) +
+  kd (r' - y')``, limited to +-``max`` N.
+
+A malformed spec raises :class:`~haptic.common.config.ConfigError` naming the key it came
+from. Models hold no mutable state: :class:`OperatorState` is owned by the caller.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from haptic.common.config import ConfigError
+
+OPERATOR_KINDS = ("constant", "regulate", "track")
+
+
+@dataclass
+class OperatorState:
+    """Per-lane operator state: elapsed time (s), regulator integral (N s), felt force (N)."""
+
+    time_s: np.ndarray
+    integral_N_s: np.ndarray
+    felt_tool_force_N: np.ndarray
+
+
+def _envelope(time_s: np.ndarray, onset_s: float, rise_s: float) -> np.ndarray:
+    """0 before onset, a linear ramp over ``rise_s``, then 1; shape (lanes, 1)."""
+    if rise_s > 0.0:
+        value = np.clip((time_s - onset_s) / rise_s, 0.0, 1.0)
+    else:
+        value = (time_s >= onset_s).astype(float)
+    return value[:, None]
+
+
+@dataclass(frozen=True)
+class OperatorModel:
+    """One scripted operator (see the module docstring for the kinds and parameters)."""
+
+    kind: str
+    params: dict[str, float | str] = field(default_factory=dict)
+
+    def _p(self, name: str) -> float:
+        return float(self.params[name])
+
+    def initial_state(self, lanes: int = 1) -> OperatorState:
+        """Zero time, zero integral, nothing felt yet."""
+        return OperatorState(np.zeros(lanes), np.zeros((lanes, 2)), np.zeros((lanes, 2)))
+
+    def intent_force(
+        self,
+        state: OperatorState,
+        handle_offset_m: np.ndarray,
+        handle_velocity_m_per_s: np.ndarray,
+        tool_force_N: np.ndarray,
+        period_s: float,
+    ) -> np.ndarray:
+        """The intent force uh (N), shape (lanes, 2), at the state's time; then advances the
+        state by ``period_s``. ``handle_offset_m`` is the handle position relative to where
+        the operator grasped it; ``tool_force_N`` is the tool force the operator feels."""
+        time_s = state.time_s
+        if self.kind == "constant":
+            envelope = _envelope(time_s, self._p("onset"), self._p("rise"))
+            force = envelope * np.array([self._p("fx"), self._p("fy")])
+        elif self.kind == "regulate":
+            envelope = _envelope(time_s, self._p("onset"), self._p("rise"))
+            force = envelope * self._regulate(state, tool_force_N, period_s, envelope)
+        else:
+            force = self._track(time_s, handle_offset_m, handle_velocity_m_per_s)
+        state.time_s = time_s + period_s
+        return force
+
+    def _regulate(self, state: OperatorState, tool_force_N: np.ndarray, period_s: float,
+                  envelope: np.ndarray) -> np.ndarray:
+        target = np.array([self._p("fx"), self._p("fy")])
+        lag_s = self._p("lag")
+        alpha = 1.0 if lag_s == 0.0 else 1.0 - math.exp(-period_s / lag_s)
+        felt = state.felt_tool_force_N
+        felt += alpha * (np.nan_to_num(tool_force_N) - felt)
+        error = target - felt
+        limit = self._p("max")
+        raw = target + self._p("kp") * error + self._p("ki") * state.integral_N_s
+        limited = np.clip(raw, -limit, limit)
+        # Conditional integration: integrate only while active and not pushing the limit.
+        pushing_limit = (raw != limited) & (np.sign(error) == np.sign(raw))
+        active = envelope > 0.0
+        state.integral_N_s += np.where(active & ~pushing_limit, error * period_s, 0.0)
+        return limited
+
+    def _track(self, time_s: np.ndarray, offset_m: np.ndarray,
+               velocity_m_per_s: np.ndarray) -> np.ndarray:
+        elapsed = np.maximum(time_s - self._p("onset"), 0.0)[:, None]
+        started = (time_s >= self._p("onset"))[:, None]
+        if self.params["shape"] == "ramp":
+            rate = np.array([self._p("vx"), self._p("vy")])
+            reference = rate * elapsed
+            reference_rate = np.where(started, rate, 0.0)
+        else:
+            amplitude = np.array([self._p("ax"), self._p("ay")])
+            omega = 2.0 * math.pi * self._p("freq")
+            reference = amplitude * np.sin(omega * elapsed)
+            reference_rate = np.where(started, amplitude * omega * np.cos(omega * elapsed), 0.0)
+        force = self._p("kp") * (reference - offset_m) + self._p("kd") * (
+            reference_rate - velocity_m_per_s)
+        limit = self._p("max")
+        return np.clip(force, -limit, limit)
+
+
+_DEFAULTS: dict[str, dict[str, float | str]] = {
+    "constant": {"fx": 0.0, "fy": 0.0, "onset": 0.0, "rise": 0.0},
+    "regulate": {"fx": 3.6, "fy": 0.0, "kp": 0.5, "ki": 4.0, "lag": 0.1, "max": 20.0,
+                 "onset": 0.0, "rise": 0.0},
+    "track": {"shape": "ramp", "vx": 0.0, "vy": 0.0, "ax": 0.0, "ay": 0.0, "freq": 0.5,
+              "kp": 200.0, "kd": 20.0, "max": 20.0, "onset": 0.0},
+}
+_NON_NEGATIVE = {"onset", "rise", "lag", "max", "kp", "ki", "kd", "freq"}
+
+
+def parse_operator_spec(spec: str, key: str = "operator") -> OperatorModel:
+    """Parse ``kind:key=value,...`` into an :class:`OperatorModel`.
+
+    Raises :class:`ConfigError` (naming ``key``) for an unknown kind or parameter, a value
+    that is not a finite number, or a negative time, gain or limit.
+    """
+    kind, _, rest = spec.strip().partition(":")
+    kind = kind.strip()
+    if kind not in _DEFAULTS:
+        raise ConfigError(key, f"operator kind must be one of {', '.join(OPERATOR_KINDS)} "
+                               f"(got {kind!r} in {spec!r})")
+    params = dict(_DEFAULTS[kind])
+    for item in filter(None, (part.strip() for part in rest.split(","))):
+        name, equals, text = item.partition("=")
+        name, text = name.strip(), text.strip()
+        if not equals or name not in params:
+            raise ConfigError(key, f"unknown {kind} operator parameter {item!r}; expected "
+                                   f"{', '.join(params)}")
+        if name == "shape":
+            if text not in ("ramp", "sine"):
+                raise ConfigError(key, f"track shape must be ramp or sine (got {text!r})")
+            params[name] = text
+            continue
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            raise ConfigError(key, f"operator parameter {name} must be a finite number "
+                                   f"(got {text!r})")
+        if name in _NON_NEGATIVE and value < 0.0:
+            raise ConfigError(key, f"operator parameter {name} must be >= 0 (got {value:g})")
+        params[name] = value
+    return OperatorModel(kind, params)
+
+
+def check_operator_spec(spec: str) -> str | None:
+    """Schema hook: an error message for a bad spec, ``None`` when it parses."""
+    try:
+        parse_operator_spec(spec)
+    except ConfigError as error:
+        return str(error).split(": ", 1)[-1]
+    return None

@@ -1,0 +1,88 @@
+"""Configuration schema of the master side: ``[master]`` and its sub-tables."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from haptic.common.config import Field, Schema
+from haptic.master.operator import check_operator_spec
+
+
+def _pair(values: Any) -> str | None:
+    return None if len(values) == 2 else f"must list 2 values, x then y (got {len(values)})"
+
+
+def _rig_name(name: Any) -> str | None:
+    from haptic.master.hardware import hardware_names
+
+    names = hardware_names()
+    return None if name in names else f"must be one of {', '.join(names)} (got {name!r})"
+
+
+CAN_SCHEMA: Schema = {
+    "interface": Field("str", "python-can interface of the real bus, e.g. socketcan, pcan."),
+    "channel": Field("str", "python-can channel, e.g. can0."),
+    "bitrate": Field("int", "CAN bitrate, bit/s.", minimum=10_000, maximum=1_000_000),
+    "x_node_id": Field("int", "CANopen node id of the x-axis CiA 402 drive.", minimum=1,
+                       maximum=127),
+    "y_node_id": Field("int", "CANopen node id of the y-axis CiA 402 drive.", minimum=1,
+                       maximum=127),
+    "dbc_file": Field("str", "Force sensor DBC file; empty for the packaged one."),
+    "pdo_timeout_s": Field("float", "How long read() waits for the PDOs of a SYNC, s.",
+                           minimum=0.0, exclusive_minimum=True),
+    "enable_timeout_cycles": Field("int", "SYNC cycles allowed for the CiA 402 enable "
+                                   "sequence and SDO replies.", minimum=1),
+    "lead_screw_pitch_m_per_rev": Field("float", "Lead-screw pitch, m per revolution.",
+                                        minimum=0.0, exclusive_minimum=True),
+    "encoder_counts_per_rev": Field("int", "Encoder counts per motor revolution (after "
+                                    "quadrature), counts/rev.", minimum=1),
+    "force_scale_N_per_count": Field("float_list", "Sensor scale per channel (x, y), N per "
+                                     "count.", check=_pair),
+    "force_offset_count": Field("float_list", "Sensor offset per channel (x, y), counts.",
+                                check=_pair),
+}
+
+SIM_SCHEMA: Schema = {
+    "channel": Field("str", "python-can virtual bus channel the simulated rig speaks on."),
+    "pdo_timeout_s": Field("float", "How long read() waits for the simulated devices' "
+                           "frames, s (they answer from a thread).", minimum=0.0,
+                           exclusive_minimum=True),
+    "operator": Field("str", "Operator model spec, kind:key=value,... (docs/master.md).",
+                      check=check_operator_spec),
+    "force_noise_std_N": Field("float", "Force sensor noise, standard deviation, N.",
+                               minimum=0.0),
+    "seed": Field("int", "Seed of the sensor noise generator.", minimum=0),
+    "initial_position_m": Field("float_list", "Handle position at start (x, y), m.",
+                                check=_pair),
+}
+
+SAFETY_SCHEMA: Schema = {
+    "force_limit_N": Field("float", "Forces (handle and tool) saturate at this magnitude "
+                           "per axis, N.", minimum=0.0, exclusive_minimum=True),
+    "force_trip_N": Field("float", "A measured handle force beyond this trips the safe "
+                          "state, N.", minimum=0.0, exclusive_minimum=True),
+    "velocity_limit_m_per_s": Field("float", "Handle command rate limit per axis, m/s.",
+                                    minimum=0.0, exclusive_minimum=True),
+    "velocity_trip_m_per_s": Field("float", "A measured handle speed beyond this trips the "
+                                   "safe state, m/s.", minimum=0.0, exclusive_minimum=True),
+    "workspace_min_m": Field("float_list", "Workspace box lower corner (x, y), m.",
+                             check=_pair),
+    "workspace_max_m": Field("float_list", "Workspace box upper corner (x, y), m.",
+                             check=_pair),
+    "workspace_trip_margin_m": Field("float", "A measured position this far outside the "
+                                     "workspace trips the safe state, m.", minimum=0.0),
+    "ramp_small_force_N": Field("float", "Force magnitude counted as small before forces "
+                                "are enabled, N.", minimum=0.0, exclusive_minimum=True),
+    "ramp_small_samples": Field("int", "Consecutive small-force samples needed before "
+                                "forces are enabled.", minimum=1),
+    "ramp_time_s": Field("float", "Forces ramp in linearly over this time once enabled, s.",
+                         minimum=0.0),
+}
+
+MASTER_SCHEMA: Schema = {
+    "rig": Field("str", "Handle hardware by name: can (servo drives on a CAN bus) or sim "
+                 "(the simulated rig on a virtual bus).", check=_rig_name),
+    "can": CAN_SCHEMA,
+    "sim": SIM_SCHEMA,
+    "safety": SAFETY_SCHEMA,
+}

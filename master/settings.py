@@ -1,0 +1,124 @@
+"""Typed views of the validated ``[master]`` configuration (units in the field names)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from haptic.common.config import ConfigError
+from haptic.master.operator import OperatorModel, parse_operator_spec
+
+
+@dataclass(frozen=True)
+class CanSettings:
+    """The CAN bus, the two CiA 402 drives, the force sensor and the unit conversions."""
+
+    interface: str
+    channel: str
+    bitrate: int
+    x_node_id: int
+    y_node_id: int
+    dbc_file: str
+    pdo_timeout_s: float
+    enable_timeout_cycles: int
+    lead_screw_pitch_m_per_rev: float
+    encoder_counts_per_rev: int
+    force_scale_N_per_count: tuple[float, float]
+    force_offset_count: tuple[float, float]
+
+    @property
+    def node_ids(self) -> tuple[int, int]:
+        """Node ids of the x and y drives."""
+        return (self.x_node_id, self.y_node_id)
+
+    @property
+    def metres_per_count(self) -> float:
+        """Handle travel per encoder count, m."""
+        return self.lead_screw_pitch_m_per_rev / self.encoder_counts_per_rev
+
+    def counts_from_metres(self, position_m: np.ndarray) -> np.ndarray:
+        """Encoder counts (int64) for positions in m, rounded to the nearest count."""
+        return np.rint(np.asarray(position_m, float) / self.metres_per_count).astype(np.int64)
+
+    def metres_from_counts(self, counts: np.ndarray) -> np.ndarray:
+        """Positions in m for encoder counts."""
+        return np.asarray(counts, float) * self.metres_per_count
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """The simulated rig on python-can's virtual bus."""
+
+    channel: str
+    pdo_timeout_s: float
+    operator: OperatorModel
+    force_noise_std_N: float
+    seed: int
+    initial_position_m: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class SafetySettings:
+    """Limits the master node enforces before anything reaches a drive."""
+
+    force_limit_N: float
+    force_trip_N: float
+    velocity_limit_m_per_s: float
+    velocity_trip_m_per_s: float
+    workspace_min_m: tuple[float, float]
+    workspace_max_m: tuple[float, float]
+    workspace_trip_margin_m: float
+    ramp_small_force_N: float
+    ramp_small_samples: int
+    ramp_time_s: float
+
+
+@dataclass(frozen=True)
+class MasterSettings:
+    """The whole ``[master]`` section."""
+
+    rig: str
+    can: CanSettings
+    sim: SimSettings
+    safety: SafetySettings
+
+
+def safety_from_table(table: dict[str, Any], prefix: str = "master.safety") -> SafetySettings:
+    """:class:`SafetySettings` from a validated table, with the cross-key checks."""
+    safety = SafetySettings(
+        **{k: (tuple(v) if isinstance(v, list) else v) for k, v in table.items()}
+    )
+    if not safety.force_trip_N >= safety.force_limit_N:
+        raise ConfigError(f"{prefix}.force_trip_N", "must be >= force_limit_N")
+    if not safety.velocity_trip_m_per_s >= safety.velocity_limit_m_per_s:
+        raise ConfigError(f"{prefix}.velocity_trip_m_per_s", "must be >= velocity_limit_m_per_s")
+    if not all(lo < hi for lo, hi in zip(safety.workspace_min_m, safety.workspace_max_m,
+                                          strict=True)):
+        raise ConfigError(f"{prefix}.workspace_max_m", "must exceed workspace_min_m on each axis")
+    if not safety.ramp_small_force_N < safety.force_trip_N:
+        raise ConfigError(f"{prefix}.ramp_small_force_N", "must be < force_trip_N")
+    return safety
+
+
+def master_settings(config: dict[str, Any]) -> MasterSettings:
+    """:class:`MasterSettings` from a validated configuration; :class:`ConfigError` names
+    the key for cross-key problems."""
+    section = config["master"]
+    can_table = dict(section["can"])
+    for key in ("force_scale_N_per_count", "force_offset_count"):
+        can_table[key] = tuple(can_table[key])
+    can = CanSettings(**can_table)
+    if can.x_node_id == can.y_node_id:
+        raise ConfigError("master.can.y_node_id", "must differ from x_node_id")
+    if any(scale == 0.0 for scale in can.force_scale_N_per_count):
+        raise ConfigError("master.can.force_scale_N_per_count", "must not be zero")
+    sim_table = dict(section["sim"])
+    sim = SimSettings(
+        channel=sim_table["channel"], pdo_timeout_s=sim_table["pdo_timeout_s"],
+        operator=parse_operator_spec(sim_table["operator"], "master.sim.operator"),
+        force_noise_std_N=sim_table["force_noise_std_N"], seed=sim_table["seed"],
+        initial_position_m=tuple(sim_table["initial_position_m"]),
+    )
+    return MasterSettings(section["rig"], can, sim, safety_from_table(section["safety"]))
