@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 from haptic.common.config import Field, Schema
+from haptic.common.link_config import LINK_SCHEMA
 
 
 def _leading_nonzero(coefficients: list[float]) -> str | None:
@@ -103,4 +104,5 @@ ANALYSIS_SCHEMA: Schema = {
 SCHEMA: Schema = {
     "model": MODEL_SCHEMA,
     "analysis": ANALYSIS_SCHEMA,
+    "link": LINK_SCHEMA,
 }
