@@ -41,13 +41,13 @@ _INJECTION_FLAGS = {
     "burst_enter": ("--burst-enter", "burst_enter_probability"),
     "burst_exit": ("--burst-exit", "burst_exit_probability"),
     "burst_loss": ("--burst-loss", "burst_loss_probability"),
+    "seed": ("--seed", "seed"),
 }
 # flag dest -> key under [link]
 _LINK_FLAGS = {
-    "mode": ("--mode", "mode"),
-    "key_prefix": ("--key-prefix", "key_prefix"),
-    "max_message_age": ("--max-message-age", "max_message_age_s"),
-    "seed": ("--seed", "seed"),
+    "mode": ("--mode", "transport.mode"),
+    "key_prefix": ("--key-prefix", "transport.key_prefix"),
+    "max_message_age": ("--max-message-age", "watchdog.max_message_age_s"),
 }
 
 
@@ -85,18 +85,20 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
 
 
 def add_connection_options(parser: argparse.ArgumentParser) -> None:
-    """The Zenoh connection options (``[link]`` and ``[link.<side>]`` in the config)."""
+    """The Zenoh connection options (``[link.transport]``, ``[link.<side>.endpoints]``)."""
     group = parser.add_argument_group("connection (Zenoh)")
-    group.add_argument("--mode", choices=MODES, help="peer, or client of a router (link.mode)")
+    group.add_argument(
+        "--mode", choices=MODES, help="peer, or client of a router (link.transport.mode)"
+    )
     group.add_argument(
         "--connect", metavar="ENDPOINT", action="append",
         help="endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable; replaces "
-        "link.<side>.connect; in client mode: the router)",
+        "link.<side>.endpoints.connect; in client mode: the router)",
     )
     group.add_argument(
         "--listen", metavar="ENDPOINT", action="append",
         help="endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable; replaces "
-        "link.<side>.listen)",
+        "link.<side>.endpoints.listen)",
     )
     group.add_argument("--key-prefix", metavar="PREFIX", help="key prefix, e.g. haptic/rig-1")
     group.add_argument(
@@ -109,7 +111,8 @@ def add_connection_options(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument(
         "--max-message-age", metavar="S", type=float,
-        help="watchdog: safe state after S s without a fresh message (link.max_message_age_s)",
+        help="watchdog: safe state after S s without a fresh message "
+        "(link.watchdog.max_message_age_s)",
     )
 
 
@@ -174,7 +177,7 @@ def run_options_from_args(
     for dest, flag in (("connect", "--connect"), ("listen", "--listen")):
         endpoints = getattr(args, dest, None)
         if endpoints:
-            config = _set(config, flag, f"link.{side}.{dest}", ",".join(endpoints))
+            config = _set(config, flag, f"link.{side}.endpoints.{dest}", ",".join(endpoints))
     duration = getattr(args, "duration", None)
     if duration is not None and not duration > 0.0:
         raise ConfigError("--duration", f"must be > 0 s (got {duration:g})")

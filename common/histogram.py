@@ -55,6 +55,8 @@ class LogHistogram:
         index = int(np.searchsorted(cumulative, max(rank, 1e-12), side="left"))
         if index == 0:
             return 0.0
+        if index >= self._nbins - 1:
+            return self.max_s
         centre = math.exp(self._log_low + (index - 0.5) * self._step)
         return min(centre, self.max_s)
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import zenoh
 
-from haptic.common.link_config import SIDES, LinkConfig
+from haptic.common.link_config import LinkConfig
 from haptic.common.messages import (
     KIND_HANDLE,
     KIND_TOOL,
@@ -77,9 +77,9 @@ class PresenceEvent:
 class Link:
     """One side's end of the link. Not thread-safe: call it from the control loop only.
 
-    ``rng`` drives the injected jitter and loss (default: seeded from ``config.seed`` and the
-    side); ``clock_ns`` is the send-time clock (CLOCK_REALTIME); ``epoch`` identifies this run
-    of the sender (default: random).
+    ``rng`` drives the injected jitter and loss (default: seeded from ``config.seed``);
+    ``clock_ns`` is the send-time clock (CLOCK_REALTIME); ``epoch`` identifies this run of the
+    sender (default: random).
     """
 
     def __init__(
@@ -90,9 +90,8 @@ class Link:
         epoch: int | None = None,
     ) -> None:
         self.config = config
-        side_index = SIDES.index(config.side)
         if rng is None:
-            rng = np.random.default_rng([config.seed, side_index])
+            rng = np.random.default_rng(config.seed)
         self._clock_ns = clock_ns
         self.epoch = int(np.random.default_rng().integers(0, 2**32)) if epoch is None else epoch
         self._seq = 0

@@ -1,9 +1,10 @@
 """Configuration of the link: the ``[link]`` TOML table and the :class:`LinkConfig` it becomes.
 
-``[link]`` holds what both sides share (mode, key prefix, QoS, watchdog ages);
-``[link.master]`` and ``[link.slave]`` hold each side's endpoints and, in ``.injection``, what
-that side's *receiving* link injects (one way: the master's injection delays the tool's
-messages, the slave's the handle's). Endpoints are zenoh locators (``tcp/127.0.0.1:7447``),
+``[link.transport]`` and ``[link.watchdog]`` hold what both sides share (mode, key prefix, QoS;
+watchdog ages); ``[link.master.endpoints]`` / ``[link.slave.endpoints]`` each side's endpoints,
+and ``[link.master.injection]`` / ``[link.slave.injection]`` what that side's *receiving* link
+injects (one way: the master's injection delays the tool's messages, the slave's the
+handle's). Endpoints are zenoh locators (``tcp/127.0.0.1:7447``),
 comma separated, empty for none.
 """
 
@@ -77,23 +78,27 @@ INJECTION_SCHEMA: Schema = {
     "burst_loss_probability": Field(
         "float", "Loss probability per message in the bad state.", minimum=0.0, maximum=1.0
     ),
+    "seed": Field("int", "Seed of this side's injected jitter and loss.", minimum=0),
 }
 
 
 def _side_schema(doc: str) -> Schema:
     return {
-        "listen": Field(
-            "str", f"Endpoints the {doc} listens on, comma separated.", check=_endpoints_check
-        ),
-        "connect": Field(
-            "str", f"Endpoints the {doc} connects to (the router in client mode).",
-            check=_endpoints_check,
-        ),
+        "endpoints": {
+            "listen": Field(
+                "str", f"Endpoints the {doc} listens on, comma separated.",
+                check=_endpoints_check,
+            ),
+            "connect": Field(
+                "str", f"Endpoints the {doc} connects to (the router in client mode).",
+                check=_endpoints_check,
+            ),
+        },
         "injection": INJECTION_SCHEMA,
     }
 
 
-LINK_SCHEMA: Schema = {
+TRANSPORT_SCHEMA: Schema = {
     "mode": Field("str", "Zenoh mode: peer, or client of a router.", choices=MODES),
     "key_prefix": Field("str", "Key expression prefix of the rig.", check=_key_prefix_check),
     "multicast_scouting": Field("bool", "Discover peers by UDP multicast scouting."),
@@ -112,8 +117,11 @@ LINK_SCHEMA: Schema = {
         "float", "Zenoh link lease: a silent peer is declared gone after this, s.",
         minimum=0.001, maximum=3600.0,
     ),
+}
+
+WATCHDOG_SCHEMA: Schema = {
     "max_message_age_s": Field(
-        "float", "Watchdog: no fresh peer message for this long -> safe state, s.",
+        "float", "No fresh peer message for this long -> safe state, s.",
         minimum=0.0, exclusive_minimum=True, maximum=60.0,
     ),
     "stale_after_s": Field(
@@ -121,10 +129,16 @@ LINK_SCHEMA: Schema = {
         minimum=0.0, exclusive_minimum=True, maximum=60.0,
     ),
     "resync_messages": Field(
-        "int", "Fresh consecutive messages needed after a watchdog trip before resync.",
+        "int", "Fresh messages in a row needed after start-up or a trip before resync.",
         minimum=1, maximum=1_000_000,
     ),
-    "seed": Field("int", "Seed of the injection's random generator.", minimum=0),
+}
+
+# Only tables at this level and in the side tables: a file may override one of them (say
+# [link.slave.endpoints]) without repeating the others (see haptic.common.config's rules).
+LINK_SCHEMA: Schema = {
+    "transport": TRANSPORT_SCHEMA,
+    "watchdog": WATCHDOG_SCHEMA,
     "master": _side_schema("master"),
     "slave": _side_schema("slave"),
 }
@@ -161,19 +175,19 @@ class LinkConfig:
         if self.side not in SIDES:
             raise ConfigError("side", f"must be one of {', '.join(SIDES)} (got {self.side!r})")
         if self.mode not in MODES:
-            raise ConfigError("link.mode", f"must be one of {', '.join(MODES)}")
+            raise ConfigError("link.transport.mode", f"must be one of {', '.join(MODES)}")
         if self.mode == "client" and not self.connect:
             raise ConfigError(
-                f"link.{self.side}.connect", "client mode needs the router's endpoint"
+                f"link.{self.side}.endpoints.connect", "client mode needs the router's endpoint"
             )
         problem = _key_prefix_check(self.key_prefix)
         if problem:
-            raise ConfigError("link.key_prefix", problem)
+            raise ConfigError("link.transport.key_prefix", problem)
         for name in ("listen", "connect"):
             for endpoint in getattr(self, name):
                 problem = endpoint_problem(endpoint)
                 if problem:
-                    raise ConfigError(f"link.{self.side}.{name}", problem)
+                    raise ConfigError(f"link.{self.side}.endpoints.{name}", problem)
 
     @property
     def peer_side(self) -> str:
@@ -214,8 +228,9 @@ class LinkConfig:
 
 
 def injection_from_table(table: dict[str, Any]) -> InjectionConfig:
-    """An :class:`InjectionConfig` from a validated ``[link.<side>.injection]`` table."""
-    return InjectionConfig(**table)
+    """An :class:`InjectionConfig` from a validated ``[link.<side>.injection]`` table (its
+    ``seed`` goes to :class:`LinkConfig`)."""
+    return InjectionConfig(**{k: v for k, v in table.items() if k != "seed"})
 
 
 def link_config_from(config: dict[str, Any], side: str, **changes: Any) -> LinkConfig:
@@ -224,24 +239,17 @@ def link_config_from(config: dict[str, Any], side: str, **changes: Any) -> LinkC
     if side not in SIDES:
         raise ConfigError("side", f"must be one of {', '.join(SIDES)} (got {side!r})")
     link = config["link"]
+    transport = link["transport"]
+    watchdog = link["watchdog"]
     own = link[side]
     values: dict[str, Any] = {
         "side": side,
-        "mode": link["mode"],
-        "key_prefix": link["key_prefix"],
-        "listen": split_endpoints(own["listen"]),
-        "connect": split_endpoints(own["connect"]),
-        "multicast_scouting": link["multicast_scouting"],
-        "express": link["express"],
-        "congestion_control": link["congestion_control"],
-        "tx_queue_size_real_time": link["tx_queue_size_real_time"],
-        "receive_queue_capacity": link["receive_queue_capacity"],
-        "lease_s": link["lease_s"],
-        "max_message_age_s": link["max_message_age_s"],
-        "stale_after_s": link["stale_after_s"],
-        "resync_messages": link["resync_messages"],
-        "seed": link["seed"],
+        "listen": split_endpoints(own["endpoints"]["listen"]),
+        "connect": split_endpoints(own["endpoints"]["connect"]),
         "injection": injection_from_table(own["injection"]),
+        "seed": own["injection"]["seed"],
+        **transport,
+        **watchdog,
     }
     values.update(changes)
     return LinkConfig(**values)

@@ -170,6 +170,8 @@ class ReceivePath:
             self._drop(DropReason.STALE)
             return
         if message.seq <= seq_state.highest_seq:
+            if message.seq < seq_state.highest_seq and n.network_lost > 0:
+                n.network_lost -= 1  # it filled a gap counted as lost (duplicates are not told)
             n.reordered += 1
             self._drop(DropReason.OUT_OF_ORDER)
             return
