@@ -207,3 +207,15 @@ def test_sigterm_ends_a_linked_node_cleanly(tmp_path):
         child.stdout.close()
     summary = json.loads(out.read_text())
     assert summary["stop_reason"] == "SIGTERM" and summary["closed"]
+
+
+def test_slave_started_before_master_finds_it():
+    master_cfg, slave_cfg = configs()
+    with Link(slave_cfg) as slave:
+        slave.poll()
+        assert not slave.peer_alive
+        time.sleep(0.2)
+        with Link(master_cfg) as master:
+            wait_for_peers(master, slave)  # zenoh retries the slave's connect endpoint
+            sent = master.send_handle((0.5, 0.5), (0.0, 0.0))
+            assert [m for m, _ in drain(slave, 0.2)] == [sent]
