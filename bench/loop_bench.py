@@ -297,6 +297,7 @@ def _direction(summary: dict[str, Any]) -> dict[str, Any]:
         "loss_ratio": summary["loss_ratio"],
         "age_at_use_p50_s": summary.get("link_age_at_use_p50_s"),
         "network_loss_ratio": summary.get("link_network_loss_ratio"),
+        "dropped": {k: v for k, v in summary.get("link_dropped", {}).items() if v},
     }
 
 
@@ -365,6 +366,7 @@ def print_table(result: dict[str, Any]) -> None:
             f"  link {name:15s} one-way p50 {_us(d['one_way_p50_s'])} p99 "
             f"{_us(d['one_way_p99_s'])}  loss {d['loss_ratio'] * 100:.3f} %  "
             f"(age at use p50 {_us(d['age_at_use_p50_s'])})"
+            + (f"  dropped {d['dropped']}" if d["dropped"] else "")
         )
     raw = result["raw_zenoh"]
     print(f"  raw zenoh ping-pong one-way p50 {_us(raw['one_way_p50_s'])} p99 "

@@ -18,7 +18,7 @@ class LogHistogram:
     values above ``high_s`` in the last; ``max_s`` and ``count`` are exact.
     """
 
-    def __init__(self, low_s: float = 1e-7, high_s: float = 100.0, rel_width: float = 0.005):
+    def __init__(self, low_s: float = 1e-9, high_s: float = 100.0, rel_width: float = 0.005):
         if not 0.0 < low_s < high_s or not 0.0 < rel_width < 1.0:
             raise ValueError("need 0 < low_s < high_s and 0 < rel_width < 1")
         self.low_s = low_s

@@ -73,6 +73,11 @@ class PresenceEvent:
     time_ns: int
     alive: bool
 
+    def as_dict(self) -> dict[str, object]:
+        """For the run summary's ``events`` (``time_s`` on CLOCK_REALTIME, s)."""
+        kind = "peer_alive" if self.alive else "peer_gone"
+        return {"time_s": self.time_ns * 1e-9, "kind": kind, "reason": "liveliness token"}
+
 
 class Link:
     """One side's end of the link. Not thread-safe: call it from the control loop only.
