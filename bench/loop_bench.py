@@ -45,7 +45,7 @@ from haptic.common.cli_options import add_run_options, run_options_from_args
 from haptic.common.config import exit_on_config_error
 from haptic.common.link import Link
 from haptic.common.messages import Flags
-from haptic.common.runner import RealTimeRunner
+from haptic.common.runner import RealTimeRunner, StopSignals
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.watchdog import PeerWatchdog
 
@@ -170,14 +170,12 @@ def echo_node(side: str, argv: list[str]) -> int:
     period_s = config["model"]["sample_period_s"]
     watchdog = PeerWatchdog(options.link.max_message_age_s, options.link.resync_messages)
     max_force = 0.0
-    with Link(options.link) as link:
-        deadline = time.monotonic() + PEER_WAIT_S
-        while not link.peer_alive:
-            link.poll()
-            if time.monotonic() > deadline:
-                print(f"{side}: no peer after {PEER_WAIT_S} s", file=sys.stderr)
-                return 1
-            time.sleep(0.001)
+    with StopSignals() as signals, Link(options.link) as link:
+        if not link.wait_for_peer(PEER_WAIT_S, lambda: signals.requested):
+            if signals.requested:
+                return 0
+            print(f"{side}: no peer after {PEER_WAIT_S} s", file=sys.stderr)
+            return 1
         state: dict[str, Any] = {"force": (0.0, 0.0), "position": (0.0, 0.0)}
 
         def step(tick: int, now_ns: int) -> None:
@@ -207,7 +205,7 @@ def echo_node(side: str, argv: list[str]) -> int:
 
         runner = RealTimeRunner(
             period_s, step, duration_s=options.duration_s, status=status,
-            spin_s=spin_s,
+            spin_s=spin_s, stop_signals=signals,
             show_status=options.show_status,
         )
         run = runner.run()

@@ -265,6 +265,26 @@ class Link:
                 change = presence.try_recv()
         return receive.release(now_ns)
 
+    def wait_for_peer(
+        self,
+        timeout_s: float | None,
+        should_stop: Callable[[], bool] | None = None,
+        poll_interval_s: float = 0.001,
+    ) -> bool:
+        """Poll until the peer's liveliness token is seen (True), or ``timeout_s`` passes
+        (``None``: no limit) or ``should_stop()`` says so (False). Messages that arrive
+        meanwhile go through the receive path as usual."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while not self.peer_alive:
+            if should_stop is not None and should_stop():
+                return False
+            if deadline is not None and time.monotonic() > deadline:
+                return False
+            self.poll()
+            if not self.peer_alive:
+                time.sleep(poll_interval_s)
+        return True
+
     @property
     def latest(self) -> Message | None:
         """The newest message delivered so far (``None`` before the first)."""

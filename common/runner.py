@@ -14,7 +14,9 @@ Definitions (all on the runner's monotonic clock, :func:`time.perf_counter_ns`):
 
 SIGINT and SIGTERM set a flag the loop checks every tick, so a run ends within one period
 plus one step; the previous handlers are restored when :meth:`RealTimeRunner.run` returns
-(handlers are installed only from the main thread).
+(handlers are installed only from the main thread). A program that must also be stoppable
+before the loop starts (while it waits for its peer) holds a :class:`StopSignals` for its
+whole life and hands it to the runner.
 """
 
 from __future__ import annotations
@@ -29,6 +31,34 @@ from dataclasses import dataclass
 from typing import TextIO
 
 from haptic.common.histogram import LogHistogram
+
+
+class StopSignals:
+    """Context manager: while inside, SIGINT and SIGTERM set :attr:`requested` (and
+    :attr:`reason`, the signal's name) instead of raising; the previous handlers come back on
+    exit. Outside the main thread it installs nothing (Python allows handlers only there)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.reason = ""
+        self._previous: dict[int, object] = {}
+
+    def _handler(self, signum: int, _frame: object) -> None:
+        if not self.requested:
+            self.reason = signal.Signals(signum).name
+        self.requested = True
+
+    def __enter__(self) -> StopSignals:
+        if threading.current_thread() is threading.main_thread():
+            for signum in (signal.SIGINT, signal.SIGTERM):
+                self._previous[signum] = signal.signal(signum, self._handler)
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        previous, self._previous = self._previous, {}
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)  # type: ignore[arg-type]
+
 
 StepFunction = Callable[[int, int], None]
 """``step(tick, now_ns)``: ``tick`` counts from 0; ``now_ns`` is the tick's start on the
@@ -79,7 +109,9 @@ class RealTimeRunner:
     ``clock_ns`` and ``sleep`` are injectable (tests drive a fake clock). ``status`` returns
     extra text for the live status line (link delay, loss, force); the line is written to
     ``status_stream`` every ``status_interval_s`` when ``show_status`` is true (default: when
-    the stream is a terminal).
+    the stream is a terminal). ``stop_signals``: an outer :class:`StopSignals` the loop checks
+    (then the runner installs no handlers of its own); otherwise, with ``handle_signals``, the
+    runner installs its own for the duration of :meth:`run`.
     """
 
     def __init__(
@@ -96,6 +128,7 @@ class RealTimeRunner:
         status_interval_s: float = 0.25,
         show_status: bool | None = None,
         handle_signals: bool = True,
+        stop_signals: StopSignals | None = None,
     ) -> None:
         if not period_s > 0.0:
             raise ValueError(f"period_s must be > 0 (got {period_s})")
@@ -115,6 +148,7 @@ class RealTimeRunner:
             show_status = bool(getattr(self._stream, "isatty", lambda: False)())
         self._show_status = show_status
         self._handle_signals = handle_signals
+        self._signals = stop_signals
         self._stop = False
         self.stop_reason = ""
         self._errors = LogHistogram()
@@ -134,31 +168,23 @@ class RealTimeRunner:
     def stopping(self) -> bool:
         return self._stop
 
-    def _on_signal(self, signum: int, _frame: object) -> None:
-        self.request_stop(signal.Signals(signum).name)
-
-    def _install_signals(self) -> dict[int, object]:
-        if not self._handle_signals or threading.current_thread() is not threading.main_thread():
-            return {}
-        previous = {}
-        for signum in (signal.SIGINT, signal.SIGTERM):
-            previous[signum] = signal.signal(signum, self._on_signal)
-        return previous
-
     def run(self) -> RunStats:
         """Run until the duration is reached or a stop is requested; returns the figures."""
-        previous = self._install_signals()
+        own = self._signals is None and self._handle_signals
+        signals = StopSignals() if own else self._signals
         try:
-            self._loop()
+            if own:
+                signals.__enter__()
+            self._loop(signals)
         finally:
-            for signum, handler in previous.items():
-                signal.signal(signum, handler)  # type: ignore[arg-type]
+            if own:
+                signals.__exit__(None, None, None)
             if self._show_status:
                 self._stream.write("\n")
                 self._stream.flush()
         return self.stats()
 
-    def _loop(self) -> None:
+    def _loop(self, signals: StopSignals | None) -> None:
         clock = self._clock_ns
         sleep = self._sleep
         period = self._period_ns
@@ -174,6 +200,9 @@ class RealTimeRunner:
         status_steps = 0
         tick = 0
         while not self._stop:
+            if signals is not None and signals.requested:
+                self.request_stop(signals.reason)
+                break
             remaining = deadline - clock()
             if remaining > spin:
                 sleep((remaining - spin) * 1e-9)

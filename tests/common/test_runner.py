@@ -12,7 +12,7 @@ import textwrap
 
 import pytest
 
-from haptic.common.runner import RealTimeRunner
+from haptic.common.runner import RealTimeRunner, StopSignals
 
 PERIOD_NS = 540_000
 
@@ -146,7 +146,7 @@ def test_invalid_arguments():
 CHILD = textwrap.dedent(
     """
     import json, sys
-    from haptic.common.runner import RealTimeRunner
+    from haptic.common.runner import RealTimeRunner, StopSignals
     first = []
     def step(tick, now):
         if tick == 0:
@@ -178,3 +178,45 @@ def test_signal_ends_the_run_cleanly(tmp_path, signum):
     result = json.loads(summary.read_text())
     assert result["stop_reason"] == signal.Signals(signum).name
     assert result["steps"] >= 1
+
+
+CHILD_WAITING = textwrap.dedent(
+    """
+    import json, sys, time
+    from haptic.common.runner import RealTimeRunner, StopSignals
+    with StopSignals() as signals:
+        print("ready", flush=True)
+        while not signals.requested:  # waiting for a peer that never comes
+            time.sleep(0.001)
+        stats = RealTimeRunner(0.00054, lambda t, n: None, stop_signals=signals).run()
+    with open(sys.argv[1], "w") as f:
+        json.dump(stats.as_summary(), f)
+    """
+)
+
+
+def test_signal_before_the_loop_starts_ends_cleanly(tmp_path):
+    summary = tmp_path / "summary.json"
+    child = subprocess.Popen(
+        [sys.executable, "-c", CHILD_WAITING, str(summary)], stdout=subprocess.PIPE, text=True,
+    )
+    try:
+        assert child.stdout.readline().strip() == "ready"
+        os.kill(child.pid, signal.SIGINT)
+        assert child.wait(timeout=10) == 0
+    finally:
+        if child.poll() is None:
+            child.kill()
+        child.wait()
+        child.stdout.close()
+    result = json.loads(summary.read_text())
+    assert result["stop_reason"] == "SIGINT" and result["steps"] == 0
+
+
+def test_stop_signals_restore_the_previous_handlers():
+    before = signal.getsignal(signal.SIGTERM)
+    with StopSignals() as signals:
+        assert signal.getsignal(signal.SIGTERM) != before
+        os.kill(os.getpid(), signal.SIGTERM)
+        assert signals.requested and signals.reason == "SIGTERM"
+    assert signal.getsignal(signal.SIGTERM) == before
