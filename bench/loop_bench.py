@@ -375,6 +375,7 @@ def print_table(result: dict[str, Any]) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    zenoh.init_log_from_env_or("error")
     if len(argv) >= 2 and argv[0] == "--role":
         role, rest = argv[1], argv[2:]
         if role == "pong":

@@ -31,6 +31,11 @@ def free_port() -> int:
 
 
 def configs(slave_injection: InjectionConfig | None = None, **common):
+    """A master/slave pair on a fresh port and key prefix. Unless told otherwise the pair
+    blocks instead of dropping on congestion and never drops as stale, so exact counts hold
+    on a loaded machine (the defaults' drop behaviour is the benchmark's business)."""
+    common.setdefault("congestion_control", "block")
+    common.setdefault("stale_after_s", 10.0)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     prefix = f"test/{uuid.uuid4().hex[:10]}"
     master = LinkConfig(side="master", key_prefix=prefix, listen=(endpoint,), **common)

@@ -26,6 +26,7 @@ finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 pair = st.tuples(finite, finite)
 
 
+@settings(deadline=None)
 @given(
     epoch=st.integers(0, 2**32 - 1), seq=st.integers(0, 2**63 - 1),
     send=st.integers(0, 2**63 - 1), flags=st.integers(0, 7), force=pair, position=pair,
@@ -35,6 +36,7 @@ def test_handle_state_round_trip(epoch, seq, send, flags, force, position):
     assert decode(encode(message), KIND_HANDLE) == message
 
 
+@settings(deadline=None)
 @given(
     seq=st.integers(0, 2**63 - 1), force=pair, position=pair, velocity=pair,
     engagement=st.floats(0.0, 1.0), volume=st.floats(0.0, 1.0), flags=st.integers(0, 7),
@@ -96,7 +98,7 @@ def test_not_msgpack_and_not_an_array_are_malformed():
         assert caught.value.reason is DropReason.MALFORMED
 
 
-@settings(max_examples=300)
+@settings(max_examples=300, deadline=None)
 @given(st.binary(max_size=200))
 def test_decode_of_random_bytes_raises_only_decode_error(payload):
     try:
@@ -115,7 +117,7 @@ json_like = st.recursive(
 )
 
 
-@settings(max_examples=300)
+@settings(max_examples=300, deadline=None)
 @given(json_like)
 def test_decode_of_random_msgpack_structures_raises_only_decode_error(value):
     payload = msgpack.packb(value, use_bin_type=True)
