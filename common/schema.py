@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 from haptic.common.config import Field, Schema
+from haptic.common.link_config import LINK_SCHEMA
 from haptic.master.schema import MASTER_SCHEMA
 from haptic.slave_sim.schema import SLAVE_SCHEMA
 
@@ -121,4 +122,5 @@ SCHEMA: Schema = {
     "analysis": ANALYSIS_SCHEMA,
     "slave": SLAVE_SCHEMA,
     "master": MASTER_SCHEMA,
+    "link": LINK_SCHEMA,
 }

@@ -1,0 +1,415 @@
+"""Loop benchmark: the real-time loop over our Zenoh link, next to a raw Zenoh ping-pong.
+
+Runs, in one invocation on loopback:
+
+1. the floor: a raw zenoh-python ping-pong between this process and a child (express,
+   real-time priority, ``RingChannel``), one-way delay = round trip / 2 on
+   :func:`time.perf_counter_ns`, 10000 round trips before and 10000 after the loop, pooled
+   (the machine's noise drifts);
+2. the loop: two processes, each a :class:`~haptic.common.runner.RealTimeRunner` at Ts with a
+   :class:`~haptic.common.link.Link`, exchanging HandleState and ToolState every tick.
+
+By default the two loop processes are this file's ``--role master`` / ``--role slave`` echo
+nodes (a watchdog, a poll, a send per tick; no control law). :func:`run_pair` takes any two
+commands that accept the shared run options (``--duration``, ``--json-summary``,
+``--listen``/``--connect``, ``--key-prefix``, ``--no-status``), so ``--master-cmd`` and
+``--slave-cmd`` can point it at ``haptic-master`` and ``haptic-slave``.
+
+Usage::
+
+    python bench/loop_bench.py --duration 10            # a table
+    python bench/loop_bench.py --duration 10 --json     # the JSON of issue 5
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shlex
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import zenoh
+
+from haptic.common.cli_options import add_run_options, run_options_from_args
+from haptic.common.config import exit_on_config_error
+from haptic.common.link import Link
+from haptic.common.messages import Flags
+from haptic.common.runner import RealTimeRunner, StopSignals
+from haptic.common.summary import format_summary, make_summary, write_json_summary
+from haptic.common.watchdog import PeerWatchdog
+
+PEER_WAIT_S = 10.0
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 nobody listens on right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _peer_config(listen: str | None = None, connect: str | None = None) -> zenoh.Config:
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    if listen:
+        conf.insert_json5("listen/endpoints", json.dumps([listen]))
+    if connect:
+        conf.insert_json5("connect/endpoints", json.dumps([connect]))
+    return conf
+
+
+# -- raw zenoh ping-pong -------------------------------------------------------------------
+
+
+def pong(endpoint: str, prefix: str) -> None:
+    """Echo every ``<prefix>/ping`` sample on ``<prefix>/pong`` until the ping says stop."""
+    with zenoh.open(_peer_config(connect=endpoint)) as session:
+        sub = session.declare_subscriber(f"{prefix}/ping", zenoh.handlers.RingChannel(16))
+        pub = session.declare_publisher(
+            f"{prefix}/pong", express=True, congestion_control=zenoh.CongestionControl.DROP,
+            priority=zenoh.Priority.REAL_TIME,
+        )
+        token = session.liveliness().declare_token(f"{prefix}/alive/pong")
+        while True:
+            sample = sub.recv()
+            payload = sample.payload.to_bytes()
+            if payload == b"stop":
+                break
+            pub.put(payload)
+        token.undeclare()
+
+
+def raw_ping_pong(round_trips: int = 10000, warmup: int = 200) -> np.ndarray:
+    """One-way delays (s, round trip / 2) of a raw zenoh-python ping-pong with a child
+    process."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    prefix = f"bench/{uuid.uuid4().hex[:8]}"
+    rtts = np.empty(round_trips)
+    with zenoh.open(_peer_config(listen=endpoint)) as session:
+        sub = session.declare_subscriber(f"{prefix}/pong", zenoh.handlers.RingChannel(1))
+        pub = session.declare_publisher(
+            f"{prefix}/ping", express=True, congestion_control=zenoh.CongestionControl.DROP,
+            priority=zenoh.Priority.REAL_TIME,
+        )
+        alive = session.liveliness().declare_subscriber(
+            f"{prefix}/alive/pong", zenoh.handlers.FifoChannel(4), history=True
+        )
+        child = subprocess.Popen(
+            [sys.executable, __file__, "--role", "pong", "--endpoint", endpoint,
+             "--prefix", prefix],
+        )
+        try:
+            deadline = time.monotonic() + PEER_WAIT_S
+            while alive.try_recv() is None:
+                if time.monotonic() > deadline or child.poll() is not None:
+                    raise RuntimeError("the pong process did not come up")
+                time.sleep(0.005)
+            i = -warmup
+            while i < round_trips:
+                payload = i.to_bytes(8, "little", signed=True)
+                t0 = time.perf_counter_ns()
+                pub.put(payload)
+                reply_deadline = t0 + 1_000_000_000
+                while True:
+                    sample = sub.try_recv()
+                    if sample is not None and sample.payload.to_bytes() == payload:
+                        break
+                    if time.perf_counter_ns() > reply_deadline:
+                        sample = None
+                        break
+                t1 = time.perf_counter_ns()
+                if sample is not None and i >= 0:
+                    rtts[i] = (t1 - t0) * 1e-9
+                i += 1 if sample is not None else 0
+            pub.put(b"stop")
+            child.wait(timeout=5)
+        finally:
+            if child.poll() is None:
+                child.kill()
+            child.wait()
+    return rtts / 2.0
+
+
+def summarise_one_way(one_way_s: np.ndarray) -> dict[str, float]:
+    return {
+        "one_way_p50_s": float(np.percentile(one_way_s, 50)),
+        "one_way_p99_s": float(np.percentile(one_way_s, 99)),
+        "round_trips": int(one_way_s.size),
+    }
+
+
+# -- the echo nodes --------------------------------------------------------------------------
+
+
+def echo_node(side: str, argv: list[str]) -> int:
+    """A minimal node on the real runner and link: poll, watchdog, send. Returns the exit
+    status."""
+    parser = argparse.ArgumentParser(prog=f"loop_bench {side}")
+    add_run_options(parser)
+    parser.add_argument(
+        "--spin-s", type=float, default=0.0003, help="runner: spin this long before a tick, s"
+    )
+    args = parser.parse_args(argv)
+    spin_s = args.spin_s
+    with exit_on_config_error():
+        options = run_options_from_args(args, side)
+    config = options.config
+    period_s = config["model"]["sample_period_s"]
+    watchdog = PeerWatchdog(options.link.max_message_age_s, options.link.resync_messages)
+    max_force = 0.0
+    with StopSignals() as signals, Link(options.link) as link:
+        if not link.wait_for_peer(PEER_WAIT_S, lambda: signals.requested):
+            if signals.requested:
+                return 0
+            print(f"{side}: no peer after {PEER_WAIT_S} s", file=sys.stderr)
+            return 1
+        state: dict[str, Any] = {"force": (0.0, 0.0), "position": (0.0, 0.0)}
+
+        def step(tick: int, now_ns: int) -> None:
+            nonlocal max_force
+            message = link.poll()
+            fresh = message is not None
+            watchdog.update(now_ns * 1e-9, fresh, link.silence_s(), True, link.peer_alive)
+            flags = Flags.FORCES_ENABLED if watchdog.forces_enabled else Flags.SAFE_STATE
+            if side == "master":
+                phase = 2.0 * math.pi * 1.0 * tick * period_s
+                force = (3.0 * math.sin(phase), 3.0 * math.cos(phase))
+                link.send_handle(force, (0.01 * force[0], 0.01 * force[1]), flags)
+                if fresh and watchdog.forces_enabled:
+                    max_force = max(max_force, abs(message.tool_force_N[0]))
+            else:
+                if fresh:
+                    state["force"] = message.handle_force_N
+                    state["position"] = message.handle_position_m
+                link.send_tool(state["force"], state["position"], (0.0, 0.0), 0.0, 0.0, flags)
+
+        def status() -> str:
+            s = link.stats()
+            return (
+                f"delay p50 {s.one_way_delay_p50_s * 1e6:.0f} us  loss "
+                f"{s.loss_ratio * 100:.2f} %"
+            )
+
+        runner = RealTimeRunner(
+            period_s, step, duration_s=options.duration_s, status=status,
+            spin_s=spin_s, stop_signals=signals,
+            show_status=options.show_status,
+        )
+        run = runner.run()
+        summary = make_summary(
+            run.as_summary(),
+            link.summary(),
+            max_abs_force_N=max_force,
+            watchdog_trips=watchdog.trips,
+            events=[e.as_dict() for e in watchdog.events],
+            side=side,
+        )
+    if options.json_summary is not None:
+        write_json_summary(options.json_summary, summary)
+    print(f"{side}: {format_summary(summary)}", file=sys.stderr)
+    return 0
+
+
+# -- the pair --------------------------------------------------------------------------------
+
+
+def default_command(side: str) -> list[str]:
+    return [sys.executable, os.path.abspath(__file__), "--role", side]
+
+
+def run_pair(
+    master_cmd: list[str],
+    slave_cmd: list[str],
+    duration_s: float,
+    extra_args: list[str] | None = None,
+    timeout_s: float | None = None,
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Run the master and slave commands on loopback for ``duration_s`` and return their JSON
+    summaries. Both get ``--duration``, ``--json-summary``, ``--no-status``, a fresh key
+    prefix and port (master ``--listen``, slave ``--connect``) and ``extra_args``."""
+    port = free_port()
+    prefix = f"bench/{uuid.uuid4().hex[:8]}"
+    endpoint = f"tcp/127.0.0.1:{port}"
+    common = ["--duration", str(duration_s), "--key-prefix", prefix, "--no-status",
+              *(extra_args or [])]
+    timeout = timeout_s if timeout_s is not None else duration_s + 60.0
+    with tempfile.TemporaryDirectory(prefix="loop_bench_") as tmp:
+        files = {side: Path(tmp) / f"{side}.json" for side in ("master", "slave")}
+        commands = {
+            "master": [*master_cmd, *common, "--listen", endpoint,
+                       "--json-summary", str(files["master"])],
+            "slave": [*slave_cmd, *common, "--connect", endpoint,
+                      "--json-summary", str(files["slave"])],
+        }
+        processes = {side: subprocess.Popen(cmd) for side, cmd in commands.items()}
+        try:
+            end = time.monotonic() + timeout
+            for process in processes.values():
+                process.wait(timeout=max(1.0, end - time.monotonic()))
+        finally:
+            for process in processes.values():
+                if process.poll() is None:
+                    process.send_signal(signal.SIGTERM)
+                    try:
+                        process.wait(timeout=3)
+                    except subprocess.TimeoutExpired:
+                        process.kill()
+                process.wait()
+        for side, process in processes.items():
+            if process.returncode != 0:
+                raise RuntimeError(f"{side} exited with status {process.returncode}")
+        return tuple(json.loads(files[s].read_text()) for s in ("master", "slave"))  # type: ignore[return-value]
+
+
+def _side_figures(summary: dict[str, Any], ts_s: float) -> dict[str, Any]:
+    return {
+        "rate_hz": summary["rate_hz"],
+        "target_rate_hz": 1.0 / ts_s,
+        "period_p50_error_s": summary.get("period_p50_error_s"),
+        "period_p99_error_s": summary["period_p99_error_s"],
+        "period_max_error_s": summary.get("period_max_error_s"),
+        "overruns": summary["overruns"],
+        "overrun_ratio": summary["overrun_ratio"],
+        "steps": summary["steps"],
+        "stalls": summary.get("stalls"),
+    }
+
+
+def _direction(summary: dict[str, Any]) -> dict[str, Any]:
+    return {
+        "one_way_p50_s": summary["link_one_way_delay_p50_s"],
+        "one_way_p99_s": summary["link_one_way_delay_p99_s"],
+        "loss_ratio": summary["loss_ratio"],
+        "age_at_use_p50_s": summary.get("link_age_at_use_p50_s"),
+        "network_loss_ratio": summary.get("link_network_loss_ratio"),
+        "dropped": {k: v for k, v in summary.get("link_dropped", {}).items() if v},
+    }
+
+
+def _worst(a: float | None, b: float | None) -> float | None:
+    values = [v for v in (a, b) if v is not None and math.isfinite(v)]
+    return max(values) if values else None
+
+
+def benchmark(
+    duration_s: float,
+    master_cmd: list[str] | None = None,
+    slave_cmd: list[str] | None = None,
+    extra_args: list[str] | None = None,
+    ts_s: float = 0.00054,
+) -> dict[str, Any]:
+    """The whole benchmark; returns the result dict (the ``--json`` shape of issue 5, with
+    per-direction details added)."""
+    before = raw_ping_pong()
+    master, slave = run_pair(
+        master_cmd or default_command("master"), slave_cmd or default_command("slave"),
+        duration_s, extra_args,
+    )
+    raw = summarise_one_way(np.concatenate([before, raw_ping_pong()]))
+    to_slave = _direction(slave)   # the slave receives master -> slave
+    to_master = _direction(master)
+    link = {
+        "one_way_p50_s": _worst(to_slave["one_way_p50_s"], to_master["one_way_p50_s"]),
+        "one_way_p99_s": _worst(to_slave["one_way_p99_s"], to_master["one_way_p99_s"]),
+        "loss_ratio": _worst(to_slave["loss_ratio"], to_master["loss_ratio"]),
+        "master_to_slave": to_slave,
+        "slave_to_master": to_master,
+    }
+    ratio = (
+        link["one_way_p50_s"] / raw["one_way_p50_s"]
+        if link["one_way_p50_s"] is not None and raw["one_way_p50_s"] > 0
+        else None
+    )
+    return {
+        "duration_s": duration_s,
+        "master": _side_figures(master, ts_s),
+        "slave": _side_figures(slave, ts_s),
+        "link": link,
+        "raw_zenoh": raw,
+        "link_to_raw_p50_ratio": ratio,
+    }
+
+
+def _us(value: float | None) -> str:
+    return "n/a" if value is None else f"{value * 1e6:8.1f} us"
+
+
+def print_table(result: dict[str, Any]) -> None:
+    print(f"loop benchmark, {result['duration_s']:g} s on loopback")
+    for side in ("master", "slave"):
+        f = result[side]
+        print(
+            f"  {side:6s} rate {f['rate_hz']:8.1f} Hz (target {f['target_rate_hz']:.1f})  "
+            f"period error p50 {_us(f['period_p50_error_s'])} p99 {_us(f['period_p99_error_s'])}"
+            f" max {_us(f['period_max_error_s'])}  overruns {f['overruns']} "
+            f"({f['overrun_ratio'] * 100:.3f} %)"
+        )
+    link = result["link"]
+    for name in ("master_to_slave", "slave_to_master"):
+        d = link[name]
+        print(
+            f"  link {name:15s} one-way p50 {_us(d['one_way_p50_s'])} p99 "
+            f"{_us(d['one_way_p99_s'])}  loss {d['loss_ratio'] * 100:.3f} %  "
+            f"(age at use p50 {_us(d['age_at_use_p50_s'])})"
+            + (f"  dropped {d['dropped']}" if d["dropped"] else "")
+        )
+    raw = result["raw_zenoh"]
+    print(f"  raw zenoh ping-pong one-way p50 {_us(raw['one_way_p50_s'])} p99 "
+          f"{_us(raw['one_way_p99_s'])}")
+    ratio = result["link_to_raw_p50_ratio"]
+    print(f"  link / raw one-way p50: {ratio:.2f}" if ratio is not None else "  ratio: n/a")
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    zenoh.init_log_from_env_or("error")
+    if len(argv) >= 2 and argv[0] == "--role":
+        role, rest = argv[1], argv[2:]
+        if role == "pong":
+            parser = argparse.ArgumentParser(prog="loop_bench pong")
+            parser.add_argument("--endpoint", required=True)
+            parser.add_argument("--prefix", required=True)
+            args = parser.parse_args(rest)
+            pong(args.endpoint, args.prefix)
+            return 0
+        if role in ("master", "slave"):
+            return echo_node(role, rest)
+        print(f"unknown role {role}", file=sys.stderr)
+        return 2
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=10.0, help="loop run length, s")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    parser.add_argument("--master-cmd", help="master command (default: the echo node)")
+    parser.add_argument("--slave-cmd", help="slave command (default: the echo node)")
+    parser.add_argument(
+        "--extra", default="", help="extra arguments for both commands (one shell string)"
+    )
+    args = parser.parse_args(argv)
+    result = benchmark(
+        args.duration,
+        shlex.split(args.master_cmd) if args.master_cmd else None,
+        shlex.split(args.slave_cmd) if args.slave_cmd else None,
+        shlex.split(args.extra),
+    )
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print_table(result)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,213 @@
+"""The one shared command-line helper of ``haptic-master`` and ``haptic-slave``.
+
+Both programs call :func:`add_run_options` on their parser and :func:`run_options_from_args`
+on the parsed arguments. Order of precedence, lowest first: the shipped defaults, the TOML
+file of ``--config``, then the flags. For Zenoh itself: the ``--zenoh-config`` json5 file,
+then the ``[link]`` settings and connection flags, then every ``--zenoh-set KEY=VALUE``.
+
+Injection flags (``--delay``, ``--jitter``, ``--loss`` ...) set what *this side's receiving*
+link injects, one way (``[link.<side>.injection]``). Every invalid value raises a
+:class:`~haptic.common.config.ConfigError` naming the flag and the key; wrap the call in
+:func:`~haptic.common.config.exit_on_config_error` to exit with status 2 and one line.
+
+Example::
+
+    parser = argparse.ArgumentParser(prog="haptic-slave")
+    add_run_options(parser)
+    args = parser.parse_args()
+    with exit_on_config_error():
+        options = run_options_from_args(args, side="slave")
+    with Link(options.link) as link:
+        ...
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from haptic.common.config import ConfigError, load_config, override
+from haptic.common.injection import JITTER_DISTRIBUTIONS
+from haptic.common.link_config import MODES, SIDES, LinkConfig, link_config_from
+
+# flag dest -> key under [link.<side>.injection]
+_INJECTION_FLAGS = {
+    "delay": ("--delay", "delay_s"),
+    "jitter": ("--jitter", "jitter_s"),
+    "jitter_distribution": ("--jitter-distribution", "jitter_distribution"),
+    "loss": ("--loss", "loss_probability"),
+    "burst_enter": ("--burst-enter", "burst_enter_probability"),
+    "burst_exit": ("--burst-exit", "burst_exit_probability"),
+    "burst_loss": ("--burst-loss", "burst_loss_probability"),
+    "seed": ("--seed", "seed"),
+}
+# flag dest -> key under [link]
+_LINK_FLAGS = {
+    "mode": ("--mode", "transport.mode"),
+    "key_prefix": ("--key-prefix", "transport.key_prefix"),
+    "max_message_age": ("--max-message-age", "watchdog.max_message_age_s"),
+}
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """The validated options of one program run.
+
+    ``config``: the whole validated configuration (with the flags applied); ``link``: this
+    side's :class:`LinkConfig`; ``duration_s``: run length in s (``None``: until SIGINT or
+    SIGTERM); ``json_summary``: where to write the JSON summary (or ``None``);
+    ``show_status``: the live status line (``None``: when stderr is a terminal).
+    """
+
+    config: dict[str, Any]
+    link: LinkConfig
+    duration_s: float | None
+    json_summary: Path | None
+    show_status: bool | None
+
+
+def add_run_options(parser: argparse.ArgumentParser) -> None:
+    """Add ``--config``, ``--duration``, ``--json-summary``, ``--status``, the connection
+    options and the injection options to ``parser``."""
+    parser.add_argument("--config", metavar="FILE", help="TOML configuration (over the defaults)")
+    parser.add_argument(
+        "--duration", metavar="S", type=float, help="run for S seconds (default: until stopped)"
+    )
+    parser.add_argument("--json-summary", metavar="FILE", help="write the run summary as JSON")
+    parser.add_argument(
+        "--status", action=argparse.BooleanOptionalAction, default=None,
+        help="live status line on stderr (default: when stderr is a terminal)",
+    )
+    add_connection_options(parser)
+    add_injection_options(parser)
+
+
+def add_connection_options(parser: argparse.ArgumentParser) -> None:
+    """The Zenoh connection options (``[link.transport]``, ``[link.<side>.endpoints]``)."""
+    group = parser.add_argument_group("connection (Zenoh)")
+    group.add_argument(
+        "--mode", choices=MODES, help="peer, or client of a router (link.transport.mode)"
+    )
+    group.add_argument(
+        "--connect", metavar="ENDPOINT", action="append",
+        help="endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable; replaces "
+        "link.<side>.endpoints.connect; in client mode: the router)",
+    )
+    group.add_argument(
+        "--listen", metavar="ENDPOINT", action="append",
+        help="endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable; replaces "
+        "link.<side>.endpoints.listen)",
+    )
+    group.add_argument("--key-prefix", metavar="PREFIX", help="key prefix, e.g. haptic/rig-1")
+    group.add_argument(
+        "--zenoh-config", metavar="FILE", help="a Zenoh json5 configuration file, loaded first"
+    )
+    group.add_argument(
+        "--zenoh-set", metavar="KEY=VALUE", action="append", default=[],
+        help="a Zenoh configuration override, VALUE in json5, applied last (repeatable), "
+        "e.g. transport/link/tx/queue/size/real_time=32",
+    )
+    group.add_argument(
+        "--max-message-age", metavar="S", type=float,
+        help="watchdog: safe state after S s without a fresh message "
+        "(link.watchdog.max_message_age_s)",
+    )
+
+
+def add_injection_options(parser: argparse.ArgumentParser) -> None:
+    """What this side's receiving link injects, one way (``[link.<side>.injection]``)."""
+    group = parser.add_argument_group("injected impairment (this side's receiving link)")
+    group.add_argument("--delay", metavar="S", type=float, help="one-way delay, s")
+    group.add_argument("--jitter", metavar="S", type=float, help="extra delay in [0, S], s")
+    group.add_argument("--jitter-distribution", choices=JITTER_DISTRIBUTIONS)
+    group.add_argument("--loss", metavar="P", type=float, help="independent loss probability")
+    group.add_argument(
+        "--burst-enter", metavar="P", type=float,
+        help="bursty loss: probability per message of entering a burst (Gilbert-Elliott)",
+    )
+    group.add_argument(
+        "--burst-exit", metavar="P", type=float,
+        help="bursty loss: probability per message of leaving a burst (1/mean length)",
+    )
+    group.add_argument(
+        "--burst-loss", metavar="P", type=float, help="bursty loss: loss probability in a burst"
+    )
+    group.add_argument("--seed", metavar="N", type=int, help="seed of the injected randomness")
+
+
+def _set(config: dict[str, Any], flag: str, key: str, value: Any) -> dict[str, Any]:
+    try:
+        return override(config, key, value)
+    except ConfigError as error:
+        message = str(error).removeprefix(f"{key}: ")
+        raise ConfigError(f"{flag} ({key})", message) from None
+
+
+def _zenoh_overrides(items: list[str]) -> tuple[tuple[str, str], ...]:
+    result = []
+    for item in items:
+        key, equals, value = item.partition("=")
+        if not equals or not key.strip() or not value.strip():
+            raise ConfigError("--zenoh-set", f"{item!r} is not KEY=VALUE")
+        result.append((key.strip(), value.strip()))
+    return tuple(result)
+
+
+def run_options_from_args(
+    args: argparse.Namespace, side: str, config: dict[str, Any] | None = None
+) -> RunOptions:
+    """Validate the parsed arguments for ``side`` (``master`` or ``slave``) into
+    :class:`RunOptions`. ``config`` replaces loading ``args.config`` (tests, embedding).
+    Raises :class:`ConfigError` naming the flag or key; also checks that Zenoh accepts the
+    resulting configuration."""
+    if side not in SIDES:
+        raise ConfigError("side", f"must be one of {', '.join(SIDES)} (got {side!r})")
+    if config is None:
+        config = load_config(getattr(args, "config", None))
+    for dest, (flag, key) in _LINK_FLAGS.items():
+        value = getattr(args, dest, None)
+        if value is not None:
+            config = _set(config, flag, f"link.{key}", value)
+    for dest, (flag, key) in _INJECTION_FLAGS.items():
+        value = getattr(args, dest, None)
+        if value is not None:
+            config = _set(config, flag, f"link.{side}.injection.{key}", value)
+    for dest, flag in (("connect", "--connect"), ("listen", "--listen")):
+        endpoints = getattr(args, dest, None)
+        if endpoints:
+            config = _set(config, flag, f"link.{side}.endpoints.{dest}", ",".join(endpoints))
+    duration = getattr(args, "duration", None)
+    if duration is not None and not duration > 0.0:
+        raise ConfigError("--duration", f"must be > 0 s (got {duration:g})")
+    zenoh_file = getattr(args, "zenoh_config", None)
+    if zenoh_file is not None and not Path(zenoh_file).is_file():
+        raise ConfigError("--zenoh-config", f"no such file {zenoh_file}")
+    link = link_config_from(
+        config,
+        side,
+        zenoh_config_file=zenoh_file,
+        zenoh_overrides=_zenoh_overrides(getattr(args, "zenoh_set", None) or []),
+    )
+    check_zenoh_config(link)
+    summary = getattr(args, "json_summary", None)
+    return RunOptions(
+        config=config,
+        link=link,
+        duration_s=duration,
+        json_summary=Path(summary) if summary else None,
+        show_status=getattr(args, "status", None),
+    )
+
+
+def check_zenoh_config(link: LinkConfig) -> None:
+    """Build the Zenoh configuration once so a bad file or override fails at start-up."""
+    from haptic.common.link import zenoh_config
+
+    try:
+        zenoh_config(link)
+    except Exception as error:  # noqa: BLE001 - zenoh raises its own ZError
+        flag = "--zenoh-config" if link.zenoh_config_file else "--zenoh-set"
+        text = " ".join(str(error).split())[:240]
+        raise ConfigError(flag, f"zenoh rejected the configuration: {text}") from None

@@ -1,0 +1,322 @@
+"""The Zenoh link between the master and the slave: one :class:`Link` per side.
+
+A link owns a Zenoh session (use it as a context manager: the session is always closed), a
+publisher for this side's messages (``<prefix>/handle`` from the master, ``<prefix>/tool`` from
+the slave), a subscriber for the peer's with a ``RingChannel`` the control loop drains with
+``try_recv()`` (no Python callback runs in Zenoh's threads, so nothing competes with the loop
+for the GIL), and a liveliness token ``<prefix>/alive/<side>`` plus a liveliness subscriber on
+the peer's token.
+
+Timing: ``send_time_ns`` is ``CLOCK_REALTIME`` (:func:`time.time_ns`). On one host both
+processes read the same clock; across hosts the clocks must be synchronised (PTP or chrony),
+and the error between them adds directly to the measured and injected one-way delay. The
+arrival time of a sample is Zenoh's own receive timestamp (timestamp-stack instrumentation,
+taken in the Zenoh runtime when the sample arrives, on the same clock), so the measured delay
+does not include the wait for the loop's next poll; without it the poll time is used.
+
+Injection, ordering and the counters live in :class:`haptic.common.receive.ReceivePath`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import zenoh
+
+from haptic.common.link_config import LinkConfig
+from haptic.common.messages import (
+    KIND_HANDLE,
+    KIND_TOOL,
+    Flags,
+    HandleState,
+    Message,
+    ToolState,
+    encode,
+)
+from haptic.common.receive import LinkStats, ReceivePath
+
+NO_FLAGS = Flags(0)
+_CONGESTION = {"drop": zenoh.CongestionControl.DROP, "block": zenoh.CongestionControl.BLOCK}
+
+
+def _receive_instrumentation() -> object | None:
+    """Ask Zenoh to stamp each sample's arrival time (an unstable API; absent -> None)."""
+    try:
+        return zenoh.TimestampInstrumentationBuilder().set_receive(True).build()
+    except Exception:  # noqa: BLE001 - older zenoh without timestamp stacks
+        return None
+
+
+_RECEIVE_POINT = getattr(getattr(zenoh, "InterceptionPoint", None), "RECEIVE", None)
+
+
+def zenoh_config(config: LinkConfig) -> zenoh.Config:
+    """The Zenoh configuration of ``config``: the file first, the link's settings on top, the
+    ``zenoh_overrides`` last."""
+    if config.zenoh_config_file:
+        zconf = zenoh.Config.from_file(config.zenoh_config_file)
+    else:
+        zconf = zenoh.Config()
+    for key, value in config.zenoh_settings():
+        zconf.insert_json5(key, value)
+    return zconf
+
+
+@dataclass(frozen=True)
+class PresenceEvent:
+    """The peer's liveliness token appeared (``alive``) or went away, at ``time_ns``
+    (CLOCK_REALTIME)."""
+
+    time_ns: int
+    alive: bool
+
+    def as_dict(self) -> dict[str, object]:
+        """For the run summary's ``events`` (``time_s`` on CLOCK_REALTIME, s)."""
+        kind = "peer_alive" if self.alive else "peer_gone"
+        return {"time_s": self.time_ns * 1e-9, "kind": kind, "reason": "liveliness token"}
+
+
+class Link:
+    """One side's end of the link. Not thread-safe: call it from the control loop only.
+
+    ``rng`` drives the injected jitter and loss (default: seeded from ``config.seed``);
+    ``clock_ns`` is the send-time clock (CLOCK_REALTIME); ``epoch`` identifies this run of the
+    sender (default: random).
+    """
+
+    def __init__(
+        self,
+        config: LinkConfig,
+        rng: np.random.Generator | None = None,
+        clock_ns: Callable[[], int] = time.time_ns,
+        epoch: int | None = None,
+    ) -> None:
+        self.config = config
+        if rng is None:
+            rng = np.random.default_rng(config.seed)
+        self._clock_ns = clock_ns
+        self.epoch = int(np.random.default_rng().integers(0, 2**32)) if epoch is None else epoch
+        self._seq = 0
+        self._send_kind = KIND_HANDLE if config.side == "master" else KIND_TOOL
+        self.receive = ReceivePath(
+            KIND_TOOL if config.side == "master" else KIND_HANDLE,
+            config.injection,
+            rng,
+            config.stale_after_s,
+        )
+        self._instrumentation = _receive_instrumentation()
+        self._session: zenoh.Session | None = None
+        self._publisher: zenoh.Publisher | None = None
+        self._subscriber: zenoh.Subscriber | None = None
+        self._token: zenoh.LivelinessToken | None = None
+        self._presence: zenoh.Subscriber | None = None
+        self.peer_alive = False
+        self.presence_events: list[PresenceEvent] = []
+        self.sent = 0
+        self.send_errors = 0
+
+    # -- lifecycle ---------------------------------------------------------------------------
+
+    def open(self) -> Link:
+        """Open the session and declare the publisher, subscribers and liveliness token."""
+        if self._session is not None:
+            return self
+        c = self.config
+        self._session = zenoh.open(zenoh_config(c))
+        try:
+            self._publisher = self._session.declare_publisher(
+                c.publish_key,
+                congestion_control=_CONGESTION[c.congestion_control],
+                priority=zenoh.Priority.REAL_TIME,
+                express=c.express,
+            )
+            self._subscriber = self._session.declare_subscriber(
+                c.subscribe_key, zenoh.handlers.RingChannel(c.receive_queue_capacity)
+            )
+            liveliness = self._session.liveliness()
+            self._presence = liveliness.declare_subscriber(
+                c.liveliness_key(c.peer_side), zenoh.handlers.FifoChannel(64), history=True
+            )
+            self._token = liveliness.declare_token(c.liveliness_key(c.side))
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def close(self) -> None:
+        """Undeclare everything and close the session (idempotent)."""
+        session, self._session = self._session, None
+        for name in ("_token", "_presence", "_subscriber", "_publisher"):
+            entity = getattr(self, name)
+            setattr(self, name, None)
+            if entity is not None and session is not None:
+                try:
+                    entity.undeclare()
+                except Exception:  # noqa: BLE001 - best effort while closing
+                    pass
+        if session is not None:
+            session.close()
+
+    def __enter__(self) -> Link:
+        return self.open()
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+    @property
+    def is_open(self) -> bool:
+        return self._session is not None
+
+    # -- sending -----------------------------------------------------------------------------
+
+    def next_header(self) -> tuple[int, int, int]:
+        """``(epoch, seq, send_time_ns)`` for the next message; consumes a sequence number."""
+        seq = self._seq
+        self._seq = seq + 1
+        return self.epoch, seq, self._clock_ns()
+
+    def send(self, message: Message) -> None:
+        """Publish a message (its kind must be this side's). A Zenoh error is counted in
+        ``send_errors``, not raised: the loop must keep its period."""
+        if message.KIND != self._send_kind:
+            raise TypeError(f"the {self.config.side} side sends kind {self._send_kind} only")
+        payload = encode(message)
+        publisher = self._publisher
+        if publisher is None:
+            raise RuntimeError("link is not open")
+        try:
+            if self._instrumentation is not None:
+                publisher.put(payload, timestamp_instrumentation=self._instrumentation)
+            else:
+                publisher.put(payload)
+            self.sent += 1
+        except Exception:  # noqa: BLE001 - a failed put is a lost message, never a crash
+            self.send_errors += 1
+
+    def send_handle(
+        self,
+        handle_force_N: tuple[float, float],
+        handle_position_m: tuple[float, float],
+        flags: Flags = NO_FLAGS,
+    ) -> HandleState:
+        """Master: stamp and publish the handle's force (N) and position (m)."""
+        epoch, seq, send_ns = self.next_header()
+        message = HandleState(epoch, seq, send_ns, flags, handle_force_N, handle_position_m)
+        self.send(message)
+        return message
+
+    def send_tool(
+        self,
+        tool_force_N: tuple[float, float],
+        tool_position_m: tuple[float, float],
+        tool_velocity_m_s: tuple[float, float],
+        clay_engagement: float,
+        removed_volume_m3: float,
+        flags: Flags = NO_FLAGS,
+    ) -> ToolState:
+        """Slave: stamp and publish the tool's force (N), position (m), velocity (m/s) and the
+        clay's status."""
+        epoch, seq, send_ns = self.next_header()
+        message = ToolState(
+            epoch, seq, send_ns, flags, tool_force_N, tool_position_m, tool_velocity_m_s,
+            clay_engagement, removed_volume_m3,
+        )
+        self.send(message)
+        return message
+
+    # -- receiving ---------------------------------------------------------------------------
+
+    def _arrival_ns(self, sample: zenoh.Sample, now_ns: int) -> int:
+        if _RECEIVE_POINT is None:
+            return now_ns
+        stack = sample.timestamp_stack
+        if stack is None:
+            return now_ns
+        for record in stack.records:
+            if record.point == _RECEIVE_POINT and not record.is_custom:
+                return record.timestamp().get_time_as_ntp64().as_nanos()
+        return now_ns
+
+    def poll(self, now_ns: int | None = None) -> Message | None:
+        """Drain everything received since the last poll into the receive path and return the
+        newest message whose delivery time has come (``None`` if there is none). Also updates
+        ``peer_alive`` from the liveliness subscriber. Never blocks."""
+        subscriber = self._subscriber
+        if subscriber is None:
+            raise RuntimeError("link is not open")
+        if now_ns is None:
+            now_ns = self._clock_ns()
+        receive = self.receive
+        sample = subscriber.try_recv()
+        while sample is not None:
+            receive.accept(sample.payload.to_bytes(), self._arrival_ns(sample, now_ns))
+            sample = subscriber.try_recv()
+        presence = self._presence
+        if presence is not None:
+            change = presence.try_recv()
+            while change is not None:
+                alive = change.kind == zenoh.SampleKind.PUT
+                if alive != self.peer_alive:
+                    self.peer_alive = alive
+                    self.presence_events.append(PresenceEvent(now_ns, alive))
+                change = presence.try_recv()
+        return receive.release(now_ns)
+
+    def wait_for_peer(
+        self,
+        timeout_s: float | None,
+        should_stop: Callable[[], bool] | None = None,
+        poll_interval_s: float = 0.001,
+    ) -> bool:
+        """Poll until the peer's liveliness token is seen (True), or ``timeout_s`` passes
+        (``None``: no limit) or ``should_stop()`` says so (False). Messages that arrive
+        meanwhile go through the receive path as usual."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while not self.peer_alive:
+            if should_stop is not None and should_stop():
+                return False
+            if deadline is not None and time.monotonic() > deadline:
+                return False
+            self.poll()
+            if not self.peer_alive:
+                time.sleep(poll_interval_s)
+        return True
+
+    @property
+    def latest(self) -> Message | None:
+        """The newest message delivered so far (``None`` before the first)."""
+        return self.receive.last_delivered
+
+    def silence_s(self, now_ns: int | None = None) -> float:
+        """Time since the last fresh message was delivered, s (inf before the first): what the
+        application watchdog compares with ``max_message_age_s``."""
+        last = self.receive.last_delivery_ns
+        if last is None:
+            return float("inf")
+        if now_ns is None:
+            now_ns = self._clock_ns()
+        return (now_ns - last) * 1e-9
+
+    def message_age_s(self, now_ns: int | None = None) -> float:
+        """Age of the newest delivered message (now minus its send time), s; inf before the
+        first. Includes the injected delay."""
+        latest = self.receive.last_delivered
+        if latest is None:
+            return float("inf")
+        if now_ns is None:
+            now_ns = self._clock_ns()
+        return (now_ns - latest.send_time_ns) * 1e-9
+
+    def stats(self) -> LinkStats:
+        return self.receive.stats()
+
+    def summary(self) -> dict[str, object]:
+        """The link's keys of the run summary."""
+        result = self.stats().as_summary()
+        result["link_sent"] = self.sent
+        result["link_send_errors"] = self.send_errors
+        result["link_peer_alive"] = self.peer_alive
+        return result

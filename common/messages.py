@@ -1,0 +1,244 @@
+"""The wire schema of the master-slave link: the one module that owns it.
+
+Every message is a msgpack array (compact: no field names on the wire)::
+
+    [version, kind, epoch, seq, send_time_ns, flags, *payload]
+
+``version``
+    :data:`SCHEMA_VERSION`; a receiver drops any other value (``unknown_version``).
+``kind``
+    :data:`KIND_HANDLE` (master to slave, :class:`HandleState`) or :data:`KIND_TOOL` (slave to
+    master, :class:`ToolState`).
+``epoch``
+    a number the sender draws once per run (unsigned 32 bit); a new epoch tells the receiver the
+    peer restarted, so its sequence numbers start again.
+``seq``
+    the sender's message counter within the epoch (unsigned 63 bit), +1 per message.
+``send_time_ns``
+    the sender's ``CLOCK_REALTIME`` (:func:`time.time_ns`) when the message was built, ns.
+``flags``
+    a bit field of :class:`Flags`.
+payload, :class:`HandleState` (4 floats)
+    ``handle_force_N`` x, y; ``handle_position_m`` x, y.
+payload, :class:`ToolState` (8 floats)
+    ``tool_force_N`` x, y; ``tool_position_m`` x, y; ``tool_velocity_m_s`` x, y;
+    ``clay_engagement`` (0..1); ``removed_volume_m3`` (>= 0).
+
+:func:`decode` never lets an exception other than :class:`DecodeError` escape; the error's
+``reason`` (a :class:`DropReason`) says which counter the receiver charges.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+
+SCHEMA_VERSION = 1
+KIND_HANDLE = 1
+KIND_TOOL = 2
+
+_HEADER_LENGTH = 6
+_HANDLE_FLOATS = 4
+_TOOL_FLOATS = 8
+_MAX_U32 = 2**32 - 1
+_MAX_U63 = 2**63 - 1
+_MAX_FLAGS = 0xFF
+_MAX_PAYLOAD_BYTES = 1024
+
+
+class Flags(enum.IntFlag):
+    """Status bits carried in every message."""
+
+    SAFE_STATE = 1
+    """The sender is in its safe state (master: handle held, no reflected force; slave: tool
+    stopped)."""
+    FORCES_ENABLED = 2
+    """The sender applies forces (it is past the watchdog's re-synchronisation)."""
+    IN_CONTACT = 4
+    """Slave only: the tool touches the clay."""
+
+
+class DropReason(enum.StrEnum):
+    """Why a received message was dropped; each has its own counter in the link statistics."""
+
+    MALFORMED = "malformed"
+    UNKNOWN_VERSION = "unknown_version"
+    WRONG_KIND = "wrong_kind"
+    NON_FINITE = "non_finite"
+    STALE = "stale"
+    OUT_OF_ORDER = "out_of_order"
+    INJECTED_LOSS = "injected_loss"
+
+
+class DecodeError(ValueError):
+    """A payload that is not a valid message of the expected kind."""
+
+    def __init__(self, reason: DropReason, detail: str) -> None:
+        super().__init__(f"{reason.value}: {detail}")
+        self.reason = reason
+
+
+@dataclass(frozen=True, slots=True)
+class HandleState:
+    """Master to slave: the operator's force on the handle and the handle's position.
+
+    Forces in N, positions in m, each as an (x, y) pair; ``send_time_ns`` is CLOCK_REALTIME, ns.
+    """
+
+    epoch: int
+    seq: int
+    send_time_ns: int
+    flags: Flags
+    handle_force_N: tuple[float, float]
+    handle_position_m: tuple[float, float]
+
+    KIND = KIND_HANDLE
+
+    @property
+    def safe_state(self) -> bool:
+        return bool(self.flags & Flags.SAFE_STATE)
+
+    @property
+    def forces_enabled(self) -> bool:
+        return bool(self.flags & Flags.FORCES_ENABLED)
+
+
+@dataclass(frozen=True, slots=True)
+class ToolState:
+    """Slave to master: the tool's force on the clay, its motion, and the clay's status.
+
+    ``tool_force_N`` is the force the tool applies to the clay (N, x and y; the clay pushes
+    back with its negative), ``tool_position_m`` (m), ``tool_velocity_m_s`` (m/s);
+    ``clay_engagement`` is the fraction of the tool's cutting edge inside clay (0..1) and
+    ``removed_volume_m3`` the clay volume removed since the start (m^3).
+    """
+
+    epoch: int
+    seq: int
+    send_time_ns: int
+    flags: Flags
+    tool_force_N: tuple[float, float]
+    tool_position_m: tuple[float, float]
+    tool_velocity_m_s: tuple[float, float]
+    clay_engagement: float
+    removed_volume_m3: float
+
+    KIND = KIND_TOOL
+
+    @property
+    def safe_state(self) -> bool:
+        return bool(self.flags & Flags.SAFE_STATE)
+
+    @property
+    def forces_enabled(self) -> bool:
+        return bool(self.flags & Flags.FORCES_ENABLED)
+
+    @property
+    def in_contact(self) -> bool:
+        return bool(self.flags & Flags.IN_CONTACT)
+
+
+Message = HandleState | ToolState
+
+_packer = msgpack.Packer(use_bin_type=True, use_single_float=False)
+
+
+def encode(message: Message) -> bytes:
+    """The msgpack bytes of ``message``. Raises ``ValueError`` for a non-finite value."""
+    if isinstance(message, HandleState):
+        floats = (*message.handle_force_N, *message.handle_position_m)
+    elif isinstance(message, ToolState):
+        floats = (
+            *message.tool_force_N,
+            *message.tool_position_m,
+            *message.tool_velocity_m_s,
+            message.clay_engagement,
+            message.removed_volume_m3,
+        )
+    else:
+        raise TypeError(f"not a message: {type(message).__name__}")
+    values = [float(v) for v in floats]
+    if not all(map(math.isfinite, values)):
+        raise ValueError(f"non-finite value in {type(message).__name__}: {values}")
+    return _packer.pack(
+        [
+            SCHEMA_VERSION,
+            message.KIND,
+            int(message.epoch),
+            int(message.seq),
+            int(message.send_time_ns),
+            int(message.flags),
+            *values,
+        ]
+    )
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _floats(values: list[Any]) -> list[float]:
+    for value in values:
+        if not isinstance(value, float | int) or isinstance(value, bool):
+            raise DecodeError(DropReason.MALFORMED, f"payload value {value!r} is not a number")
+    result = [float(v) for v in values]
+    if not all(map(math.isfinite, result)):
+        raise DecodeError(DropReason.NON_FINITE, f"non-finite payload {result}")
+    return result
+
+
+def decode(payload: bytes, expected_kind: int) -> Message:
+    """Parse and validate one message of ``expected_kind``.
+
+    Raises :class:`DecodeError` (and nothing else) with reason ``malformed`` (not msgpack,
+    wrong shape or types, values out of range), ``unknown_version``, ``wrong_kind`` or
+    ``non_finite``.
+    """
+    if len(payload) > _MAX_PAYLOAD_BYTES:
+        raise DecodeError(DropReason.MALFORMED, f"{len(payload)} bytes is too long")
+    try:
+        fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=True)
+    except Exception as error:  # msgpack raises many types for corrupt input
+        raise DecodeError(DropReason.MALFORMED, f"not msgpack: {type(error).__name__}") from None
+    if not isinstance(fields, list) or len(fields) < _HEADER_LENGTH:
+        raise DecodeError(DropReason.MALFORMED, "not an array with a header")
+    version, kind, epoch, seq, send_time_ns, flags = fields[:_HEADER_LENGTH]
+    if not _is_int(version):
+        raise DecodeError(DropReason.MALFORMED, f"version {version!r} is not an integer")
+    if version != SCHEMA_VERSION:
+        raise DecodeError(DropReason.UNKNOWN_VERSION, f"version {version}")
+    if not _is_int(kind):
+        raise DecodeError(DropReason.MALFORMED, f"kind {kind!r} is not an integer")
+    if kind != expected_kind:
+        raise DecodeError(DropReason.WRONG_KIND, f"kind {kind}, expected {expected_kind}")
+    if not (_is_int(epoch) and 0 <= epoch <= _MAX_U32):
+        raise DecodeError(DropReason.MALFORMED, f"epoch {epoch!r}")
+    if not (_is_int(seq) and 0 <= seq <= _MAX_U63):
+        raise DecodeError(DropReason.MALFORMED, f"seq {seq!r}")
+    if not (_is_int(send_time_ns) and 0 <= send_time_ns <= _MAX_U63):
+        raise DecodeError(DropReason.MALFORMED, f"send_time_ns {send_time_ns!r}")
+    if not (_is_int(flags) and 0 <= flags <= _MAX_FLAGS):
+        raise DecodeError(DropReason.MALFORMED, f"flags {flags!r}")
+    body = fields[_HEADER_LENGTH:]
+    if kind == KIND_HANDLE:
+        if len(body) != _HANDLE_FLOATS:
+            raise DecodeError(DropReason.MALFORMED, f"handle payload has {len(body)} values")
+        v = _floats(body)
+        return HandleState(
+            epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3])
+        )
+    if len(body) != _TOOL_FLOATS:
+        raise DecodeError(DropReason.MALFORMED, f"tool payload has {len(body)} values")
+    v = _floats(body)
+    if not 0.0 <= v[6] <= 1.0:
+        raise DecodeError(DropReason.MALFORMED, f"clay_engagement {v[6]} outside 0..1")
+    if v[7] < 0.0:
+        raise DecodeError(DropReason.MALFORMED, f"removed_volume_m3 {v[7]} is negative")
+    return ToolState(
+        epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3]), (v[4], v[5]),
+        v[6], v[7],
+    )

@@ -1,0 +1,267 @@
+"""The real-time runner: paces one node's step at the period Ts, in one process.
+
+:class:`RealTimeRunner` calls a user step function once per tick and does none of the node's
+work itself. Pacing: sleep until ``spin_s`` before the deadline, then spin on the clock (pure
+sleep misses by 50-350 us on a loaded Linux box; the spin absorbs the sleep's lateness).
+
+Definitions (all on the runner's monotonic clock, :func:`time.perf_counter_ns`):
+
+- period error: ``|t_k - t_(k-1) - Ts|`` between the starts of two consecutive ticks;
+- overrun: a step that ends after the next tick's deadline;
+- stall: a tick that starts a whole period or more after its deadline (the process was not
+  scheduled, or a step took very long). The schedule is then re-anchored at the late start:
+  the missed ticks are counted in ``skipped_ticks`` and never fired back to back.
+
+SIGINT and SIGTERM set a flag the loop checks every tick, so a run ends within one period
+plus one step; the previous handlers are restored when :meth:`RealTimeRunner.run` returns
+(handlers are installed only from the main thread). A program that must also be stoppable
+before the loop starts (while it waits for its peer) holds a :class:`StopSignals` for its
+whole life and hands it to the runner.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TextIO
+
+from haptic.common.histogram import LogHistogram
+
+
+class StopSignals:
+    """Context manager: while inside, SIGINT and SIGTERM set :attr:`requested` (and
+    :attr:`reason`, the signal's name) instead of raising; the previous handlers come back on
+    exit. Outside the main thread it installs nothing (Python allows handlers only there)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.reason = ""
+        self._previous: dict[int, object] = {}
+
+    def _handler(self, signum: int, _frame: object) -> None:
+        if not self.requested:
+            self.reason = signal.Signals(signum).name
+        self.requested = True
+
+    def __enter__(self) -> StopSignals:
+        if threading.current_thread() is threading.main_thread():
+            for signum in (signal.SIGINT, signal.SIGTERM):
+                self._previous[signum] = signal.signal(signum, self._handler)
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        previous, self._previous = self._previous, {}
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)  # type: ignore[arg-type]
+
+
+StepFunction = Callable[[int, int], None]
+"""``step(tick, now_ns)``: ``tick`` counts from 0; ``now_ns`` is the tick's start on the
+runner's clock (ns). It may call :meth:`RealTimeRunner.request_stop`."""
+
+
+@dataclass(frozen=True)
+class RunStats:
+    """Figures of one run. Times in s, rates in Hz."""
+
+    steps: int
+    elapsed_s: float
+    rate_hz: float
+    period_s: float
+    period_error_p50_s: float
+    period_error_p99_s: float
+    period_error_max_s: float
+    overruns: int
+    stalls: int
+    skipped_ticks: int
+    stop_reason: str
+
+    @property
+    def overrun_ratio(self) -> float:
+        return self.overruns / self.steps if self.steps else 0.0
+
+    def as_summary(self) -> dict[str, object]:
+        """The runner's keys of the run summary."""
+        return {
+            "rate_hz": self.rate_hz,
+            "period_s": self.period_s,
+            "period_p50_error_s": self.period_error_p50_s,
+            "period_p99_error_s": self.period_error_p99_s,
+            "period_max_error_s": self.period_error_max_s,
+            "overruns": self.overruns,
+            "overrun_ratio": self.overrun_ratio,
+            "stalls": self.stalls,
+            "skipped_ticks": self.skipped_ticks,
+            "steps": self.steps,
+            "duration_s": self.elapsed_s,
+            "stop_reason": self.stop_reason,
+        }
+
+
+class RealTimeRunner:
+    """Calls ``step`` every ``period_s`` seconds until ``duration_s`` (None: until stopped).
+
+    ``clock_ns`` and ``sleep`` are injectable (tests drive a fake clock). ``status`` returns
+    extra text for the live status line (link delay, loss, force); the line is written to
+    ``status_stream`` every ``status_interval_s`` when ``show_status`` is true (default: when
+    the stream is a terminal). ``stop_signals``: an outer :class:`StopSignals` the loop checks
+    (then the runner installs no handlers of its own); otherwise, with ``handle_signals``, the
+    runner installs its own for the duration of :meth:`run`.
+    """
+
+    def __init__(
+        self,
+        period_s: float,
+        step: StepFunction,
+        *,
+        duration_s: float | None = None,
+        spin_s: float = 0.0003,
+        clock_ns: Callable[[], int] = time.perf_counter_ns,
+        sleep: Callable[[float], None] = time.sleep,
+        status: Callable[[], str] | None = None,
+        status_stream: TextIO | None = None,
+        status_interval_s: float = 0.25,
+        show_status: bool | None = None,
+        handle_signals: bool = True,
+        stop_signals: StopSignals | None = None,
+    ) -> None:
+        if not period_s > 0.0:
+            raise ValueError(f"period_s must be > 0 (got {period_s})")
+        if duration_s is not None and not duration_s >= 0.0:
+            raise ValueError(f"duration_s must be >= 0 (got {duration_s})")
+        self.period_s = period_s
+        self._period_ns = round(period_s * 1e9)
+        self._spin_ns = round(max(spin_s, 0.0) * 1e9)
+        self._step = step
+        self._duration_ns = None if duration_s is None else round(duration_s * 1e9)
+        self._clock_ns = clock_ns
+        self._sleep = sleep
+        self._status = status
+        self._stream = status_stream if status_stream is not None else sys.stderr
+        self._status_interval_ns = round(status_interval_s * 1e9)
+        if show_status is None:
+            show_status = bool(getattr(self._stream, "isatty", lambda: False)())
+        self._show_status = show_status
+        self._handle_signals = handle_signals
+        self._signals = stop_signals
+        self._stop = False
+        self.stop_reason = ""
+        self._errors = LogHistogram()
+        self.steps = 0
+        self.overruns = 0
+        self.stalls = 0
+        self.skipped_ticks = 0
+        self._elapsed_ns = 0
+
+    def request_stop(self, reason: str = "requested") -> None:
+        """End the run after the current tick (safe from a signal handler or another thread)."""
+        if not self._stop:
+            self.stop_reason = reason
+        self._stop = True
+
+    @property
+    def stopping(self) -> bool:
+        return self._stop
+
+    def run(self) -> RunStats:
+        """Run until the duration is reached or a stop is requested; returns the figures."""
+        own = self._signals is None and self._handle_signals
+        signals = StopSignals() if own else self._signals
+        try:
+            if own:
+                signals.__enter__()
+            self._loop(signals)
+        finally:
+            if own:
+                signals.__exit__(None, None, None)
+            if self._show_status:
+                self._stream.write("\n")
+                self._stream.flush()
+        return self.stats()
+
+    def _loop(self, signals: StopSignals | None) -> None:
+        clock = self._clock_ns
+        sleep = self._sleep
+        period = self._period_ns
+        spin = self._spin_ns
+        errors = self._errors
+        step = self._step
+        start = clock()
+        end = None if self._duration_ns is None else start + self._duration_ns
+        deadline = start
+        previous_start = None
+        next_status = start + self._status_interval_ns
+        last_status = start
+        status_steps = 0
+        tick = 0
+        while not self._stop:
+            if signals is not None and signals.requested:
+                self.request_stop(signals.reason)
+                break
+            remaining = deadline - clock()
+            if remaining > spin:
+                sleep((remaining - spin) * 1e-9)
+            now = clock()
+            while now < deadline:
+                now = clock()
+            if end is not None and now >= end:
+                self.stop_reason = self.stop_reason or "duration"
+                break
+            late = now - deadline
+            if late >= period:  # a stall: re-anchor, never fire the missed ticks in a burst
+                self.stalls += 1
+                self.skipped_ticks += late // period
+                deadline = now
+            if previous_start is not None:
+                error = now - previous_start - period
+                errors.record((error if error >= 0 else -error) * 1e-9)
+            previous_start = now
+            step(tick, now)
+            tick += 1
+            self.steps = tick
+            deadline += period
+            after = clock()
+            if after > deadline:
+                self.overruns += 1
+            if self._show_status and after >= next_status:
+                self._write_status(after, start, tick - status_steps, after - last_status)
+                status_steps = tick
+                last_status = after
+                next_status = after + self._status_interval_ns
+        self._elapsed_ns = clock() - start
+        if not self.stop_reason:
+            self.stop_reason = "requested"
+
+    def _write_status(self, now_ns: int, start_ns: int, steps: int, span_ns: int) -> None:
+        rate = steps / (span_ns * 1e-9) if span_ns > 0 else 0.0
+        p99 = self._errors.percentile(99.0)
+        extra = self._status() if self._status is not None else ""
+        line = (
+            f"\r{(now_ns - start_ns) * 1e-9:7.1f} s  {rate:7.1f} Hz  period p99 "
+            f"{p99 * 1e6:6.1f} us  overruns {self.overruns}  {extra}\x1b[K"
+        )
+        self._stream.write(line)
+        self._stream.flush()
+
+    def stats(self) -> RunStats:
+        """Figures so far (final after :meth:`run` returns)."""
+        elapsed = self._elapsed_ns * 1e-9
+        e = self._errors
+        return RunStats(
+            steps=self.steps,
+            elapsed_s=elapsed,
+            rate_hz=self.steps / elapsed if elapsed > 0 else 0.0,
+            period_s=self.period_s,
+            period_error_p50_s=e.percentile(50.0),
+            period_error_p99_s=e.percentile(99.0),
+            period_error_max_s=e.max_s if e.count else math.nan,
+            overruns=self.overruns,
+            stalls=self.stalls,
+            skipped_ticks=self.skipped_ticks,
+            stop_reason=self.stop_reason,
+        )

@@ -1,0 +1,127 @@
+"""The wire schema: round trips, classification of bad payloads, fuzzing of decode."""
+
+from __future__ import annotations
+
+import math
+
+import msgpack
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from haptic.common.messages import (
+    KIND_HANDLE,
+    KIND_TOOL,
+    SCHEMA_VERSION,
+    DecodeError,
+    DropReason,
+    Flags,
+    HandleState,
+    ToolState,
+    decode,
+    encode,
+)
+
+finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+pair = st.tuples(finite, finite)
+
+
+@settings(deadline=None)
+@given(
+    epoch=st.integers(0, 2**32 - 1), seq=st.integers(0, 2**63 - 1),
+    send=st.integers(0, 2**63 - 1), flags=st.integers(0, 7), force=pair, position=pair,
+)
+def test_handle_state_round_trip(epoch, seq, send, flags, force, position):
+    message = HandleState(epoch, seq, send, Flags(flags), force, position)
+    assert decode(encode(message), KIND_HANDLE) == message
+
+
+@settings(deadline=None)
+@given(
+    seq=st.integers(0, 2**63 - 1), force=pair, position=pair, velocity=pair,
+    engagement=st.floats(0.0, 1.0), volume=st.floats(0.0, 1.0), flags=st.integers(0, 7),
+)
+def test_tool_state_round_trip(seq, force, position, velocity, engagement, volume, flags):
+    message = ToolState(7, seq, 123, Flags(flags), force, position, velocity, engagement, volume)
+    decoded = decode(encode(message), KIND_TOOL)
+    assert decoded == message
+    assert decoded.in_contact == bool(flags & Flags.IN_CONTACT)
+    assert decoded.safe_state == bool(flags & Flags.SAFE_STATE)
+
+
+def test_wire_layout_is_a_compact_array():
+    message = HandleState(5, 9, 1000, Flags.FORCES_ENABLED, (1.0, 2.0), (0.1, 0.2))
+    assert msgpack.unpackb(encode(message)) == [
+        SCHEMA_VERSION, KIND_HANDLE, 5, 9, 1000, 2, 1.0, 2.0, 0.1, 0.2
+    ]
+
+
+def test_encode_refuses_non_finite():
+    with pytest.raises(ValueError):
+        encode(HandleState(0, 0, 0, Flags(0), (math.nan, 0.0), (0.0, 0.0)))
+
+
+def _valid_tool_fields() -> list:
+    return [SCHEMA_VERSION, KIND_TOOL, 1, 2, 3, 0, 1.0, 2.0, 0.1, 0.2, 0.0, 0.0, 0.5, 1e-6]
+
+
+@pytest.mark.parametrize(
+    ("change", "reason"),
+    [
+        (lambda f: f.__setitem__(0, 2), DropReason.UNKNOWN_VERSION),
+        (lambda f: f.__setitem__(0, "1"), DropReason.MALFORMED),
+        (lambda f: f.__setitem__(1, KIND_HANDLE), DropReason.WRONG_KIND),
+        (lambda f: f.__setitem__(3, -1), DropReason.MALFORMED),
+        (lambda f: f.__setitem__(3, True), DropReason.MALFORMED),
+        (lambda f: f.__setitem__(5, 256), DropReason.MALFORMED),
+        (lambda f: f.__setitem__(7, math.inf), DropReason.NON_FINITE),
+        (lambda f: f.__setitem__(8, math.nan), DropReason.NON_FINITE),
+        (lambda f: f.__setitem__(9, "x"), DropReason.MALFORMED),
+        (lambda f: f.__setitem__(12, 1.5), DropReason.MALFORMED),
+        (lambda f: f.__setitem__(13, -1.0), DropReason.MALFORMED),
+        (lambda f: f.pop(), DropReason.MALFORMED),
+        (lambda f: f.append(0.0), DropReason.MALFORMED),
+    ],
+)
+def test_bad_fields_are_classified(change, reason):
+    fields = _valid_tool_fields()
+    change(fields)
+    with pytest.raises(DecodeError) as caught:
+        decode(msgpack.packb(fields), KIND_TOOL)
+    assert caught.value.reason is reason
+
+
+def test_not_msgpack_and_not_an_array_are_malformed():
+    for payload in (b"", b"\xc1", b"\x92\x01", msgpack.packb({"a": 1}), msgpack.packb(1)):
+        with pytest.raises(DecodeError) as caught:
+            decode(payload, KIND_TOOL)
+        assert caught.value.reason is DropReason.MALFORMED
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(max_size=200))
+def test_decode_of_random_bytes_raises_only_decode_error(payload):
+    try:
+        decode(payload, KIND_HANDLE)
+    except DecodeError:
+        pass
+
+
+json_like = st.recursive(
+    st.none() | st.booleans() | st.integers(-(2**63), 2**64 - 1) | st.floats() | st.text(max_size=5)
+    | st.binary(max_size=5),
+    lambda children: (
+        st.lists(children, max_size=16) | st.dictionaries(st.text(max_size=3), children)
+    ),
+    max_leaves=30,
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(json_like)
+def test_decode_of_random_msgpack_structures_raises_only_decode_error(value):
+    payload = msgpack.packb(value, use_bin_type=True)
+    try:
+        decode(payload, KIND_TOOL)
+    except DecodeError:
+        pass

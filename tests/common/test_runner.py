@@ -1,0 +1,222 @@
+"""The real-time runner's logic on an injected clock (no timing is asserted), and its signal
+handling in a child process."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from haptic.common.runner import RealTimeRunner, StopSignals
+
+PERIOD_NS = 540_000
+
+
+class FakeClock:
+    """A clock that moves 1 us per read, by the requested time per sleep (plus ``late_ns``),
+    and by whatever a step charges."""
+
+    def __init__(self, late_ns: int = 0) -> None:
+        self.now = 1_000_000_000
+        self.late_ns = late_ns
+        self.sleeps = 0
+
+    def clock(self) -> int:
+        self.now += 1_000
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        self.sleeps += 1
+        self.now += round(seconds * 1e9) + self.late_ns
+
+
+def make(clock: FakeClock, step, duration_s: float, **kwargs) -> RealTimeRunner:
+    return RealTimeRunner(
+        PERIOD_NS * 1e-9, step, duration_s=duration_s, clock_ns=clock.clock, sleep=clock.sleep,
+        handle_signals=False, show_status=False, **kwargs,
+    )
+
+
+def test_runs_the_expected_number_of_ticks():
+    clock = FakeClock(late_ns=50_000)
+    starts = []
+    runner = make(clock, lambda tick, now: starts.append((tick, now)), duration_s=1.0)
+    stats = runner.run()
+    assert stats.steps == len(starts) == pytest.approx(1.0 / (PERIOD_NS * 1e-9), abs=2)
+    assert [t for t, _ in starts] == list(range(len(starts)))
+    assert stats.overruns == 0 and stats.stalls == 0 and stats.skipped_ticks == 0
+    assert stats.stop_reason == "duration"
+    gaps = [b - a for (_, a), (_, b) in zip(starts, starts[1:], strict=False)]
+    assert max(abs(g - PERIOD_NS) for g in gaps) <= 2_000  # the spin absorbs the late sleep
+    assert clock.sleeps > 0
+
+
+def test_stall_reanchors_without_a_burst():
+    clock = FakeClock()
+    starts = []
+
+    def step(tick: int, now: int) -> None:
+        starts.append(now)
+        if tick == 100:
+            clock.now += 10 * PERIOD_NS  # the process was frozen for ten periods
+
+    stats = make(clock, step, duration_s=0.2).run()
+    gaps = [b - a for a, b in zip(starts, starts[1:], strict=False)]
+    assert stats.stalls == 1
+    assert stats.skipped_ticks == 9  # the ticks due at 101..109; 110 fires, late
+    assert stats.overruns == 1  # tick 100 ended after its deadline
+    # no missed tick is fired back to back: every gap is at least about one period
+    assert min(gaps) >= PERIOD_NS - 2_000
+    assert max(gaps) >= 10 * PERIOD_NS
+    assert stats.steps == pytest.approx(0.2 / (PERIOD_NS * 1e-9) - 9, abs=2)
+
+
+def test_short_overrun_is_counted_and_caught_up_once():
+    clock = FakeClock()
+    starts = []
+
+    def step(tick: int, now: int) -> None:
+        starts.append(now)
+        if tick == 10:
+            clock.now += PERIOD_NS * 3 // 2
+
+    stats = make(clock, step, duration_s=0.05).run()
+    assert stats.overruns == 1
+    assert stats.stalls == 0 and stats.skipped_ticks == 0
+    gaps = [b - a for a, b in zip(starts, starts[1:], strict=False)]
+    assert sum(g < PERIOD_NS * 0.9 for g in gaps) == 1  # one short gap to get back on grid
+
+
+def test_request_stop_from_the_step():
+    clock = FakeClock()
+    holder = {}
+
+    def step(tick: int, _now: int) -> None:
+        if tick == 41:
+            holder["runner"].request_stop("done")
+
+    runner = make(clock, step, duration_s=None)
+    holder["runner"] = runner
+    stats = runner.run()
+    assert stats.steps == 42
+    assert stats.stop_reason == "done"
+
+
+def test_period_statistics_see_the_jitter():
+    clock = FakeClock()
+
+    def step(tick: int, _now: int) -> None:
+        if tick % 10 == 5:
+            clock.now += PERIOD_NS + 20_000  # overrun by 20 us every tenth tick
+
+    stats = make(clock, step, duration_s=0.1).run()
+    assert stats.overruns == pytest.approx(stats.steps / 10, abs=1)
+    assert stats.period_error_max_s == pytest.approx(20e-6, abs=3e-6)
+    assert stats.period_error_p50_s < 3e-6
+
+
+def test_status_line_is_written_when_asked(tmp_path):
+    clock = FakeClock()
+    out = open(tmp_path / "status.txt", "w")  # noqa: SIM115 - closed below
+    runner = make(
+        clock, lambda t, n: None, duration_s=1.0, status=lambda: "link ok",
+        status_stream=out,
+    )
+    runner._show_status = True
+    runner.run()
+    out.close()
+    with open(tmp_path / "status.txt", newline="") as f:
+        text = f.read()
+    assert text.count("\r") >= 3
+    assert "Hz" in text and "link ok" in text and text.endswith("\n")
+
+
+def test_invalid_arguments():
+    with pytest.raises(ValueError):
+        RealTimeRunner(0.0, lambda t, n: None)
+    with pytest.raises(ValueError):
+        RealTimeRunner(0.001, lambda t, n: None, duration_s=-1.0)
+
+
+CHILD = textwrap.dedent(
+    """
+    import json, sys
+    from haptic.common.runner import RealTimeRunner, StopSignals
+    first = []
+    def step(tick, now):
+        if tick == 0:
+            print("ready", flush=True)
+    runner = RealTimeRunner(0.00054, step, show_status=False)
+    stats = runner.run()
+    with open(sys.argv[1], "w") as f:
+        json.dump(stats.as_summary(), f)
+    """
+)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_signal_ends_the_run_cleanly(tmp_path, signum):
+    summary = tmp_path / "summary.json"
+    child = subprocess.Popen(
+        [sys.executable, "-c", CHILD, str(summary)], stdout=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    try:
+        assert child.stdout.readline().strip() == "ready"
+        os.kill(child.pid, signum)
+        assert child.wait(timeout=10) == 0
+    finally:
+        if child.poll() is None:
+            child.kill()
+        child.wait()
+        child.stdout.close()
+    result = json.loads(summary.read_text())
+    assert result["stop_reason"] == signal.Signals(signum).name
+    assert result["steps"] >= 1
+
+
+CHILD_WAITING = textwrap.dedent(
+    """
+    import json, sys, time
+    from haptic.common.runner import RealTimeRunner, StopSignals
+    with StopSignals() as signals:
+        print("ready", flush=True)
+        while not signals.requested:  # waiting for a peer that never comes
+            time.sleep(0.001)
+        stats = RealTimeRunner(0.00054, lambda t, n: None, stop_signals=signals).run()
+    with open(sys.argv[1], "w") as f:
+        json.dump(stats.as_summary(), f)
+    """
+)
+
+
+def test_signal_before_the_loop_starts_ends_cleanly(tmp_path):
+    summary = tmp_path / "summary.json"
+    child = subprocess.Popen(
+        [sys.executable, "-c", CHILD_WAITING, str(summary)], stdout=subprocess.PIPE, text=True,
+    )
+    try:
+        assert child.stdout.readline().strip() == "ready"
+        os.kill(child.pid, signal.SIGINT)
+        assert child.wait(timeout=10) == 0
+    finally:
+        if child.poll() is None:
+            child.kill()
+        child.wait()
+        child.stdout.close()
+    result = json.loads(summary.read_text())
+    assert result["stop_reason"] == "SIGINT" and result["steps"] == 0
+
+
+def test_stop_signals_restore_the_previous_handlers():
+    before = signal.getsignal(signal.SIGTERM)
+    with StopSignals() as signals:
+        assert signal.getsignal(signal.SIGTERM) != before
+        os.kill(os.getpid(), signal.SIGTERM)
+        assert signals.requested and signals.reason == "SIGTERM"
+    assert signal.getsignal(signal.SIGTERM) == before

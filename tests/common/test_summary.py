@@ -1,0 +1,38 @@
+"""The run summary: required keys, JSON output."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from haptic.common.summary import (
+    REQUIRED_SUMMARY_KEYS,
+    format_summary,
+    make_summary,
+    write_json_summary,
+)
+
+RUN = {"rate_hz": 1851.0, "period_p99_error_s": 2e-5, "overruns": 1, "steps": 18510}
+LINK = {"link_one_way_delay_p50_s": 1e-4, "link_one_way_delay_p99_s": math.nan,
+        "loss_ratio": 0.0}
+
+
+def test_summary_has_the_required_keys_and_writes_valid_json(tmp_path):
+    summary = make_summary(
+        RUN, LINK, max_abs_force_N=3.5, watchdog_trips=2,
+        events=[{"time_s": 1.0, "kind": "trip", "reason": "silence"}], side="master",
+    )
+    assert set(REQUIRED_SUMMARY_KEYS) <= set(summary)
+    path = tmp_path / "out" / "summary.json"
+    write_json_summary(path, summary)
+    loaded = json.loads(path.read_text())
+    assert loaded["link_one_way_delay_p99_s"] is None  # NaN -> null, still valid JSON
+    assert loaded["watchdog_trips"] == 2 and loaded["side"] == "master"
+    assert "1851.0 Hz" in format_summary(summary)
+
+
+def test_missing_keys_are_refused():
+    with pytest.raises(KeyError, match="rate_hz"):
+        make_summary({}, LINK, max_abs_force_N=0.0, watchdog_trips=0, events=[])

@@ -1,0 +1,77 @@
+"""The shipped deployment files load, and client mode through the Python router works."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+from haptic.common.config import load_config
+from haptic.common.link import Link
+from haptic.common.link_config import link_config_from
+
+DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
+
+
+def test_two_hosts_config():
+    config = load_config(DEPLOY / "two-hosts.toml")
+    master = link_config_from(config, "master")
+    slave = link_config_from(config, "slave")
+    assert master.listen == ("tcp/0.0.0.0:7447",) and master.mode == "peer"
+    assert slave.connect == ("tcp/192.168.1.10:7447",)
+
+
+def test_router_config():
+    config = load_config(DEPLOY / "router.toml")
+    for side in ("master", "slave"):
+        link = link_config_from(config, side)
+        assert link.mode == "client" and link.connect == ("tcp/192.168.1.5:7447",)
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_client_mode_through_the_python_router():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = subprocess.Popen(
+        [sys.executable, str(DEPLOY / "zenoh_router.py"), "--listen", endpoint],
+        stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        assert "listening" in router.stderr.readline()
+        config = load_config()
+        prefix = f"test/{uuid.uuid4().hex[:10]}"
+        links = [
+            link_config_from(config, side, mode="client", connect=(endpoint,), listen=(),
+                             key_prefix=prefix)
+            for side in ("master", "slave")
+        ]
+        with Link(links[0]) as master, Link(links[1]) as slave:
+            deadline = time.monotonic() + 10
+            while not (master.peer_alive and slave.peer_alive):
+                master.poll()
+                slave.poll()
+                assert time.monotonic() < deadline
+                time.sleep(0.001)
+            sent = master.send_handle((1.0, 2.0), (0.0, 0.0))
+            got = None
+            while got is None:
+                got = slave.poll()
+                assert time.monotonic() < deadline
+                time.sleep(0.001)
+            assert got == sent
+        os.kill(router.pid, signal.SIGTERM)
+        assert router.wait(timeout=10) == 0
+    finally:
+        if router.poll() is None:
+            router.kill()
+        router.wait()
+        router.stderr.close()
