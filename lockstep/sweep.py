@@ -1,0 +1,262 @@
+"""The latency sweep: a grid of Ch1 gains k and round-trip delays run as lanes of one lockstep
+simulation, each cell's time-domain verdict set against the sampled analysis of the same
+loop (docs/lockstep.md).
+
+Modes:
+
+- ``linear`` (default): the analysis's own loop, operator impedance Th on the rig and the
+  environment ft = Tt yt of the model (eq 33) on the slave, excited by a short operator
+  force pulse; the time domain and the analysis compute the same system.
+- ``clay``: the clay-cutting loop of the constant-rate scenario, the regulating operator
+  cutting at 3.6 N; compared with the analysis of its linearisation, the clay as Tt = B s.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from haptic.common.analysis.report import AnalysisSettings, axis_loop
+from haptic.common.analysis.stability import delay_margin
+from haptic.common.injection import InjectionConfig
+from haptic.common.model import TeleopModel
+from haptic.common.synthesis import SynthesisError
+from haptic.lockstep.simulator import LockstepSimulator
+from haptic.lockstep.verdict import growth_verdict
+from haptic.master.operator import parse_operator_spec
+from haptic.slave_sim.scenario import load_scenario
+
+MODES = ("linear", "clay")
+#: The test pulse of the linear mode: 1 N on both axes for 20 samples (10.8 ms).
+PULSE_FORCE_N = 1.0
+PULSE_SAMPLES = 20
+#: The clay mode's operator: regulates the felt cutting force at 3.6 N (paper 4.1).
+CLAY_OPERATOR = "regulate:fx=3.6,fy=0,kp=0.5,ki=4,lag=0.1,max=20,onset=0,rise=0.2"
+#: Clay damping of the constant-rate workpiece used for the linearisation Tt = B s, N s/m.
+CLAY_DAMPING_N_S_PER_M = 100.0
+#: A disagreeing cell within this relative distance of the analytic boundary (in delay or
+#: in gain) is inside the band.
+BAND = 0.10
+
+
+@dataclass(frozen=True)
+class SweepSettings:
+    """What a sweep runs (units in the names)."""
+
+    gains_k: tuple[float, ...]
+    delays_s: tuple[float, ...]
+    mode: str = "linear"
+    duration_s: float = 3.0
+    window_s: float = 0.25
+    reference_start_s: float = 0.25
+    jitter_s: float = 0.0
+    loss_probability: float = 0.0
+    seed: int = 0
+
+
+@dataclass
+class SweepResult:
+    """Per cell (gain i, delay j): the lockstep and analytic verdicts and figures."""
+
+    settings: SweepSettings
+    sample_period_s: float
+    delay_samples: np.ndarray  # (delays,) round trip in whole samples
+    growing: np.ndarray  # (gains, delays) time-domain verdict
+    analytic_stable: np.ndarray  # (gains, delays)
+    in_band: np.ndarray  # (gains, delays) near the analytic boundary
+    peak_force_N: np.ndarray  # (gains, delays) max |fh| over the axes
+    position_error_rms_m: np.ndarray  # (gains, delays) worst axis
+    amplitude_ratio: np.ndarray
+    energy_ratio: np.ndarray
+    margin_s: np.ndarray  # (gains,) analytic delay margin, inf: none, 0: unstable at 0
+    simulated_seconds: float
+    wall_seconds: float
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def agree(self) -> np.ndarray:
+        """Cells where the lockstep and the analysis give the same verdict."""
+        return self.growing == ~self.analytic_stable
+
+    def summary(self) -> dict:
+        """The JSON figures of the sweep (cells, agreement, speed)."""
+        agree = self.agree
+        outside = ~agree & ~self.in_band
+        return {
+            "mode": self.settings.mode,
+            "cells": int(agree.size),
+            "agree": int(agree.sum()),
+            "disagree": int((~agree).sum()),
+            "disagree_outside_band": int(outside.sum()),
+            "simulated_seconds": round(self.simulated_seconds, 3),
+            "wall_seconds": round(self.wall_seconds, 3),
+            "sim_per_wall": round(self.simulated_seconds / max(self.wall_seconds, 1e-9), 1),
+        }
+
+    def rows(self) -> list[dict]:
+        """One dict per cell (the CSV rows)."""
+        rows = []
+        ts = self.sample_period_s
+        for i, gain in enumerate(self.settings.gains_k):
+            for j, samples in enumerate(self.delay_samples):
+                rows.append({
+                    "k": gain, "round_trip_delay_s": round(float(samples) * ts, 9),
+                    "delay_samples": int(samples),
+                    "lockstep": "growing" if self.growing[i, j] else "bounded",
+                    "analysis": "stable" if self.analytic_stable[i, j] else "unstable",
+                    "agree": bool(self.agree[i, j]), "in_band": bool(self.in_band[i, j]),
+                    "analytic_margin_s": float(self.margin_s[i]),
+                    "peak_force_N": float(self.peak_force_N[i, j]),
+                    "position_error_rms_m": float(self.position_error_rms_m[i, j]),
+                    "amplitude_ratio": float(self.amplitude_ratio[i, j]),
+                    "energy_ratio": float(self.energy_ratio[i, j]),
+                })
+        return rows
+
+
+def sweep_model(model: TeleopModel, mode: str) -> TeleopModel:
+    """The model the analysis uses for ``mode``: as configured (linear) or with the clay
+    linearised as Tt = B s on both axes (clay)."""
+    if mode == "linear":
+        return model
+    if mode == "clay":
+        axes = tuple(axis.with_environment(np.array([CLAY_DAMPING_N_S_PER_M, 0.0]))
+                     for axis in model.axes)
+        return TeleopModel(model.sample_period_s, model.ch1_gain_k, model.ch1_num,
+                           model.ch1_den, axes)
+    raise ValueError(f"mode must be one of {', '.join(MODES)} (got {mode!r})")
+
+
+def analytic_margin_s(model: TeleopModel, gain_k: float, sample_period_s: float) -> float:
+    """The sampled analysis's round-trip delay margin, worst axis, s: inf when no delay up
+    to 1 s destabilises the loop, 0 when it is unstable without delay."""
+    settings = AnalysisSettings(sample_period_s=sample_period_s)
+    margin = np.inf
+    for axis in model.axes:
+        try:
+            result = delay_margin(axis_loop(model, axis, gain_k, settings), settings.max_delay_s,
+                                  settings.grid)
+        except SynthesisError:
+            return 0.0
+        if result.delay_margin_s is not None:
+            margin = min(margin, result.delay_margin_s)
+    return float(margin)
+
+
+def _within(delay_s: float, margin_s: float) -> bool:
+    if margin_s == 0.0:
+        return False
+    if not np.isfinite(margin_s):
+        return False
+    return abs(delay_s - margin_s) <= BAND * margin_s
+
+
+def run_sweep(model: TeleopModel, settings: SweepSettings) -> SweepResult:
+    """Run every cell of the grid as one lane and compare with the analysis."""
+    ts = model.sample_period_s
+    gains = np.asarray(settings.gains_k, float)
+    delay_samples = np.unique(np.rint(np.asarray(settings.delays_s, float) / ts).astype(int))
+    lane_gains = np.repeat(gains, delay_samples.size)
+    lane_delays = np.tile(delay_samples, gains.size)
+    if settings.mode == "linear":
+        scenario = load_scenario("constant-rate")
+        operator = parse_operator_spec("constant:fx=0,fy=0")
+        environment = "linear"
+        steps = int(round(settings.duration_s / ts))
+        excitation = np.zeros((min(PULSE_SAMPLES, steps), 2))
+        excitation[:] = PULSE_FORCE_N
+    elif settings.mode == "clay":
+        scenario = load_scenario("constant-rate")
+        operator = parse_operator_spec(CLAY_OPERATOR)
+        environment = "clay"
+        excitation = None
+    else:
+        raise ValueError(f"mode must be one of {', '.join(MODES)}")
+    injection = None
+    if settings.jitter_s > 0.0 or settings.loss_probability > 0.0:
+        injection = InjectionConfig(jitter_s=settings.jitter_s,
+                                    loss_probability=settings.loss_probability)
+    started = time.perf_counter()
+    simulator = LockstepSimulator(model, scenario, operator, lane_gains, environment,
+                                  clay_impl="warp", device="cpu")
+    result = simulator.run(settings.duration_s, lane_delays, to_slave=injection,
+                           to_master=injection, seed=settings.seed, excitation_N=excitation,
+                           window_s=settings.window_s)
+    wall = time.perf_counter() - started
+    verdict = growth_verdict(result, settings.reference_start_s)
+
+    analysed = sweep_model(model, settings.mode)
+    margins = np.array([analytic_margin_s(analysed, float(g), ts) for g in gains])
+    near_margins = {factor: np.array([analytic_margin_s(analysed, float(g) * factor, ts)
+                                      for g in gains]) for factor in (1 - BAND, 1 + BAND)}
+    shape = (gains.size, delay_samples.size)
+    delays_s = delay_samples * ts
+    analytic_stable = delays_s[None, :] < margins[:, None]
+    in_band = np.zeros(shape, bool)
+    for i in range(gains.size):
+        low, high = near_margins[1 + BAND][i], near_margins[1 - BAND][i]
+        for j, delay in enumerate(delays_s):
+            # Near the boundary in delay, or a gain within the band on the other side of it.
+            other_side = (delay < low) != (delay < margins[i]) or (delay < high) != (
+                delay < margins[i])
+            in_band[i, j] = _within(float(delay), margins[i]) or other_side
+    return SweepResult(
+        settings=settings, sample_period_s=ts, delay_samples=delay_samples,
+        growing=verdict.growing.reshape(shape), analytic_stable=analytic_stable,
+        in_band=in_band, peak_force_N=result.peak_handle_force_N.max(axis=1).reshape(shape),
+        position_error_rms_m=result.position_error_rms_m.max(axis=1).reshape(shape),
+        amplitude_ratio=verdict.amplitude_ratio.reshape(shape),
+        energy_ratio=verdict.energy_ratio.reshape(shape), margin_s=margins,
+        simulated_seconds=result.simulated_seconds, wall_seconds=wall,
+    )
+
+
+def write_csv(result: SweepResult, path: str) -> None:
+    """The cells as CSV, one row per cell."""
+    import csv
+
+    rows = result.rows()
+    with open(path, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def plot_heatmap(result: SweepResult, path: str, model: TeleopModel) -> None:
+    """Heat map of the cells' peak force (log colour), growing cells hatched, disagreeing
+    cells circled, with the analytic boundary tau*(k) drawn over them."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    gains = np.asarray(result.settings.gains_k, float)
+    delays_ms = result.delay_samples * result.sample_period_s * 1e3
+    fig, ax = plt.subplots(figsize=(8, 5))
+    peak = np.log10(np.maximum(np.nan_to_num(result.peak_force_N, nan=1e12, posinf=1e12),
+                               1e-6))
+    mesh = ax.pcolormesh(delays_ms, gains, np.minimum(peak, 6), shading="nearest",
+                         cmap="viridis")
+    fig.colorbar(mesh, ax=ax, label="log10 peak handle force (N)")
+    grow_i, grow_j = np.nonzero(result.growing)
+    ax.scatter(delays_ms[grow_j], gains[grow_i], marker="x", color="white", s=14,
+               label="lockstep: growing")
+    bad_i, bad_j = np.nonzero(~result.agree)
+    ax.scatter(delays_ms[bad_j], gains[bad_i], marker="o", facecolors="none",
+               edgecolors="red", s=60, label="disagrees with the analysis")
+    analysed = sweep_model(model, result.settings.mode)
+    fine = np.linspace(gains.min(), gains.max(), 60)
+    curve = np.array([analytic_margin_s(analysed, float(g), result.sample_period_s)
+                      for g in fine]) * 1e3
+    ax.plot(np.minimum(curve, delays_ms.max() * 1.05), fine, color="orange", lw=2,
+            label="sampled analysis: delay margin")
+    ax.set_xlim(delays_ms.min() - 0.5, delays_ms.max() + 0.5)
+    ax.set_xlabel("round-trip delay (ms)")
+    ax.set_ylabel("Ch1 gain k")
+    ax.set_title(f"Latency sweep ({result.settings.mode} loop)")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
