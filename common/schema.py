@@ -9,6 +9,7 @@ from typing import Any
 
 from haptic.common.config import Field, Schema
 from haptic.common.link_config import LINK_SCHEMA
+from haptic.lockstep.schema import LOCKSTEP_SCHEMA
 from haptic.master.schema import MASTER_SCHEMA
 from haptic.slave_sim.schema import SLAVE_SCHEMA
 
@@ -123,4 +124,5 @@ SCHEMA: Schema = {
     "slave": SLAVE_SCHEMA,
     "master": MASTER_SCHEMA,
     "link": LINK_SCHEMA,
+    "lockstep": LOCKSTEP_SCHEMA,
 }

@@ -89,6 +89,7 @@ class WindowStats:
     handle_force_min_N: np.ndarray
     handle_force_sum_N: np.ndarray
     handle_force_sumsq_N2: np.ndarray
+    handle_force_moment_N: np.ndarray  # sum of (sample index in the window) * fh
     tool_force_max_N: np.ndarray
     tool_force_min_N: np.ndarray
     tool_force_sum_N: np.ndarray
@@ -212,8 +213,9 @@ class LockstepSimulator:
         n_windows = -(-steps // window)
         shape = (n_windows, lanes, 2)
         stats = WindowStats(window, np.full(shape, -np.inf), np.full(shape, np.inf),
-                            np.zeros(shape), np.zeros(shape), np.full(shape, -np.inf),
-                            np.full(shape, np.inf), np.zeros(shape), np.zeros(shape))
+                            np.zeros(shape), np.zeros(shape), np.zeros(shape),
+                            np.full(shape, -np.inf), np.full(shape, np.inf), np.zeros(shape),
+                            np.zeros(shape))
         peak_fh = np.zeros((lanes, 2))
         peak_ft = np.zeros((lanes, 2))
         error_sumsq = np.zeros((lanes, 2))
@@ -243,6 +245,7 @@ class LockstepSimulator:
                 np.minimum(stats.handle_force_min_N[w], fh, out=stats.handle_force_min_N[w])
                 stats.handle_force_sum_N[w] += fh
                 stats.handle_force_sumsq_N2[w] += fh * fh
+                stats.handle_force_moment_N[w] += (k - w * window) * fh
                 np.maximum(stats.tool_force_max_N[w], ft, out=stats.tool_force_max_N[w])
                 np.minimum(stats.tool_force_min_N[w], ft, out=stats.tool_force_min_N[w])
                 stats.tool_force_sum_N[w] += ft

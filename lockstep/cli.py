@@ -1,0 +1,220 @@
+"""``haptic-sim``: the lockstep simulator from the command line.
+
+- ``haptic-sim run``: one run of a scenario (traces saved as .npz and plotted);
+- ``haptic-sim repro --out DIR``: the paper's section 4, report.md with figures and table;
+- ``haptic-sim sweep``: the latency sweep (CSV, heat map, ``--json``), exit status 1 with
+  ``--check`` when a cell disagrees with the analysis outside the band.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from haptic.common.config import ConfigError, exit_on_config_error, load_config
+from haptic.common.injection import InjectionConfig
+from haptic.common.model import model_from_config
+from haptic.lockstep.simulator import ENVIRONMENTS, TRANSPARENT_SAFETY, LockstepSimulator
+from haptic.master.operator import parse_operator_spec
+from haptic.master.settings import master_settings
+from haptic.slave_sim.scenario import load_scenario
+
+DEFAULT_GAINS = (1.0, 3.0, 5.0, 8.0, 10.0, 13.0, 16.0, 19.0, 25.0, 30.0)
+
+
+def _floats(text: str) -> tuple[float, ...]:
+    """``"1,3,5"`` or ``"start:stop:step"`` (stop included) -> floats."""
+    if ":" in text:
+        start, stop, step = (float(part) for part in text.split(":"))
+        count = int(math.floor((stop - start) / step + 1e-9)) + 1
+        return tuple(start + step * i for i in range(count))
+    return tuple(float(part) for part in text.split(",") if part.strip())
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command-line interface."""
+    parser = argparse.ArgumentParser(prog="haptic-sim", description=__doc__.split("\n")[0])
+    parser.add_argument("--config", type=Path, help="TOML configuration (default: the paper's)")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    run = sub.add_parser("run", help="one lockstep run: traces saved and plotted")
+    run.add_argument("--scenario", default=None, help="scenario name or .toml (default: config)")
+    run.add_argument("--environment", choices=ENVIRONMENTS, default=None,
+                     help="tool environment (default: the scenario's)")
+    run.add_argument("--operator", default=None, help="operator spec (default: the "
+                     "config's [lockstep] constant_rate_operator)")
+    run.add_argument("--k", type=float, default=None, help="Ch1 gain k (default: config)")
+    run.add_argument("--delay", type=float, default=0.0, metavar="SECONDS",
+                     help="round-trip delay, s (rounded to whole samples)")
+    run.add_argument("--jitter", type=float, default=0.0, metavar="SECONDS",
+                     help="jitter bound on each line, s (uniform)")
+    run.add_argument("--loss", type=float, default=0.0, help="loss probability per message")
+    run.add_argument("--duration", type=float, default=3.0, metavar="SECONDS")
+    run.add_argument("--safety", choices=("config", "off"), default="config",
+                     help="the master's safety limits from [master.safety], or off")
+    run.add_argument("--out", type=Path, default=Path("haptic-sim-run"))
+    run.add_argument("--json", action="store_true", help="print a JSON summary")
+
+    repro = sub.add_parser("repro", help="reproduce the paper's section 4")
+    repro.add_argument("--out", type=Path, default=Path("haptic-sim-repro"))
+    repro.add_argument("--json", action="store_true", help="print the table as JSON")
+
+    sweep = sub.add_parser("sweep", help="latency sweep against the analysis")
+    sweep.add_argument("--mode", choices=("linear", "clay"), default="linear")
+    sweep.add_argument("--gains", type=_floats, default=DEFAULT_GAINS,
+                       help="k values: a,b,c or start:stop:step")
+    sweep.add_argument("--delays", type=_floats, default=None,
+                       help="round-trip delays, s: a,b,c or start:stop:step (default 0:0.02:0.001)")
+    sweep.add_argument("--duration", type=float, default=3.0, metavar="SECONDS")
+    sweep.add_argument("--jitter", type=float, default=0.0, metavar="SECONDS")
+    sweep.add_argument("--loss", type=float, default=0.0)
+    sweep.add_argument("--seed", type=int, default=0)
+    sweep.add_argument("--out", type=Path, default=None, help="write sweep.csv and "
+                       "sweep.png here")
+    sweep.add_argument("--json", action="store_true")
+    sweep.add_argument("--check", action="store_true",
+                       help="exit 1 when a cell disagrees outside the band")
+    return parser
+
+
+def _check_seconds(name: str, value: float) -> None:
+    if not (math.isfinite(value) and value >= 0.0):
+        raise ConfigError(name, f"must be a finite number >= 0 s (got {value})")
+
+
+def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, Any]:
+    """Run one scenario; write traces.npz and traces.png; return a summary."""
+    for name in ("--delay", "--jitter"):
+        _check_seconds(name, getattr(args, name[2:]))
+    if not args.duration > 0.0:
+        raise ConfigError("--duration", "must be > 0 s")
+    if not 0.0 <= args.loss <= 1.0:
+        raise ConfigError("--loss", "must be in [0, 1]")
+    model = model_from_config(config)
+    gain = model.ch1_gain_k if args.k is None else args.k
+    model = model.with_gain(gain)
+    scenario = load_scenario(args.scenario or config["slave"]["scenario"])
+    environment = args.environment or scenario.environment
+    operator = parse_operator_spec(args.operator or config["lockstep"]["constant_rate_operator"],
+                                   "--operator")
+    safety = master_settings(config).safety if args.safety == "config" else TRANSPARENT_SAFETY
+    simulator = LockstepSimulator(model, scenario, operator, np.array([gain]), environment,
+                                  safety, device="cpu")
+    injection = None
+    if args.jitter > 0.0 or args.loss > 0.0:
+        injection = InjectionConfig(jitter_s=args.jitter, loss_probability=args.loss)
+    delay_samples = int(round(args.delay / model.sample_period_s))
+    result = simulator.run(args.duration, delay_samples, to_slave=injection,
+                           to_master=injection, seed=int(config["lockstep"]["seed"]),
+                           record_lanes=[0])
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    traces = {name: values[:, 0] for name, values in result.traces.items()}
+    np.savez(out / "traces.npz", time_s=result.time_s, **traces)
+    _plot_run(out / "traces.png", result.time_s, traces, f"{scenario.name}, k = {gain:g}, "
+              f"delay {delay_samples * model.sample_period_s * 1e3:.2f} ms")
+    return {
+        "scenario": scenario.name, "environment": environment, "k": gain,
+        "round_trip_delay_s": delay_samples * model.sample_period_s,
+        "duration_s": result.steps * result.sample_period_s,
+        "peak_handle_force_N": result.peak_handle_force_N[0].tolist(),
+        "peak_tool_force_N": result.peak_tool_force_N[0].tolist(),
+        "position_error_rms_m": result.position_error_rms_m[0].tolist(),
+        "safety_events": result.safety_events, "out": str(out),
+    }
+
+
+def _plot_run(path: Path, time_s: np.ndarray, traces: dict[str, np.ndarray], title: str
+              ) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
+    axes[0].plot(time_s, traces["handle_force_N"][:, 0], lw=0.8, label="fh_x")
+    axes[0].plot(time_s, traces["tool_force_N"][:, 0], lw=0.8, label="ft_x")
+    axes[0].set_ylabel("force (N)")
+    axes[1].plot(time_s, traces["handle_position_m"][:, 0] * 100, lw=0.8, label="yh_x")
+    axes[1].plot(time_s, traces["tool_position_m"][:, 0] * 100, lw=0.8, label="yt_x")
+    axes[1].set_ylabel("position (cm)")
+    axes[2].plot(time_s, traces["tool_velocity_m_s"][:, 0], lw=0.8, label="tool velocity x")
+    axes[2].set_ylabel("m/s")
+    axes[2].set_xlabel("time (s)")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+    axes[0].set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point: 0 on success, 1 for a failed ``sweep --check``, 2 for a config error."""
+    args = build_parser().parse_args(argv)
+    with exit_on_config_error():
+        config = load_config(args.config)
+        if args.command == "run":
+            summary = command_run(args, config)
+            print(json.dumps(summary) if args.json else
+                  "\n".join(f"{key}: {value}" for key, value in summary.items()))
+            return 0
+        if args.command == "repro":
+            from haptic.lockstep.repro import reproduce, write_report
+
+            repro = reproduce(config)
+            write_report(repro, args.out)
+            if args.json:
+                print(json.dumps(repro.to_json()))
+            else:
+                for row in repro.rows:
+                    paper = "-" if row.paper is None else f"{row.paper:g}"
+                    print(f"{row.name:36s} paper {paper:>8s}  ours {row.ours:10.4g} {row.unit:4s}"
+                          f" {'ok' if row.within_tolerance else 'OUT'} ({row.tolerance})")
+                print(f"wrote {args.out / 'report.md'}", file=sys.stderr)
+            return 0
+        return command_sweep(args, config)
+
+
+def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
+    """Run the sweep, write its files, print its figures; 1 when --check fails."""
+    from haptic.lockstep.sweep import SweepSettings, plot_heatmap, run_sweep, write_csv
+
+    delays = args.delays or _floats("0:0.02:0.001")
+    for value in delays:
+        _check_seconds("--delays", value)
+    if any(not (math.isfinite(g) and g > 0.0) for g in args.gains):
+        raise ConfigError("--gains", "every k must be a finite number > 0")
+    if not args.duration >= 1.0:
+        raise ConfigError("--duration", "must be >= 1 s (the verdict compares windows)")
+    model = model_from_config(config)
+    reference = 1.0 if args.mode == "clay" else 0.25
+    settings = SweepSettings(gains_k=tuple(args.gains), delays_s=tuple(delays), mode=args.mode,
+                             duration_s=args.duration, reference_start_s=reference,
+                             jitter_s=args.jitter, loss_probability=args.loss, seed=args.seed)
+    result = run_sweep(model, settings)
+    summary = result.summary()
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        write_csv(result, str(args.out / "sweep.csv"))
+        plot_heatmap(result, str(args.out / "sweep.png"), model)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print("\n".join(f"{key}: {value}" for key, value in summary.items()))
+    if args.check and summary["disagree_outside_band"] > 0:
+        print("sweep check failed: cells disagree with the analysis outside the band",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
