@@ -260,3 +260,38 @@ def plot_heatmap(result: SweepResult, path: str, model: TeleopModel) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+@dataclass(frozen=True)
+class LockstepMargin:
+    """The delay margin the lockstep measures for one gain: the loop is bounded at
+    ``bounded_samples`` and grows at ``growing_samples`` = bounded + 1 round-trip samples;
+    ``margin_s`` is the midpoint, good to +-Ts/2."""
+
+    gain_k: float
+    bounded_samples: int
+    growing_samples: int
+    margin_s: float
+
+
+def lockstep_margin(model: TeleopModel, gain_k: float, delays_samples: np.ndarray,
+                    duration_s: float = 3.0) -> LockstepMargin:
+    """Run the linear loop at ``gain_k`` for every round-trip delay in ``delays_samples``
+    (consecutive whole samples, one lane each, in one run) and locate the boundary: the
+    first delay from which every longer one grows. Raises ValueError when the range does
+    not contain it."""
+    delays = np.arange(int(np.min(delays_samples)), int(np.max(delays_samples)) + 1)
+    ts = model.sample_period_s
+    simulator = LockstepSimulator(model, load_scenario("constant-rate"),
+                                  parse_operator_spec("constant:fx=0,fy=0"),
+                                  np.full(delays.size, float(gain_k)), "linear")
+    excitation = np.full((PULSE_SAMPLES, 2), PULSE_FORCE_N)
+    result = simulator.run(duration_s, delays, excitation_N=excitation)
+    growing = growth_verdict(result).growing
+    if growing[0] or not growing[-1]:
+        raise ValueError(f"k = {gain_k:g}: the boundary is not inside delays "
+                         f"{delays[0]}..{delays[-1]} samples")
+    # Every longer delay grows from the first index of the last run of growing lanes.
+    first = int(np.flatnonzero(~growing)[-1]) + 1
+    bounded, grows = int(delays[first - 1]), int(delays[first])
+    return LockstepMargin(float(gain_k), bounded, grows, (bounded + grows) / 2.0 * ts)

@@ -1,0 +1,47 @@
+"""haptic-sim from the command line: run, sweep (with --check) and config errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from haptic.lockstep.cli import _floats, main
+
+
+def test_run_writes_traces_and_plot(tmp_path, capsys) -> None:
+    out = tmp_path / "run"
+    assert main(["run", "--scenario", "constant-rate", "--environment", "linear",
+                 "--duration", "0.2", "--delay", "0.005", "--out", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["round_trip_delay_s"] == pytest.approx(9 * 0.00054)
+    traces = np.load(out / "traces.npz")
+    assert traces["handle_force_N"].shape == (370, 2)
+    assert (out / "traces.png").stat().st_size > 0
+
+
+def test_quick_sweep_agrees_with_the_analysis(tmp_path, capsys) -> None:
+    assert main(["sweep", "--gains", "3,13,19", "--delays", "0.004,0.011,0.02",
+                 "--duration", "2", "--out", str(tmp_path), "--json", "--check"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["cells"] == 9 and summary["disagree_outside_band"] == 0
+    assert summary["agree"] == 9
+    rows = (tmp_path / "sweep.csv").read_text().splitlines()
+    assert len(rows) == 10 and rows[0].startswith("k,round_trip_delay_s")
+    assert (tmp_path / "sweep.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("argv", [["run", "--delay", "-1"], ["run", "--loss", "2"],
+                                  ["run", "--operator", "dance:fx=1"],
+                                  ["sweep", "--gains", "0,3"]])
+def test_bad_arguments_exit_2_with_one_line(argv, capsys) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_ranges() -> None:
+    assert _floats("0:0.002:0.001") == pytest.approx((0.0, 0.001, 0.002))
+    assert _floats("1,3") == (1.0, 3.0)

@@ -1,0 +1,42 @@
+"""Delay lines: exact whole-sample delays, jitter within its bound, loss keeps the last."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from haptic.common.injection import InjectionConfig
+from haptic.lockstep.delay_line import DelayLine, source_schedule
+
+TS = 0.001
+
+
+def test_plain_delay_is_exact() -> None:
+    schedule = source_schedule(50, np.array([0, 3]), 1, TS)
+    ticks = np.arange(50)
+    np.testing.assert_array_equal(schedule[:, 0], np.where(ticks >= 1, ticks - 1, -1))
+    np.testing.assert_array_equal(schedule[:, 1], np.where(ticks >= 4, ticks - 4, -1))
+
+
+def test_jitter_is_bounded_and_keeps_order() -> None:
+    injection = InjectionConfig(delay_s=0.002, jitter_s=0.003)
+    schedule = source_schedule(2000, np.array([5]), 0, TS, injection,
+                               np.random.default_rng(1))[:, 0]
+    ticks = np.arange(2000)
+    lag = (ticks - schedule)[schedule >= 0]
+    assert lag.min() >= 5 + 2 and lag.max() <= 5 + 2 + 3 + 1
+    assert np.all(np.diff(schedule) >= 0)
+
+
+def test_lost_messages_leave_the_previous_one() -> None:
+    injection = InjectionConfig(loss_probability=0.3)
+    schedule = source_schedule(1000, np.array([2]), 0, TS, injection,
+                               np.random.default_rng(3))[:, 0]
+    ticks = np.arange(1000)
+    held = schedule < ticks - 2
+    assert 0.2 < held[10:].mean() < 0.4
+    assert np.all(np.diff(schedule) >= 0)
+    line = DelayLine(schedule[:, None], 1)
+    for tick in range(1000):
+        line.send(tick, np.array([[float(tick)]]))
+        received = line.receive(tick)[0, 0]
+        assert received == (schedule[tick] if schedule[tick] >= 0 else 0.0)
