@@ -1,0 +1,86 @@
+"""Latency sweep benchmark: a grid of Ch1 gains k and round-trip delays run as lanes of one
+lockstep simulation, every cell's verdict (bounded or growing) set against the sampled
+analysis of the same loop, and the aggregate simulation speed.
+
+Default grid: k = 1, 3, 5, 8, 10, 13, 16, 19, 25, 30 and round-trip delays 0 to 20 ms in
+1 ms steps (rounded to whole samples of Ts = 0.54 ms), 3 s of simulated time per cell, the
+linear loop of the analysis (docs/lockstep.md). ``--quick`` (the CI run): k = 1, 3, 8, 13,
+19, 30 and 0 to 20 ms in 2 ms steps, 2.5 s per cell.
+
+Usage: ``python bench/latency_sweep.py [--quick] [--mode linear|clay] [--json] [--check]
+[--out DIR]``. ``--json`` prints one object with ``cells``, ``agree``, ``disagree``,
+``disagree_outside_band``, ``simulated_seconds``, ``wall_seconds``, ``sim_per_wall``;
+``--check`` exits 1 when any cell disagrees with the analysis further than 10 % from the
+analytic boundary. The speed target (200 simulated s per wall s on the 2-core machine) is
+reported, never enforced: machines differ.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from haptic.common.config import load_config
+from haptic.common.model import model_from_config
+from haptic.lockstep.sweep import SweepSettings, plot_heatmap, run_sweep, write_csv
+
+FULL_GAINS = (1.0, 3.0, 5.0, 8.0, 10.0, 13.0, 16.0, 19.0, 25.0, 30.0)
+QUICK_GAINS = (1.0, 3.0, 8.0, 13.0, 19.0, 30.0)
+SPEED_TARGET = 200.0
+
+
+def settings_for(quick: bool, mode: str) -> SweepSettings:
+    """The grid of the full or the quick sweep."""
+    if mode == "clay":
+        gains = (0.5, 0.75, 1.0, 1.25, 1.5)
+        delays = tuple(np.arange(0.0, 0.0201, 0.002 if quick else 0.001))
+        return SweepSettings(gains, delays, "clay", 3.0, reference_start_s=1.0)
+    if quick:
+        return SweepSettings(QUICK_GAINS, tuple(np.arange(0.0, 0.0201, 0.002)), "linear", 2.5)
+    return SweepSettings(FULL_GAINS, tuple(np.arange(0.0, 0.0201, 0.001)), "linear", 3.0)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="the CI grid (well under 3 min)")
+    parser.add_argument("--mode", choices=("linear", "clay"), default="linear")
+    parser.add_argument("--json", action="store_true")
+    parser.add_argument("--check", action="store_true",
+                        help="exit 1 when a cell disagrees outside the band")
+    parser.add_argument("--out", type=Path, help="write sweep.csv and sweep.png here")
+    args = parser.parse_args(argv)
+    model = model_from_config(load_config())
+    result = run_sweep(model, settings_for(args.quick, args.mode))
+    summary = result.summary()
+    summary["speed_target_sim_per_wall"] = SPEED_TARGET
+    summary["lanes"] = summary["cells"]
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        write_csv(result, str(args.out / "sweep.csv"))
+        plot_heatmap(result, str(args.out / "sweep.png"), model)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"latency sweep ({summary['mode']} loop): {summary['cells']} cells as lanes")
+        print(f"  agree {summary['agree']}, disagree {summary['disagree']}, "
+              f"outside the 10 % band {summary['disagree_outside_band']}")
+        print(f"  simulated {summary['simulated_seconds']:.1f} s in "
+              f"{summary['wall_seconds']:.2f} s wall: {summary['sim_per_wall']:.0f} simulated "
+              f"s per wall s (target {SPEED_TARGET:.0f})")
+        margins = ", ".join(f"k={g:g}: {m * 1e3:.2f} ms" if np.isfinite(m) else f"k={g:g}: none"
+                            for g, m in zip(result.settings.gains_k, result.margin_s,
+                                            strict=True))
+        print(f"  analytic margins (sampled, worst axis): {margins}")
+    if args.check and summary["disagree_outside_band"] > 0:
+        print("latency sweep: cells disagree with the analysis outside the band",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

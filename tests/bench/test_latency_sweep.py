@@ -1,0 +1,30 @@
+"""The latency-sweep benchmark end to end on a tiny grid: its JSON has the fields the issue
+asks for and --check passes when every cell agrees. No figure is asserted."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+from haptic.lockstep.sweep import SweepSettings
+
+BENCH = Path(__file__).resolve().parents[2] / "bench" / "latency_sweep.py"
+
+
+def load_bench():
+    spec = importlib.util.spec_from_file_location("latency_sweep", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_json_shape_and_check(capsys, monkeypatch) -> None:
+    bench = load_bench()
+    monkeypatch.setattr(bench, "settings_for", lambda quick, mode: SweepSettings(
+        (3.0, 19.0), (0.0, 0.012), "linear", 1.5))
+    assert bench.main(["--quick", "--json", "--check"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert {"cells", "agree", "disagree", "disagree_outside_band", "simulated_seconds",
+            "wall_seconds", "sim_per_wall"} <= set(result)
+    assert result["cells"] == 4 and result["disagree_outside_band"] == 0
