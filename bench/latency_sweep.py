@@ -7,8 +7,12 @@ Default grid: k = 1, 3, 5, 8, 10, 13, 16, 19, 25, 30 and round-trip delays 0 to 
 linear loop of the analysis (docs/lockstep.md). ``--quick`` (the CI run): k = 1, 3, 8, 13,
 19, 30 and 0 to 20 ms in 2 ms steps, 2.5 s per cell.
 
+``--real-link`` also runs a few cells over the real Zenoh link (two Link objects in this
+process, delay injected by their receive paths, paced in real time; about 3 s each; not in
+CI) and reports each one's measured round trip and verdicts.
+
 Usage: ``python bench/latency_sweep.py [--quick] [--mode linear|clay] [--json] [--check]
-[--out DIR]``. ``--json`` prints one object with ``cells``, ``agree``, ``disagree``,
+[--out DIR] [--real-link]``. ``--json`` prints one object with ``cells``, ``agree``, ``disagree``,
 ``disagree_outside_band``, ``simulated_seconds``, ``wall_seconds``, ``sim_per_wall``;
 ``--check`` exits 1 when any cell disagrees with the analysis further than 10 % from the
 analytic boundary. The speed target (200 simulated s per wall s on the 2-core machine) is
@@ -31,6 +35,9 @@ from haptic.lockstep.sweep import SweepSettings, plot_heatmap, run_sweep, write_
 FULL_GAINS = (1.0, 3.0, 5.0, 8.0, 10.0, 13.0, 16.0, 19.0, 25.0, 30.0)
 QUICK_GAINS = (1.0, 3.0, 8.0, 13.0, 19.0, 30.0)
 SPEED_TARGET = 200.0
+#: (k, injected round trip s) run over the real link: both sides of k = 13's and 19's margins.
+REAL_LINK_CELLS = ((19.0, 0.006), (19.0, 0.0075), (19.0, 0.009), (13.0, 0.012),
+                   (13.0, 0.0135), (13.0, 0.0155))
 
 
 def settings_for(quick: bool, mode: str) -> SweepSettings:
@@ -52,6 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--check", action="store_true",
                         help="exit 1 when a cell disagrees outside the band")
     parser.add_argument("--out", type=Path, help="write sweep.csv and sweep.png here")
+    parser.add_argument("--real-link", action="store_true",
+                        help="also run a few cells over the real Zenoh link (slow)")
     args = parser.parse_args(argv)
     model = model_from_config(load_config())
     result = run_sweep(model, settings_for(args.quick, args.mode))
@@ -62,6 +71,19 @@ def main(argv: list[str] | None = None) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         write_csv(result, str(args.out / "sweep.csv"))
         plot_heatmap(result, str(args.out / "sweep.png"), model)
+    real_failed = False
+    if args.real_link:
+        from haptic.lockstep.real_link import run_cell
+
+        cells = [run_cell(model, gain, delay) for gain, delay in REAL_LINK_CELLS]
+        summary["real_link"] = [
+            {"k": c.gain_k, "injected_round_trip_s": c.injected_round_trip_s,
+             "measured_round_trip_s": round(c.measured_round_trip_s, 6),
+             "analytic_margin_s": round(c.analytic_margin_s, 6),
+             "lockstep": "growing" if c.growing else "bounded",
+             "analysis": "stable" if c.analytic_stable else "unstable", "agree": c.agree,
+             "overruns": c.overruns} for c in cells]
+        real_failed = not all(c.agree for c in cells)
     if args.json:
         print(json.dumps(summary))
     else:
@@ -75,7 +97,12 @@ def main(argv: list[str] | None = None) -> int:
                             for g, m in zip(result.settings.gains_k, result.margin_s,
                                             strict=True))
         print(f"  analytic margins (sampled, worst axis): {margins}")
-    if args.check and summary["disagree_outside_band"] > 0:
+        for cell in summary.get("real_link", []):
+            print(f"  real link k={cell['k']:g}: injected {cell['injected_round_trip_s'] * 1e3:.2f}"
+                  f" ms, measured {cell['measured_round_trip_s'] * 1e3:.2f} ms -> "
+                  f"{cell['lockstep']}, analysis {cell['analysis']} (margin "
+                  f"{cell['analytic_margin_s'] * 1e3:.2f} ms), overruns {cell['overruns']}")
+    if args.check and (summary["disagree_outside_band"] > 0 or real_failed):
         print("latency sweep: cells disagree with the analysis outside the band",
               file=sys.stderr)
         return 1

@@ -1,0 +1,160 @@
+"""A few sweep cells over the real Zenoh link: the lockstep's nodes, rig and operator, one
+lane, but the two delay lines replaced by two :class:`~haptic.common.link.Link` objects (master
+and slave side, in this process, over TCP on loopback) with the delay injected by the links'
+receive paths. The loop is paced in real time at Ts, since the injected delay is wall-clock
+time.
+
+The effective round trip is measured, not assumed: each side records how many ticks old the
+message it used was (the sender stamps one message per tick, its sequence number is the tick),
+and the round trip in samples is ``mean lag to the slave + mean lag to the master - 1`` (the
+1 is the structural sample of the tool line, docs/lockstep.md section 1). Over real Zenoh
+the slave cannot read a handle message in the tick it was sent, so the real link adds at least
+one sample to the injected delay: the analysis is evaluated at the measured round trip.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+import uuid
+from dataclasses import dataclass
+
+import numpy as np
+
+from haptic.common.injection import InjectionConfig
+from haptic.common.link import Link
+from haptic.common.link_config import LinkConfig
+from haptic.common.model import TeleopModel
+from haptic.lockstep.simulator import LockstepSimulator
+from haptic.lockstep.sweep import PULSE_FORCE_N, PULSE_SAMPLES, analytic_margin_s
+from haptic.master.operator import parse_operator_spec
+from haptic.slave_sim.scenario import load_scenario
+
+#: Sleep until this long before a tick's deadline, then spin (docs/link.md's pacing).
+SPIN_S = 0.0003
+
+
+@dataclass(frozen=True)
+class RealLinkCell:
+    """One cell run over Zenoh: the injected round trip, the measured one (s), the verdicts."""
+
+    gain_k: float
+    injected_round_trip_s: float
+    measured_round_trip_s: float
+    growing: bool
+    analytic_stable: bool
+    analytic_margin_s: float
+    energy_ratio: float
+    overruns: int
+    steps: int
+
+    @property
+    def agree(self) -> bool:
+        return self.growing != self.analytic_stable
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _configs(one_way_s: tuple[float, float]) -> tuple[LinkConfig, LinkConfig]:
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    prefix = f"haptic-sim/{uuid.uuid4().hex[:10]}"
+    common = {"key_prefix": prefix, "congestion_control": "block", "stale_after_s": 10.0}
+    master = LinkConfig(side="master", listen=(endpoint,),
+                        injection=InjectionConfig(delay_s=one_way_s[1]), **common)
+    slave = LinkConfig(side="slave", connect=(endpoint,),
+                       injection=InjectionConfig(delay_s=one_way_s[0]), **common)
+    return master, slave
+
+
+def _energy_ratio(force: np.ndarray, window: int, reference: int) -> float:
+    """The verdict's detrended energy ratio (verdict.py) from a full trace (steps, 2)."""
+    def detrended_variance(segment: np.ndarray) -> np.ndarray:
+        index = np.arange(segment.shape[0])
+        fit = np.polyfit(index, segment, 1)
+        return np.var(segment - (np.outer(index, fit[0]) + fit[1]), axis=0)
+
+    first = detrended_variance(force[reference * window:(reference + 1) * window])
+    last = detrended_variance(force[-window:])
+    return float(np.max(np.sqrt(last / np.maximum(first, 1e-300))))
+
+
+def run_cell(model: TeleopModel, gain_k: float, injected_round_trip_s: float,
+             duration_s: float = 3.0, window_s: float = 0.25) -> RealLinkCell:
+    """One cell over the real link (the linear loop, the sweep's pulse)."""
+    ts = model.sample_period_s
+    simulator = LockstepSimulator(model, load_scenario("constant-rate"),
+                                  parse_operator_spec("constant:fx=0,fy=0"),
+                                  np.array([gain_k]), "linear")
+    rig, master, slave = simulator.rig, simulator.master, simulator.slave
+    start = np.zeros((1, 2))
+    rig_state = rig.initial_state(start, np.random.default_rng(0))
+    master_state = master.activate(start)
+    slave_state = slave.initial_state(1, start)
+    command = master_state.last_command_m.copy()
+    steps = int(round(duration_s / ts))
+    handle_force = np.empty((steps, 2))
+    lag_to_slave = np.zeros(steps)
+    lag_to_master = np.zeros(steps)
+    half = injected_round_trip_s / 2.0
+    master_cfg, slave_cfg = _configs((half, injected_round_trip_s - half))
+    overruns = 0
+    with Link(master_cfg) as master_link, Link(slave_cfg) as slave_link:
+        deadline = time.monotonic() + 10.0
+        while not (master_link.peer_alive and slave_link.peer_alive):
+            master_link.poll()
+            slave_link.poll()
+            if time.monotonic() > deadline:
+                raise RuntimeError("the two links did not find each other")
+            time.sleep(0.001)
+        master_link.poll()
+        slave_link.poll()
+        first_seq = (master_link._seq, slave_link._seq)  # noqa: SLF001 - tick of seq 0
+        tool_recv = np.zeros((1, 2))
+        handle_recv = np.zeros((1, 4))
+        origin = time.perf_counter()
+        for k in range(steps):
+            tick_time = origin + k * ts
+            now = time.perf_counter()
+            if now > tick_time + ts:
+                overruns += 1
+            elif tick_time - now > SPIN_S:
+                time.sleep(tick_time - now - SPIN_S)
+            while time.perf_counter() < tick_time:
+                pass
+            master_link.poll()
+            latest = master_link.latest
+            if latest is not None:
+                tool_recv = np.array([latest.tool_force_N])
+                lag_to_master[k] = k - (latest.seq - first_seq[1])
+            else:
+                lag_to_master[k] = np.nan
+            sample = rig.step(rig_state, command, tool_recv)
+            fh = sample.handle_force_measured_N
+            if k < PULSE_SAMPLES:
+                fh = fh + PULSE_FORCE_N
+            command = master.step(master_state, fh, sample.handle_position_m, tool_recv)
+            master_link.send_handle(tuple(fh[0]), tuple(sample.handle_position_m[0]))
+            slave_link.poll()
+            latest = slave_link.latest
+            if latest is not None:
+                handle_recv = np.array([[*latest.handle_force_N, *latest.handle_position_m]])
+                lag_to_slave[k] = k - (latest.seq - first_seq[0])
+            else:
+                lag_to_slave[k] = np.nan
+            out = slave.step(slave_state, handle_recv[:, :2], handle_recv[:, 2:])
+            ft = out.tool_force_N[0]
+            slave_link.send_tool(tuple(ft), tuple(out.tool_position_m[0]),
+                                 tuple(out.tool_velocity_m_s[0]), 0.0, 0.0)
+            handle_force[k] = fh[0]
+    settled = slice(steps // 4, None)
+    measured = (np.nanmean(lag_to_slave[settled]) + np.nanmean(lag_to_master[settled]) - 1.0) * ts
+    window = int(round(window_s / ts))
+    ratio = _energy_ratio(handle_force, window, 1)
+    growing = (not np.all(np.isfinite(handle_force))) or ratio > 1.0
+    margin = analytic_margin_s(model, gain_k, ts)
+    return RealLinkCell(float(gain_k), injected_round_trip_s, float(measured), bool(growing),
+                        bool(measured < margin), float(margin), ratio, overruns, steps)
