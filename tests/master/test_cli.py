@@ -54,7 +54,7 @@ def _sim_config(tmp_path) -> str:
 
 def test_cli_runs_the_node_on_the_simulated_rig(tmp_path, capsys) -> None:
     status = main(["--config", _sim_config(tmp_path), "--rig", "sim", "--duration", "0.1",
-                   "--no-pace", "--json"])
+                   "--no-pace", "--json", "--no-link"])
     result = json.loads(capsys.readouterr().out)
     assert status == 0
     assert result["rig"] == "sim" and result["cycles"] == 185

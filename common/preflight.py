@@ -1,0 +1,155 @@
+"""Pre-flight stability check of ``haptic-master`` and ``haptic-slave``.
+
+Before a program starts its loop it analyses the configured loop (gain k of Ch1, the model)
+at the round-trip delay the link will impose, prints the verdict and the delay margin, and
+refuses to start a loop the analysis calls unstable (exit status 3) unless
+``--allow-unstable`` is given (the paper's k = 13 and 19 experiments at 20 ms need it).
+
+The round-trip delay analysed is
+
+    tau = master injection (delay_s + jitter_s) + slave injection (delay_s + jitter_s)
+          + 2 x assumed network one-way delay (``--assumed-link-delay``, default 0.5 ms)
+
+with this side's injection from its flags and the other side's from the configuration (the
+two programs should share one configuration file, or the other side's flags must be repeated
+in it). 0.5 ms one way is above the loopback p99 measured in docs/link.md (tens to a few
+hundred us); on two hosts pass the measured figure. Only the verdict and the delay margin
+are computed (the continuous model by default, ``--sampled-analysis`` for the sampled-data
+loop at Ts): no gain searches, so it takes tens of milliseconds; ``haptic-analyze`` gives the
+full report.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from dataclasses import dataclass
+from typing import Any, TextIO
+
+from haptic.common.analysis.report import AnalysisSettings, axis_loop
+from haptic.common.analysis.stability import delay_margin, is_stable
+from haptic.common.model import model_from_config
+from haptic.common.synthesis import SynthesisError
+
+#: Exit status of a program that refuses to start an unstable loop.
+EXIT_UNSTABLE = 3
+#: Network one-way delay assumed on top of the injected delays, s.
+DEFAULT_ASSUMED_LINK_DELAY_S = 0.0005
+
+
+@dataclass(frozen=True)
+class PreflightResult:
+    """The verdict at ``round_trip_delay_s`` (s) for gain ``k``: ``stable``, the smallest
+    per-axis delay margin (s; ``None`` = stable for every delay searched) and the margin left
+    (margin - tau, s)."""
+
+    k: float
+    round_trip_delay_s: float
+    sampled: bool
+    stable: bool
+    delay_margin_s: float | None
+    axes: tuple[tuple[str, bool, float | None], ...]
+
+    @property
+    def margin_left_s(self) -> float | None:
+        if self.delay_margin_s is None:
+            return None
+        return self.delay_margin_s - self.round_trip_delay_s
+
+    def describe(self) -> str:
+        """One line: model, k, tau, verdict, margin."""
+        kind = "sampled-data loop at Ts" if self.sampled else "continuous model"
+        if self.delay_margin_s is None:
+            margin = "delay margin: none (stable for every delay searched)"
+        else:
+            margin = (f"delay margin {self.delay_margin_s * 1e3:.2f} ms "
+                      f"({self.margin_left_s * 1e3:+.2f} ms left)")
+        verdict = "stable" if self.stable else "UNSTABLE"
+        return (f"stability ({kind}): k = {self.k:g}, round-trip delay "
+                f"{self.round_trip_delay_s * 1e3:.2f} ms: {verdict}; {margin}")
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "k": self.k, "round_trip_delay_s": self.round_trip_delay_s, "sampled": self.sampled,
+            "stable": self.stable, "delay_margin_s": self.delay_margin_s,
+            "margin_left_s": self.margin_left_s,
+        }
+
+
+def add_preflight_options(parser: argparse.ArgumentParser) -> None:
+    """``--k``, ``--allow-unstable``, ``--sampled-analysis``, ``--assumed-link-delay``."""
+    group = parser.add_argument_group("pre-flight stability analysis")
+    group.add_argument("--k", type=float, help="gain k of Ch1 ([model.ch1] gain_k); both "
+                       "programs must use the same")
+    group.add_argument("--allow-unstable", action="store_true",
+                       help="start even when the analysis calls the loop unstable")
+    group.add_argument("--sampled-analysis", action="store_true",
+                       help="analyse the sampled-data loop at Ts instead of the continuous model")
+    group.add_argument("--assumed-link-delay", metavar="S", type=float,
+                       default=DEFAULT_ASSUMED_LINK_DELAY_S,
+                       help="network one-way delay added to the injected delays, s "
+                       f"(default {DEFAULT_ASSUMED_LINK_DELAY_S:g})")
+
+
+def round_trip_delay_s(config: dict[str, Any], assumed_link_delay_s: float) -> float:
+    """The injected delays (plus jitter bounds) of both directions plus twice the assumed
+    network one-way delay, s."""
+    total = 2.0 * assumed_link_delay_s
+    for side in ("master", "slave"):
+        injection = config["link"][side]["injection"]
+        total += injection["delay_s"] + injection["jitter_s"]
+    return total
+
+
+def check_stability(config: dict[str, Any], round_trip_s: float,
+                    sampled: bool = False) -> PreflightResult:
+    """The verdict and delay margin of every axis of the configured loop at ``round_trip_s``."""
+    model = model_from_config(config)
+    section = config["analysis"]
+    settings = AnalysisSettings(
+        max_frequency_rad_s=section["max_frequency_rad_s"],
+        max_delay_s=section["max_delay_s"],
+        max_gain_k=section["max_gain_k"],
+        sample_period_s=model.sample_period_s if sampled else None,
+    )
+    k = model.ch1_gain_k
+    axes = []
+    for axis in model.axes:
+        try:
+            loop = axis_loop(model, axis, k, settings)
+        except SynthesisError:
+            axes.append((axis.name, False, 0.0))
+            continue
+        stable = is_stable(loop, round_trip_s, settings.grid)
+        margin = delay_margin(loop, settings.max_delay_s, settings.grid).delay_margin_s
+        axes.append((axis.name, stable, margin))
+    margins = [m for _, _, m in axes if m is not None]
+    return PreflightResult(
+        k=k, round_trip_delay_s=round_trip_s, sampled=sampled,
+        stable=all(s for _, s, _ in axes), delay_margin_s=min(margins) if margins else None,
+        axes=tuple(axes),
+    )
+
+
+def run_preflight(config: dict[str, Any], args: argparse.Namespace, program: str,
+                  stream: TextIO | None = None) -> tuple[PreflightResult, int | None]:
+    """Analyse, print the verdict line to ``stream`` (stderr) and return the result and
+    ``None`` to go on, or :data:`EXIT_UNSTABLE` when the loop is unstable and
+    ``--allow-unstable`` was not given (one line saying why is printed)."""
+    stream = stream if stream is not None else sys.stderr
+    assumed = getattr(args, "assumed_link_delay", DEFAULT_ASSUMED_LINK_DELAY_S)
+    if not (math.isfinite(assumed) and assumed >= 0.0):
+        assumed = DEFAULT_ASSUMED_LINK_DELAY_S
+    tau = round_trip_delay_s(config, assumed)
+    result = check_stability(config, tau, bool(getattr(args, "sampled_analysis", False)))
+    print(f"{program}: {result.describe()}", file=stream, flush=True)
+    if result.stable:
+        return result, None
+    if getattr(args, "allow_unstable", False):
+        print(f"{program}: starting anyway (--allow-unstable)", file=stream, flush=True)
+        return result, None
+    print(f"{program}: refusing to start: the analysis calls the loop unstable at k = "
+          f"{result.k:g} and a {tau * 1e3:.2f} ms round trip; pass --allow-unstable to run it",
+          file=stream, flush=True)
+    return result, EXIT_UNSTABLE
