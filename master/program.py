@@ -258,7 +258,8 @@ def run_linked_master(
     summary = make_summary(
         run.as_summary(), link_summary, max_abs_force_N=loop.max_force_N,
         watchdog_trips=watchdog.trips, events=events, side="master",
-        watchdog_state=watchdog.state.value, hardware_faults=loop.hardware_faults[:50],
+        watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
+        hardware_faults=loop.hardware_faults[:50],
         node_faulted=loop.faulted, **(extra_summary or {}),
     )
     if loop_options.trace_path:

@@ -217,7 +217,8 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     summary = make_summary(
         run.as_summary(), link_summary, max_abs_force_N=flags_box["max_force"],
         watchdog_trips=watchdog.trips, events=all_events, side="slave",
-        watchdog_state=watchdog.state.value, removed_volume_m3=flags_box["removed"],
+        watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
+        removed_volume_m3=flags_box["removed"],
         final_tool_position_m=[float(final[0]), float(final[1])], **extra_summary,
     )
     summary.update(cutting_figures(trace.arrays()))
