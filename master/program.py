@@ -75,8 +75,15 @@ class _Loop:
     node_events: list[dict[str, Any]] = field(default_factory=list)
     hardware_faults: list[str] = field(default_factory=list)
     faulted: bool = False
-    last_fh: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    last_ft: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    last_fh: tuple[float, float] = (0.0, 0.0)
+    last_ft: tuple[float, float] = (0.0, 0.0)
+
+
+def _clip(value: float, limit: float) -> float:
+    """``value`` limited to +-``limit``; NaN becomes 0."""
+    if value != value:  # NaN
+        return 0.0
+    return limit if value > limit else -limit if value < -limit else value
 
 
 def _flush_node_events(loop: _Loop) -> None:
@@ -111,7 +118,8 @@ def run_linked_master(
     watchdog = PeerWatchdog(link_config.max_message_age_s, link_config.resync_messages)
     trace = TraceRecorder(MASTER_TRACE_COLUMNS, loop_options.trace_every)
     loop = _Loop()
-    zero2 = np.zeros((1, 2))
+    ft = np.zeros((1, 2))
+    felt_array = np.zeros(2)
     tolerance = loop_options.sync_tolerance_m
     realtime_start_ns = 0
     perf_start_ns = 0
@@ -141,6 +149,9 @@ def run_linked_master(
                 realtime_start_ns = time.time_ns()
                 perf_start_ns = time.perf_counter_ns()
 
+                rx, ry = float(ratio[0]), float(ratio[1])
+                limit = node.safety.force_limit_N
+
                 def step(tick: int, now_ns: int) -> None:
                     nonlocal reading
                     if tick > 0:
@@ -148,6 +159,8 @@ def run_linked_master(
                     now_s = (now_ns - perf_start_ns) * 1e-9
                     fh = reading.force_N
                     yh = reading.position_m
+                    fhx, fhy = fh.tolist()
+                    yhx, yhy = yh.tolist()
                     message = link.poll()
                     fresh = message is not None
                     if fresh:
@@ -155,21 +168,23 @@ def run_linked_master(
                     tool = loop.tool
                     in_sync = False
                     if tool is not None and Flags.FORCES_ENABLED in tool.flags:
-                        error = np.abs(np.asarray(tool.tool_position_m) - ratio * yh)
-                        in_sync = bool(np.all(error < tolerance))
+                        tx, ty = tool.tool_position_m
+                        in_sync = (abs(tx - rx * yhx) < tolerance
+                                   and abs(ty - ry * yhy) < tolerance)
                     wd_state = watchdog.update(now_s, fresh, link.silence_s(), in_sync,
                                                link.peer_alive)
                     enabled = wd_state is WatchdogState.OK and not loop.faulted
-                    if enabled and not loop.enabled:
-                        _flush_node_events(loop)
-                        position = np.nan_to_num(yh)[None, :]
-                        loop.node_state = (node.resume(position) if loop.ever_enabled
-                                           else node.activate(position))
-                        loop.node_offset_s = now_s
-                        loop.ever_enabled = True
-                    elif not enabled and loop.enabled:
-                        loop.hold_m = np.nan_to_num(yh).copy()
-                    loop.enabled = enabled
+                    if enabled != loop.enabled:
+                        if enabled:
+                            _flush_node_events(loop)
+                            position = np.nan_to_num(yh)[None, :]
+                            loop.node_state = (node.resume(position) if loop.ever_enabled
+                                               else node.activate(position))
+                            loop.node_offset_s = now_s
+                            loop.ever_enabled = True
+                        else:
+                            loop.hold_m = np.nan_to_num(yh).copy()
+                        loop.enabled = enabled
                     if reading.faults and loop.node_state is not None:
                         loop.hardware_faults.extend(
                             f"cycle {reading.cycle}: {f}" for f in reading.faults)
@@ -177,37 +192,36 @@ def run_linked_master(
                                   "hardware: " + "; ".join(reading.faults))
                     if enabled:
                         state = loop.node_state
-                        ft = (np.asarray(tool.tool_force_N, float)[None, :]
-                              if tool is not None else zero2)
+                        ftx, fty = tool.tool_force_N if tool is not None else (0.0, 0.0)
+                        ft[0, 0] = ftx
+                        ft[0, 1] = fty
                         command = node.step(state, fh[None, :], yh[None, :], ft)[0]
                         if state.faulted[0]:
                             loop.faulted = True
-                        limit = node.safety.force_limit_N
                         scale = float(state.force_scale[0])
-                        fh_used = np.clip(np.nan_to_num(fh), -limit, limit) * scale
-                        ft_felt = np.clip(ft[0], -limit, limit) * scale
-                        hardware.present_tool_force(ft_felt)
+                        # what the compensator used: saturated, scaled by the force ramp
+                        sent = (_clip(fhx, limit) * scale, _clip(fhy, limit) * scale)
+                        felt = (_clip(ftx, limit) * scale, _clip(fty, limit) * scale)
                         flags = Flags.FORCES_ENABLED
                     else:
                         command = loop.hold_m
-                        fh_used = np.zeros(2)
-                        ft_felt = np.zeros(2)
-                        hardware.present_tool_force(ft_felt)
+                        sent = felt = (0.0, 0.0)
                         flags = Flags.SAFE_STATE
+                    felt_array[0] = felt[0]
+                    felt_array[1] = felt[1]
+                    hardware.present_tool_force(felt_array)
                     hardware.write(command)
-                    link.send_handle((float(fh_used[0]), float(fh_used[1])),
-                                     (float(yh[0]), float(yh[1])), flags)
-                    magnitude = math.hypot(ft_felt[0], ft_felt[1])
+                    link.send_handle(sent, (yhx, yhy), flags)
+                    magnitude = math.hypot(felt[0], felt[1])
                     if magnitude > loop.max_force_N:
                         loop.max_force_N = magnitude
-                    loop.last_fh = fh
-                    loop.last_ft = ft_felt
+                    loop.last_fh = (fhx, fhy)
+                    loop.last_ft = felt
                     if trace.due():
                         tool_pos = (tool.tool_position_m if tool is not None
                                     else (math.nan, math.nan))
-                        trace.record((now_s, fh[0], fh[1], yh[0], yh[1], ft_felt[0],
-                                      ft_felt[1], tool_pos[0], tool_pos[1], command[0],
-                                      command[1], float(enabled)))
+                        trace.record((now_s, fhx, fhy, yhx, yhy, felt[0], felt[1], tool_pos[0],
+                                      tool_pos[1], command[0], command[1], float(enabled)))
                     else:
                         trace.skip()
 
