@@ -121,7 +121,10 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     fh = np.zeros((1, 2))
     yh = state.handle_position_m.copy()
     flags_box = {"enabled": False, "max_force": 0.0, "ft": np.zeros(2), "engagement": 0.0,
-                 "removed": 0.0, "handle": None}
+                 "removed": 0.0, "outside": False}
+    grid = node.scenario.grid
+    x_low, x_high = grid.x_range_m
+    y_low, y_high = grid.y_range_m
     events: list[dict[str, Any]] = []
     run = None
     with StopSignals() as signals, Link(link_config) as link:
@@ -150,6 +153,7 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             enabled_before = flags_box["enabled"]
             if not enabled_before and fresh:
                 node.resync(state, yh)  # follow the (held) handle while not running
+                flags_box["outside"] = False
             in_sync = bool(np.all(np.abs(node.tracking_error_m(state, yh)) < tolerance))
             wd_state = watchdog.update(now_s, fresh, link.silence_s(), in_sync,
                                        link.peer_alive)
@@ -163,13 +167,23 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 events.append({"time_s": now_s, "kind": "tool_stopped",
                                "reason": f"watchdog {wd_state.value}: the tool stops"})
             flags_box["enabled"] = enabled
-            out = node.step(state, fh if enabled else np.zeros((1, 2)), yh)
+            if enabled and not flags_box["outside"]:
+                tx, ty = state.tool[0, 0], state.tool[0, 2]
+                if not (x_low <= tx <= x_high and y_low <= ty <= y_high):
+                    # The work area's guard: the tool stops at its edge until a resync.
+                    flags_box["outside"] = True
+                    node.safe_stop(state)
+                    events.append({"time_s": now_s, "kind": "tool_stopped",
+                                   "reason": f"tool left the work area at ({tx:.4f}, "
+                                   f"{ty:.4f}) m"})
+            running = enabled and not flags_box["outside"]
+            out = node.step(state, fh if running else np.zeros((1, 2)), yh)
             ft = out.tool_force_N[0]
             position = out.tool_position_m[0]
             velocity = out.tool_velocity_m_s[0]
             engagement = float(out.engagement[0])
             removed = _removed_total_m3(state)
-            flags = Flags.FORCES_ENABLED if enabled else Flags.SAFE_STATE
+            flags = Flags.FORCES_ENABLED if running else Flags.SAFE_STATE
             if out.cutting[0]:
                 flags |= Flags.IN_CONTACT
             link.send_tool((float(ft[0]), float(ft[1])), (float(position[0]), float(position[1])),
@@ -185,7 +199,7 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             if trace.due():
                 trace.record((now_s, fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], position[0],
                               position[1], velocity[0], velocity[1], ft[0], ft[1], engagement,
-                              float(out.cutting[0]), float(enabled)))
+                              float(out.cutting[0]), float(running)))
             else:
                 trace.skip()
 
@@ -238,10 +252,10 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     if options.json_summary is not None:
         write_json_summary(options.json_summary, summary)
     print(f"haptic-slave: {format_summary(summary)}", file=sys.stderr, flush=True)
-    cut = summary.get("cutting_mean_force_N")
+    cut = summary.get("cut_mean_force_N")
     if cut is not None:
         print(f"haptic-slave: in the clay {summary['cutting_time_s']:.2f} s: mean |ft| "
-              f"{cut:.3f} N, mean speed {summary['cutting_mean_speed_m_s'] * 1e3:.1f} mm/s",
+              f"{cut:.3f} N, mean speed {summary['cut_mean_speed_m_s'] * 1e3:.1f} mm/s",
               file=sys.stderr, flush=True)
     return 0
 
@@ -253,23 +267,37 @@ def _removed_total_m3(state: Any) -> float:
 
 
 def cutting_figures(trace: dict[str, np.ndarray]) -> dict[str, Any]:
-    """Mean tool force magnitude (N) and speed (m/s) over the traced samples where the tool
-    cut clay with forces enabled, and the time that covers (s); ``None`` figures when it never
-    cut."""
-    if not trace or trace["time_s"].size == 0:
-        return {"cutting_time_s": 0.0, "cutting_mean_force_N": None,
-                "cutting_mean_speed_m_s": None}
+    """Figures of the cut from the trace, over the span from the first to the last traced
+    sample that removed clay with forces enabled: its duration (s), the time-averaged tool
+    force magnitude (N) and received handle force x (N), and the mean speed (distance over
+    time, m/s); plus the mean force magnitude (N) and speed (m/s) over the removing samples
+    alone. ``None`` figures when the tool never cut."""
+    none = {"cutting_time_s": 0.0, "cut_mean_force_N": None, "cut_mean_speed_m_s": None,
+            "cut_mean_handle_force_N": None, "cutting_mean_force_N": None,
+            "cutting_mean_speed_m_s": None}
+    if not trace or trace["time_s"].size < 2:
+        return none
     cutting = (trace["cutting"] > 0.5) & (trace["forces_enabled"] > 0.5)
+    if cutting.sum() < 2:
+        return none
+    indices = np.flatnonzero(cutting)
+    span = slice(indices[0], indices[-1] + 1)
     times = trace["time_s"]
-    step = float(np.median(np.diff(times))) if times.size > 1 else 0.0
-    if not cutting.any():
-        return {"cutting_time_s": 0.0, "cutting_mean_force_N": None,
-                "cutting_mean_speed_m_s": None}
-    force = np.hypot(trace["tool_force_x_N"], trace["tool_force_y_N"])[cutting]
-    speed = np.hypot(trace["tool_velocity_x_m_s"], trace["tool_velocity_y_m_s"])[cutting]
-    return {"cutting_time_s": float(cutting.sum() * step),
-            "cutting_mean_force_N": float(force.mean()),
-            "cutting_mean_speed_m_s": float(speed.mean())}
+    duration = float(times[indices[-1]] - times[indices[0]])
+    if duration <= 0.0:
+        return none
+    force = np.hypot(trace["tool_force_x_N"], trace["tool_force_y_N"])
+    speed = np.hypot(trace["tool_velocity_x_m_s"], trace["tool_velocity_y_m_s"])
+    distance = float(np.hypot(trace["tool_position_x_m"][indices[-1]]
+                              - trace["tool_position_x_m"][indices[0]],
+                              trace["tool_position_y_m"][indices[-1]]
+                              - trace["tool_position_y_m"][indices[0]]))
+    return {"cutting_time_s": duration,
+            "cut_mean_force_N": float(force[span].mean()),
+            "cut_mean_speed_m_s": distance / duration,
+            "cut_mean_handle_force_N": float(trace["handle_force_x_N"][span].mean()),
+            "cutting_mean_force_N": float(force[cutting].mean()),
+            "cutting_mean_speed_m_s": float(speed[cutting].mean())}
 
 
 if __name__ == "__main__":
