@@ -97,7 +97,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         peer_wait_s=args.peer_wait, sync_tolerance_m=args.sync_tolerance, spin_s=args.spin_s,
         trace_every=args.trace_every, trace_path=args.trace,
     )
-    return run_linked_master(options.config, options, model, node, hardware, loop_options,
+    return run_linked_master(options, model, node, hardware, loop_options,
                              {"rig": settings.rig, "analysis": analysis.as_dict()})
 
 

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.cli_options import RunOptions
 from haptic.common.link import Link
 from haptic.common.messages import Flags, ToolState
 from haptic.common.model import TeleopModel
@@ -102,8 +103,7 @@ def _node_event(event: SafetyEvent, offset_s: float) -> dict[str, Any]:
 
 
 def run_linked_master(
-    config: dict[str, Any],
-    options: Any,
+    options: RunOptions,
     model: TeleopModel,
     node: MasterNode,
     hardware: HandleHardware,
@@ -111,7 +111,8 @@ def run_linked_master(
     extra_summary: dict[str, Any] | None = None,
 ) -> int:
     """Run the master against the slave until the duration ends or SIGINT/SIGTERM; returns
-    the exit status (0; 1 for a hardware error or a hardware fault that latched the node)."""
+    the exit status (0; 1 for a hardware error, no slave within ``peer_wait_s``, or a fault
+    that latched the safe state: a hardware fault or a trip of the node's safety layer)."""
     period_s = model.sample_period_s
     ratio = np.array([axis.position_ratio_ah1 for axis in model.axes])
     link_config = options.link
@@ -173,6 +174,15 @@ def run_linked_master(
                                    and abs(ty - ry * yhy) < tolerance)
                     wd_state = watchdog.update(now_s, fresh, link.silence_s(), in_sync,
                                                link.peer_alive)
+                    if reading.faults:
+                        # A hardware fault latches the safe state for the rest of the run.
+                        loop.hardware_faults.extend(
+                            f"cycle {reading.cycle}: {f}" for f in reading.faults)
+                        if not loop.faulted:
+                            loop.faulted = True
+                            loop.node_events.append({
+                                "time_s": now_s, "kind": "node_trip",
+                                "reason": "hardware: " + "; ".join(reading.faults)})
                     enabled = wd_state is WatchdogState.OK and not loop.faulted
                     if enabled != loop.enabled:
                         if enabled:
@@ -185,11 +195,6 @@ def run_linked_master(
                         else:
                             loop.hold_m = np.nan_to_num(yh).copy()
                         loop.enabled = enabled
-                    if reading.faults and loop.node_state is not None:
-                        loop.hardware_faults.extend(
-                            f"cycle {reading.cycle}: {f}" for f in reading.faults)
-                        node.trip(loop.node_state, np.array([True]),
-                                  "hardware: " + "; ".join(reading.faults))
                     if enabled:
                         state = loop.node_state
                         ftx, fty = tool.tool_force_N if tool is not None else (0.0, 0.0)

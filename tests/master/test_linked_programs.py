@@ -220,3 +220,57 @@ def test_the_slave_ends_cleanly_on_sigterm_while_waiting_for_its_master(tmp_path
         process.wait()
         process.stdout.close()
     assert process.returncode == 0
+
+
+def test_a_drive_fault_latches_the_linked_master_in_its_safe_state(pair, tmp_path) -> None:
+    """The master in this process (to reach the simulated rig), the slave as a child: a drive
+    fault mid-run holds the handle for the rest of the run and ends with status 1."""
+    import threading
+
+    from haptic.common.cli_options import run_options_from_args
+    from haptic.common.config import load_config, override
+    from haptic.common.model import model_from_config
+    from haptic.master.cli import build_parser
+    from haptic.master.hardware import create_hardware
+    from haptic.master.node import MasterNode
+    from haptic.master.program import MasterLoopOptions, run_linked_master
+    from haptic.master.settings import master_settings
+
+    summary_path = tmp_path / "master.json"
+    args = build_parser().parse_args([
+        "--listen", pair.endpoint, "--key-prefix", pair.prefix, "--duration", "1.5",
+        "--no-status", "--json-summary", str(summary_path)])
+    config = override(load_config(), "master.sim.channel", f"fault-{uuid.uuid4().hex}")
+    config = override(config, "master.sim.operator", "constant:fx=1.0,onset=0.05")
+    options = run_options_from_args(args, "master", config=config)
+    model = model_from_config(options.config)
+    node = MasterNode.from_model(model, master_settings(options.config).safety)
+    hardware = create_hardware("sim", options.config)
+    slave = pair.slave(None, tmp_path / "slave.json")
+    fault = threading.Timer(0.0, lambda: None)
+
+    def arm() -> None:
+        # once the link is up (the loop runs), fault the x drive 0.5 s later
+        nonlocal fault
+        fault = threading.Timer(0.5, hardware.rig.inject_drive_fault, args=(0,))
+        fault.start()
+
+    original_activate = hardware.activate
+
+    def activate() -> None:
+        original_activate()
+        arm()
+
+    hardware.activate = activate
+    try:
+        status = run_linked_master(options, model, node, hardware,
+                                   MasterLoopOptions(peer_wait_s=30.0))
+    finally:
+        fault.cancel()
+        slave.send_signal(signal.SIGTERM)
+        slave.wait(timeout=10.0)
+    assert status == 1
+    summary = json.loads(summary_path.read_text())
+    assert summary["node_faulted"] and summary["hardware_faults"]
+    trips = _events(summary, "node_trip")
+    assert trips and "hardware" in trips[0]["reason"]
