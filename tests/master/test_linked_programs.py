@@ -159,12 +159,14 @@ def test_killed_slave_trips_the_master_and_a_new_slave_resumes(pair, tmp_path) -
     second = pair.slave(None, second_json)
     time.sleep(3.5)
     # SIGTERM to each program: both end cleanly with status 0 and write their summaries.
-    second.send_signal(signal.SIGTERM)
-    slave_status, slave_log = _wait(second, 10.0)
-    assert slave_status == 0, slave_log
-    master.send_signal(signal.SIGTERM)
-    master_status, master_log = _wait(master, 10.0)
-    assert master_status == 0, master_log
+    for process in (second, master):
+        sent = time.monotonic()
+        process.send_signal(signal.SIGTERM)
+        status, log = _wait(process, 10.0)
+        assert status == 0, log
+        # within a second or two (the loop stops within a period; then the summary is
+        # written and Zenoh closed); generous for a loaded machine
+        assert time.monotonic() - sent < 5.0
     summary = json.loads(master_json.read_text())
     assert summary["stop_reason"] == "SIGTERM"
     assert json.loads(second_json.read_text())["stop_reason"] == "SIGTERM"
