@@ -230,19 +230,22 @@ def echo_node(side: str, argv: list[str]) -> int:
 
 
 PROGRAM_COMMANDS = {
-    "master": [sys.executable, "-m", "haptic.master.cli", "--rig", "sim", "--operator",
-               "regulate:fx=3.6,onset=0.2", "--peer-wait", "30"],
+    "master": [sys.executable, "-m", "haptic.master.cli", "--operator",
+               "regulate:fx=3.6,onset=0.2,max=5", "--peer-wait", "30"],
     "slave": [sys.executable, "-m", "haptic.slave_sim.program", "--scenario", "constant-rate",
               "--peer-wait", "30"],
 }
 
 
-def default_command(side: str, echo: bool = False) -> list[str]:
-    """The real program of ``side`` (``haptic-master``, ``haptic-slave``), or this file's echo
-    node with ``echo``."""
+def default_command(side: str, echo: bool = False, rig: str = "sim") -> list[str]:
+    """The real program of ``side`` (``haptic-master`` on the handle hardware ``rig``,
+    ``haptic-slave``), or this file's echo node with ``echo``."""
     if echo:
         return [sys.executable, os.path.abspath(__file__), "--role", side]
-    return list(PROGRAM_COMMANDS[side])
+    command = list(PROGRAM_COMMANDS[side])
+    if side == "master":
+        command += ["--rig", rig]
+    return command
 
 
 def run_pair(
@@ -326,12 +329,13 @@ def benchmark(
     extra_args: list[str] | None = None,
     ts_s: float = 0.00054,
     echo: bool = False,
+    rig: str = "sim",
 ) -> dict[str, Any]:
     """The whole benchmark; returns the result dict (the ``--json`` shape of issue 5, with
     per-direction details added)."""
     before = raw_ping_pong()
     master, slave = run_pair(
-        master_cmd or default_command("master", echo),
+        master_cmd or default_command("master", echo, rig),
         slave_cmd or default_command("slave", echo), duration_s, extra_args,
     )
     raw = summarise_one_way(np.concatenate([before, raw_ping_pong()]))
@@ -352,7 +356,7 @@ def benchmark(
     return {
         "duration_s": duration_s,
         "nodes": "echo" if echo and not (master_cmd or slave_cmd) else (
-            "custom" if master_cmd or slave_cmd else "programs"),
+            "custom" if master_cmd or slave_cmd else f"programs, rig {rig}"),
         "master": _side_figures(master, ts_s),
         "slave": _side_figures(slave, ts_s),
         "link": link,
@@ -413,6 +417,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--master-cmd", help="master command (default: haptic-master)")
     parser.add_argument("--slave-cmd", help="slave command (default: haptic-slave)")
+    parser.add_argument("--rig", default="sim",
+                        help="the master's handle hardware: sim (emulated CAN drives, default) "
+                        "or model (the rig block, no bus)")
     parser.add_argument("--echo", action="store_true",
                         help="run the echo nodes (link and runner only) instead of the programs")
     parser.add_argument(
@@ -425,6 +432,7 @@ def main(argv: list[str] | None = None) -> int:
         shlex.split(args.slave_cmd) if args.slave_cmd else None,
         shlex.split(args.extra),
         echo=args.echo,
+        rig=args.rig,
     )
     if args.json:
         print(json.dumps(result, indent=2))
