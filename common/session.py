@@ -57,6 +57,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--config", metavar="FILE", help="TOML configuration for both programs")
     parser.add_argument("--scenario", default="constant-rate", help="slave scenario")
     parser.add_argument("--operator", default=DEFAULT_OPERATOR, help="simulated operator spec")
+    parser.add_argument("--rig", default="sim", choices=("sim", "model"),
+                        help="the master's simulated handle: sim (emulated CAN drives and "
+                        "sensor, default) or model (the rig block, no bus)")
     parser.add_argument("--k", type=float, help="gain k of Ch1 (both programs)")
     parser.add_argument("--delay", type=float, metavar="S",
                         help="one-way delay injected in each direction, s")
@@ -102,11 +105,12 @@ def run_session(args: argparse.Namespace) -> int:
                   "--scenario", args.scenario, "--out", str(out),
                   "--json-summary", str(files["slave"]), *shlex.split(args.slave_args)],
         "master": [sys.executable, "-m", "haptic.master.cli", *common,
-                   "--duration", repr(args.duration), "--listen", endpoint, "--rig", "sim",
+                   "--duration", repr(args.duration), "--listen", endpoint, "--rig", args.rig,
                    "--operator", args.operator, "--trace", str(out / "master_trace.npz"),
                    "--json-summary", str(files["master"]), *shlex.split(args.master_args)],
     }
-    print(f"haptic-session: {args.scenario}, operator {args.operator}, {args.duration:g} s, "
+    print(f"haptic-session: {args.scenario}, rig {args.rig}, operator {args.operator}, "
+          f"{args.duration:g} s, "
           f"Zenoh on {endpoint}, key prefix {prefix}", flush=True)
     processes: dict[str, subprocess.Popen] = {}
     statuses: dict[str, int | None] = {}
