@@ -9,14 +9,15 @@ Runs, in one invocation on loopback:
 2. the loop: two processes, each a :class:`~haptic.common.runner.RealTimeRunner` at Ts with a
    :class:`~haptic.common.link.Link`, exchanging HandleState and ToolState every tick.
 
-By default the two loop processes are the real programs: ``haptic-master`` on the simulated
-rig (the regulating operator holding 3.6 N) and ``haptic-slave`` cutting the constant-rate
-clay, each started as ``python -m`` of its module. ``--echo`` runs this file's ``--role
-master`` / ``--role slave`` echo nodes instead (a watchdog, a poll, a send per tick; no
-control law, no hardware): the link and runner alone. :func:`run_pair` takes any two
-commands that accept the shared run options (``--duration``, ``--json-summary``,
-``--listen``/``--connect``, ``--key-prefix``, ``--no-status``); ``--master-cmd`` and
-``--slave-cmd`` give others.
+By default the two loop processes are the real programs: ``haptic-master`` on the ``model``
+handle backend (the rig block stepped in ``read()``, the regulating operator holding 3.6 N;
+``--rig sim`` puts the emulated CAN drives and sensor with their thread in the loop) and
+``haptic-slave`` cutting the constant-rate clay, each started as ``python -m`` of its module.
+``--echo`` runs this file's ``--role master`` / ``--role slave`` echo nodes instead (a
+watchdog, a poll, a send per tick; no control law, no hardware): the link and runner alone.
+:func:`run_pair` takes any two commands that accept the shared run options (``--duration``,
+``--json-summary``, ``--listen``/``--connect``, ``--key-prefix``, ``--no-status``);
+``--master-cmd`` and ``--slave-cmd`` give others.
 
 Usage::
 
@@ -237,7 +238,7 @@ PROGRAM_COMMANDS = {
 }
 
 
-def default_command(side: str, echo: bool = False, rig: str = "sim") -> list[str]:
+def default_command(side: str, echo: bool = False, rig: str = "model") -> list[str]:
     """The real program of ``side`` (``haptic-master`` on the handle hardware ``rig``,
     ``haptic-slave``), or this file's echo node with ``echo``."""
     if echo:
@@ -329,7 +330,7 @@ def benchmark(
     extra_args: list[str] | None = None,
     ts_s: float = 0.00054,
     echo: bool = False,
-    rig: str = "sim",
+    rig: str = "model",
 ) -> dict[str, Any]:
     """The whole benchmark; returns the result dict (the ``--json`` shape of issue 5, with
     per-direction details added)."""
@@ -417,9 +418,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--master-cmd", help="master command (default: haptic-master)")
     parser.add_argument("--slave-cmd", help="slave command (default: haptic-slave)")
-    parser.add_argument("--rig", default="sim",
-                        help="the master's handle hardware: sim (emulated CAN drives, default) "
-                        "or model (the rig block, no bus)")
+    parser.add_argument("--rig", default="model",
+                        help="the master's handle hardware: sim (emulated CAN drives) "
+                        "or model (the rig block, no bus; default)")
     parser.add_argument("--echo", action="store_true",
                         help="run the echo nodes (link and runner only) instead of the programs")
     parser.add_argument(
