@@ -120,8 +120,8 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     tool_path: list[tuple[float, float]] = []
     fh = np.zeros((1, 2))
     yh = state.handle_position_m.copy()
-    flags_box = {"enabled": False, "max_force": 0.0, "ft": np.zeros(2), "engagement": 0.0,
-                 "removed": 0.0, "outside": False}
+    flags_box = {"running": False, "master_enabled": False, "max_force": 0.0,
+                 "ft": np.zeros(2), "engagement": 0.0, "removed": 0.0, "outside": False}
     grid = node.scenario.grid
     x_low, x_high = grid.x_range_m
     y_low, y_high = grid.y_range_m
@@ -150,40 +150,48 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 handle: HandleState = message
                 fh = np.array([handle.handle_force_N], float)
                 yh = np.array([handle.handle_position_m], float)
-            enabled_before = flags_box["enabled"]
-            if not enabled_before and fresh:
+                flags_box["master_enabled"] = Flags.FORCES_ENABLED in handle.flags
+            running_before = flags_box["running"]
+            if not running_before and fresh and not flags_box["outside"]:
                 node.resync(state, yh)  # follow the (held) handle while not running
-                flags_box["outside"] = False
             in_sync = bool(np.all(np.abs(node.tracking_error_m(state, yh)) < tolerance))
             wd_state = watchdog.update(now_s, fresh, link.silence_s(), in_sync,
                                        link.peer_alive)
-            enabled = wd_state is WatchdogState.OK
-            if enabled and not enabled_before:
-                node.resume(state)
-                events.append({"time_s": now_s, "kind": "tool_resumed",
-                               "reason": "positions in sync; the tool follows the handle"})
-            elif not enabled and enabled_before:
-                node.safe_stop(state)
-                events.append({"time_s": now_s, "kind": "tool_stopped",
-                               "reason": f"watchdog {wd_state.value}: the tool stops"})
-            flags_box["enabled"] = enabled
-            if enabled and not flags_box["outside"]:
+            ready = wd_state is WatchdogState.OK
+            master_enabled = flags_box["master_enabled"]
+            if not (ready and master_enabled):
+                flags_box["outside"] = False  # a resync cycle ends the work-area stop
+            elif not flags_box["outside"]:
                 tx, ty = state.tool[0, 0], state.tool[0, 2]
                 if not (x_low <= tx <= x_high and y_low <= ty <= y_high):
                     # The work area's guard: the tool stops at its edge until a resync.
                     flags_box["outside"] = True
-                    node.safe_stop(state)
                     events.append({"time_s": now_s, "kind": "tool_stopped",
                                    "reason": f"tool left the work area at ({tx:.4f}, "
                                    f"{ty:.4f}) m"})
-            running = enabled and not flags_box["outside"]
+            running = ready and master_enabled and not flags_box["outside"]
+            if running and not running_before:
+                node.resume(state)
+                events.append({"time_s": now_s, "kind": "tool_resumed",
+                               "reason": "positions in sync and the master's forces enabled"})
+            elif running_before and not running:
+                node.safe_stop(state)
+                if not flags_box["outside"]:
+                    reason = (f"watchdog {wd_state.value}" if not ready
+                              else "the master is in its safe state")
+                    events.append({"time_s": now_s, "kind": "tool_stopped",
+                                   "reason": f"{reason}: the tool stops"})
+            flags_box["running"] = running
             out = node.step(state, fh if running else np.zeros((1, 2)), yh)
             ft = out.tool_force_N[0]
             position = out.tool_position_m[0]
             velocity = out.tool_velocity_m_s[0]
             engagement = float(out.engagement[0])
             removed = _removed_total_m3(state)
-            flags = Flags.FORCES_ENABLED if running else Flags.SAFE_STATE
+            # FORCES_ENABLED: this side is ready (link in sync, tool at the handle or running);
+            # the master enables its forces on it, the slave runs once the master has.
+            ready_flag = ready and not flags_box["outside"]
+            flags = Flags.FORCES_ENABLED if ready_flag else Flags.SAFE_STATE
             if out.cutting[0]:
                 flags |= Flags.IN_CONTACT
             link.send_tool((float(ft[0]), float(ft[1])), (float(position[0]), float(position[1])),

@@ -276,3 +276,33 @@ def test_a_drive_fault_latches_the_linked_master_in_its_safe_state(pair, tmp_pat
     assert summary["node_faulted"] and summary["hardware_faults"]
     trips = _events(summary, "node_trip")
     assert trips and "hardware" in trips[0]["reason"]
+
+
+def test_a_master_side_outage_resyncs_both_sides(pair, tmp_path) -> None:
+    """Bursts of loss on the slave-to-master direction only (mean 100 messages, 54 ms) trip
+    the master's watchdog while the slave's stays ok: the slave stops its tool while the
+    master says SAFE_STATE, follows the held handle, and both resume after the resync."""
+    slave = pair.slave(None, tmp_path / "slave.json")
+    master = pair.master(3.0, tmp_path / "master.json", "--rig", "model", "--burst-enter",
+                         "0.001", "--burst-exit", "0.01", "--burst-loss", "1", "--seed", "3")
+    status, log = _wait(master)
+    assert status == 0, log
+    slave.send_signal(signal.SIGTERM)
+    slave_status, slave_log = _wait(slave, 10.0)
+    assert slave_status == 0, slave_log
+    summary = json.loads((tmp_path / "master.json").read_text())
+    assert summary["link_dropped"]["injected_loss"] > 0
+    trips = _events(summary, "trip")
+    assert trips, "no burst long enough to trip the watchdog"
+    end = summary["duration_s"]
+    for trip in trips:
+        if trip["time_s"] > end - 0.3:
+            continue
+        later = [e["kind"] for e in summary["events"] if e["time_s"] > trip["time_s"]]
+        assert "forces_enabled" in later
+    slave_summary = json.loads((tmp_path / "slave.json").read_text())
+    stops = [e for e in slave_summary["events"] if e["kind"] == "tool_stopped"
+             and "master is in its safe state" in e["reason"]]
+    assert stops
+    resumed = [e for e in slave_summary["events"] if e["kind"] == "tool_resumed"]
+    assert len(resumed) >= len(stops)  # one at the start, one after each master-side outage
