@@ -79,6 +79,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _main_alone(args)
     zenoh.init_log_from_env_or("error")
     with exit_on_config_error():
+        for flag, given in (("--no-pace", args.no_pace), ("--json", args.json)):
+            if given:
+                raise ConfigError(flag, "only with --no-link (the linked run writes "
+                                  "--json-summary FILE and is always paced)")
         config = _config(args)
         options = run_options_from_args(args, "master", config=config)
         if args.sync_tolerance is not None and not args.sync_tolerance > 0.0:
