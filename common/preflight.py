@@ -11,9 +11,10 @@ The round-trip delay analysed is
           + 2 x assumed network one-way delay (``--assumed-link-delay``, default 0.5 ms)
 
 with this side's injection from its flags and the other side's from the configuration (the
-two programs should share one configuration file, or the other side's flags must be repeated
-in it). 0.5 ms one way is above the loopback p99 measured in docs/link.md (tens to a few
-hundred us); on two hosts pass the measured figure. Only the verdict and the delay margin
+two programs should share one configuration file), or from ``--peer-delay S`` when given (the
+one-way delay plus jitter the peer's receiving link injects, for the analysis only). 0.5 ms
+one way is above the loopback p99 measured in docs/link.md (tens to a few hundred us); on
+two hosts pass the measured figure. Only the verdict and the delay margin
 are computed (the continuous model by default, ``--sampled-analysis`` for the sampled-data
 loop at Ts): no gain searches, so it takes tens of milliseconds; ``haptic-analyze`` gives the
 full report.
@@ -29,6 +30,7 @@ from typing import Any, TextIO
 
 from haptic.common.analysis.report import AnalysisSettings, axis_loop
 from haptic.common.analysis.stability import delay_margin, is_stable
+from haptic.common.config import ConfigError
 from haptic.common.model import model_from_config
 from haptic.common.synthesis import SynthesisError
 
@@ -86,18 +88,27 @@ def add_preflight_options(parser: argparse.ArgumentParser) -> None:
                        help="start even when the analysis calls the loop unstable")
     group.add_argument("--sampled-analysis", action="store_true",
                        help="analyse the sampled-data loop at Ts instead of the continuous model")
+    group.add_argument("--peer-delay", metavar="S", type=float,
+                       help="the one-way delay (plus jitter) the peer injects on this side's "
+                       "messages, s, for the analysis (default: the peer's [link.<peer>."
+                       "injection] in the configuration)")
     group.add_argument("--assumed-link-delay", metavar="S", type=float,
                        default=DEFAULT_ASSUMED_LINK_DELAY_S,
                        help="network one-way delay added to the injected delays, s "
                        f"(default {DEFAULT_ASSUMED_LINK_DELAY_S:g})")
 
 
-def round_trip_delay_s(config: dict[str, Any], assumed_link_delay_s: float) -> float:
+def round_trip_delay_s(config: dict[str, Any], assumed_link_delay_s: float,
+                       side: str | None = None, peer_delay_s: float | None = None) -> float:
     """The injected delays (plus jitter bounds) of both directions plus twice the assumed
-    network one-way delay, s."""
+    network one-way delay, s. ``peer_delay_s`` (with ``side``, this program's side) replaces
+    the other side's configured delay plus jitter."""
     total = 2.0 * assumed_link_delay_s
-    for side in ("master", "slave"):
-        injection = config["link"][side]["injection"]
+    for name in ("master", "slave"):
+        if peer_delay_s is not None and side is not None and name != side:
+            total += peer_delay_s
+            continue
+        injection = config["link"][name]["injection"]
         total += injection["delay_s"] + injection["jitter_s"]
     return total
 
@@ -133,15 +144,21 @@ def check_stability(config: dict[str, Any], round_trip_s: float,
 
 
 def run_preflight(config: dict[str, Any], args: argparse.Namespace, program: str,
-                  stream: TextIO | None = None) -> tuple[PreflightResult, int | None]:
+                  stream: TextIO | None = None, side: str | None = None
+                  ) -> tuple[PreflightResult, int | None]:
     """Analyse, print the verdict line to ``stream`` (stderr) and return the result and
     ``None`` to go on, or :data:`EXIT_UNSTABLE` when the loop is unstable and
-    ``--allow-unstable`` was not given (one line saying why is printed)."""
+    ``--allow-unstable`` was not given (one line saying why is printed). ``side`` is the
+    program's (for ``--peer-delay``). Raises :class:`ConfigError` for a bad flag."""
     stream = stream if stream is not None else sys.stderr
     assumed = getattr(args, "assumed_link_delay", DEFAULT_ASSUMED_LINK_DELAY_S)
     if not (math.isfinite(assumed) and assumed >= 0.0):
-        assumed = DEFAULT_ASSUMED_LINK_DELAY_S
-    tau = round_trip_delay_s(config, assumed)
+        raise ConfigError("--assumed-link-delay",
+                          f"must be a finite number >= 0 s (got {assumed})")
+    peer = getattr(args, "peer_delay", None)
+    if peer is not None and not (math.isfinite(peer) and peer >= 0.0):
+        raise ConfigError("--peer-delay", f"must be a finite number >= 0 s (got {peer})")
+    tau = round_trip_delay_s(config, assumed, side, peer)
     result = check_stability(config, tau, bool(getattr(args, "sampled_analysis", False)))
     print(f"{program}: {result.describe()}", file=stream, flush=True)
     if result.stable:

@@ -92,7 +92,8 @@ def run_session(args: argparse.Namespace) -> int:
     if args.k is not None:
         common += ["--k", repr(args.k)]
     if args.delay is not None:
-        common += ["--delay", repr(args.delay)]
+        # each side injects it on what it receives; each side's analysis counts both
+        common += ["--delay", repr(args.delay), "--peer-delay", repr(args.delay)]
     if args.allow_unstable:
         common.append("--allow-unstable")
     files = {"master": out / "master.json", "slave": out / "slave.json"}

@@ -92,7 +92,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         settings = master_settings(options.config)
         model = model_from_config(options.config)
         node = MasterNode.from_model(model, settings.safety)
-    analysis, refused = run_preflight(options.config, args, "haptic-master")
+    with exit_on_config_error():
+        analysis, refused = run_preflight(options.config, args, "haptic-master", side="master")
     if refused is not None:
         return refused
     with exit_on_config_error():

@@ -93,7 +93,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.trace_every < 1:
             raise ConfigError("--trace-every", f"must be >= 1 (got {args.trace_every})")
         scenario = load_scenario(options.config["slave"]["scenario"])
-    analysis, refused = run_preflight(options.config, args, "haptic-slave")
+    with exit_on_config_error():
+        analysis, refused = run_preflight(options.config, args, "haptic-slave", side="slave")
     if refused is not None:
         return refused
     import warp
