@@ -13,6 +13,9 @@ One tick at Ts (docs/programs.md):
 3. ``node.step(fh_recv, yh_recv)``: the tool moves and cuts the clay;
 4. ``link.send_tool(ft, yt, vt, engagement, removed volume, flags)``.
 
+A work-area guard stops the tool (until the next resync) when it gets more than
+:data:`WORK_AREA_MARGIN_M` outside the scenario's grid.
+
 At the end (duration, SIGINT or SIGTERM) the tool stops, the summary is printed (and written
 with ``--json-summary``), and with ``--out DIR`` the workpiece is saved as ``clay.npz`` and
 ``clay.png`` (with the tool path) and the trace as ``slave_trace.npz``.
@@ -43,6 +46,8 @@ from haptic.common.watchdog import PeerWatchdog, WatchdogState
 from haptic.slave_sim.node import SlaveNode
 from haptic.slave_sim.scenario import load_scenario
 
+#: How far the tool may leave the scenario's grid before the work-area guard stops it, m.
+WORK_AREA_MARGIN_M = 0.01
 #: Default tolerance of the resync position check, m per axis.
 DEFAULT_SYNC_TOLERANCE_M = 0.001
 
@@ -124,8 +129,9 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     flags_box = {"running": False, "master_enabled": False, "max_force": 0.0,
                  "ft": np.zeros(2), "engagement": 0.0, "removed": 0.0, "outside": False}
     grid = node.scenario.grid
-    x_low, x_high = grid.x_range_m
-    y_low, y_high = grid.y_range_m
+    margin = WORK_AREA_MARGIN_M
+    x_low, x_high = grid.x_range_m[0] - margin, grid.x_range_m[1] + margin
+    y_low, y_high = grid.y_range_m[0] - margin, grid.y_range_m[1] + margin
     events: list[dict[str, Any]] = []
     run = None
     with StopSignals() as signals, Link(link_config) as link:
