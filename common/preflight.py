@@ -30,7 +30,7 @@ from typing import Any, TextIO
 
 from haptic.common.analysis.report import AnalysisSettings, axis_loop
 from haptic.common.analysis.stability import delay_margin, is_stable
-from haptic.common.config import ConfigError
+from haptic.common.config import ConfigError, override
 from haptic.common.model import model_from_config
 from haptic.common.synthesis import SynthesisError
 
@@ -64,6 +64,8 @@ class PreflightResult:
         kind = "sampled-data loop at Ts" if self.sampled else "continuous model"
         if self.delay_margin_s is None:
             margin = "delay margin: none (stable for every delay searched)"
+        elif self.delay_margin_s == 0.0:
+            margin = "unstable even without delay"
         else:
             margin = (f"delay margin {self.delay_margin_s * 1e3:.2f} ms "
                       f"({self.margin_left_s * 1e3:+.2f} ms left)")
@@ -86,6 +88,10 @@ def add_preflight_options(parser: argparse.ArgumentParser) -> None:
                        "programs must use the same")
     group.add_argument("--allow-unstable", action="store_true",
                        help="start even when the analysis calls the loop unstable")
+    group.add_argument("--analysis-environment", choices=("config", "clay"), default="config",
+                       help="environment impedance Tt of the analysis: the configuration's "
+                       "(default; the paper's 0.25 s^2 + 2 s + 6) or the clay's linearisation "
+                       "B s with the scenario's largest block damping")
     group.add_argument("--sampled-analysis", action="store_true",
                        help="analyse the sampled-data loop at Ts instead of the continuous model")
     group.add_argument("--peer-delay", metavar="S", type=float,
@@ -111,6 +117,15 @@ def round_trip_delay_s(config: dict[str, Any], assumed_link_delay_s: float,
         injection = config["link"][name]["injection"]
         total += injection["delay_s"] + injection["jitter_s"]
     return total
+
+
+def with_damper_environment(config: dict[str, Any], damping_N_s_per_m: float
+                            ) -> dict[str, Any]:
+    """``config`` with Tt = B s on every axis (the clay's linearisation, B in N s/m)."""
+    for axis in ("x", "y"):
+        config = override(config, f"model.{axis}.environment_impedance_tt",
+                           [float(damping_N_s_per_m), 0.0])
+    return config
 
 
 def check_stability(config: dict[str, Any], round_trip_s: float,
@@ -144,12 +159,15 @@ def check_stability(config: dict[str, Any], round_trip_s: float,
 
 
 def run_preflight(config: dict[str, Any], args: argparse.Namespace, program: str,
-                  stream: TextIO | None = None, side: str | None = None
+                  stream: TextIO | None = None, side: str | None = None,
+                  clay_damping_N_s_per_m: float | None = None,
                   ) -> tuple[PreflightResult, int | None]:
     """Analyse, print the verdict line to ``stream`` (stderr) and return the result and
     ``None`` to go on, or :data:`EXIT_UNSTABLE` when the loop is unstable and
     ``--allow-unstable`` was not given (one line saying why is printed). ``side`` is the
-    program's (for ``--peer-delay``). Raises :class:`ConfigError` for a bad flag."""
+    program's (for ``--peer-delay``); ``clay_damping_N_s_per_m`` the scenario's largest block
+    damping (for ``--analysis-environment clay``). Raises :class:`ConfigError` for a bad
+    flag."""
     stream = stream if stream is not None else sys.stderr
     assumed = getattr(args, "assumed_link_delay", DEFAULT_ASSUMED_LINK_DELAY_S)
     if not (math.isfinite(assumed) and assumed >= 0.0):
@@ -159,8 +177,15 @@ def run_preflight(config: dict[str, Any], args: argparse.Namespace, program: str
     if peer is not None and not (math.isfinite(peer) and peer >= 0.0):
         raise ConfigError("--peer-delay", f"must be a finite number >= 0 s (got {peer})")
     tau = round_trip_delay_s(config, assumed, side, peer)
-    result = check_stability(config, tau, bool(getattr(args, "sampled_analysis", False)))
-    print(f"{program}: {result.describe()}", file=stream, flush=True)
+    analysed = config
+    environment = ""
+    if getattr(args, "analysis_environment", "config") == "clay":
+        if clay_damping_N_s_per_m is None:
+            raise ConfigError("--analysis-environment", "no clay damping known for this run")
+        analysed = with_damper_environment(config, clay_damping_N_s_per_m)
+        environment = f", environment Tt = {clay_damping_N_s_per_m:g} s (clay)"
+    result = check_stability(analysed, tau, bool(getattr(args, "sampled_analysis", False)))
+    print(f"{program}: {result.describe()}{environment}", file=stream, flush=True)
     if result.stable:
         return result, None
     if getattr(args, "allow_unstable", False):

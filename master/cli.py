@@ -93,7 +93,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         model = model_from_config(options.config)
         node = MasterNode.from_model(model, settings.safety)
     with exit_on_config_error():
-        analysis, refused = run_preflight(options.config, args, "haptic-master", side="master")
+        clay = None
+        if args.analysis_environment == "clay":
+            from haptic.slave_sim.program import max_block_damping
+            from haptic.slave_sim.scenario import load_scenario
+
+            clay = max_block_damping(load_scenario(options.config["slave"]["scenario"]))
+        analysis, refused = run_preflight(options.config, args, "haptic-master", side="master",
+                                          clay_damping_N_s_per_m=clay)
     if refused is not None:
         return refused
     with exit_on_config_error():

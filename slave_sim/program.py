@@ -99,7 +99,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ConfigError("--trace-every", f"must be >= 1 (got {args.trace_every})")
         scenario = load_scenario(options.config["slave"]["scenario"])
     with exit_on_config_error():
-        analysis, refused = run_preflight(options.config, args, "haptic-slave", side="slave")
+        analysis, refused = run_preflight(options.config, args, "haptic-slave", side="slave",
+                                          clay_damping_N_s_per_m=max_block_damping(scenario))
     if refused is not None:
         return refused
     import warp
@@ -279,6 +280,12 @@ def _removed_total_m3(state: Any) -> float:
     """Clay removed since the start, m^3 (0 for the linear environment)."""
     total = getattr(state.environment, "removed_total_m3", None)
     return 0.0 if total is None else float(total[0])
+
+
+def max_block_damping(scenario: Any) -> float | None:
+    """The largest block damping of a scenario, N s/m (``None`` without blocks)."""
+    values = [block.damping_N_s_per_m for block in scenario.blocks]
+    return max(values) if values else None
 
 
 def cutting_figures(trace: dict[str, np.ndarray]) -> dict[str, Any]:

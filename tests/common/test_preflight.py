@@ -81,3 +81,16 @@ def test_bad_preflight_flags_are_config_errors() -> None:
     with pytest.raises(ConfigError) as caught:
         run_preflight(load_config(), _args("--peer-delay", "-1"), "prog", io.StringIO(), "slave")
     assert caught.value.key == "--peer-delay"
+
+
+def test_the_clay_environment_changes_the_verdict() -> None:
+    """With the clay's linearisation Tt = 100 s, k = 13 is unstable at any delay (what the
+    networked sessions show), while the paper's Tt keeps it stable up to 17.9 ms."""
+    config = override(load_config(), "model.ch1.gain_k", 13.0)
+    stream = io.StringIO()
+    result, status = run_preflight(config, _args("--analysis-environment", "clay"), "prog",
+                                   stream, "slave", clay_damping_N_s_per_m=100.0)
+    assert status == EXIT_UNSTABLE and "even without delay" in stream.getvalue()
+    assert "Tt = 100 s (clay)" in stream.getvalue()
+    result, status = run_preflight(config, _args(), "prog", io.StringIO(), "slave")
+    assert status is None and result.delay_margin_s > 0.017
