@@ -9,11 +9,15 @@ Runs, in one invocation on loopback:
 2. the loop: two processes, each a :class:`~haptic.common.runner.RealTimeRunner` at Ts with a
    :class:`~haptic.common.link.Link`, exchanging HandleState and ToolState every tick.
 
-By default the two loop processes are this file's ``--role master`` / ``--role slave`` echo
-nodes (a watchdog, a poll, a send per tick; no control law). :func:`run_pair` takes any two
-commands that accept the shared run options (``--duration``, ``--json-summary``,
-``--listen``/``--connect``, ``--key-prefix``, ``--no-status``), so ``--master-cmd`` and
-``--slave-cmd`` can point it at ``haptic-master`` and ``haptic-slave``.
+By default the two loop processes are the real programs: ``haptic-master`` on the ``model``
+handle backend (the rig block stepped in ``read()``, the regulating operator holding 3.6 N;
+``--rig sim`` puts the emulated CAN drives and sensor with their thread in the loop) and
+``haptic-slave`` cutting the constant-rate clay, each started as ``python -m`` of its module.
+``--echo`` runs this file's ``--role master`` / ``--role slave`` echo nodes instead (a
+watchdog, a poll, a send per tick; no control law, no hardware): the link and runner alone.
+:func:`run_pair` takes any two commands that accept the shared run options (``--duration``,
+``--json-summary``, ``--listen``/``--connect``, ``--key-prefix``, ``--no-status``);
+``--master-cmd`` and ``--slave-cmd`` give others.
 
 Usage::
 
@@ -226,8 +230,23 @@ def echo_node(side: str, argv: list[str]) -> int:
 # -- the pair --------------------------------------------------------------------------------
 
 
-def default_command(side: str) -> list[str]:
-    return [sys.executable, os.path.abspath(__file__), "--role", side]
+PROGRAM_COMMANDS = {
+    "master": [sys.executable, "-m", "haptic.master.cli", "--operator",
+               "regulate:fx=3.6,onset=0.2,max=5", "--peer-wait", "30"],
+    "slave": [sys.executable, "-m", "haptic.slave_sim.program", "--scenario", "constant-rate",
+              "--peer-wait", "30"],
+}
+
+
+def default_command(side: str, echo: bool = False, rig: str = "model") -> list[str]:
+    """The real program of ``side`` (``haptic-master`` on the handle hardware ``rig``,
+    ``haptic-slave``), or this file's echo node with ``echo``."""
+    if echo:
+        return [sys.executable, os.path.abspath(__file__), "--role", side]
+    command = list(PROGRAM_COMMANDS[side])
+    if side == "master":
+        command += ["--rig", rig]
+    return command
 
 
 def run_pair(
@@ -310,13 +329,15 @@ def benchmark(
     slave_cmd: list[str] | None = None,
     extra_args: list[str] | None = None,
     ts_s: float = 0.00054,
+    echo: bool = False,
+    rig: str = "model",
 ) -> dict[str, Any]:
     """The whole benchmark; returns the result dict (the ``--json`` shape of issue 5, with
     per-direction details added)."""
     before = raw_ping_pong()
     master, slave = run_pair(
-        master_cmd or default_command("master"), slave_cmd or default_command("slave"),
-        duration_s, extra_args,
+        master_cmd or default_command("master", echo, rig),
+        slave_cmd or default_command("slave", echo), duration_s, extra_args,
     )
     raw = summarise_one_way(np.concatenate([before, raw_ping_pong()]))
     to_slave = _direction(slave)   # the slave receives master -> slave
@@ -335,6 +356,8 @@ def benchmark(
     )
     return {
         "duration_s": duration_s,
+        "nodes": "echo" if echo and not (master_cmd or slave_cmd) else (
+            "custom" if master_cmd or slave_cmd else f"programs, rig {rig}"),
         "master": _side_figures(master, ts_s),
         "slave": _side_figures(slave, ts_s),
         "link": link,
@@ -348,7 +371,8 @@ def _us(value: float | None) -> str:
 
 
 def print_table(result: dict[str, Any]) -> None:
-    print(f"loop benchmark, {result['duration_s']:g} s on loopback")
+    print(f"loop benchmark, {result['duration_s']:g} s on loopback, nodes: "
+          f"{result.get('nodes', '?')}")
     for side in ("master", "slave"):
         f = result[side]
         print(
@@ -392,8 +416,13 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=10.0, help="loop run length, s")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
-    parser.add_argument("--master-cmd", help="master command (default: the echo node)")
-    parser.add_argument("--slave-cmd", help="slave command (default: the echo node)")
+    parser.add_argument("--master-cmd", help="master command (default: haptic-master)")
+    parser.add_argument("--slave-cmd", help="slave command (default: haptic-slave)")
+    parser.add_argument("--rig", default="model",
+                        help="the master's handle hardware: sim (emulated CAN drives) "
+                        "or model (the rig block, no bus; default)")
+    parser.add_argument("--echo", action="store_true",
+                        help="run the echo nodes (link and runner only) instead of the programs")
     parser.add_argument(
         "--extra", default="", help="extra arguments for both commands (one shell string)"
     )
@@ -403,6 +432,8 @@ def main(argv: list[str] | None = None) -> int:
         shlex.split(args.master_cmd) if args.master_cmd else None,
         shlex.split(args.slave_cmd) if args.slave_cmd else None,
         shlex.split(args.extra),
+        echo=args.echo,
+        rig=args.rig,
     )
     if args.json:
         print(json.dumps(result, indent=2))

@@ -22,6 +22,10 @@ REQUIRED_SUMMARY_KEYS = (
 )
 
 
+#: Events kept in a summary; the rest are counted in ``events_omitted``.
+MAX_SUMMARY_EVENTS = 1000
+
+
 def make_summary(
     run: Mapping[str, Any],
     link: Mapping[str, Any],
@@ -39,7 +43,9 @@ def make_summary(
     summary.update(link)
     summary["max_abs_force_N"] = float(max_abs_force_N)
     summary["watchdog_trips"] = int(watchdog_trips)
-    summary["events"] = [dict(e) for e in events]
+    kept = [dict(e) for e in events]
+    summary["events"] = kept[:MAX_SUMMARY_EVENTS]
+    summary["events_omitted"] = max(0, len(kept) - MAX_SUMMARY_EVENTS)
     summary.update(extra)
     missing = [key for key in REQUIRED_SUMMARY_KEYS if key not in summary]
     if missing:

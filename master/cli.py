@@ -1,7 +1,8 @@
-"""``haptic-master``: run the master node on the handle hardware chosen by name.
+"""``haptic-master``: the master on the rig PC: the handle hardware chosen by name, the master
+node, and (by default) the Zenoh link to ``haptic-slave`` on the real-time runner.
 
-Without a slave link the received tool force is zero, so the handle moves as Ch1 makes it
-under the operator's force (on the simulated rig, the scripted operator of
+``--no-link`` runs the master alone (the received tool force is zero, so the handle moves as
+Ch1 makes it under the operator's force; on the simulated rig, the scripted operator of
 ``[master.sim] operator``).
 """
 
@@ -9,53 +10,120 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from collections.abc import Sequence
 
+import zenoh
+
+from haptic.common.cli_options import add_run_options, run_options_from_args
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.model import model_from_config
+from haptic.common.preflight import add_preflight_options, run_preflight
 from haptic.master.hardware import HardwareError, create_hardware
 from haptic.master.node import MasterNode
+from haptic.master.program import DEFAULT_SYNC_TOLERANCE_M, MasterLoopOptions, run_linked_master
 from haptic.master.runner import run_master
 from haptic.master.settings import master_settings
+
+#: Run length of the master-only mode when --duration is not given, s.
+NO_LINK_DEFAULT_DURATION_S = 1.0
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line."""
     parser = argparse.ArgumentParser(prog="haptic-master", description=__doc__.split("\n")[0])
-    parser.add_argument("--config", help="TOML configuration file (defaults: the paper's)")
+    add_run_options(parser)
     parser.add_argument("--rig", help="handle hardware by name: can or sim ([master] rig)")
     parser.add_argument("--operator", help="simulated operator spec ([master.sim] operator), "
-                        "e.g. constant:fx=1,fy=0,onset=0.05")
-    parser.add_argument("--k", type=float, help="gain k of Ch1 ([model.ch1] gain_k)")
-    parser.add_argument("--duration", type=float, default=1.0, help="run time, s (default 1)")
-    parser.add_argument("--no-pace", action="store_true",
-                        help="run cycles back to back instead of every Ts (simulated rig only: "
-                             "real drives need SYNC at Ts)")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
+                        "e.g. regulate:fx=3.6,onset=0.2")
+    add_preflight_options(parser)
+    group = parser.add_argument_group("networked run")
+    group.add_argument("--peer-wait", metavar="S", type=float,
+                       help="give up (exit 1) when no slave appears within S s (default: wait)")
+    group.add_argument("--sync-tolerance", metavar="M", type=float,
+                       default=DEFAULT_SYNC_TOLERANCE_M,
+                       help="resync: |tool - Ah1 handle| below this on both axes, m "
+                       f"(default {DEFAULT_SYNC_TOLERANCE_M:g})")
+    group.add_argument("--spin-s", metavar="S", type=float, default=0.0003,
+                       help="runner: spin this long before each tick, s (default 0.0003)")
+    group.add_argument("--trace", metavar="FILE",
+                       help="write a trace (every --trace-every-th tick) as .npz at the end")
+    group.add_argument("--trace-every", metavar="N", type=int, default=10)
+    alone = parser.add_argument_group("master alone")
+    alone.add_argument("--no-link", action="store_true",
+                       help="run the master alone, no slave (default duration 1 s)")
+    alone.add_argument("--no-pace", action="store_true",
+                       help="with --no-link: run cycles back to back instead of every Ts "
+                       "(simulated rig only: real drives need SYNC at Ts)")
+    alone.add_argument("--json", action="store_true", help="with --no-link: print one JSON object")
     return parser
 
 
+def _config(args: argparse.Namespace) -> dict:
+    config = load_config(args.config)
+    if args.rig is not None:
+        config = override(config, "master.rig", args.rig)
+    if args.operator is not None:
+        config = override(config, "master.sim.operator", args.operator)
+    if args.k is not None:
+        config = override(config, "model.ch1.gain_k", args.k)
+    return config
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit status (2 for a configuration error, 1 for a
-    hardware error or a run that ended in the safe state)."""
+    """Entry point; returns the exit status: 0; 1 for a hardware error or a run that ended
+    with the node latched in its safe state by a fault; 2 for a configuration error (one
+    line); 3 when the stability analysis refuses the loop (see ``--allow-unstable``)."""
     args = build_parser().parse_args(argv)
+    if args.no_link:
+        return _main_alone(args)
+    zenoh.init_log_from_env_or("error")
     with exit_on_config_error():
-        config = load_config(args.config)
-        if args.rig is not None:
-            config = override(config, "master.rig", args.rig)
-        if args.operator is not None:
-            config = override(config, "master.sim.operator", args.operator)
-        if args.k is not None:
-            config = override(config, "model.ch1.gain_k", args.k)
-        if not (math.isfinite(args.duration) and args.duration > 0.0):
-            raise ConfigError("--duration", f"must be a finite number > 0 (got {args.duration})")
+        for flag, given in (("--no-pace", args.no_pace), ("--json", args.json)):
+            if given:
+                raise ConfigError(flag, "only with --no-link (the linked run writes "
+                                  "--json-summary FILE and is always paced)")
+        config = _config(args)
+        options = run_options_from_args(args, "master", config=config)
+        if args.sync_tolerance is not None and not args.sync_tolerance > 0.0:
+            raise ConfigError("--sync-tolerance", f"must be > 0 m (got {args.sync_tolerance})")
+        if args.trace_every < 1:
+            raise ConfigError("--trace-every", f"must be >= 1 (got {args.trace_every})")
+        settings = master_settings(options.config)
+        model = model_from_config(options.config)
+        node = MasterNode.from_model(model, settings.safety)
+    with exit_on_config_error():
+        clay = None
+        if args.analysis_environment == "clay":
+            from haptic.slave_sim.program import max_block_damping
+            from haptic.slave_sim.scenario import load_scenario
+
+            clay = max_block_damping(load_scenario(options.config["slave"]["scenario"]))
+        analysis, refused = run_preflight(options.config, args, "haptic-master", side="master",
+                                          clay_damping_N_s_per_m=clay)
+    if refused is not None:
+        return refused
+    with exit_on_config_error():
+        hardware = create_hardware(settings.rig, options.config)
+    loop_options = MasterLoopOptions(
+        peer_wait_s=args.peer_wait, sync_tolerance_m=args.sync_tolerance, spin_s=args.spin_s,
+        trace_every=args.trace_every, trace_path=args.trace,
+    )
+    return run_linked_master(options, model, node, hardware, loop_options,
+                             {"rig": settings.rig, "analysis": analysis.as_dict()})
+
+
+def _main_alone(args: argparse.Namespace) -> int:
+    duration = NO_LINK_DEFAULT_DURATION_S if args.duration is None else args.duration
+    with exit_on_config_error():
+        config = _config(args)
+        if not (duration > 0.0 and duration < float("inf")):
+            raise ConfigError("--duration", f"must be a finite number > 0 (got {duration})")
         settings = master_settings(config)
         model = model_from_config(config)
         node = MasterNode.from_model(model, settings.safety)
         hardware = create_hardware(settings.rig, config)
-    cycles = max(1, round(args.duration / model.sample_period_s))
+    cycles = max(1, round(duration / model.sample_period_s))
     try:
         with hardware:
             summary = run_master(hardware, node, cycles, pace=not args.no_pace)

@@ -123,6 +123,23 @@ class MasterNode:
             self._trip(state, lane, "non-finite handle position at activation", None)
         return state
 
+    def resume(self, position_m: np.ndarray, reason: str = "link resynchronised") -> (
+            MasterNodeState):
+        """A fresh state after a link outage, at ``position_m`` (lanes, 2), m: like
+        :meth:`activate` (command holds the position, compensator zero), but the forces ramp
+        in over ``ramp_time_s`` at once instead of waiting for small-force samples: the
+        operator may be pushing through the outage, and the ramp alone keeps the force from
+        jumping. One ``enable`` event per healthy lane."""
+        state = self.activate(position_m)
+        healthy = ~state.faulted
+        state.forces_enabled[healthy] = True
+        state.small_force_count[healthy] = self.safety.ramp_small_samples
+        for lane in np.flatnonzero(healthy):
+            state.events.append(SafetyEvent(0, 0.0, int(lane), "enable",
+                                            f"forces ramp in over {self.safety.ramp_time_s:g} s "
+                                            f"({reason})"))
+        return state
+
     def trip(self, state: MasterNodeState, lanes: np.ndarray, reason: str) -> None:
         """Put ``lanes`` (bool mask or indices) in the safe state for an outside reason
         (a drive fault, a missing PDO); an event records ``reason``."""

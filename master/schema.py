@@ -80,8 +80,9 @@ SAFETY_SCHEMA: Schema = {
 }
 
 MASTER_SCHEMA: Schema = {
-    "rig": Field("str", "Handle hardware by name: can (servo drives on a CAN bus) or sim "
-                 "(the simulated rig on a virtual bus).", check=_rig_name),
+    "rig": Field("str", "Handle hardware by name: can (servo drives on a CAN bus), sim "
+                 "(the simulated rig on a virtual bus) or model (the rig block, no bus).",
+                 check=_rig_name),
     "can": CAN_SCHEMA,
     "sim": SIM_SCHEMA,
     "safety": SAFETY_SCHEMA,

@@ -212,3 +212,27 @@ class SlaveNode:
         index = slice(None) if lanes is None else lanes
         state.compensator[index] = 0.0
         state.halted[index] = False
+
+    def resync(self, state: SlaveState, handle_position_m: np.ndarray,
+               lanes: np.ndarray | slice | None = None) -> None:
+        """Re-synchronise halted ``lanes`` to the received handle position (lanes, 2), m: the
+        tool is placed at ``Ah1 yh`` at rest, compensators cleared, no force sent back, so
+        that ``yt = Ah1 yh`` when the lanes resume. The tool's previous position becomes the
+        new one, so the clay sees no sweep between the old and new places (a plunge into clay
+        there is spread over steps by the clay's per-step cut cap)."""
+        index = slice(None) if lanes is None else lanes
+        target = self._position_ratio * np.asarray(handle_position_m, float)
+        state.tool[index, 0] = target[index, 0] if target.ndim == 2 else target[0]
+        state.tool[index, 2] = target[index, 1] if target.ndim == 2 else target[1]
+        state.tool[index, 1] = 0.0
+        state.tool[index, 3] = 0.0
+        state.compensator[index] = 0.0
+        state.actuator_force_N[index] = 0.0
+        state.tool_force_N = state.tool_force_N.copy()
+        state.tool_force_N[index] = 0.0
+        state.handle_position_m = np.array(np.broadcast_to(handle_position_m,
+                                                           state.handle_position_m.shape))
+
+    def tracking_error_m(self, state: SlaveState, handle_position_m: np.ndarray) -> np.ndarray:
+        """yt - Ah1 yh for every lane (lanes, 2), m."""
+        return state.tool_position_m() - self._position_ratio * np.asarray(handle_position_m)

@@ -36,3 +36,14 @@ def test_summary_has_the_required_keys_and_writes_valid_json(tmp_path):
 def test_missing_keys_are_refused():
     with pytest.raises(KeyError, match="rate_hz"):
         make_summary({}, LINK, max_abs_force_N=0.0, watchdog_trips=0, events=[])
+
+
+def test_events_beyond_the_cap_are_counted_not_kept():
+    from haptic.common.summary import MAX_SUMMARY_EVENTS
+
+    events = [{"time_s": float(i), "kind": "saturate", "reason": "x"}
+              for i in range(MAX_SUMMARY_EVENTS + 5)]
+    summary = make_summary(RUN, LINK, max_abs_force_N=0.0, watchdog_trips=0, events=events)
+    assert len(summary["events"]) == MAX_SUMMARY_EVENTS
+    assert summary["events_omitted"] == 5
+    assert summary["events"][-1]["time_s"] == MAX_SUMMARY_EVENTS - 1

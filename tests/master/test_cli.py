@@ -54,7 +54,7 @@ def _sim_config(tmp_path) -> str:
 
 def test_cli_runs_the_node_on_the_simulated_rig(tmp_path, capsys) -> None:
     status = main(["--config", _sim_config(tmp_path), "--rig", "sim", "--duration", "0.1",
-                   "--no-pace", "--json"])
+                   "--no-pace", "--json", "--no-link"])
     result = json.loads(capsys.readouterr().out)
     assert status == 0
     assert result["rig"] == "sim" and result["cycles"] == 185
@@ -79,3 +79,11 @@ def test_cli_reports_a_can_bus_that_cannot_open(capsys) -> None:
     status = main(["--rig", "can", "--duration", "0.01"])
     assert status == 1
     assert "hardware error" in capsys.readouterr().err
+
+
+def test_master_alone_flags_are_refused_in_the_linked_run(capsys) -> None:
+    with pytest.raises(SystemExit) as caught:
+        main(["--no-pace", "--duration", "0.1"])
+    assert caught.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--no-pace" in err[0] and "--no-link" in err[0]

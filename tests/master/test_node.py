@@ -242,3 +242,19 @@ def test_shipped_safety_settings_load_and_cross_checks_name_the_key() -> None:
     with pytest.raises(ConfigError) as caught:
         master_settings(bad)
     assert caught.value.key == "master.safety.workspace_max_m"
+
+
+def test_resume_ramps_forces_in_without_the_small_force_gate(paper_model) -> None:
+    safety = master_settings(load_config()).safety
+    node = MasterNode.from_model(paper_model, safety)
+    start = np.array([[0.02, -0.01]])
+    state = node.resume(start)
+    assert state.forces_enabled[0] and state.events[0].kind == "enable"
+    push = np.array([[3.0, 0.0]])  # the operator pushes through the outage
+    first = node.step(state, push, start, np.zeros((1, 2)))
+    assert np.allclose(first, start, atol=1e-9)  # no jump: the ramp starts at zero
+    scales = []
+    for _ in range(round(0.3 / node.period_s)):
+        node.step(state, push, start, np.zeros((1, 2)))
+        scales.append(state.force_scale[0])
+    assert 0.0 < scales[10] < 0.2 and scales[-1] == 1.0

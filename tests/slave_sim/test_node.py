@@ -173,3 +173,21 @@ def test_tool_started_inside_the_clay_feels_no_spike(model) -> None:
         if out.cutting[0]:
             worst = max(worst, np.linalg.norm(out.tool_force_N[0]) / (100.0 * speed))
     assert 0.5 < worst <= 2.0  # it cuts, at most B_max |v|, far below a spike
+
+
+def test_resync_places_the_tool_at_the_handle_at_rest(paper_config) -> None:
+    config = override(paper_config, "slave.environment", "linear")
+    node = SlaveNode.from_config(config)
+    state = node.initial_state(2)
+    handle = np.array([[0.01, 0.0], [0.0, 0.0]])
+    for _ in range(200):
+        node.step(state, np.array([[1.0, 0.5], [0.0, 0.0]]), handle)
+    node.safe_stop(state)
+    target = np.array([[0.03, -0.002], [0.01, 0.02]])
+    node.resync(state, target)
+    assert np.allclose(node.tracking_error_m(state, target), 0.0)
+    assert np.all(state.tool_velocity_m_s() == 0.0)
+    assert np.all(state.compensator == 0.0) and np.all(state.tool_force_N == 0.0)
+    node.resume(state)
+    out = node.step(state, np.zeros((2, 2)), target)
+    assert np.allclose(out.tool_position_m, target)  # at rest with no force: stays there

@@ -1,0 +1,290 @@
+"""The networked master: the handle hardware, the master node, the link and the watchdog on
+the real-time runner (``haptic-master`` without ``--no-link``).
+
+One tick at Ts (docs/programs.md):
+
+1. ``hardware.read()``: the handle force fh and position yh of this SYNC;
+2. ``link.poll()``: the newest ``ToolState`` whose delivery time has come (tool force ft,
+   tool position, the slave's flags);
+3. the watchdog: fresh message? silence? peer alive? and, while re-synchronising, ``in_sync``:
+   the slave reports forces enabled and |tool position - Ah1 yh| is below the tolerance on
+   both axes;
+4. forces enabled: the master node steps (vh = Ch1 fh - Ct1 ft behind the safety layer) and
+   the simulated operator is shown ft; otherwise the safe state: the handle holds the
+   position it had when the watchdog left ``ok`` (or the start position), no reflected force,
+   the compensator is not stepped. Back to ``ok``: a fresh node state at the current position
+   whose forces ramp in (``MasterNode.resume``; at the very first start the node's own
+   small-force gate applies);
+5. ``hardware.write(command)``; ``link.send_handle(fh_used, yh, flags)``, where fh_used is the
+   force the compensator used (saturated, scaled by the force ramp; zero in the safe state),
+   so that Ch2 at the slave sees the same force as Ch1 here.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from haptic.common.cli_options import RunOptions
+from haptic.common.link import Link
+from haptic.common.messages import Flags, ToolState
+from haptic.common.model import TeleopModel
+from haptic.common.runner import RealTimeRunner, StopSignals
+from haptic.common.summary import format_summary, make_summary, write_json_summary
+from haptic.common.trace import TraceRecorder
+from haptic.common.watchdog import PeerWatchdog, WatchdogState
+from haptic.master.hardware import HandleHardware, HardwareError
+from haptic.master.node import MasterNode, MasterNodeState, SafetyEvent
+
+#: Default tolerance of the resync position check, m per axis.
+DEFAULT_SYNC_TOLERANCE_M = 0.001
+
+MASTER_TRACE_COLUMNS = (
+    "time_s", "handle_force_x_N", "handle_force_y_N", "handle_position_x_m",
+    "handle_position_y_m", "tool_force_x_N", "tool_force_y_N", "tool_position_x_m",
+    "tool_position_y_m", "command_x_m", "command_y_m", "forces_enabled",
+)
+
+
+@dataclass
+class MasterLoopOptions:
+    """What the networked master needs beyond the run options (units in the names)."""
+
+    peer_wait_s: float | None = None  # None: wait for the slave until stopped
+    sync_tolerance_m: float = DEFAULT_SYNC_TOLERANCE_M
+    spin_s: float = 0.0003
+    trace_every: int = 10
+    trace_path: str | None = None
+
+
+@dataclass
+class _Loop:
+    """The mutable state of one run (the tick closure's)."""
+
+    node_state: MasterNodeState | None = None
+    node_offset_s: float = 0.0
+    hold_m: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    tool: ToolState | None = None
+    ever_enabled: bool = False
+    enabled: bool = False
+    max_force_N: float = 0.0
+    node_events: list[dict[str, Any]] = field(default_factory=list)
+    hardware_faults: list[str] = field(default_factory=list)
+    faulted: bool = False
+    last_fh: tuple[float, float] = (0.0, 0.0)
+    last_ft: tuple[float, float] = (0.0, 0.0)
+
+
+def _clip(value: float, limit: float) -> float:
+    """``value`` limited to +-``limit``; NaN becomes 0."""
+    if value != value:  # NaN
+        return 0.0
+    return limit if value > limit else -limit if value < -limit else value
+
+
+def _flush_node_events(loop: _Loop) -> None:
+    state = loop.node_state
+    if state is None:
+        return
+    for event in state.events:
+        loop.node_events.append(_node_event(event, loop.node_offset_s))
+    state.events.clear()
+
+
+def _node_event(event: SafetyEvent, offset_s: float) -> dict[str, Any]:
+    axis = f" [{event.axis}]" if event.axis else ""
+    return {"time_s": offset_s + event.time_s, "kind": f"node_{event.kind}",
+            "reason": event.reason + axis}
+
+
+def run_linked_master(
+    options: RunOptions,
+    model: TeleopModel,
+    node: MasterNode,
+    hardware: HandleHardware,
+    loop_options: MasterLoopOptions,
+    extra_summary: dict[str, Any] | None = None,
+) -> int:
+    """Run the master against the slave until the duration ends or SIGINT/SIGTERM; returns
+    the exit status (0; 1 for a hardware error, no slave within ``peer_wait_s``, or a fault
+    that latched the safe state: a hardware fault or a trip of the node's safety layer)."""
+    period_s = model.sample_period_s
+    ratio = np.array([axis.position_ratio_ah1 for axis in model.axes])
+    link_config = options.link
+    watchdog = PeerWatchdog(link_config.max_message_age_s, link_config.resync_messages)
+    trace = TraceRecorder(MASTER_TRACE_COLUMNS, loop_options.trace_every)
+    loop = _Loop()
+    ft = np.zeros((1, 2))
+    felt_array = np.zeros(2)
+    tolerance = loop_options.sync_tolerance_m
+    realtime_start_ns = 0
+    perf_start_ns = 0
+    run = None
+    status_code = 0
+    with StopSignals() as signals:
+        try:
+            hardware.configure()
+        except HardwareError as error:
+            print(f"haptic-master: hardware error: {error}", file=sys.stderr)
+            return 1
+        try:
+            with Link(link_config) as link:
+                print(f"haptic-master: waiting for the slave on {link_config.key_prefix} "
+                      f"(listen {','.join(link_config.listen) or '-'}, connect "
+                      f"{','.join(link_config.connect) or '-'})", file=sys.stderr, flush=True)
+                if not link.wait_for_peer(loop_options.peer_wait_s, lambda: signals.requested):
+                    if signals.requested:
+                        print("haptic-master: stopped before the slave came", file=sys.stderr)
+                        return 0
+                    print(f"haptic-master: no slave after {loop_options.peer_wait_s:g} s",
+                          file=sys.stderr)
+                    return 1
+                hardware.activate()
+                reading = hardware.read()
+                loop.hold_m = np.nan_to_num(reading.position_m).copy()
+                realtime_start_ns = time.time_ns()
+                perf_start_ns = time.perf_counter_ns()
+
+                rx, ry = float(ratio[0]), float(ratio[1])
+                limit = node.safety.force_limit_N
+
+                def step(tick: int, now_ns: int) -> None:
+                    nonlocal reading
+                    if tick > 0:
+                        reading = hardware.read()
+                    now_s = (now_ns - perf_start_ns) * 1e-9
+                    fh = reading.force_N
+                    yh = reading.position_m
+                    fhx, fhy = fh.tolist()
+                    yhx, yhy = yh.tolist()
+                    message = link.poll()
+                    fresh = message is not None
+                    if fresh:
+                        loop.tool = message
+                    tool = loop.tool
+                    in_sync = False
+                    if tool is not None and Flags.FORCES_ENABLED in tool.flags:
+                        tx, ty = tool.tool_position_m
+                        in_sync = (abs(tx - rx * yhx) < tolerance
+                                   and abs(ty - ry * yhy) < tolerance)
+                    wd_state = watchdog.update(now_s, fresh, link.silence_s(), in_sync,
+                                               link.peer_alive)
+                    if reading.faults:
+                        # A hardware fault latches the safe state for the rest of the run.
+                        loop.hardware_faults.extend(
+                            f"cycle {reading.cycle}: {f}" for f in reading.faults)
+                        if not loop.faulted:
+                            loop.faulted = True
+                            loop.node_events.append({
+                                "time_s": now_s, "kind": "node_trip",
+                                "reason": "hardware: " + "; ".join(reading.faults)})
+                    enabled = wd_state is WatchdogState.OK and not loop.faulted
+                    if enabled != loop.enabled:
+                        if enabled:
+                            _flush_node_events(loop)
+                            position = np.nan_to_num(yh)[None, :]
+                            loop.node_state = (node.resume(position) if loop.ever_enabled
+                                               else node.activate(position))
+                            loop.node_offset_s = now_s
+                            loop.ever_enabled = True
+                        else:
+                            loop.hold_m = np.nan_to_num(yh).copy()
+                        loop.enabled = enabled
+                    if enabled:
+                        state = loop.node_state
+                        ftx, fty = tool.tool_force_N if tool is not None else (0.0, 0.0)
+                        ft[0, 0] = ftx
+                        ft[0, 1] = fty
+                        command = node.step(state, fh[None, :], yh[None, :], ft)[0]
+                        if state.faulted[0]:
+                            loop.faulted = True
+                        scale = float(state.force_scale[0])
+                        # what the compensator used: saturated, scaled by the force ramp
+                        sent = (_clip(fhx, limit) * scale, _clip(fhy, limit) * scale)
+                        felt = (_clip(ftx, limit) * scale, _clip(fty, limit) * scale)
+                        flags = Flags.FORCES_ENABLED
+                    else:
+                        command = loop.hold_m
+                        sent = felt = (0.0, 0.0)
+                        flags = Flags.SAFE_STATE
+                    felt_array[0] = felt[0]
+                    felt_array[1] = felt[1]
+                    hardware.present_tool_force(felt_array)
+                    hardware.write(command)
+                    link.send_handle(sent, (yhx, yhy), flags)
+                    magnitude = math.hypot(felt[0], felt[1])
+                    if magnitude > loop.max_force_N:
+                        loop.max_force_N = magnitude
+                    loop.last_fh = (fhx, fhy)
+                    loop.last_ft = felt
+                    if trace.due():
+                        tool_pos = (tool.tool_position_m if tool is not None
+                                    else (math.nan, math.nan))
+                        trace.record((now_s, fhx, fhy, yhx, yhy, felt[0], felt[1], tool_pos[0],
+                                      tool_pos[1], command[0], command[1], float(enabled)))
+                    else:
+                        trace.skip()
+
+                def status() -> str:
+                    stats = link.stats()
+                    return (f"link p50 {stats.one_way_delay_p50_s * 1e3:.3f} ms  loss "
+                            f"{stats.loss_ratio * 100:.2f} %  {watchdog.state.value}  fh "
+                            f"{loop.last_fh[0]:+.2f} N  ft {loop.last_ft[0]:+.2f} N")
+
+                runner = RealTimeRunner(
+                    period_s, step, duration_s=options.duration_s, spin_s=loop_options.spin_s,
+                    status=status, show_status=options.show_status, stop_signals=signals,
+                )
+                try:
+                    run = runner.run()
+                finally:
+                    # Safe state: hold where the handle is, no reflected force, then tell the
+                    # slave (one message with SAFE_STATE) before the link closes.
+                    try:
+                        final = hardware.read()
+                        hold = np.nan_to_num(final.position_m)
+                        hardware.present_tool_force(np.zeros(2))
+                        hardware.write(hold)
+                        link.send_handle((0.0, 0.0), (float(hold[0]), float(hold[1])),
+                                         Flags.SAFE_STATE)
+                    except Exception as error:  # noqa: BLE001 - shutting down regardless
+                        print(f"haptic-master: while stopping: {error}", file=sys.stderr)
+                    _flush_node_events(loop)
+                link_summary = link.summary()
+                presence = [e.as_dict() for e in link.presence_events]
+        except HardwareError as error:
+            print(f"haptic-master: hardware error: {error}", file=sys.stderr)
+            status_code = 1
+        finally:
+            try:
+                hardware.deactivate()
+            except Exception:  # noqa: BLE001 - best effort; cleanup follows
+                pass
+            hardware.cleanup()
+    if run is None:
+        return status_code or 1
+    for event in presence:
+        event["time_s"] = event["time_s"] - realtime_start_ns * 1e-9
+    events = [e.as_dict() for e in watchdog.events] + loop.node_events + presence
+    events.sort(key=lambda e: e["time_s"])
+    if loop.faulted:
+        status_code = 1
+    summary = make_summary(
+        run.as_summary(), link_summary, max_abs_force_N=loop.max_force_N,
+        watchdog_trips=watchdog.trips, events=events, side="master",
+        watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
+        hardware_faults=loop.hardware_faults[:50],
+        node_faulted=loop.faulted, **(extra_summary or {}),
+    )
+    if loop_options.trace_path:
+        trace.save(loop_options.trace_path)
+        summary["trace"] = str(loop_options.trace_path)
+    if options.json_summary is not None:
+        write_json_summary(options.json_summary, summary)
+    print(f"haptic-master: {format_summary(summary)}", file=sys.stderr, flush=True)
+    return status_code

@@ -1,0 +1,326 @@
+"""``haptic-slave``: the slave on the remote host: the slave node (Ch2/Ct2, the virtual tool,
+the Warp clay) driven by the handle's messages over the Zenoh link, on the real-time runner.
+
+One tick at Ts (docs/programs.md):
+
+1. ``link.poll()``: the newest ``HandleState`` whose delivery time has come (the handle force
+   the master's compensator used, the handle position, the master's flags);
+2. the watchdog (fresh? silence? master alive?). In its safe states (``waiting`` at start,
+   ``tripped``, ``resyncing``) the node is halted (``SlaveNode.safe_stop``: the tool stops, no
+   force goes back) and, on every fresh message, re-synchronised to the received handle
+   position (``SlaveNode.resync``: tool at Ah1 yh at rest); ``in_sync`` is then
+   |yt - Ah1 yh| below the tolerance. Back to ``ok``: ``SlaveNode.resume``;
+3. ``node.step(fh_recv, yh_recv)``: the tool moves and cuts the clay;
+4. ``link.send_tool(ft, yt, vt, engagement, removed volume, flags)``.
+
+A work-area guard stops the tool (until the next resync) when it gets more than
+:data:`WORK_AREA_MARGIN_M` outside the scenario's grid.
+
+At the end (duration, SIGINT or SIGTERM) the tool stops, the summary is printed (and written
+with ``--json-summary``), and with ``--out DIR`` the workpiece is saved as ``clay.npz`` and
+``clay.png`` (with the tool path) and the trace as ``slave_trace.npz``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import zenoh
+
+from haptic.common.cli_options import add_run_options, run_options_from_args
+from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
+from haptic.common.link import Link
+from haptic.common.messages import Flags, HandleState
+from haptic.common.preflight import add_preflight_options, run_preflight
+from haptic.common.runner import RealTimeRunner, StopSignals
+from haptic.common.summary import format_summary, make_summary, write_json_summary
+from haptic.common.trace import TraceRecorder
+from haptic.common.watchdog import PeerWatchdog, WatchdogState
+from haptic.slave_sim.node import SlaveNode
+from haptic.slave_sim.scenario import load_scenario
+
+#: How far the tool may leave the scenario's grid before the work-area guard stops it, m.
+WORK_AREA_MARGIN_M = 0.01
+#: Default tolerance of the resync position check, m per axis.
+DEFAULT_SYNC_TOLERANCE_M = 0.001
+
+SLAVE_TRACE_COLUMNS = (
+    "time_s", "handle_force_x_N", "handle_force_y_N", "handle_position_x_m",
+    "handle_position_y_m", "tool_position_x_m", "tool_position_y_m", "tool_velocity_x_m_s",
+    "tool_velocity_y_m_s", "tool_force_x_N", "tool_force_y_N", "engagement", "cutting",
+    "forces_enabled",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line."""
+    parser = argparse.ArgumentParser(prog="haptic-slave", description=__doc__.split("\n")[0])
+    add_run_options(parser)
+    parser.add_argument("--scenario", help="scenario name or TOML path ([slave] scenario)")
+    add_preflight_options(parser)
+    group = parser.add_argument_group("networked run")
+    group.add_argument("--out", metavar="DIR", type=Path,
+                       help="write clay.npz, clay.png and slave_trace.npz here at the end")
+    group.add_argument("--peer-wait", metavar="S", type=float,
+                       help="give up (exit 1) when no master appears within S s (default: wait)")
+    group.add_argument("--sync-tolerance", metavar="M", type=float,
+                       default=DEFAULT_SYNC_TOLERANCE_M,
+                       help=f"resync: |tool - Ah1 handle| below this, m "
+                       f"(default {DEFAULT_SYNC_TOLERANCE_M:g})")
+    group.add_argument("--spin-s", metavar="S", type=float, default=0.0003,
+                       help="runner: spin this long before each tick, s (default 0.0003)")
+    group.add_argument("--trace-every", metavar="N", type=int, default=10,
+                       help="keep every Nth tick in the trace (default 10)")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the exit status: 0; 1 when no master came within --peer-wait;
+    2 for a configuration error (one line); 3 when the stability analysis refuses the loop."""
+    args = build_parser().parse_args(argv)
+    zenoh.init_log_from_env_or("error")
+    with exit_on_config_error():
+        config = load_config(args.config)
+        if args.scenario is not None:
+            config = override(config, "slave.scenario", args.scenario)
+        if args.k is not None:
+            config = override(config, "model.ch1.gain_k", args.k)
+        options = run_options_from_args(args, "slave", config=config)
+        if not args.sync_tolerance > 0.0:
+            raise ConfigError("--sync-tolerance", f"must be > 0 m (got {args.sync_tolerance})")
+        if args.trace_every < 1:
+            raise ConfigError("--trace-every", f"must be >= 1 (got {args.trace_every})")
+        scenario = load_scenario(options.config["slave"]["scenario"])
+    with exit_on_config_error():
+        analysis, refused = run_preflight(options.config, args, "haptic-slave", side="slave",
+                                          clay_damping_N_s_per_m=max_block_damping(scenario))
+    if refused is not None:
+        return refused
+    import warp
+
+    warp.config.log_level = warp.LOG_WARNING  # no start-up banner
+    warp.config.quiet = True
+    with exit_on_config_error():
+        node = SlaveNode.from_config(options.config, scenario)
+    return run_slave(node, options, args, {"scenario": scenario.name,
+                                           "analysis": analysis.as_dict()})
+
+
+def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
+              extra_summary: dict[str, Any]) -> int:
+    """The networked slave loop; returns the exit status."""
+    period_s = node.sample_period_s
+    link_config = options.link
+    watchdog = PeerWatchdog(link_config.max_message_age_s, link_config.resync_messages)
+    trace = TraceRecorder(SLAVE_TRACE_COLUMNS, args.trace_every)
+    tolerance = args.sync_tolerance
+    state = node.initial_state(1)
+    node.safe_stop(state)
+    path_every = max(1, args.trace_every)
+    tool_path: list[tuple[float, float]] = []
+    fh = np.zeros((1, 2))
+    yh = state.handle_position_m.copy()
+    flags_box = {"running": False, "master_enabled": False, "max_force": 0.0,
+                 "ft": np.zeros(2), "engagement": 0.0, "removed": 0.0, "outside": False}
+    grid = node.scenario.grid
+    margin = WORK_AREA_MARGIN_M
+    x_low, x_high = grid.x_range_m[0] - margin, grid.x_range_m[1] + margin
+    y_low, y_high = grid.y_range_m[0] - margin, grid.y_range_m[1] + margin
+    events: list[dict[str, Any]] = []
+    run = None
+    with StopSignals() as signals, Link(link_config) as link:
+        print(f"haptic-slave: {node.scenario.name}, environment {node.environment_kind}; "
+              f"waiting for the master on {link_config.key_prefix} (connect "
+              f"{','.join(link_config.connect) or '-'}, listen "
+              f"{','.join(link_config.listen) or '-'})", file=sys.stderr, flush=True)
+        if not link.wait_for_peer(args.peer_wait, lambda: signals.requested):
+            if signals.requested:
+                print("haptic-slave: stopped before the master came", file=sys.stderr)
+                return 0
+            print(f"haptic-slave: no master after {args.peer_wait:g} s", file=sys.stderr)
+            return 1
+        realtime_start_ns = time.time_ns()
+        perf_start_ns = time.perf_counter_ns()
+
+        def step(tick: int, now_ns: int) -> None:
+            nonlocal fh, yh
+            now_s = (now_ns - perf_start_ns) * 1e-9
+            message = link.poll()
+            fresh = message is not None
+            if fresh:
+                handle: HandleState = message
+                fh = np.array([handle.handle_force_N], float)
+                yh = np.array([handle.handle_position_m], float)
+                flags_box["master_enabled"] = Flags.FORCES_ENABLED in handle.flags
+            running_before = flags_box["running"]
+            if not running_before and fresh and not flags_box["outside"]:
+                node.resync(state, yh)  # follow the (held) handle while not running
+            in_sync = bool(np.all(np.abs(node.tracking_error_m(state, yh)) < tolerance))
+            wd_state = watchdog.update(now_s, fresh, link.silence_s(), in_sync,
+                                       link.peer_alive)
+            ready = wd_state is WatchdogState.OK
+            master_enabled = flags_box["master_enabled"]
+            if not (ready and master_enabled):
+                flags_box["outside"] = False  # a resync cycle ends the work-area stop
+            elif not flags_box["outside"]:
+                tx, ty = state.tool[0, 0], state.tool[0, 2]
+                if not (x_low <= tx <= x_high and y_low <= ty <= y_high):
+                    # The work area's guard: the tool stops at its edge until a resync.
+                    flags_box["outside"] = True
+                    events.append({"time_s": now_s, "kind": "tool_stopped",
+                                   "reason": f"tool left the work area at ({tx:.4f}, "
+                                   f"{ty:.4f}) m"})
+            running = ready and master_enabled and not flags_box["outside"]
+            if running and not running_before:
+                node.resume(state)
+                events.append({"time_s": now_s, "kind": "tool_resumed",
+                               "reason": "positions in sync and the master's forces enabled"})
+            elif running_before and not running:
+                node.safe_stop(state)
+                if not flags_box["outside"]:
+                    reason = (f"watchdog {wd_state.value}" if not ready
+                              else "the master is in its safe state")
+                    events.append({"time_s": now_s, "kind": "tool_stopped",
+                                   "reason": f"{reason}: the tool stops"})
+            flags_box["running"] = running
+            out = node.step(state, fh if running else np.zeros((1, 2)), yh)
+            ft = out.tool_force_N[0]
+            position = out.tool_position_m[0]
+            velocity = out.tool_velocity_m_s[0]
+            engagement = float(out.engagement[0])
+            removed = _removed_total_m3(state)
+            # FORCES_ENABLED: this side is ready (link in sync, tool at the handle or running);
+            # the master enables its forces on it, the slave runs once the master has.
+            ready_flag = ready and not flags_box["outside"]
+            flags = Flags.FORCES_ENABLED if ready_flag else Flags.SAFE_STATE
+            if out.cutting[0]:
+                flags |= Flags.IN_CONTACT
+            link.send_tool((float(ft[0]), float(ft[1])), (float(position[0]), float(position[1])),
+                           (float(velocity[0]), float(velocity[1])), engagement, removed, flags)
+            magnitude = math.hypot(ft[0], ft[1])
+            if magnitude > flags_box["max_force"]:
+                flags_box["max_force"] = magnitude
+            flags_box["ft"] = ft
+            flags_box["engagement"] = engagement
+            flags_box["removed"] = removed
+            if tick % path_every == 0:
+                tool_path.append((float(position[0]), float(position[1])))
+            if trace.due():
+                trace.record((now_s, fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], position[0],
+                              position[1], velocity[0], velocity[1], ft[0], ft[1], engagement,
+                              float(out.cutting[0]), float(running)))
+            else:
+                trace.skip()
+
+        def status() -> str:
+            stats = link.stats()
+            return (f"link p50 {stats.one_way_delay_p50_s * 1e3:.3f} ms  loss "
+                    f"{stats.loss_ratio * 100:.2f} %  {watchdog.state.value}  ft "
+                    f"{flags_box['ft'][0]:+.2f} N  engagement {flags_box['engagement']:.2f}")
+
+        runner = RealTimeRunner(
+            period_s, step, duration_s=options.duration_s, spin_s=args.spin_s, status=status,
+            show_status=options.show_status, stop_signals=signals,
+        )
+        try:
+            run = runner.run()
+        finally:
+            # Safe state: the tool stops; one message with SAFE_STATE before the link closes.
+            node.safe_stop(state)
+            position = state.tool_position_m()[0]
+            link.send_tool((0.0, 0.0), (float(position[0]), float(position[1])), (0.0, 0.0),
+                           0.0, flags_box["removed"], Flags.SAFE_STATE)
+        link_summary = link.summary()
+        presence = [e.as_dict() for e in link.presence_events]
+    for event in presence:
+        event["time_s"] = event["time_s"] - realtime_start_ns * 1e-9
+    all_events = [e.as_dict() for e in watchdog.events] + events + presence
+    all_events.sort(key=lambda e: e["time_s"])
+    final = state.tool_position_m()[0]
+    summary = make_summary(
+        run.as_summary(), link_summary, max_abs_force_N=flags_box["max_force"],
+        watchdog_trips=watchdog.trips, events=all_events, side="slave",
+        watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
+        removed_volume_m3=flags_box["removed"],
+        final_tool_position_m=[float(final[0]), float(final[1])], **extra_summary,
+    )
+    summary.update(cutting_figures(trace.arrays()))
+    if args.out is not None:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        trace.save(out / "slave_trace.npz")
+        summary["trace"] = str(out / "slave_trace.npz")
+        if node.environment_kind == "clay":
+            state.environment.save_npz(out / "clay.npz")
+            path = np.array(tool_path) if tool_path else None
+            state.environment.render_png(
+                out / "clay.png", path,
+                title=f"{node.scenario.name}: networked run, {run.elapsed_s:.1f} s")
+            summary["clay_npz"] = str(out / "clay.npz")
+            summary["clay_png"] = str(out / "clay.png")
+    if options.json_summary is not None:
+        write_json_summary(options.json_summary, summary)
+    print(f"haptic-slave: {format_summary(summary)}", file=sys.stderr, flush=True)
+    cut = summary.get("cut_mean_force_N")
+    if cut is not None:
+        print(f"haptic-slave: in the clay {summary['cutting_time_s']:.2f} s: mean |ft| "
+              f"{cut:.3f} N, mean speed {summary['cut_mean_speed_m_s'] * 1e3:.1f} mm/s",
+              file=sys.stderr, flush=True)
+    return 0
+
+
+def _removed_total_m3(state: Any) -> float:
+    """Clay removed since the start, m^3 (0 for the linear environment)."""
+    total = getattr(state.environment, "removed_total_m3", None)
+    return 0.0 if total is None else float(total[0])
+
+
+def max_block_damping(scenario: Any) -> float | None:
+    """The largest block damping of a scenario, N s/m (``None`` without blocks)."""
+    values = [block.damping_N_s_per_m for block in scenario.blocks]
+    return max(values) if values else None
+
+
+def cutting_figures(trace: dict[str, np.ndarray]) -> dict[str, Any]:
+    """Figures of the cut from the trace, over the span from the first to the last traced
+    sample that removed clay with forces enabled: its duration (s), the time-averaged tool
+    force magnitude (N) and received handle force x (N), and the mean speed (distance over
+    time, m/s); plus the mean force magnitude (N) and speed (m/s) over the removing samples
+    alone. ``None`` figures when the tool never cut."""
+    none = {"cutting_time_s": 0.0, "cut_mean_force_N": None, "cut_mean_speed_m_s": None,
+            "cut_mean_handle_force_N": None, "cutting_mean_force_N": None,
+            "cutting_mean_speed_m_s": None}
+    if not trace or trace["time_s"].size < 2:
+        return none
+    cutting = (trace["cutting"] > 0.5) & (trace["forces_enabled"] > 0.5)
+    if cutting.sum() < 2:
+        return none
+    indices = np.flatnonzero(cutting)
+    span = slice(indices[0], indices[-1] + 1)
+    times = trace["time_s"]
+    duration = float(times[indices[-1]] - times[indices[0]])
+    if duration <= 0.0:
+        return none
+    force = np.hypot(trace["tool_force_x_N"], trace["tool_force_y_N"])
+    speed = np.hypot(trace["tool_velocity_x_m_s"], trace["tool_velocity_y_m_s"])
+    distance = float(np.hypot(trace["tool_position_x_m"][indices[-1]]
+                              - trace["tool_position_x_m"][indices[0]],
+                              trace["tool_position_y_m"][indices[-1]]
+                              - trace["tool_position_y_m"][indices[0]]))
+    return {"cutting_time_s": duration,
+            "cut_mean_force_N": float(force[span].mean()),
+            "cut_mean_speed_m_s": distance / duration,
+            "cut_mean_handle_force_N": float(trace["handle_force_x_N"][span].mean()),
+            "cutting_mean_force_N": float(force[cutting].mean()),
+            "cutting_mean_speed_m_s": float(speed[cutting].mean())}
+
+
+if __name__ == "__main__":
+    sys.exit(main())

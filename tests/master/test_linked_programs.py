@@ -1,0 +1,308 @@
+"""``haptic-master`` and ``haptic-slave`` as two real processes over Zenoh on loopback.
+
+Every child is ended by its own PID and always reaped; every wait is bounded. Timing figures
+are not asserted, except the watchdog reacting to a killed peer well within a generous bound.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from haptic.common.summary import REQUIRED_SUMMARY_KEYS
+
+#: One-way cap on waiting for anything a child does, s.
+WAIT_S = 40.0
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _linear_config(tmp_path: Path) -> Path:
+    """The slave with the linear environment ft = Tt yt (a force whenever the tool moves), so
+    the test does not depend on reaching the clay."""
+    path = tmp_path / "linear.toml"
+    path.write_text('[slave]\nscenario = "constant-rate"\nenvironment = "linear"\n'
+                    'clay_impl = "numpy"\ndevice = "cpu"\n')
+    return path
+
+
+class Pair:
+    """Starts and always ends the two programs (by their own PIDs)."""
+
+    def __init__(self, tmp_path: Path) -> None:
+        self.tmp = tmp_path
+        self.endpoint = f"tcp/127.0.0.1:{_free_port()}"
+        self.prefix = f"test/{uuid.uuid4().hex[:8]}"
+        self.config = _linear_config(tmp_path)
+        self.processes: list[subprocess.Popen] = []
+
+    def _common(self) -> list[str]:
+        return ["--config", str(self.config), "--key-prefix", self.prefix, "--no-status",
+                "--peer-wait", "30"]
+
+    def master(self, duration: float | None, summary: Path, *extra: str) -> subprocess.Popen:
+        args = [sys.executable, "-m", "haptic.master.cli", *self._common(), "--listen",
+                self.endpoint, "--rig", "sim", "--operator", "constant:fx=1.0,onset=0.05",
+                "--json-summary", str(summary), *extra]
+        if duration is not None:
+            args += ["--duration", str(duration)]
+        return self._start(args)
+
+    def slave(self, duration: float | None, summary: Path, *extra: str) -> subprocess.Popen:
+        args = [sys.executable, "-m", "haptic.slave_sim.program", *self._common(), "--connect",
+                self.endpoint, "--json-summary", str(summary), *extra]
+        if duration is not None:
+            args += ["--duration", str(duration)]
+        return self._start(args)
+
+    def _start(self, args: list[str]) -> subprocess.Popen:
+        process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                   text=True)
+        self.processes.append(process)
+        return process
+
+    def close(self) -> None:
+        for process in self.processes:
+            if process.poll() is None:
+                process.kill()
+            process.wait()
+            if process.stdout is not None:
+                process.stdout.close()
+
+
+@pytest.fixture
+def pair(tmp_path):
+    programs = Pair(tmp_path)
+    try:
+        yield programs
+    finally:
+        programs.close()
+
+
+def _wait(process: subprocess.Popen, timeout: float = WAIT_S) -> tuple[int, str]:
+    out, _ = process.communicate(timeout=timeout)
+    return process.returncode, out
+
+
+def _wait_for_file(path: Path, timeout: float = WAIT_S) -> None:
+    deadline = time.monotonic() + timeout
+    while not path.exists():
+        assert time.monotonic() < deadline, f"{path} never appeared"
+        time.sleep(0.05)
+
+
+def _events(summary: dict, kind: str) -> list[dict]:
+    return [e for e in summary["events"] if e["kind"] == kind]
+
+
+def test_two_processes_exchange_forces_and_positions(pair, tmp_path) -> None:
+    trace = tmp_path / "master_trace.npz"
+    out = tmp_path / "slave_out"
+    slave = pair.slave(3.5, tmp_path / "slave.json", "--out", str(out))
+    master = pair.master(3.0, tmp_path / "master.json", "--trace", str(trace))
+    master_status, master_log = _wait(master)
+    slave_status, slave_log = _wait(slave)
+    assert master_status == 0, master_log
+    assert slave_status == 0, slave_log
+    master_summary = json.loads((tmp_path / "master.json").read_text())
+    slave_summary = json.loads((tmp_path / "slave.json").read_text())
+    for summary in (master_summary, slave_summary):
+        assert set(REQUIRED_SUMMARY_KEYS) <= set(summary)
+        assert summary["steps"] > 1000
+        assert summary["analysis"]["stable"]
+        assert _events(summary, "forces_enabled")
+    assert master_summary["side"] == "master" and slave_summary["side"] == "slave"
+    assert master_summary["link_delivered"] > 1000 and slave_summary["link_delivered"] > 1000
+    # Forces both ways: the slave received the operator's force, the master the tool's.
+    slave_trace = np.load(out / "slave_trace.npz")
+    master_trace = np.load(trace)
+    assert np.max(np.abs(slave_trace["handle_force_x_N"])) > 0.5
+    assert master_summary["max_abs_force_N"] > 0.0
+    assert np.max(np.abs(master_trace["tool_force_x_N"])) > 0.0
+    # Positions: the handle moved, and the tool followed it (Ah1 = 1).
+    moving = master_trace["forces_enabled"] > 0.5
+    travel = master_trace["handle_position_x_m"][moving][-1] - (
+        master_trace["handle_position_x_m"][moving][0])
+    assert travel > 0.005
+    gap = np.abs(master_trace["tool_position_x_m"][moving][-1]
+                 - master_trace["handle_position_x_m"][moving][-1])
+    assert gap < 0.25 * travel
+    assert slave_summary["final_tool_position_m"][0] > 0.5 * travel
+
+
+def test_killed_slave_trips_the_master_and_a_new_slave_resumes(pair, tmp_path) -> None:
+    master_json = tmp_path / "master.json"
+    master = pair.master(None, master_json, "--max-message-age", "0.03")
+    first = pair.slave(None, tmp_path / "slave1.json")
+    time.sleep(0.5)
+    assert first.poll() is None and master.poll() is None
+    # Let the loop run, then kill the slave by its own PID.
+    time.sleep(2.5)
+    killed_at = time.time()
+    first.kill()
+    first.wait(timeout=WAIT_S)
+    time.sleep(1.0)
+    second_json = tmp_path / "slave2.json"
+    second = pair.slave(None, second_json)
+    time.sleep(3.5)
+    # SIGTERM to each program: both end cleanly with status 0 and write their summaries.
+    for process in (second, master):
+        sent = time.monotonic()
+        process.send_signal(signal.SIGTERM)
+        status, log = _wait(process, 10.0)
+        assert status == 0, log
+        # within a second or two (the loop stops within a period; then the summary is
+        # written and Zenoh closed); generous for a loaded machine
+        assert time.monotonic() - sent < 5.0
+    summary = json.loads(master_json.read_text())
+    assert summary["stop_reason"] == "SIGTERM"
+    assert json.loads(second_json.read_text())["stop_reason"] == "SIGTERM"
+    trips = _events(summary, "trip")
+    assert summary["watchdog_trips"] >= 1 and trips
+    trip_time = summary["loop_start_time_s"] + trips[0]["time_s"]
+    # The kill is seen through the liveliness token or the message age (30 ms); allow for a
+    # loaded machine, but far below Zenoh's 1 s lease.
+    assert trip_time - killed_at < 0.5, (trip_time - killed_at, trips)
+    after = [e for e in summary["events"] if e["time_s"] > trips[0]["time_s"]]
+    kinds = [e["kind"] for e in after]
+    assert "peer_returned" in kinds
+    assert "forces_enabled" in kinds
+    assert kinds.index("peer_returned") < kinds.index("forces_enabled")
+    assert "node_enable" in kinds[kinds.index("forces_enabled"):]
+    assert summary["watchdog_state"] in ("ok", "tripped")
+
+
+@pytest.mark.parametrize("program", ["haptic.slave_sim.program", "haptic.master.cli"])
+def test_the_analysis_refuses_an_unstable_loop(program) -> None:
+    args = [sys.executable, "-m", program, "--k", "19", "--delay", "0.02", "--duration", "1",
+            "--no-status", "--peer-wait", "1", "--key-prefix", f"test/{uuid.uuid4().hex[:8]}"]
+    process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = process.communicate(timeout=WAIT_S)
+    finally:
+        if process.poll() is None:
+            process.kill()
+        process.wait()
+    assert process.returncode == 3, err
+    refusal = [line for line in err.splitlines() if "refusing" in line]
+    assert len(refusal) == 1 and "--allow-unstable" in refusal[0]
+    assert "UNSTABLE" in err
+
+
+def test_the_slave_ends_cleanly_on_sigterm_while_waiting_for_its_master(tmp_path) -> None:
+    args = [sys.executable, "-m", "haptic.slave_sim.program", "--no-status", "--key-prefix",
+            f"test/{uuid.uuid4().hex[:8]}", "--connect", f"tcp/127.0.0.1:{_free_port()}",
+            "--config", str(_linear_config(tmp_path))]
+    process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + WAIT_S
+        line = ""
+        while "waiting for the master" not in line:
+            assert time.monotonic() < deadline
+            line = process.stdout.readline()
+            assert line or process.poll() is None
+        process.send_signal(signal.SIGTERM)
+        process.wait(timeout=5.0)
+    finally:
+        if process.poll() is None:
+            process.kill()
+        process.wait()
+        process.stdout.close()
+    assert process.returncode == 0
+
+
+def test_a_drive_fault_latches_the_linked_master_in_its_safe_state(pair, tmp_path) -> None:
+    """The master in this process (to reach the simulated rig), the slave as a child: a drive
+    fault mid-run holds the handle for the rest of the run and ends with status 1."""
+    import threading
+
+    from haptic.common.cli_options import run_options_from_args
+    from haptic.common.config import load_config, override
+    from haptic.common.model import model_from_config
+    from haptic.master.cli import build_parser
+    from haptic.master.hardware import create_hardware
+    from haptic.master.node import MasterNode
+    from haptic.master.program import MasterLoopOptions, run_linked_master
+    from haptic.master.settings import master_settings
+
+    summary_path = tmp_path / "master.json"
+    args = build_parser().parse_args([
+        "--listen", pair.endpoint, "--key-prefix", pair.prefix, "--duration", "1.5",
+        "--no-status", "--json-summary", str(summary_path)])
+    config = override(load_config(), "master.sim.channel", f"fault-{uuid.uuid4().hex}")
+    config = override(config, "master.sim.operator", "constant:fx=1.0,onset=0.05")
+    options = run_options_from_args(args, "master", config=config)
+    model = model_from_config(options.config)
+    node = MasterNode.from_model(model, master_settings(options.config).safety)
+    hardware = create_hardware("sim", options.config)
+    slave = pair.slave(None, tmp_path / "slave.json")
+    fault = threading.Timer(0.0, lambda: None)
+
+    def arm() -> None:
+        # once the link is up (the loop runs), fault the x drive 0.5 s later
+        nonlocal fault
+        fault = threading.Timer(0.5, hardware.rig.inject_drive_fault, args=(0,))
+        fault.start()
+
+    original_activate = hardware.activate
+
+    def activate() -> None:
+        original_activate()
+        arm()
+
+    hardware.activate = activate
+    try:
+        status = run_linked_master(options, model, node, hardware,
+                                   MasterLoopOptions(peer_wait_s=30.0))
+    finally:
+        fault.cancel()
+        slave.send_signal(signal.SIGTERM)
+        slave.wait(timeout=10.0)
+    assert status == 1
+    summary = json.loads(summary_path.read_text())
+    assert summary["node_faulted"] and summary["hardware_faults"]
+    trips = _events(summary, "node_trip")
+    assert trips and "hardware" in trips[0]["reason"]
+
+
+def test_a_master_side_outage_resyncs_both_sides(pair, tmp_path) -> None:
+    """Bursts of loss on the slave-to-master direction only (mean 100 messages, 54 ms) trip
+    the master's watchdog while the slave's stays ok: the slave stops its tool while the
+    master says SAFE_STATE, follows the held handle, and both resume after the resync."""
+    slave = pair.slave(None, tmp_path / "slave.json")
+    master = pair.master(3.0, tmp_path / "master.json", "--rig", "model", "--burst-enter",
+                         "0.001", "--burst-exit", "0.01", "--burst-loss", "1", "--seed", "3")
+    status, log = _wait(master)
+    assert status == 0, log
+    slave.send_signal(signal.SIGTERM)
+    slave_status, slave_log = _wait(slave, 10.0)
+    assert slave_status == 0, slave_log
+    summary = json.loads((tmp_path / "master.json").read_text())
+    assert summary["link_dropped"]["injected_loss"] > 0
+    trips = _events(summary, "trip")
+    assert trips, "no burst long enough to trip the watchdog"
+    end = summary["duration_s"]
+    for trip in trips:
+        if trip["time_s"] > end - 0.3:
+            continue
+        later = [e["kind"] for e in summary["events"] if e["time_s"] > trip["time_s"]]
+        assert "forces_enabled" in later
+    slave_summary = json.loads((tmp_path / "slave.json").read_text())
+    stops = [e for e in slave_summary["events"] if e["kind"] == "tool_stopped"
+             and "master is in its safe state" in e["reason"]]
+    assert stops
+    resumed = [e for e in slave_summary["events"] if e["kind"] == "tool_resumed"]
+    assert len(resumed) >= len(stops)  # one at the start, one after each master-side outage
