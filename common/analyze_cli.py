@@ -14,6 +14,7 @@ import numpy as np
 from haptic.common.analysis.report import Analysis, AnalysisSettings, analyse
 from haptic.common.config import ConfigError, exit_on_config_error, load_config
 from haptic.common.model import TeleopModel, model_from_config
+from haptic.common.summary import json_safe
 from haptic.common.synthesis import SynthesisError
 
 #: Cells per side of the stability map written by --plot.
@@ -87,16 +88,6 @@ def format_text(analysis: Analysis) -> str:
     return "\n".join(lines)
 
 
-def _json_safe(value: Any) -> Any:
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
-    return value
-
-
 def write_plots(model: TeleopModel, analysis: Analysis, settings: AnalysisSettings,
                 directory: Path) -> list[Path]:
     """Nyquist, compensator Bode and stability-map PNGs into ``directory``."""
@@ -138,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
         except SynthesisError as error:
             raise ConfigError("model", str(error)) from None
     if args.json:
-        print(json.dumps(_json_safe(analysis.to_json())))
+        print(json.dumps(json_safe(analysis.to_json())))
     else:
         print(format_text(analysis))
     if args.plot is not None:

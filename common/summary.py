@@ -53,13 +53,14 @@ def make_summary(
     return summary
 
 
-def _json_safe(value: Any) -> Any:
+def json_safe(value: Any) -> Any:
+    """``value`` with non-finite floats as None (JSON has no NaN or inf), recursively."""
     if isinstance(value, float) and not math.isfinite(value):
         return None
     if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
+        return {k: json_safe(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
+        return [json_safe(v) for v in value]
     return value
 
 
@@ -67,7 +68,7 @@ def write_json_summary(path: str | Path, summary: Mapping[str, Any]) -> None:
     """Write ``summary`` as JSON (NaN and inf become null), creating parent folders."""
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    target.write_text(json.dumps(_json_safe(dict(summary)), indent=2, sort_keys=True) + "\n")
+    target.write_text(json.dumps(json_safe(dict(summary)), indent=2, sort_keys=True) + "\n")
 
 
 def format_summary(summary: Mapping[str, Any]) -> str:
