@@ -42,7 +42,7 @@ def free_port() -> int:
 def test_client_mode_through_the_python_router():
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = subprocess.Popen(
-        [sys.executable, str(DEPLOY / "zenoh_router.py"), "--listen", endpoint],
+        [sys.executable, "-m", "haptic.common.router", "--listen", endpoint],
         stderr=subprocess.PIPE, text=True,
     )
     try:

@@ -1,0 +1,164 @@
+"""The shipped Zenoh configurations (deploy/zenoh/) on one host: they load, mutual TLS admits
+only certificates of the deployment's CA, and the access control passes handle state only
+from the master and tool state only from the slave."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from haptic.common.config import load_config
+from haptic.common.link import Link
+from haptic.common.link_config import link_config_from
+from haptic.common.router import router_config
+
+DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
+ZENOH = DEPLOY / "zenoh"
+PREFIX = "haptic/rig-1"  # the key prefix the access control names
+
+
+def test_every_zenoh_config_loads():
+    files = sorted(ZENOH.glob("*.json5"))
+    assert {f.name for f in files} >= {"router.json5", "client-master.json5",
+                                       "client-slave.json5", "peer-master.json5",
+                                       "peer-slave.json5"}
+    for path in files:
+        config = zenoh.Config.from_file(str(path))
+        assert config.get_json("transport/link/tls/enable_mtls") == "true", path.name
+    for name in ("router", "peer-master", "peer-slave"):
+        config = zenoh.Config.from_file(str(ZENOH / f"{name}.json5"))
+        assert config.get_json("access_control/enabled") == "true"
+        assert config.get_json("access_control/default_permission") == '"deny"'
+
+
+def test_tls_toml_files_match_the_zenoh_files():
+    router = load_config(DEPLOY / "router-tls.toml")
+    peers = load_config(DEPLOY / "two-hosts-tls.toml")
+    for side in ("master", "slave"):
+        link = link_config_from(router, side)
+        assert link.mode == "client" and link.connect[0].startswith("tls/")
+        assert link.key_prefix == PREFIX
+    assert link_config_from(peers, "master").listen == ("tls/0.0.0.0:7447",)
+    assert link_config_from(peers, "slave").connect[0].startswith("tls/")
+
+
+def test_router_config_layers_file_listen_and_overrides():
+    config = router_config(str(ZENOH / "router.json5"), ["tls/127.0.0.1:1"],
+                           ['transport/link/tls/root_ca_certificate="/x/ca.pem"'])
+    assert config.get_json("mode") == '"router"'
+    assert config.get_json("listen/endpoints") == '["tls/127.0.0.1:1"]'
+    assert config.get_json("transport/link/tls/root_ca_certificate") == '"/x/ca.pem"'
+    with pytest.raises(ValueError):
+        router_config(None, [], ["no-equals"])
+
+
+def test_make_certs_chain_and_names(certs):
+    if shutil.which("openssl") is None:
+        pytest.skip("openssl is not installed")
+    good, rogue = str(certs.good / "ca.pem"), str(certs.rogue / "ca.pem")
+    for name in ("router", "master", "slave", "intruder"):
+        pem = str(certs.good / f"{name}.pem")
+        subprocess.run(["openssl", "verify", "-CAfile", good, pem], check=True,
+                       capture_output=True)
+        subject = subprocess.run(["openssl", "x509", "-in", pem, "-noout", "-subject"],
+                                 check=True, capture_output=True, text=True).stdout
+        assert f"CN = haptic-{name}" in subject or f"CN=haptic-{name}" in subject
+    foreign = subprocess.run(["openssl", "verify", "-CAfile", good,
+                              str(certs.rogue / "master.pem")], capture_output=True)
+    assert foreign.returncode != 0
+    assert (certs.rogue / "ca.pem").read_bytes() != (certs.good / "ca.pem").read_bytes()
+    assert rogue != good
+    assert os.stat(certs.good / "master.key").st_mode & 0o077 == 0
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def client_link(side: str, endpoint: str, overrides, zenoh_file: str) -> Link:
+    config = link_config_from(
+        load_config(), side, mode="client", connect=(endpoint,), listen=(), key_prefix=PREFIX,
+        zenoh_config_file=str(ZENOH / zenoh_file), zenoh_overrides=overrides,
+    )
+    return Link(config)
+
+
+def wait_alive(*links: Link, timeout_s: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not all(link.peer_alive for link in links):
+        for link in links:
+            link.poll()
+        assert time.monotonic() < deadline, "the peers never saw each other"
+        time.sleep(0.002)
+
+
+def drain(link: Link, seconds: float) -> list:
+    got, deadline = [], time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        message = link.poll()
+        if message is not None:
+            got.append(message)
+        time.sleep(0.002)
+    return got
+
+
+def test_router_tls_and_access_control_on_one_host(certs):
+    endpoint = f"tls/localhost:{free_port()}"
+    router = subprocess.Popen(
+        [sys.executable, "-m", "haptic.common.router", "--config", str(ZENOH / "router.json5"),
+         "--listen", endpoint, *[a for k, v in certs.tls_overrides("router")
+                                 for a in ("--zenoh-set", f"{k}={v}")]],
+        stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        assert "listening" in router.stderr.readline()
+        master = client_link("master", endpoint, certs.tls_overrides("master"),
+                             "client-master.json5")
+        slave = client_link("slave", endpoint, certs.tls_overrides("slave"), "client-slave.json5")
+        with master, slave:
+            wait_alive(master, slave)
+            sent = [master.send_handle((0.1 * i, 0.0), (0.0, 0.0)) for i in range(5)]
+            assert drain(slave, 0.5)[-1] == sent[-1]
+            tool = slave.send_tool((1.0, 2.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)
+            assert drain(master, 0.5)[-1] == tool
+            # a certificate of the same CA whose CN the access control does not name
+            intruder = client_link("master", endpoint, certs.tls_overrides("intruder"),
+                                   "client-master.json5")
+            intruder_tool = client_link("slave", endpoint, certs.tls_overrides("intruder"),
+                                        "client-slave.json5")
+            with intruder, intruder_tool:
+                for _ in range(20):
+                    intruder.send_handle((9.0, 9.0), (0.0, 0.0))
+                    intruder_tool.send_tool((9.0, 9.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)
+                    time.sleep(0.005)
+                assert drain(slave, 0.5) == [], "a handle message of a CN not allowed arrived"
+                assert drain(master, 0.1) == [], "a tool message of a CN not allowed arrived"
+            # the master and slave still get through
+            sent = master.send_handle((0.5, 0.5), (0.0, 0.0))
+            assert drain(slave, 0.3)[-1] == sent
+            # a certificate of another CA: the TLS handshake fails, no session
+            rogue = client_link("master", endpoint, certs.tls_overrides("master", rogue=True),
+                                "client-master.json5")
+            with pytest.raises(Exception, match="(?i)connect"):
+                rogue.open()
+            rogue.close()
+    finally:
+        if router.poll() is None:
+            os.kill(router.pid, signal.SIGTERM)
+        try:
+            router.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            router.kill()
+            router.wait()
+        router.stderr.close()
