@@ -1,0 +1,231 @@
+"""Two hosts for real: network namespaces joined by veth pairs act as the rig PC, the remote
+host and the router host; haptic-master and haptic-slave run a short session through
+haptic-router over mutual TLS with the shipped configurations (deploy/zenoh/, router-tls.toml).
+Then: a client whose certificate is of another CA cannot connect, and one with a certificate
+of the deployment's CA whose CN the access control does not name gets no handle or tool
+message through (the receiving side sees none, while the master's certificate does).
+
+The namespaces ``hap-{rig,remote,router}-<pid>`` and their veth pairs (10.200.1.0/30 rig to
+router, 10.200.2.0/30 remote to router, private addresses that exist only inside them) are
+made and removed here; every process is ended by its own PID and reaped. Skips, with the
+reason, where network namespaces cannot be made (no CAP_NET_ADMIN, no iproute2)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
+ZENOH = DEPLOY / "zenoh"
+PID = os.getpid()
+NS = {name: f"hap-{name}-{PID}" for name in ("rig", "remote", "router")}
+# (namespace, veth, address), (router-side veth, address) per pair
+PAIRS = (
+    (("rig", f"hapr{PID}a", "10.200.1.1/30"), (f"hapr{PID}b", "10.200.1.2/30")),
+    (("remote", f"hapm{PID}a", "10.200.2.1/30"), (f"hapm{PID}b", "10.200.2.2/30")),
+)
+ROUTER_FOR = {"rig": "tls/10.200.1.2:7447", "remote": "tls/10.200.2.2:7447"}
+SESSION_S = 2.0
+
+pytestmark = pytest.mark.slow
+
+PROBE = r'''
+"""listen|send SIDE ENDPOINT SECONDS CERT-OVERRIDES-JSON ZENOH-FILE: a Link of SIDE; listen
+counts the peer's messages, send publishes this side's; prints one JSON line."""
+import json, sys, time
+from haptic.common.config import load_config
+from haptic.common.link import Link
+from haptic.common.link_config import link_config_from
+role, side, endpoint, seconds, overrides, zfile = sys.argv[1:7]
+config = link_config_from(load_config(), side, mode="client", connect=(endpoint,), listen=(),
+                          key_prefix="haptic/rig-1", zenoh_config_file=zfile,
+                          zenoh_overrides=tuple(map(tuple, json.loads(overrides))))
+try:
+    link = Link(config).open()
+except Exception as error:
+    print(json.dumps({"opened": False, "error": " ".join(str(error).split())[:200]}), flush=True)
+    sys.exit(0)
+with link:
+    print(json.dumps({"opened": True}), flush=True)
+    count, sent, end = 0, 0, time.monotonic() + float(seconds)
+    while time.monotonic() < end:
+        if role == "send":
+            if side == "master":
+                link.send_handle((1.0, 1.0), (0.0, 0.0))
+            else:
+                link.send_tool((1.0, 1.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)
+            sent += 1
+        elif link.poll() is not None:
+            count += 1
+        time.sleep(0.005)
+    print(json.dumps({"opened": True, "received": count, "sent": sent}), flush=True)
+'''
+
+
+def ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
+    return subprocess.run(["ip", *args], capture_output=True, text=True, check=check,
+                          timeout=20)
+
+
+def remove_network() -> None:
+    for ns in NS.values():
+        ip("netns", "delete", ns, check=False)  # takes its veth ends (and their peers) along
+    for (_, veth, _), _router_end in PAIRS:
+        ip("link", "delete", veth, check=False)  # only if it never left the root namespace
+
+
+@pytest.fixture(scope="module")
+def network() -> Iterator[None]:
+    if shutil.which("ip") is None:
+        pytest.skip("iproute2 ('ip') is not installed: cannot make network namespaces")
+    probe = ip("netns", "add", NS["rig"], check=False)
+    if probe.returncode != 0:
+        pytest.skip(f"cannot make network namespaces ({probe.stderr.strip()}): the two-host "
+                    "test needs CAP_NET_ADMIN")
+    try:
+        for name in ("remote", "router"):
+            ip("netns", "add", NS[name])
+        for ns in NS.values():
+            ip("-n", ns, "link", "set", "lo", "up")
+        for (host, veth, address), (router_veth, router_address) in PAIRS:
+            ip("link", "add", veth, "type", "veth", "peer", "name", router_veth)
+            ip("link", "set", veth, "netns", NS[host])
+            ip("link", "set", router_veth, "netns", NS["router"])
+            ip("-n", NS[host], "addr", "add", address, "dev", veth)
+            ip("-n", NS["router"], "addr", "add", router_address, "dev", router_veth)
+            ip("-n", NS[host], "link", "set", veth, "up")
+            ip("-n", NS["router"], "link", "set", router_veth, "up")
+        yield
+    finally:
+        remove_network()
+
+
+class Processes:
+    """Children started in a namespace, each ended by its own PID and reaped."""
+
+    def __init__(self) -> None:
+        self.started: list[subprocess.Popen] = []
+
+    def start(self, host: str, args: list[str], **kwargs) -> subprocess.Popen:
+        # `ip netns exec` execs the command: the PID is the program's own
+        process = subprocess.Popen(["ip", "netns", "exec", NS[host], sys.executable, *args],
+                                   text=True, **kwargs)
+        self.started.append(process)
+        return process
+
+    def end_all(self) -> None:
+        for process in reversed(self.started):
+            if process.poll() is None:
+                os.kill(process.pid, signal.SIGTERM)
+                try:
+                    process.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    os.kill(process.pid, signal.SIGKILL)
+            process.wait()
+            for stream in (process.stdout, process.stderr):
+                if stream is not None:
+                    stream.close()
+
+
+def zenoh_set(overrides) -> list[str]:
+    return [arg for key, value in overrides for arg in ("--zenoh-set", f"{key}={value}")]
+
+
+def probe(processes: Processes, tmp_path: Path, role: str, host: str, side: str,
+          overrides, seconds: float) -> subprocess.Popen:
+    script = tmp_path / "probe.py"
+    script.write_text(PROBE)
+    zenoh_file = ZENOH / f"client-{side}.json5"
+    return processes.start(
+        host, [str(script), role, side, ROUTER_FOR[host], repr(seconds),
+               json.dumps([list(pair) for pair in overrides]), str(zenoh_file)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )
+
+
+def result(process: subprocess.Popen, timeout_s: float = 30.0) -> dict:
+    out, err = process.communicate(timeout=timeout_s)
+    lines = [line for line in out.splitlines() if line.startswith("{")]
+    assert lines, f"probe printed nothing: {err[-2000:]}"
+    return json.loads(lines[-1])
+
+
+def exchange(processes, tmp_path, sender_host, sender_side, sender_certs, receiver_certs):
+    """Messages a receiver (the other side, the deployment's own certificate) in the other
+    namespace gets while ``sender_side`` publishes for 2 s with ``sender_certs``."""
+    receiver_side = "slave" if sender_side == "master" else "master"
+    receiver_host = "remote" if sender_host == "rig" else "rig"
+    receiver = probe(processes, tmp_path, "listen", receiver_host, receiver_side,
+                     receiver_certs, 5.0)
+    assert json.loads(receiver.stdout.readline())["opened"]
+    time.sleep(0.5)  # the receiver's subscription reaches the router
+    sender = probe(processes, tmp_path, "send", sender_host, sender_side, sender_certs, 2.0)
+    sent, received = result(sender), result(receiver)
+    assert sent["opened"], sent
+    assert sent["sent"] > 100
+    return received["received"]
+
+
+def test_session_and_access_control_across_namespaces(network, certs, tmp_path):
+    processes = Processes()
+    out = tmp_path / "out"
+    summaries = {side: out / f"{side}.json" for side in ("master", "slave")}
+    common = ["--config", str(DEPLOY / "router-tls.toml"), "--no-status", "--peer-wait", "30"]
+    try:
+        router = processes.start(
+            "router",
+            ["-m", "haptic.common.router", "--config", str(ZENOH / "router.json5"),
+             *[arg for host in ("rig", "remote") for arg in ("--listen", ROUTER_FOR[host])],
+             *zenoh_set(certs.tls_overrides("router"))],
+            stderr=subprocess.PIPE,
+        )
+        assert "listening" in router.stderr.readline()
+        started = time.monotonic()
+        slave = processes.start("remote", [
+            "-m", "haptic.slave_sim.program", *common, "--connect", ROUTER_FOR["remote"],
+            "--zenoh-config", str(ZENOH / "client-slave.json5"),
+            *zenoh_set(certs.tls_overrides("slave")), "--duration", repr(SESSION_S + 20),
+            "--scenario", "constant-rate", "--out", str(out),
+            "--json-summary", str(summaries["slave"])])
+        master = processes.start("rig", [
+            "-m", "haptic.master.cli", *common, "--connect", ROUTER_FOR["rig"],
+            "--zenoh-config", str(ZENOH / "client-master.json5"),
+            *zenoh_set(certs.tls_overrides("master")), "--rig", "model",
+            "--duration", repr(SESSION_S), "--json-summary", str(summaries["master"])])
+        assert master.wait(timeout=60) == 0
+        os.kill(slave.pid, signal.SIGTERM)  # the session is over: stop the slave
+        assert slave.wait(timeout=20) == 0
+        elapsed = time.monotonic() - started
+        for side, path in summaries.items():
+            summary = json.loads(path.read_text())
+            assert summary["steps"] > 0, side
+            # the other side's messages arrived over the router: a measured one-way delay
+            assert summary["link_one_way_delay_p50_s"] is not None, side
+            assert summary["max_abs_force_N"] > 0.0, side
+        print(f"two-host session over mutual TLS through the router: {elapsed:.1f} s wall, "
+              f"master p50 one-way "
+              f"{json.loads(summaries['master'].read_text())['link_one_way_delay_p50_s']}")
+
+        good = certs.tls_overrides
+        # control: the master's own certificate gets handle messages through
+        assert exchange(processes, tmp_path, "rig", "master", good("master"), good("slave")) > 0
+        # a valid certificate whose CN the access control does not name: nothing arrives
+        assert exchange(processes, tmp_path, "rig", "master", good("intruder"),
+                        good("slave")) == 0
+        assert exchange(processes, tmp_path, "remote", "slave", good("intruder"),
+                        good("master")) == 0
+        # a certificate of another CA: no session at all
+        rogue = result(probe(processes, tmp_path, "send", "rig", "master",
+                             good("master", rogue=True), 1.0))
+        assert not rogue["opened"], rogue
+    finally:
+        processes.end_all()
