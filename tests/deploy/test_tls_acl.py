@@ -17,7 +17,7 @@ import pytest
 import zenoh
 
 from haptic.common.config import load_config
-from haptic.common.link import Link
+from haptic.common.link import Link, zenoh_config
 from haptic.common.link_config import link_config_from
 from haptic.common.router import router_config
 
@@ -162,3 +162,42 @@ def test_router_tls_and_access_control_on_one_host(certs):
             router.kill()
             router.wait()
         router.stderr.close()
+
+
+def peer_link(side: str, endpoint: str, overrides) -> Link:
+    ends = {"listen": (endpoint,), "connect": ()} if side == "master" else {
+        "listen": (), "connect": (endpoint,)}
+    config = link_config_from(
+        load_config(), side, mode="peer", key_prefix=PREFIX,
+        zenoh_config_file=str(ZENOH / f"peer-{side}.json5"), zenoh_overrides=overrides, **ends,
+    )
+    return Link(config)
+
+
+def test_direct_peers_tls_and_access_control_on_one_host(certs):
+    endpoint = f"tls/localhost:{free_port()}"
+    master = peer_link("master", endpoint, certs.tls_overrides("master"))
+    slave = peer_link("slave", endpoint, certs.tls_overrides("slave"))
+    with master, slave:
+        wait_alive(master, slave)
+        sent = master.send_handle((0.3, 0.0), (0.0, 0.0))
+        assert drain(slave, 0.5)[-1] == sent
+        tool = slave.send_tool((1.0, 2.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)
+        assert drain(master, 0.5)[-1] == tool
+        # same CA, a CN the master's access control does not name: its tool state is dropped
+        intruder = peer_link("slave", endpoint, certs.tls_overrides("intruder"))
+        with intruder:
+            time.sleep(0.3)
+            for _ in range(20):
+                intruder.send_tool((9.0, 9.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)
+                time.sleep(0.005)
+            assert drain(master, 0.5) == [], "a tool message of a CN not allowed arrived"
+        # another CA: a peer's session opens (peers retry in the background) but the TLS
+        # handshake fails, so it never has a peer and nothing it sends arrives
+        rogue = peer_link("slave", endpoint, certs.tls_overrides("slave", rogue=True))
+        with rogue, zenoh.open(zenoh_config(rogue.config)) as probe:
+            for _ in range(20):
+                rogue.send_tool((9.0, 9.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)
+                time.sleep(0.01)
+            assert drain(master, 0.5) == [], "a tool message from a foreign CA arrived"
+            assert list(probe.info.peers_zid()) == []
