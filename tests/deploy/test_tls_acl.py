@@ -201,3 +201,16 @@ def test_direct_peers_tls_and_access_control_on_one_host(certs):
                 time.sleep(0.01)
             assert drain(master, 0.5) == [], "a tool message from a foreign CA arrived"
             assert list(probe.info.peers_zid()) == []
+
+
+def test_router_cli_rejects_a_bad_override_and_the_old_wrapper_runs(tmp_path):
+    bad = subprocess.run([sys.executable, "-m", "haptic.common.router", "--zenoh-set", "oops"],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "KEY=VALUE" in bad.stderr
+    missing = subprocess.run(
+        [sys.executable, "-m", "haptic.common.router", "--config", str(tmp_path / "no.json5")],
+        capture_output=True, text=True, timeout=60)
+    assert missing.returncode == 2 and missing.stderr.startswith("haptic-router:")
+    wrapper = subprocess.run([sys.executable, str(DEPLOY / "zenoh_router.py"), "--help"],
+                             capture_output=True, text=True, timeout=60)
+    assert wrapper.returncode == 0 and "--config" in wrapper.stdout
