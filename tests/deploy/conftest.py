@@ -10,8 +10,9 @@ from pathlib import Path
 import pytest
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
-# Addresses the two-host test gives the router inside its own network namespaces.
-ROUTER_SANS = ("IP:10.200.1.2", "IP:10.200.2.2")
+# Addresses the two-host test gives the router and the rig (the direct peers' listener) inside
+# its own network namespaces.
+ROUTER_SANS = ("IP:10.200.1.2", "IP:10.200.2.2", "IP:10.200.3.1")
 
 
 @dataclass(frozen=True)

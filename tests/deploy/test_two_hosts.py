@@ -5,8 +5,12 @@ Then: a client whose certificate is of another CA cannot connect, and one with a
 of the deployment's CA whose CN the access control does not name gets no handle or tool
 message through (the receiving side sees none, while the master's certificate does).
 
+A second session runs the direct-peer topology (deploy/zenoh/peer-*.json5, two-hosts-tls.toml)
+between the rig and the remote host.
+
 The namespaces ``hap-{rig,remote,router}-<pid>`` and their veth pairs (10.200.1.0/30 rig to
-router, 10.200.2.0/30 remote to router, private addresses that exist only inside them) are
+router, 10.200.2.0/30 remote to router, 10.200.3.0/30 rig to remote: private addresses that
+exist only inside them) are
 made and removed here; every process is ended by its own PID and reaped. Skips, with the
 reason, where network namespaces cannot be made (no CAP_NET_ADMIN, no iproute2)."""
 
@@ -28,12 +32,14 @@ DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 ZENOH = DEPLOY / "zenoh"
 PID = os.getpid()
 NS = {name: f"hap-{name}-{PID}" for name in ("rig", "remote", "router")}
-# (namespace, veth, address), (router-side veth, address) per pair
+# veth pairs: (namespace, veth, address) at each end
 PAIRS = (
-    (("rig", f"hapr{PID}a", "10.200.1.1/30"), (f"hapr{PID}b", "10.200.1.2/30")),
-    (("remote", f"hapm{PID}a", "10.200.2.1/30"), (f"hapm{PID}b", "10.200.2.2/30")),
+    (("rig", f"hapr{PID}a", "10.200.1.1/30"), ("router", f"hapr{PID}b", "10.200.1.2/30")),
+    (("remote", f"hapm{PID}a", "10.200.2.1/30"), ("router", f"hapm{PID}b", "10.200.2.2/30")),
+    (("rig", f"hapd{PID}a", "10.200.3.1/30"), ("remote", f"hapd{PID}b", "10.200.3.2/30")),
 )
 ROUTER_FOR = {"rig": "tls/10.200.1.2:7447", "remote": "tls/10.200.2.2:7447"}
+MASTER_DIRECT = "tls/10.200.3.1:7447"  # the rig PC as the direct peers' listener
 SESSION_S = 2.0
 
 pytestmark = pytest.mark.slow
@@ -79,8 +85,8 @@ def ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
 def remove_network() -> None:
     for ns in NS.values():
         ip("netns", "delete", ns, check=False)  # takes its veth ends (and their peers) along
-    for (_, veth, _), _router_end in PAIRS:
-        ip("link", "delete", veth, check=False)  # only if it never left the root namespace
+    for ends in PAIRS:
+        ip("link", "delete", ends[0][1], check=False)  # only if it never left the root ns
 
 
 @pytest.fixture(scope="module")
@@ -96,14 +102,12 @@ def network() -> Iterator[None]:
             ip("netns", "add", NS[name])
         for ns in NS.values():
             ip("-n", ns, "link", "set", "lo", "up")
-        for (host, veth, address), (router_veth, router_address) in PAIRS:
-            ip("link", "add", veth, "type", "veth", "peer", "name", router_veth)
-            ip("link", "set", veth, "netns", NS[host])
-            ip("link", "set", router_veth, "netns", NS["router"])
-            ip("-n", NS[host], "addr", "add", address, "dev", veth)
-            ip("-n", NS["router"], "addr", "add", router_address, "dev", router_veth)
-            ip("-n", NS[host], "link", "set", veth, "up")
-            ip("-n", NS["router"], "link", "set", router_veth, "up")
+        for ends in PAIRS:
+            ip("link", "add", ends[0][1], "type", "veth", "peer", "name", ends[1][1])
+            for host, veth, address in ends:
+                ip("link", "set", veth, "netns", NS[host])
+                ip("-n", NS[host], "addr", "add", address, "dev", veth)
+                ip("-n", NS[host], "link", "set", veth, "up")
         yield
     finally:
         remove_network()
@@ -175,11 +179,51 @@ def exchange(processes, tmp_path, sender_host, sender_side, sender_certs, receiv
     return received["received"]
 
 
-def test_session_and_access_control_across_namespaces(network, certs, tmp_path):
-    processes = Processes()
-    out = tmp_path / "out"
+def run_session(processes: Processes, certs, out: Path, topology: str) -> float:
+    """Slave on the remote host, master (``--rig model``) on the rig for SESSION_S, over
+    ``topology`` (``router``: clients of the router that must already run; ``peers``: direct);
+    checks both summaries and returns the session's wall time (start of the slave to the
+    end of both programs), s."""
     summaries = {side: out / f"{side}.json" for side in ("master", "slave")}
-    common = ["--config", str(DEPLOY / "router-tls.toml"), "--no-status", "--peer-wait", "30"]
+    toml = "router-tls.toml" if topology == "router" else "two-hosts-tls.toml"
+    common = ["--config", str(DEPLOY / toml), "--no-status", "--peer-wait", "30"]
+    if topology == "router":
+        ends = {"master": ["--connect", ROUTER_FOR["rig"]],
+                "slave": ["--connect", ROUTER_FOR["remote"]]}
+        files = {side: ZENOH / f"client-{side}.json5" for side in summaries}
+    else:
+        ends = {"master": ["--listen", MASTER_DIRECT], "slave": ["--connect", MASTER_DIRECT]}
+        files = {side: ZENOH / f"peer-{side}.json5" for side in summaries}
+    started = time.monotonic()
+    slave = processes.start("remote", [
+        "-m", "haptic.slave_sim.program", *common, *ends["slave"],
+        "--zenoh-config", str(files["slave"]), *zenoh_set(certs.tls_overrides("slave")),
+        "--duration", repr(SESSION_S + 20), "--scenario", "constant-rate", "--out", str(out),
+        "--json-summary", str(summaries["slave"])])
+    master = processes.start("rig", [
+        "-m", "haptic.master.cli", *common, *ends["master"],
+        "--zenoh-config", str(files["master"]), *zenoh_set(certs.tls_overrides("master")),
+        "--rig", "model", "--duration", repr(SESSION_S),
+        "--json-summary", str(summaries["master"])])
+    assert master.wait(timeout=60) == 0
+    os.kill(slave.pid, signal.SIGTERM)  # the session is over: stop the slave
+    assert slave.wait(timeout=20) == 0
+    elapsed = time.monotonic() - started
+    for side, path in summaries.items():
+        summary = json.loads(path.read_text())
+        assert summary["steps"] > 0, side
+        # the other side's messages arrived: a measured one-way delay, forces
+        assert summary["link_one_way_delay_p50_s"] is not None, side
+        assert summary["max_abs_force_N"] > 0.0, side
+        print(f"{topology}: {side} received p50 {summary['link_one_way_delay_p50_s'] * 1e6:.0f}"
+              f" us p99 {summary['link_one_way_delay_p99_s'] * 1e6:.0f} us, "
+              f"max |force| {summary['max_abs_force_N']:.2f} N")
+    print(f"{topology}: session of {SESSION_S:g} s over mutual TLS: {elapsed:.1f} s wall")
+    return elapsed
+
+
+def test_session_and_access_control_through_the_router(network, certs, tmp_path):
+    processes = Processes()
     try:
         router = processes.start(
             "router",
@@ -189,31 +233,7 @@ def test_session_and_access_control_across_namespaces(network, certs, tmp_path):
             stderr=subprocess.PIPE,
         )
         assert "listening" in router.stderr.readline()
-        started = time.monotonic()
-        slave = processes.start("remote", [
-            "-m", "haptic.slave_sim.program", *common, "--connect", ROUTER_FOR["remote"],
-            "--zenoh-config", str(ZENOH / "client-slave.json5"),
-            *zenoh_set(certs.tls_overrides("slave")), "--duration", repr(SESSION_S + 20),
-            "--scenario", "constant-rate", "--out", str(out),
-            "--json-summary", str(summaries["slave"])])
-        master = processes.start("rig", [
-            "-m", "haptic.master.cli", *common, "--connect", ROUTER_FOR["rig"],
-            "--zenoh-config", str(ZENOH / "client-master.json5"),
-            *zenoh_set(certs.tls_overrides("master")), "--rig", "model",
-            "--duration", repr(SESSION_S), "--json-summary", str(summaries["master"])])
-        assert master.wait(timeout=60) == 0
-        os.kill(slave.pid, signal.SIGTERM)  # the session is over: stop the slave
-        assert slave.wait(timeout=20) == 0
-        elapsed = time.monotonic() - started
-        for side, path in summaries.items():
-            summary = json.loads(path.read_text())
-            assert summary["steps"] > 0, side
-            # the other side's messages arrived over the router: a measured one-way delay
-            assert summary["link_one_way_delay_p50_s"] is not None, side
-            assert summary["max_abs_force_N"] > 0.0, side
-        print(f"two-host session over mutual TLS through the router: {elapsed:.1f} s wall, "
-              f"master p50 one-way "
-              f"{json.loads(summaries['master'].read_text())['link_one_way_delay_p50_s']}")
+        run_session(processes, certs, tmp_path / "out", "router")
 
         good = certs.tls_overrides
         # control: the master's own certificate gets handle messages through
@@ -227,5 +247,13 @@ def test_session_and_access_control_across_namespaces(network, certs, tmp_path):
         rogue = result(probe(processes, tmp_path, "send", "rig", "master",
                              good("master", rogue=True), 1.0))
         assert not rogue["opened"], rogue
+    finally:
+        processes.end_all()
+
+
+def test_session_between_direct_peers(network, certs, tmp_path):
+    processes = Processes()
+    try:
+        run_session(processes, certs, tmp_path / "out", "peers")
     finally:
         processes.end_all()
