@@ -153,6 +153,17 @@ def test_router_tls_and_access_control_on_one_host(certs):
             with pytest.raises(Exception, match="(?i)connect"):
                 rogue.open()
             rogue.close()
+            # no client certificate, or plain TCP: no session
+            for protocol, ca in (("tls", True), ("tcp", False)):
+                bare = zenoh.Config()
+                bare.insert_json5("mode", '"client"')
+                bare.insert_json5("connect/endpoints",
+                                  f'["{protocol}/{endpoint.split("/", 1)[1]}"]')
+                if ca:
+                    bare.insert_json5("transport/link/tls/root_ca_certificate",
+                                      f'"{certs.good / "ca.pem"}"')
+                with pytest.raises(Exception, match="(?i)connect"):
+                    zenoh.open(bare).close()
     finally:
         if router.poll() is None:
             os.kill(router.pid, signal.SIGTERM)

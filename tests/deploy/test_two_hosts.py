@@ -53,7 +53,7 @@ from haptic.common.link import Link
 from haptic.common.link_config import link_config_from
 role, side, endpoint, seconds, overrides, zfile = sys.argv[1:7]
 config = link_config_from(load_config(), side, mode="client", connect=(endpoint,), listen=(),
-                          key_prefix="haptic/rig-1", zenoh_config_file=zfile,
+                          key_prefix="haptic/rig-1", zenoh_config_file=zfile or None,
                           zenoh_overrides=tuple(map(tuple, json.loads(overrides))))
 try:
     link = Link(config).open()
@@ -145,10 +145,10 @@ def zenoh_set(overrides) -> list[str]:
 
 
 def probe(processes: Processes, tmp_path: Path, role: str, host: str, side: str,
-          overrides, seconds: float) -> subprocess.Popen:
+          overrides, seconds: float, shipped_file: bool = True) -> subprocess.Popen:
     script = tmp_path / "probe.py"
     script.write_text(PROBE)
-    zenoh_file = ZENOH / f"client-{side}.json5"
+    zenoh_file = ZENOH / f"client-{side}.json5" if shipped_file else ""
     return processes.start(
         host, [str(script), role, side, ROUTER_FOR[host], repr(seconds),
                json.dumps([list(pair) for pair in overrides]), str(zenoh_file)],
@@ -246,7 +246,12 @@ def test_session_and_access_control_through_the_router(network, certs, tmp_path)
         # a certificate of another CA: no session at all
         rogue = result(probe(processes, tmp_path, "send", "rig", "master",
                              good("master", rogue=True), 1.0))
-        assert not rogue["opened"], rogue
+        assert not rogue["opened"] and "connect" in rogue["error"].lower(), rogue
+        # TLS that trusts the CA but presents no certificate of its own: no session either
+        ca_only = (("transport/link/tls/root_ca_certificate", f'"{certs.good / "ca.pem"}"'),)
+        anonymous = result(probe(processes, tmp_path, "send", "rig", "master", ca_only, 1.0,
+                                 shipped_file=False))
+        assert not anonymous["opened"] and "connect" in anonymous["error"].lower(), anonymous
     finally:
         processes.end_all()
 
