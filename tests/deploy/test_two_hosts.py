@@ -22,6 +22,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -233,6 +234,8 @@ def test_session_and_access_control_through_the_router(network, certs, tmp_path)
             stderr=subprocess.PIPE,
         )
         assert "listening" in router.stderr.readline()
+        # keep its log pipe drained for the rest of the test (it ends at the router's exit)
+        threading.Thread(target=router.stderr.read, daemon=True).start()
         run_session(processes, certs, tmp_path / "out", "router")
 
         good = certs.tls_overrides
