@@ -70,14 +70,17 @@ class DisplayPublisher:
     docstring. ``session``: the program's open Zenoh session; ``key_prefix``: the rig's
     prefix; ``clay_source``: returns the (cells_y, cells_x) height map in m, or None;
     ``layout``: the workpiece layout of :func:`haptic.slave_sim.clay_view.workpiece_layout`
-    (published once as ``<prefix>/workpiece`` and again every second for late viewers)."""
+    (published once as ``<prefix>/workpiece`` and again every second for late viewers);
+    ``on_clay(time_ns, reduced heights m)``: called in the thread after each clay
+    publication (the slave records the map from it)."""
 
     def __init__(self, session: Any, key_prefix: str, side: str, *,
                  status_rate_hz: float = DEFAULT_STATUS_RATE_HZ,
                  clay_rate_hz: float = DEFAULT_CLAY_RATE_HZ,
                  clay_source: Callable[[], np.ndarray] | None = None,
                  layout: dict[str, Any] | None = None,
-                 factors: tuple[int, int] = (1, 1)) -> None:
+                 factors: tuple[int, int] = (1, 1),
+                 on_clay: Callable[[int, np.ndarray], None] | None = None) -> None:
         self._session = session
         self._prefix = key_prefix
         self.side = side
@@ -86,6 +89,7 @@ class DisplayPublisher:
         self._clay_source = clay_source
         self._layout = layout
         self._factors = factors
+        self._on_clay = on_clay
         self._status: dict[str, Any] | None = None
         self._events: list[dict[str, Any]] = []
         self._stop = threading.Event()
@@ -159,11 +163,14 @@ class DisplayPublisher:
 
                     heights = self._clay_source()
                     if heights is not None:
-                        data = heights_to_bytes(downsample_heights(heights, self._factors))
+                        reduced = downsample_heights(heights, self._factors)
+                        data = heights_to_bytes(reduced)
                         sequence += 1
                         self._put(session, clay_key, encode_clay(self._layout, data, sequence))
                         self.clay_publications += 1
                         self._account(time.perf_counter() - started)
+                        if self._on_clay is not None:
+                            self._on_clay(time.time_ns(), reduced)
             self._stop.wait(min(0.01, self._status_period_s, self._clay_period_s))
 
     def _account(self, cost_s: float) -> None:

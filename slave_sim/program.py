@@ -154,10 +154,16 @@ def _record_clay(recording: RunRecording, state: Any, log_time_ns: int,
     recording.record("/slave/clay", log_time_ns, heights_message(clay.heights_m()[0], factors))
 
 
-def _display_publisher(link: Link, node: SlaveNode, state: Any) -> DisplayPublisher:
+#: Rate of the clay maps in the recording (taken from the display thread), Hz.
+RECORD_CLAY_RATE_HZ = 2.0
+
+
+def _display_publisher(link: Link, node: SlaveNode, state: Any,
+                       recording: RunRecording | None) -> DisplayPublisher:
     """The slave's display publications: status, and the clay's height map read off the
-    loop (on a CPU clay, a view of the live array)."""
-    clay_source = layout = None
+    loop (on a CPU clay, a view of the live array); with a recording, the reduced map also
+    goes into ``/slave/clay`` at :data:`RECORD_CLAY_RATE_HZ`."""
+    clay_source = layout = on_clay = None
     factors = (1, 1)
     if node.environment_kind == "clay":
         from haptic.slave_sim.clay_view import reduction_factors, workpiece_layout
@@ -172,8 +178,19 @@ def _display_publisher(link: Link, node: SlaveNode, state: Any) -> DisplayPublis
             view = heights.numpy() if hasattr(heights, "numpy") else heights
             return view[0]
 
+        if recording is not None:
+            last = [0]
+
+            def on_clay(time_ns: int, reduced: np.ndarray) -> None:
+                if time_ns - last[0] >= 1e9 / RECORD_CLAY_RATE_HZ:
+                    last[0] = time_ns
+                    recording.record("/slave/clay", time_ns, {
+                        "cells_x": int(reduced.shape[1]), "cells_y": int(reduced.shape[0]),
+                        "heights_mm": np.round(reduced * 1e3, 4).tolist()})
+
     return DisplayPublisher(link.session, link.config.key_prefix, "slave",
-                            clay_source=clay_source, layout=layout, factors=factors).start()
+                            clay_source=clay_source, layout=layout, factors=factors,
+                            on_clay=on_clay).start()
 
 
 def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
@@ -221,7 +238,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         cursor = EventCursor()
         display = None
         if getattr(args, "display", False) and link.session is not None:
-            display = _display_publisher(link, node, state)
+            display = _display_publisher(link, node, state, recording)
 
         def step(tick: int, now_ns: int) -> None:
             nonlocal fh, yh
