@@ -61,6 +61,40 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def pair_figures(duration_s: float, record: bool, display: bool) -> dict[str, float]:
+    """The same networked run without the view, with or without ``--record`` and the display
+    publications: the loops' rate and overruns, to attribute the cost."""
+    tmp = Path(tempfile.mkdtemp(prefix="view-bench-pair-"))
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    common = ["--key-prefix", f"bench/{uuid.uuid4().hex[:8]}",
+              "--display" if display else "--no-display"]
+    run = ["--no-status", "--peer-wait", "30", "--duration", str(duration_s)]
+    record_m = ["--record", str(tmp / "master.mcap")] if record else []
+    record_s = ["--record", str(tmp / "slave.mcap")] if record else []
+    processes = [
+        subprocess.Popen([sys.executable, "-m", "haptic.master.cli", *common, *run, "--listen",
+                          endpoint, "--rig", "model", "--operator",
+                          "regulate:fx=3.6,onset=0.2,max=5", *record_m, "--json-summary",
+                          str(tmp / "master.json")], stderr=subprocess.DEVNULL),
+        subprocess.Popen([sys.executable, "-m", "haptic.slave_sim.program", *common, *run,
+                          "--connect", endpoint, *record_s, "--json-summary",
+                          str(tmp / "slave.json")], stderr=subprocess.DEVNULL),
+    ]
+    try:
+        for process in processes:
+            process.wait(timeout=duration_s + 90)
+    finally:
+        for process in processes:
+            if process.poll() is None:
+                process.kill()
+            process.wait(timeout=10)
+    master = json.loads((tmp / "master.json").read_text())
+    slave = json.loads((tmp / "slave.json").read_text())
+    return {"master_rate_hz": master["rate_hz"], "slave_rate_hz": slave["rate_hz"],
+            "master_overruns": master["overruns"], "slave_overruns": slave["overruns"],
+            "master_steps": master["steps"], "slave_steps": slave["steps"]}
+
+
 def run_figures(duration_s: float) -> dict[str, float]:
     """The networked run with the view (see the module docstring)."""
     tmp = Path(tempfile.mkdtemp(prefix="view-bench-"))
@@ -116,6 +150,7 @@ def run_figures(duration_s: float) -> dict[str, float]:
             "view_state_updates_per_s_since_start": stats["state_update_rate_hz"],
             "master_rate_hz": master["rate_hz"], "slave_rate_hz": slave["rate_hz"],
             "master_overruns": master["overruns"], "slave_overruns": slave["overruns"],
+            "master_steps": master["steps"], "slave_steps": slave["steps"],
             "master_record_written": master["record_written"],
             "master_record_dropped": master["record_dropped"],
             "slave_record_written": slave["record_written"],
@@ -130,7 +165,11 @@ def main() -> int:
     parser.add_argument("--duration", type=float, default=6.0, help="networked run, s")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    figures = {"recorder": recorder_figures(), "run": run_figures(args.duration)}
+    figures = {"recorder": recorder_figures(), "run": run_figures(args.duration),
+               "record only (no view, no display)": pair_figures(args.duration, True, False),
+               "display only (no view, no record)": pair_figures(args.duration, False, True),
+               "baseline (no view, no display, no record)":
+                   pair_figures(args.duration, False, False)}
     if args.json:
         print(json.dumps(figures, indent=2))
         return 0
@@ -139,8 +178,12 @@ def main() -> int:
           f"{r['record_call_p99_block_s'] * 1e6:.2f} us (p99 of 1000-call blocks)")
     print(f"recorder, writer: {r['writer_messages']} messages drained in "
           f"{r['writer_drain_after_loop_s']:.2f} s after the loop")
-    for key, value in figures["run"].items():
-        print(f"{key}: {value:.6g}" if isinstance(value, float) else f"{key}: {value}")
+    for title in figures:
+        if title == "recorder":
+            continue
+        print("record, display and view:" if title == "run" else f"{title}:")
+        for key, value in figures[title].items():
+            print(f"  {key}: {value:.6g}" if isinstance(value, float) else f"  {key}: {value}")
     return 0
 
 
