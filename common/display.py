@@ -3,6 +3,11 @@
 A :class:`DisplayPublisher` owns a thread on the program's Zenoh session that publishes, at
 display rates:
 
+- ``<prefix>/view/<side>`` (JSON, ``state_rate_hz``): the side's newest state (master: handle
+  force and position, the felt force; slave: tool force, position, velocity, engagement,
+  removed volume), which the loop hands over with :meth:`offer_state` every
+  :meth:`state_every` ticks. The view never subscribes to the loops' own 1850 Hz keys, so
+  the loops' publishers gain no subscriber;
 - ``<prefix>/status/<side>`` (JSON, ``status_rate_hz``): the side's link statistics, watchdog
   state and safety events. The loop hands the latest figures over with :meth:`offer_status`
   at its own status rate (a reference swap, no copy, no I/O in the loop);
@@ -30,6 +35,7 @@ import numpy as np
 from haptic.common.summary import json_safe
 
 #: Default rates, Hz.
+DEFAULT_STATE_RATE_HZ = 60.0
 DEFAULT_STATUS_RATE_HZ = 5.0
 DEFAULT_CLAY_RATE_HZ = 10.0
 
@@ -91,6 +97,8 @@ class DisplayPublisher:
         self._factors = factors
         self._on_clay = on_clay
         self._status: dict[str, Any] | None = None
+        self._state: dict[str, Any] | None = None
+        self._state_period_s = 1.0 / DEFAULT_STATE_RATE_HZ
         self._events: list[dict[str, Any]] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -98,6 +106,14 @@ class DisplayPublisher:
         self.clay_publications = 0
         self.busy_s = 0.0
         self.max_busy_s = 0.0
+
+    def state_every(self, period_s: float) -> int:
+        """Ticks of ``period_s`` between two :meth:`offer_state` calls."""
+        return max(1, round(self._state_period_s / period_s))
+
+    def offer_state(self, state: dict[str, Any]) -> None:
+        """From the loop: the side's newest state (a reference swap)."""
+        self._state = state
 
     def offer_status(self, figures: dict[str, Any], new_events: list[dict[str, Any]]) -> None:
         """From the loop: the newest link figures and any new events (kept for the next
@@ -136,12 +152,24 @@ class DisplayPublisher:
     def _run(self) -> None:
         session = self._session
         status_key = f"{self._prefix}/status/{self.side}"
+        state_key = f"{self._prefix}/view/{self.side}"
+        sent_state: dict[str, Any] | None = None
+        next_state = time.monotonic()
         clay_key = f"{self._prefix}/clay"
         layout_key = f"{self._prefix}/workpiece"
         next_status = next_clay = next_layout = time.monotonic()
         sequence = 0
         while not self._stop.is_set():
             now = time.monotonic()
+            if now >= next_state:
+                next_state = now + self._state_period_s
+                state = self._state
+                if state is not None and state is not sent_state:
+                    sent_state = state
+                    started = time.perf_counter()
+                    state["time_ns"] = time.time_ns()
+                    self._put(session, state_key, json.dumps(json_safe(state)).encode())
+                    self._account(time.perf_counter() - started)
             if now >= next_status:
                 next_status = now + self._status_period_s
                 status = self._status
@@ -171,7 +199,7 @@ class DisplayPublisher:
                         self._account(time.perf_counter() - started)
                         if self._on_clay is not None:
                             self._on_clay(time.time_ns(), reduced)
-            self._stop.wait(min(0.01, self._status_period_s, self._clay_period_s))
+            self._stop.wait(min(0.005, self._state_period_s))
 
     def _account(self, cost_s: float) -> None:
         self.publications += 1

@@ -194,6 +194,7 @@ def _run_linked_master(
                 if loop_options.display and link.session is not None:
                     display = DisplayPublisher(link.session, link_config.key_prefix,
                                                "master").start()
+                view_every = display.state_every(period_s) if display is not None else 1
 
                 rx, ry = float(ratio[0]), float(ratio[1])
                 limit = node.safety.force_limit_N
@@ -284,6 +285,11 @@ def _run_linked_master(
                             now_s, fhx, fhy, yhx, yhy, rft[0], rft[1], felt[0], felt[1],
                             tool_pos[0], tool_pos[1], float(command[0]), float(command[1]),
                             sent[0], sent[1], float(enabled)))
+                    if display is not None and tick % view_every == 0:
+                        display.offer_state({
+                            "handle_force_N": [fhx, fhy], "handle_position_m": [yhx, yhy],
+                            "felt_force_N": [felt[0], felt[1]], "forces_enabled": enabled,
+                            "safe_state": not enabled})
                     if tick % status_every == 0 and (recording is not None
                                                      or display is not None):
                         figures = link.summary()

@@ -239,6 +239,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         display = None
         if getattr(args, "display", False) and link.session is not None:
             display = _display_publisher(link, node, state, recording)
+        view_every = display.state_every(period_s) if display is not None else 1
 
         def step(tick: int, now_ns: int) -> None:
             nonlocal fh, yh
@@ -316,6 +317,14 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                     float(position[0]), float(position[1]), float(velocity[0]),
                     float(velocity[1]), float(ft[0]), float(ft[1]), float(vt[0]), float(vt[1]),
                     engagement, float(out.cutting[0]), removed, float(running)))
+            if display is not None and tick % view_every == 0:
+                display.offer_state({
+                    "tool_force_N": [float(ft[0]), float(ft[1])],
+                    "tool_position_m": [float(position[0]), float(position[1])],
+                    "tool_velocity_m_s": [float(velocity[0]), float(velocity[1])],
+                    "clay_engagement": engagement, "removed_volume_m3": removed,
+                    "in_contact": bool(out.cutting[0]), "forces_enabled": ready_flag,
+                    "safe_state": not ready_flag})
             if tick % status_every == 0 and (recording is not None or display is not None):
                 figures = link.summary()
                 figures["watchdog_state"] = watchdog.state.value

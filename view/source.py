@@ -2,8 +2,9 @@
 prefix and a poller thread that moves the newest samples into the :class:`ViewState` at the
 display rate.
 
-Keys: ``<prefix>/handle`` and ``<prefix>/tool`` (the loops' messages, msgpack; ring channels
-of one sample, so only the newest is ever decoded), ``<prefix>/status/<side>`` (JSON),
+Keys: ``<prefix>/view/master`` and ``<prefix>/view/slave`` (each side's newest state at
+60 Hz, JSON, from the programs' display threads; the view never subscribes to the loops'
+1850 Hz keys, so their publishers gain no subscriber), ``<prefix>/status/<side>`` (JSON),
 ``<prefix>/workpiece`` (JSON) and ``<prefix>/clay`` (the reduced height map). Nothing here
 runs in Zenoh's threads: the poller drains the ring channels.
 """
@@ -18,29 +19,7 @@ from typing import Any
 import zenoh
 
 from haptic.common.display import decode_clay
-from haptic.common.messages import KIND_HANDLE, KIND_TOOL, decode
 from haptic.view.state import ViewState
-
-
-def handle_dict(message: Any) -> dict[str, Any]:
-    """A ``HandleState`` for the page (SI units in the names)."""
-    return {"seq": message.seq, "send_time_ns": message.send_time_ns,
-            "forces_enabled": bool(message.forces_enabled),
-            "safe_state": bool(message.safe_state),
-            "handle_force_N": list(message.handle_force_N),
-            "handle_position_m": list(message.handle_position_m)}
-
-
-def tool_dict(message: Any) -> dict[str, Any]:
-    """A ``ToolState`` for the page (SI units in the names)."""
-    return {"seq": message.seq, "send_time_ns": message.send_time_ns,
-            "forces_enabled": bool(message.forces_enabled),
-            "safe_state": bool(message.safe_state), "in_contact": bool(message.in_contact),
-            "tool_force_N": list(message.tool_force_N),
-            "tool_position_m": list(message.tool_position_m),
-            "tool_velocity_m_s": list(message.tool_velocity_m_s),
-            "clay_engagement": message.clay_engagement,
-            "removed_volume_m3": message.removed_volume_m3}
 
 
 class ZenohSource:
@@ -64,7 +43,8 @@ class ZenohSource:
         self._session = zenoh.open(self._config)
         ring = zenoh.handlers.RingChannel
         p = self._prefix
-        for name, key, capacity in (("handle", f"{p}/handle", 1), ("tool", f"{p}/tool", 1),
+        for name, key, capacity in (("handle", f"{p}/view/master", 1),
+                                    ("tool", f"{p}/view/slave", 1),
                                     ("status", f"{p}/status/*", 8),
                                     ("workpiece", f"{p}/workpiece", 1),
                                     ("clay", f"{p}/clay", 1)):
@@ -94,10 +74,10 @@ class ZenohSource:
         try:
             sample = subs["handle"].try_recv()
             if sample is not None:
-                parts["handle"] = handle_dict(decode(sample.payload.to_bytes(), KIND_HANDLE))
+                parts["handle"] = json.loads(sample.payload.to_bytes())
             sample = subs["tool"].try_recv()
             if sample is not None:
-                parts["tool"] = tool_dict(decode(sample.payload.to_bytes(), KIND_TOOL))
+                parts["tool"] = json.loads(sample.payload.to_bytes())
             sample = subs["workpiece"].try_recv()
             if sample is not None:
                 parts["layout"] = json.loads(sample.payload.to_bytes())

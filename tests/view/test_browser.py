@@ -54,6 +54,16 @@ def _unavailable(reason: str) -> None:
     pytest.skip(reason)
 
 
+def _wait_port(port: int, deadline: float) -> None:
+    while time.monotonic() < deadline:
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=1.0):
+                return
+        except OSError:
+            time.sleep(0.1)
+    raise AssertionError(f"nothing listens on port {port}")
+
+
 def test_page_shows_the_cut_in_chromium(tmp_path: Path) -> None:
     try:
         from playwright import sync_api
@@ -64,23 +74,24 @@ def test_page_shows_the_cut_in_chromium(tmp_path: Path) -> None:
     config = tmp_path / "clay.toml"
     config.write_text('[slave]\nscenario = "constant-rate"\nenvironment = "clay"\n'
                       'clay_impl = "numpy"\ndevice = "cpu"\n')
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    master_port = _free_port()
+    endpoint = f"tcp/127.0.0.1:{master_port}"
     prefix = f"test/{uuid.uuid4().hex[:8]}"
     port = _free_port()
     common = ["--config", str(config), "--key-prefix", prefix]
     run = ["--no-status", "--peer-wait", "30", "--duration", "8"]
     processes = []
     try:
-        processes.append(subprocess.Popen(
-            [sys.executable, "-m", "haptic.view.cli", *common, "--connect", endpoint,
-             "--port", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        # The master first (it listens and waits for the slave), then the view connects to
+        # it, the page loads, and only then the slave starts: the page sees the whole cut.
         processes.append(subprocess.Popen(
             [sys.executable, "-m", "haptic.master.cli", *common, *run, "--listen", endpoint,
              "--rig", "model", "--operator", "regulate:fx=3.6,onset=0.1,max=5"],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        _wait_port(master_port, time.monotonic() + WAIT_S)
         processes.append(subprocess.Popen(
-            [sys.executable, "-m", "haptic.slave_sim.program", *common, *run, "--connect",
-             endpoint], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+            [sys.executable, "-m", "haptic.view.cli", *common, "--connect", endpoint,
+             "--port", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         url = f"http://127.0.0.1:{port}/"
         _wait_http(url, time.monotonic() + WAIT_S)
         with sync_api.sync_playwright() as playwright:
@@ -89,6 +100,10 @@ def test_page_shows_the_cut_in_chromium(tmp_path: Path) -> None:
             try:
                 page = browser.new_page(viewport={"width": 1300, "height": 700})
                 page.goto(url)
+                processes.append(subprocess.Popen(
+                    [sys.executable, "-m", "haptic.slave_sim.program", *common, *run,
+                     "--connect", endpoint], stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL))
                 timeout_ms = WAIT_S * 1000
                 page.wait_for_function("window.hapticView && window.hapticView.clayVersion > 0"
                                        " && window.hapticView.layout !== null",
