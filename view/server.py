@@ -34,6 +34,18 @@ def static_file(name: str) -> bytes | None:
     return entry.read_bytes() if entry.is_file() else None
 
 
+class _QuietServer(ThreadingHTTPServer):
+    """A browser or client that goes away mid-request is normal, not an error to print."""
+
+    daemon_threads = True
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        import sys
+
+        if not isinstance(sys.exc_info()[1], (ConnectionError, TimeoutError)):
+            super().handle_error(request, client_address)
+
+
 class ViewServer:
     """Serves ``state`` on ``host:port`` (port 0: any free port; see :attr:`port`)."""
 
@@ -79,8 +91,7 @@ class ViewServer:
                 self.end_headers()
                 self.wfile.write(body)
 
-        self._httpd = ThreadingHTTPServer((host, port), Handler)
-        self._httpd.daemon_threads = True
+        self._httpd = _QuietServer((host, port), Handler)
         self.host = host
         self.port = self._httpd.server_address[1]
         self._thread: threading.Thread | None = None
