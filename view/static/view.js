@@ -56,9 +56,13 @@
         if (id < 0 || h <= 1e-4) {
           image.data[k] = 20; image.data[k + 1] = 22; image.data[k + 2] = 26;
         } else {
+          // Shade by height; cut material (below its initial height) loses its colour.
           const hue = HUES[id % HUES.length];
-          const light = 20 + 45 * Math.min(1, h / maxH);
-          const [r, g, b] = hsl(hue, 0.55, light / 100);
+          const initial = layout.initial_heights_mm[j][i];
+          const cut = initial > 0 ? Math.min(1, Math.max(0, (initial - h) / initial)) : 0;
+          const light = 18 + 50 * Math.min(1, h / maxH);
+          const [r, g, b] = hsl(hue, cut > 0.01 ? 0.55 * (1 - 0.8 * Math.sqrt(cut)) : 0.55,
+            light / 100);
           image.data[k] = r; image.data[k + 1] = g; image.data[k + 2] = b;
         }
         image.data[k + 3] = 255;
