@@ -80,6 +80,19 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
         "--status", action=argparse.BooleanOptionalAction, default=None,
         help="live status line on stderr (default: when stderr is a terminal)",
     )
+    parser.add_argument(
+        "--record", metavar="FILE",
+        help="record the run to an MCAP file (Foxglove, PlotJuggler; haptic-replay FILE)",
+    )
+    parser.add_argument(
+        "--record-every", metavar="N", type=int, default=1,
+        help="record the loop's state every Nth tick (default 1: every tick)",
+    )
+    parser.add_argument(
+        "--display", action=argparse.BooleanOptionalAction, default=True,
+        help="publish the status (and the slave's clay) at display rates for haptic-view "
+        "(default: on)",
+    )
     add_connection_options(parser)
     add_injection_options(parser)
 

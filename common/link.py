@@ -170,6 +170,11 @@ class Link:
     def is_open(self) -> bool:
         return self._session is not None
 
+    @property
+    def session(self) -> zenoh.Session | None:
+        """The open Zenoh session (for display-rate publications off the loop), or None."""
+        return self._session
+
     # -- sending -----------------------------------------------------------------------------
 
     def next_header(self) -> tuple[int, int, int]:

@@ -89,6 +89,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ConfigError("--sync-tolerance", f"must be > 0 m (got {args.sync_tolerance})")
         if args.trace_every < 1:
             raise ConfigError("--trace-every", f"must be >= 1 (got {args.trace_every})")
+        if args.record_every < 1:
+            raise ConfigError("--record-every", f"must be >= 1 (got {args.record_every})")
         settings = master_settings(options.config)
         model = model_from_config(options.config)
         node = MasterNode.from_model(model, settings.safety)
@@ -108,6 +110,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     loop_options = MasterLoopOptions(
         peer_wait_s=args.peer_wait, sync_tolerance_m=args.sync_tolerance, spin_s=args.spin_s,
         trace_every=args.trace_every, trace_path=args.trace,
+        record_path=args.record, record_every=args.record_every, display=args.display,
     )
     return run_linked_master(options, model, node, hardware, loop_options,
                              {"rig": settings.rig, "analysis": analysis.as_dict()})

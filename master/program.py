@@ -31,9 +31,11 @@ from typing import Any
 import numpy as np
 
 from haptic.common.cli_options import RunOptions
+from haptic.common.display import DisplayPublisher, EventCursor
 from haptic.common.link import Link
 from haptic.common.messages import Flags, ToolState
 from haptic.common.model import TeleopModel
+from haptic.common.run_recording import RunRecording
 from haptic.common.runner import RealTimeRunner, StopSignals
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
@@ -43,6 +45,15 @@ from haptic.master.node import MasterNode, MasterNodeState, SafetyEvent
 
 #: Default tolerance of the resync position check, m per axis.
 DEFAULT_SYNC_TOLERANCE_M = 0.001
+
+#: The columns of ``/master/state`` in the recording (``--record``).
+MASTER_RECORD_COLUMNS = (
+    "time_s", "handle_force_x_N", "handle_force_y_N", "handle_position_x_m",
+    "handle_position_y_m", "received_tool_force_x_N", "received_tool_force_y_N",
+    "felt_force_x_N", "felt_force_y_N", "tool_position_x_m", "tool_position_y_m",
+    "command_x_m", "command_y_m", "sent_handle_force_x_N", "sent_handle_force_y_N",
+    "forces_enabled",
+)
 
 MASTER_TRACE_COLUMNS = (
     "time_s", "handle_force_x_N", "handle_force_y_N", "handle_position_x_m",
@@ -60,6 +71,9 @@ class MasterLoopOptions:
     spin_s: float = 0.0003
     trace_every: int = 10
     trace_path: str | None = None
+    record_path: str | None = None  # MCAP file of the run (--record)
+    record_every: int = 1
+    display: bool = True  # publish status at display rates for haptic-view
 
 
 @dataclass
@@ -112,7 +126,30 @@ def run_linked_master(
 ) -> int:
     """Run the master against the slave until the duration ends or SIGINT/SIGTERM; returns
     the exit status (0; 1 for a hardware error, no slave within ``peer_wait_s``, or a fault
-    that latched the safe state: a hardware fault or a trip of the node's safety layer)."""
+    that latched the safe state: a hardware fault or a trip of the node's safety layer).
+    With ``loop_options.record_path`` the run is recorded to MCAP (common/run_recording.py);
+    the file is closed properly on every way out."""
+    recording = None
+    if loop_options.record_path:
+        recording = RunRecording(loop_options.record_path, "master", MASTER_RECORD_COLUMNS,
+                                 model.sample_period_s, state_every=loop_options.record_every)
+    try:
+        return _run_linked_master(options, model, node, hardware, loop_options, extra_summary,
+                                  recording)
+    finally:
+        if recording is not None:
+            recording.close(time.time_ns(), None)
+
+
+def _run_linked_master(
+    options: RunOptions,
+    model: TeleopModel,
+    node: MasterNode,
+    hardware: HandleHardware,
+    loop_options: MasterLoopOptions,
+    extra_summary: dict[str, Any] | None,
+    recording: RunRecording | None,
+) -> int:
     period_s = model.sample_period_s
     ratio = np.array([axis.position_ratio_ah1 for axis in model.axes])
     link_config = options.link
@@ -149,6 +186,15 @@ def run_linked_master(
                 loop.hold_m = np.nan_to_num(reading.position_m).copy()
                 realtime_start_ns = time.time_ns()
                 perf_start_ns = time.perf_counter_ns()
+                if recording is not None:
+                    recording.start(realtime_start_ns, perf_start_ns, options.config)
+                status_every = max(1, round(0.1 / period_s))  # 10 Hz
+                cursor = EventCursor()
+                display = None
+                if loop_options.display and link.session is not None:
+                    display = DisplayPublisher(link.session, link_config.key_prefix,
+                                               "master").start()
+                view_every = display.state_every(period_s) if display is not None else 1
 
                 rx, ry = float(ratio[0]), float(ratio[1])
                 limit = node.safety.force_limit_N
@@ -229,6 +275,32 @@ def run_linked_master(
                                       tool_pos[1], command[0], command[1], float(enabled)))
                     else:
                         trace.skip()
+                    if recording is not None:
+                        if tool is not None:
+                            rft = tool.tool_force_N
+                            tool_pos = tool.tool_position_m
+                        else:
+                            rft = tool_pos = (math.nan, math.nan)
+                        recording.state(tick, now_ns, (
+                            now_s, fhx, fhy, yhx, yhy, rft[0], rft[1], felt[0], felt[1],
+                            tool_pos[0], tool_pos[1], float(command[0]), float(command[1]),
+                            sent[0], sent[1], float(enabled)))
+                    if display is not None and tick % view_every == 0:
+                        display.offer_state({
+                            "handle_force_N": [fhx, fhy], "handle_position_m": [yhx, yhy],
+                            "felt_force_N": [felt[0], felt[1]], "forces_enabled": enabled,
+                            "safe_state": not enabled})
+                    if tick % status_every == 0 and (recording is not None
+                                                     or display is not None):
+                        figures = link.summary()
+                        figures["watchdog_state"] = watchdog.state.value
+                        figures["watchdog_trips"] = watchdog.trips
+                        figures["forces_enabled"] = enabled
+                        new_events = cursor.new((watchdog.events, loop.node_events))
+                        if recording is not None:
+                            recording.status(now_ns, figures, new_events)
+                        if display is not None:
+                            display.offer_status(figures, new_events)
 
                 def status() -> str:
                     stats = link.stats()
@@ -255,6 +327,8 @@ def run_linked_master(
                     except Exception as error:  # noqa: BLE001 - shutting down regardless
                         print(f"haptic-master: while stopping: {error}", file=sys.stderr)
                     _flush_node_events(loop)
+                    if display is not None:
+                        display.stop()
                 link_summary = link.summary()
                 presence = [e.as_dict() for e in link.presence_events]
         except HardwareError as error:
@@ -281,9 +355,13 @@ def run_linked_master(
         hardware_faults=loop.hardware_faults[:50],
         node_faulted=loop.faulted, **(extra_summary or {}),
     )
+    if display is not None:
+        summary.update(display.figures)
     if loop_options.trace_path:
         trace.save(loop_options.trace_path)
         summary["trace"] = str(loop_options.trace_path)
+    if recording is not None:
+        summary.update(recording.close(time.time_ns(), summary))
     if options.json_summary is not None:
         write_json_summary(options.json_summary, summary)
     print(f"haptic-master: {format_summary(summary)}", file=sys.stderr, flush=True)

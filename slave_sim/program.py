@@ -36,9 +36,11 @@ import zenoh
 
 from haptic.common.cli_options import add_run_options, run_options_from_args
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
+from haptic.common.display import DisplayPublisher, EventCursor
 from haptic.common.link import Link
 from haptic.common.messages import Flags, HandleState
 from haptic.common.preflight import add_preflight_options, run_preflight
+from haptic.common.run_recording import RunRecording
 from haptic.common.runner import RealTimeRunner, StopSignals
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
@@ -50,6 +52,14 @@ from haptic.slave_sim.scenario import load_scenario
 WORK_AREA_MARGIN_M = 0.01
 #: Default tolerance of the resync position check, m per axis.
 DEFAULT_SYNC_TOLERANCE_M = 0.001
+
+#: The columns of ``/slave/state`` in the recording (``--record``).
+SLAVE_RECORD_COLUMNS = (
+    "time_s", "handle_force_x_N", "handle_force_y_N", "handle_position_x_m",
+    "handle_position_y_m", "tool_position_x_m", "tool_position_y_m", "tool_velocity_x_m_s",
+    "tool_velocity_y_m_s", "tool_force_x_N", "tool_force_y_N", "actuator_force_x_N",
+    "actuator_force_y_N", "engagement", "cutting", "removed_volume_m3", "running",
+)
 
 SLAVE_TRACE_COLUMNS = (
     "time_s", "handle_force_x_N", "handle_force_y_N", "handle_position_x_m",
@@ -97,6 +107,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ConfigError("--sync-tolerance", f"must be > 0 m (got {args.sync_tolerance})")
         if args.trace_every < 1:
             raise ConfigError("--trace-every", f"must be >= 1 (got {args.trace_every})")
+        if args.record_every < 1:
+            raise ConfigError("--record-every", f"must be >= 1 (got {args.record_every})")
         scenario = load_scenario(options.config["slave"]["scenario"])
     with exit_on_config_error():
         analysis, refused = run_preflight(options.config, args, "haptic-slave", side="slave",
@@ -115,7 +127,74 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
               extra_summary: dict[str, Any]) -> int:
-    """The networked slave loop; returns the exit status."""
+    """The networked slave loop; returns the exit status. With ``--record FILE`` the run is
+    recorded to MCAP (common/run_recording.py), the file closed properly on every way out."""
+    recording = None
+    if getattr(args, "record", None):
+        recording = RunRecording(args.record, "slave", SLAVE_RECORD_COLUMNS,
+                                 node.sample_period_s, state_every=args.record_every)
+    try:
+        return _run_slave(node, options, args, extra_summary, recording)
+    finally:
+        if recording is not None:
+            recording.close(time.time_ns(), None)
+
+
+def _record_clay(recording: RunRecording, state: Any, log_time_ns: int,
+                 layout: bool) -> None:
+    """The workpiece's layout (once) and its reduced height map into the recording."""
+    from haptic.slave_sim.clay_view import heights_message, reduction_factors, workpiece_layout
+
+    clay = state.environment
+    grid = clay.workpiece.grid
+    factors = reduction_factors(grid.cells_x, grid.cells_y)
+    if layout:
+        recording.record("/slave/workpiece", log_time_ns,
+                         workpiece_layout(clay.workpiece, factors))
+    recording.record("/slave/clay", log_time_ns, heights_message(clay.heights_m()[0], factors))
+
+
+#: Rate of the clay maps in the recording (taken from the display thread), Hz.
+RECORD_CLAY_RATE_HZ = 2.0
+
+
+def _display_publisher(link: Link, node: SlaveNode, state: Any,
+                       recording: RunRecording | None) -> DisplayPublisher:
+    """The slave's display publications: status, and the clay's height map read off the
+    loop (on a CPU clay, a view of the live array); with a recording, the reduced map also
+    goes into ``/slave/clay`` at :data:`RECORD_CLAY_RATE_HZ`."""
+    clay_source = layout = on_clay = None
+    factors = (1, 1)
+    if node.environment_kind == "clay":
+        from haptic.slave_sim.clay_view import reduction_factors, workpiece_layout
+
+        clay = state.environment
+        grid = clay.workpiece.grid
+        factors = reduction_factors(grid.cells_x, grid.cells_y)
+        layout = workpiece_layout(clay.workpiece, factors)
+        heights = clay.heights
+
+        def clay_source() -> np.ndarray:
+            view = heights.numpy() if hasattr(heights, "numpy") else heights
+            return view[0]
+
+        if recording is not None:
+            last = [0]
+
+            def on_clay(time_ns: int, reduced: np.ndarray) -> None:
+                if time_ns - last[0] >= 1e9 / RECORD_CLAY_RATE_HZ:
+                    last[0] = time_ns
+                    recording.record("/slave/clay", time_ns, {
+                        "cells_x": int(reduced.shape[1]), "cells_y": int(reduced.shape[0]),
+                        "heights_mm": np.round(reduced * 1e3, 4).tolist()})
+
+    return DisplayPublisher(link.session, link.config.key_prefix, "slave",
+                            clay_source=clay_source, layout=layout, factors=factors,
+                            on_clay=on_clay).start()
+
+
+def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
+               extra_summary: dict[str, Any], recording: RunRecording | None) -> int:
     period_s = node.sample_period_s
     link_config = options.link
     watchdog = PeerWatchdog(link_config.max_message_age_s, link_config.resync_messages)
@@ -148,6 +227,19 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             return 1
         realtime_start_ns = time.time_ns()
         perf_start_ns = time.perf_counter_ns()
+        clay_recorded = recording is not None and node.environment_kind == "clay"
+        if recording is not None:
+            recording.start(realtime_start_ns, perf_start_ns, options.config)
+            if clay_recorded:
+                recording.add_channel("/slave/workpiece")
+                recording.add_channel("/slave/clay")
+                _record_clay(recording, state, realtime_start_ns, layout=True)
+        status_every = max(1, round(0.1 / period_s))  # 10 Hz
+        cursor = EventCursor()
+        display = None
+        if getattr(args, "display", False) and link.session is not None:
+            display = _display_publisher(link, node, state, recording)
+        view_every = display.state_every(period_s) if display is not None else 1
 
         def step(tick: int, now_ns: int) -> None:
             nonlocal fh, yh
@@ -218,6 +310,31 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                               float(out.cutting[0]), float(running)))
             else:
                 trace.skip()
+            if recording is not None:
+                vt = out.actuator_force_N[0]
+                recording.state(tick, now_ns, (
+                    now_s, float(fh[0, 0]), float(fh[0, 1]), float(yh[0, 0]), float(yh[0, 1]),
+                    float(position[0]), float(position[1]), float(velocity[0]),
+                    float(velocity[1]), float(ft[0]), float(ft[1]), float(vt[0]), float(vt[1]),
+                    engagement, float(out.cutting[0]), removed, float(running)))
+            if display is not None and tick % view_every == 0:
+                display.offer_state({
+                    "tool_force_N": [float(ft[0]), float(ft[1])],
+                    "tool_position_m": [float(position[0]), float(position[1])],
+                    "tool_velocity_m_s": [float(velocity[0]), float(velocity[1])],
+                    "clay_engagement": engagement, "removed_volume_m3": removed,
+                    "in_contact": bool(out.cutting[0]), "forces_enabled": ready_flag,
+                    "safe_state": not ready_flag})
+            if tick % status_every == 0 and (recording is not None or display is not None):
+                figures = link.summary()
+                figures["watchdog_state"] = watchdog.state.value
+                figures["watchdog_trips"] = watchdog.trips
+                figures["running"] = running
+                new_events = cursor.new((watchdog.events, events))
+                if recording is not None:
+                    recording.status(now_ns, figures, new_events)
+                if display is not None:
+                    display.offer_status(figures, new_events)
 
         def status() -> str:
             stats = link.stats()
@@ -237,6 +354,8 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             position = state.tool_position_m()[0]
             link.send_tool((0.0, 0.0), (float(position[0]), float(position[1])), (0.0, 0.0),
                            0.0, flags_box["removed"], Flags.SAFE_STATE)
+            if display is not None:
+                display.stop()
         link_summary = link.summary()
         presence = [e.as_dict() for e in link.presence_events]
     for event in presence:
@@ -251,6 +370,8 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         removed_volume_m3=flags_box["removed"],
         final_tool_position_m=[float(final[0]), float(final[1])], **extra_summary,
     )
+    if display is not None:
+        summary.update(display.figures)
     summary.update(cutting_figures(trace.arrays()))
     if args.out is not None:
         out = Path(args.out)
@@ -265,6 +386,11 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 title=f"{node.scenario.name}: networked run, {run.elapsed_s:.1f} s")
             summary["clay_npz"] = str(out / "clay.npz")
             summary["clay_png"] = str(out / "clay.png")
+    if recording is not None:
+        end_ns = time.time_ns()
+        if clay_recorded:
+            _record_clay(recording, state, end_ns, layout=False)
+        summary.update(recording.close(end_ns, summary))
     if options.json_summary is not None:
         write_json_summary(options.json_summary, summary)
     print(f"haptic-slave: {format_summary(summary)}", file=sys.stderr, flush=True)

@@ -1,0 +1,191 @@
+"""Benchmark of the interfaces: the recorder's cost in the loop, its writer's throughput, and
+the live view's update rate during a real run.
+
+1. Recorder, loop side: the time of one ``RunRecording.state`` call (what the loop pays per
+   tick with ``--record``), and the writer thread's throughput (messages encoded and written
+   per second) with its drops at a given queue size.
+2. A networked run on loopback (``haptic-slave`` cutting clay, ``haptic-master`` with the
+   regulating operator, both with ``--record``, and ``haptic-view``): frames per second that
+   one SSE client of the view receives, the view's state update rate, the recorders' drops
+   and the slave's display-publication cost (s per publication, mean and largest).
+
+    python bench/view_bench.py [--duration S] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+import uuid
+from pathlib import Path
+
+from haptic.common.run_recording import RunRecording
+
+
+def recorder_figures(calls: int = 50_000) -> dict[str, float]:
+    """Loop-side cost per call and the writer's throughput, with 17 columns as the slave."""
+    from haptic.slave_sim.program import SLAVE_RECORD_COLUMNS
+
+    values = tuple(float(i) for i in range(len(SLAVE_RECORD_COLUMNS)))
+    with tempfile.TemporaryDirectory() as folder:
+        recording = RunRecording(Path(folder) / "bench.mcap", "slave", SLAVE_RECORD_COLUMNS,
+                                 0.00054, queue_size=calls + 10)
+        recording.start(time.time_ns(), time.perf_counter_ns(), None)
+        state = recording.state
+        costs = []
+        for block in range(calls // 1000):
+            started = time.perf_counter_ns()
+            for i in range(1000):
+                state(block * 1000 + i, time.perf_counter_ns(), values)
+            costs.append((time.perf_counter_ns() - started) / 1000)
+        write_start = time.perf_counter()
+        figures = recording.close(time.time_ns(), None)
+        drain_s = time.perf_counter() - write_start
+    costs.sort()
+    return {"record_call_mean_s": sum(costs) / len(costs) * 1e-9,
+            "record_call_p99_block_s": costs[int(0.99 * (len(costs) - 1))] * 1e-9,
+            "writer_messages": figures["record_written"],
+            "writer_drain_after_loop_s": drain_s,
+            "writer_messages_per_s_lower_bound": figures["record_written"] / max(drain_s, 1e-9)}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def pair_figures(duration_s: float, record: bool, display: bool) -> dict[str, float]:
+    """The same networked run without the view, with or without ``--record`` and the display
+    publications: the loops' rate and overruns, to attribute the cost."""
+    tmp = Path(tempfile.mkdtemp(prefix="view-bench-pair-"))
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    common = ["--key-prefix", f"bench/{uuid.uuid4().hex[:8]}",
+              "--display" if display else "--no-display"]
+    run = ["--no-status", "--peer-wait", "30", "--duration", str(duration_s)]
+    record_m = ["--record", str(tmp / "master.mcap")] if record else []
+    record_s = ["--record", str(tmp / "slave.mcap")] if record else []
+    processes = [
+        subprocess.Popen([sys.executable, "-m", "haptic.master.cli", *common, *run, "--listen",
+                          endpoint, "--rig", "model", "--operator",
+                          "regulate:fx=3.6,onset=0.2,max=5", *record_m, "--json-summary",
+                          str(tmp / "master.json")], stderr=subprocess.DEVNULL),
+        subprocess.Popen([sys.executable, "-m", "haptic.slave_sim.program", *common, *run,
+                          "--connect", endpoint, *record_s, "--json-summary",
+                          str(tmp / "slave.json")], stderr=subprocess.DEVNULL),
+    ]
+    try:
+        for process in processes:
+            process.wait(timeout=duration_s + 90)
+    finally:
+        for process in processes:
+            if process.poll() is None:
+                process.kill()
+            process.wait(timeout=10)
+    master = json.loads((tmp / "master.json").read_text())
+    slave = json.loads((tmp / "slave.json").read_text())
+    return {"master_rate_hz": master["rate_hz"], "slave_rate_hz": slave["rate_hz"],
+            "master_overruns": master["overruns"], "slave_overruns": slave["overruns"],
+            "master_steps": master["steps"], "slave_steps": slave["steps"]}
+
+
+def run_figures(duration_s: float) -> dict[str, float]:
+    """The networked run with the view (see the module docstring)."""
+    tmp = Path(tempfile.mkdtemp(prefix="view-bench-"))
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    prefix = f"bench/{uuid.uuid4().hex[:8]}"
+    port = _free_port()
+    common = ["--key-prefix", prefix]
+    run = ["--no-status", "--peer-wait", "30", "--duration", str(duration_s)]
+    processes = [
+        subprocess.Popen([sys.executable, "-m", "haptic.view.cli", *common, "--connect",
+                          endpoint, "--port", str(port)], stderr=subprocess.DEVNULL),
+        subprocess.Popen([sys.executable, "-m", "haptic.master.cli", *common, *run, "--listen",
+                          endpoint, "--rig", "model", "--operator",
+                          "regulate:fx=3.6,onset=0.2,max=5", "--record",
+                          str(tmp / "master.mcap"), "--json-summary", str(tmp / "master.json")],
+                         stderr=subprocess.DEVNULL),
+        subprocess.Popen([sys.executable, "-m", "haptic.slave_sim.program", *common, *run,
+                          "--connect", endpoint, "--record", str(tmp / "slave.mcap"),
+                          "--json-summary", str(tmp / "slave.json")],
+                         stderr=subprocess.DEVNULL),
+    ]
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/state", timeout=1) as r:
+                    if json.loads(r.read())["tool"] is not None:
+                        break
+            except OSError:
+                pass
+            time.sleep(0.1)
+        frames = 0
+        window = max(1.0, duration_s / 2)
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/events", timeout=5) as stream:
+            started = time.monotonic()
+            while time.monotonic() - started < window:
+                line = stream.readline()
+                if line.startswith(b"data: "):
+                    frames += 1
+            elapsed = time.monotonic() - started
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/stats", timeout=5) as r:
+            stats = json.loads(r.read())
+        for process in processes[1:]:
+            process.wait(timeout=duration_s + 60)
+    finally:
+        for process in processes:
+            if process.poll() is None:
+                process.kill()
+            process.wait(timeout=10)
+    master = json.loads((tmp / "master.json").read_text())
+    slave = json.loads((tmp / "slave.json").read_text())
+    return {"view_frames_per_s": frames / elapsed,
+            "view_state_updates_per_s_since_start": stats["state_update_rate_hz"],
+            "master_rate_hz": master["rate_hz"], "slave_rate_hz": slave["rate_hz"],
+            "master_overruns": master["overruns"], "slave_overruns": slave["overruns"],
+            "master_steps": master["steps"], "slave_steps": slave["steps"],
+            "master_record_written": master["record_written"],
+            "master_record_dropped": master["record_dropped"],
+            "slave_record_written": slave["record_written"],
+            "slave_record_dropped": slave["record_dropped"],
+            "slave_display_publications": slave.get("display_publications"),
+            "slave_display_mean_cost_s": slave.get("display_mean_cost_s"),
+            "slave_display_max_cost_s": slave.get("display_max_cost_s")}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--duration", type=float, default=6.0, help="networked run, s")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    figures = {"recorder": recorder_figures(), "run": run_figures(args.duration),
+               "record only (no view, no display)": pair_figures(args.duration, True, False),
+               "display only (no view, no record)": pair_figures(args.duration, False, True),
+               "baseline (no view, no display, no record)":
+                   pair_figures(args.duration, False, False)}
+    if args.json:
+        print(json.dumps(figures, indent=2))
+        return 0
+    r = figures["recorder"]
+    print(f"recorder, loop side: {r['record_call_mean_s'] * 1e6:.2f} us per tick (mean), "
+          f"{r['record_call_p99_block_s'] * 1e6:.2f} us (p99 of 1000-call blocks)")
+    print(f"recorder, writer: {r['writer_messages']} messages drained in "
+          f"{r['writer_drain_after_loop_s']:.2f} s after the loop")
+    for title in figures:
+        if title == "recorder":
+            continue
+        print("record, display and view:" if title == "run" else f"{title}:")
+        for key, value in figures[title].items():
+            print(f"  {key}: {value:.6g}" if isinstance(value, float) else f"  {key}: {value}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,78 @@
+"""``haptic-view [--port N] [--config FILE]``: the live view of a run in the browser.
+
+Joins the run's Zenoh session (by default the way the slave does: it connects to the master's
+listener, ``[link.slave.endpoints]``; ``--connect`` replaces it) and serves the page on
+``http://127.0.0.1:PORT/`` until SIGINT or SIGTERM. Open that address in a browser.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+
+import zenoh
+
+from haptic.common.config import exit_on_config_error, load_config, override
+from haptic.common.link import zenoh_config
+from haptic.common.link_config import link_config_from, split_endpoints
+from haptic.common.runner import StopSignals
+from haptic.view.server import DEFAULT_MAX_RATE_HZ, ViewServer
+from haptic.view.source import ZenohSource
+from haptic.view.state import ViewState
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="haptic-view", description=__doc__.split("\n")[0])
+    parser.add_argument("--port", metavar="N", type=int, default=8765,
+                        help="HTTP port on 127.0.0.1 (default 8765; 0: any free port)")
+    parser.add_argument("--config", metavar="FILE", help="TOML configuration (over the defaults)")
+    parser.add_argument("--connect", metavar="ENDPOINT", action="append",
+                        help="Zenoh endpoint to connect to (default: the slave's, "
+                        "link.slave.endpoints.connect)")
+    parser.add_argument("--key-prefix", metavar="PREFIX", help="key prefix of the rig")
+    parser.add_argument("--rate", metavar="HZ", type=float, default=DEFAULT_MAX_RATE_HZ,
+                        help=f"display rate: Zenoh polls and frames per second per browser "
+                        f"(default {DEFAULT_MAX_RATE_HZ:g})")
+    return parser
+
+
+def view_zenoh_config(config: dict, connect: Sequence[str] | None) -> zenoh.Config:
+    """The view's Zenoh configuration: the slave's transport settings, connecting where the
+    slave connects (or to ``connect``) and listening on a free loopback port so the peers'
+    gossip can reach it."""
+    changes = {"listen": ("tcp/127.0.0.1:0",)}
+    if connect:
+        changes["connect"] = tuple(e for item in connect for e in split_endpoints(item))
+    return zenoh_config(link_config_from(config, "slave", **changes))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point: 0 after SIGINT/SIGTERM; 2 for a configuration error."""
+    args = build_parser().parse_args(argv)
+    zenoh.init_log_from_env_or("error")
+    with exit_on_config_error():
+        config = load_config(args.config)
+        if args.key_prefix is not None:
+            config = override(config, "link.transport.key_prefix", args.key_prefix)
+        if not args.rate > 0.0:
+            from haptic.common.config import ConfigError
+
+            raise ConfigError("--rate", f"must be > 0 Hz (got {args.rate})")
+        zconf = view_zenoh_config(config, args.connect)
+    prefix = config["link"]["transport"]["key_prefix"]
+    state = ViewState()
+    with StopSignals() as signals, ZenohSource(zconf, prefix, state, args.rate), \
+            ViewServer(state, args.port, max_rate_hz=args.rate) as server:
+        print(f"haptic-view: {server.url} (keys {prefix}/...)", file=sys.stderr, flush=True)
+        while not signals.requested:
+            time.sleep(0.2)
+    stats = server.stats()
+    print(f"haptic-view: {stats['frames_sent']} frames sent, {stats['state_updates']} "
+          f"updates", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
