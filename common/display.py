@@ -94,6 +94,9 @@ class DisplayPublisher:
         self._clay_period_s = 1.0 / clay_rate_hz
         self._clay_source = clay_source
         self._layout = layout
+        # encoded once: the layout lists every reduced cell, and json.dumps of it holds the
+        # GIL for about 1.5 ms, which stalled the slave's loop once a second
+        self._layout_bytes = json.dumps(layout).encode() if layout is not None else b""
         self._factors = factors
         self._on_clay = on_clay
         self._status: dict[str, Any] | None = None
@@ -183,7 +186,7 @@ class DisplayPublisher:
             if self._clay_source is not None and self._layout is not None:
                 if now >= next_layout:
                     next_layout = now + 1.0
-                    self._put(session, layout_key, json.dumps(self._layout).encode())
+                    self._put(session, layout_key, self._layout_bytes)
                 if now >= next_clay:
                     next_clay = now + self._clay_period_s
                     started = time.perf_counter()
