@@ -163,11 +163,7 @@ def echo_node(side: str, argv: list[str]) -> int:
     status."""
     parser = argparse.ArgumentParser(prog=f"loop_bench {side}")
     add_run_options(parser)
-    parser.add_argument(
-        "--spin-s", type=float, default=0.0003, help="runner: spin this long before a tick, s"
-    )
     args = parser.parse_args(argv)
-    spin_s = args.spin_s
     with exit_on_config_error():
         options = run_options_from_args(args, side)
     config = options.config
@@ -209,7 +205,8 @@ def echo_node(side: str, argv: list[str]) -> int:
 
         runner = RealTimeRunner(
             period_s, step, duration_s=options.duration_s, status=status,
-            spin_s=spin_s, stop_signals=signals,
+            spin_s=options.runner.spin_s, realtime=options.runner.realtime,
+            stop_signals=signals,
             show_status=options.show_status,
         )
         run = runner.run()

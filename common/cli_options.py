@@ -31,6 +31,7 @@ from typing import Any
 from haptic.common.config import ConfigError, load_config, override
 from haptic.common.injection import JITTER_DISTRIBUTIONS
 from haptic.common.link_config import MODES, SIDES, LinkConfig, link_config_from
+from haptic.common.runner_config import RunnerSettings, runner_settings_from
 
 # flag dest -> key under [link.<side>.injection]
 _INJECTION_FLAGS = {
@@ -42,6 +43,12 @@ _INJECTION_FLAGS = {
     "burst_exit": ("--burst-exit", "burst_exit_probability"),
     "burst_loss": ("--burst-loss", "burst_loss_probability"),
     "seed": ("--seed", "seed"),
+}
+# flag dest -> key under [runner]
+_RUNNER_FLAGS = {
+    "spin_s": ("--spin-s", "spin_s"),
+    "rt_priority": ("--rt-priority", "realtime_priority"),
+    "loop_cpus": ("--loop-cpus", "loop_cpus"),
 }
 # flag dest -> key under [link]
 _LINK_FLAGS = {
@@ -58,7 +65,8 @@ class RunOptions:
     ``config``: the whole validated configuration (with the flags applied); ``link``: this
     side's :class:`LinkConfig`; ``duration_s``: run length in s (``None``: until SIGINT or
     SIGTERM); ``json_summary``: where to write the JSON summary (or ``None``);
-    ``show_status``: the live status line (``None``: when stderr is a terminal).
+    ``show_status``: the live status line (``None``: when stderr is a terminal);
+    ``runner``: the loop's pacing and scheduling (``[runner]``).
     """
 
     config: dict[str, Any]
@@ -66,6 +74,7 @@ class RunOptions:
     duration_s: float | None
     json_summary: Path | None
     show_status: bool | None
+    runner: RunnerSettings
 
 
 def add_run_options(parser: argparse.ArgumentParser) -> None:
@@ -93,8 +102,21 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
         help="publish the status (and the slave's clay) at display rates for haptic-view "
         "(default: on)",
     )
+    add_loop_options(parser)
     add_connection_options(parser)
     add_injection_options(parser)
+
+
+def add_loop_options(parser: argparse.ArgumentParser) -> None:
+    """The real-time loop's pacing and scheduling (``[runner]``)."""
+    group = parser.add_argument_group("real-time loop")
+    group.add_argument("--spin-s", metavar="S", type=float,
+                       help="spin on the clock this long before each tick, s (runner.spin_s)")
+    group.add_argument("--rt-priority", metavar="N", type=int,
+                       help="SCHED_FIFO priority of the loop thread, 0 for normal scheduling "
+                       "(runner.realtime_priority)")
+    group.add_argument("--loop-cpus", metavar="CPUS",
+                       help="CPUs of the loop thread, e.g. 1 or 0,2-3 (runner.loop_cpus)")
 
 
 def add_connection_options(parser: argparse.ArgumentParser) -> None:
@@ -183,6 +205,10 @@ def run_options_from_args(
         value = getattr(args, dest, None)
         if value is not None:
             config = _set(config, flag, f"link.{key}", value)
+    for dest, (flag, key) in _RUNNER_FLAGS.items():
+        value = getattr(args, dest, None)
+        if value is not None:
+            config = _set(config, flag, f"runner.{key}", value)
     for dest, (flag, key) in _INJECTION_FLAGS.items():
         value = getattr(args, dest, None)
         if value is not None:
@@ -211,6 +237,7 @@ def run_options_from_args(
         duration_s=duration,
         json_summary=Path(summary) if summary else None,
         show_status=getattr(args, "status", None),
+        runner=runner_settings_from(config),
     )
 
 

@@ -2,7 +2,10 @@
 
 :class:`RealTimeRunner` calls a user step function once per tick and does none of the node's
 work itself. Pacing: sleep until ``spin_s`` before the deadline, then spin on the clock (pure
-sleep misses by 50-350 us on a loaded Linux box; the spin absorbs the sleep's lateness).
+sleep misses by 50-350 us on a loaded Linux box; the spin absorbs the sleep's lateness). With
+``realtime`` (:class:`~haptic.common.realtime.RealtimeSettings`) the loop thread gets tight
+timers, and SCHED_FIFO or pinned CPUs if asked, for the run: a sleep then wakes within a few us
+and the spin can be short, which leaves the CPUs to Zenoh's threads (common/realtime.py).
 
 Definitions (all on the runner's monotonic clock, :func:`time.perf_counter_ns`):
 
@@ -31,6 +34,7 @@ from dataclasses import dataclass
 from typing import TextIO
 
 from haptic.common.histogram import LogHistogram
+from haptic.common.realtime import AppliedScheduling, LoopThreadScheduling, RealtimeSettings
 
 
 class StopSignals:
@@ -80,6 +84,7 @@ class RunStats:
     stalls: int
     skipped_ticks: int
     stop_reason: str
+    scheduling: AppliedScheduling | None = None
 
     @property
     def overrun_ratio(self) -> float:
@@ -100,6 +105,7 @@ class RunStats:
             "steps": self.steps,
             "duration_s": self.elapsed_s,
             "stop_reason": self.stop_reason,
+            **(self.scheduling.as_summary() if self.scheduling is not None else {}),
         }
 
 
@@ -109,7 +115,8 @@ class RealTimeRunner:
     ``clock_ns`` and ``sleep`` are injectable (tests drive a fake clock). ``status`` returns
     extra text for the live status line (link delay, loss, force); the line is written to
     ``status_stream`` every ``status_interval_s`` when ``show_status`` is true (default: when
-    the stream is a terminal). ``stop_signals``: an outer :class:`StopSignals` the loop checks
+    the stream is a terminal). ``realtime``: how the loop thread is scheduled during
+    :meth:`run` (``None``: left as it is). ``stop_signals``: an outer :class:`StopSignals` the loop checks
     (then the runner installs no handlers of its own); otherwise, with ``handle_signals``, the
     runner installs its own for the duration of :meth:`run`.
     """
@@ -129,6 +136,7 @@ class RealTimeRunner:
         show_status: bool | None = None,
         handle_signals: bool = True,
         stop_signals: StopSignals | None = None,
+        realtime: RealtimeSettings | None = None,
     ) -> None:
         if not period_s > 0.0:
             raise ValueError(f"period_s must be > 0 (got {period_s})")
@@ -149,6 +157,8 @@ class RealTimeRunner:
         self._show_status = show_status
         self._handle_signals = handle_signals
         self._signals = stop_signals
+        self._realtime = realtime
+        self.scheduling: AppliedScheduling | None = None
         self._stop = False
         self.stop_reason = ""
         self._errors = LogHistogram()
@@ -175,7 +185,12 @@ class RealTimeRunner:
         try:
             if own:
                 signals.__enter__()
-            self._loop(signals)
+            if self._realtime is None:
+                self._loop(signals)
+            else:
+                with LoopThreadScheduling(self._realtime) as applied:
+                    self.scheduling = applied
+                    self._loop(signals)
         finally:
             if own:
                 signals.__exit__(None, None, None)
@@ -264,4 +279,5 @@ class RealTimeRunner:
             stalls=self.stalls,
             skipped_ticks=self.skipped_ticks,
             stop_reason=self.stop_reason,
+            scheduling=self.scheduling,
         )

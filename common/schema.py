@@ -9,6 +9,7 @@ from typing import Any
 
 from haptic.common.config import Field, Schema
 from haptic.common.link_config import LINK_SCHEMA
+from haptic.common.runner_config import RUNNER_SCHEMA
 from haptic.lockstep.schema import LOCKSTEP_SCHEMA
 from haptic.master.schema import MASTER_SCHEMA
 from haptic.slave_sim.schema import SLAVE_SCHEMA
@@ -125,4 +126,5 @@ SCHEMA: Schema = {
     "master": MASTER_SCHEMA,
     "link": LINK_SCHEMA,
     "lockstep": LOCKSTEP_SCHEMA,
+    "runner": RUNNER_SCHEMA,
 }

@@ -44,8 +44,6 @@ def build_parser() -> argparse.ArgumentParser:
                        default=DEFAULT_SYNC_TOLERANCE_M,
                        help="resync: |tool - Ah1 handle| below this on both axes, m "
                        f"(default {DEFAULT_SYNC_TOLERANCE_M:g})")
-    group.add_argument("--spin-s", metavar="S", type=float, default=0.0003,
-                       help="runner: spin this long before each tick, s (default 0.0003)")
     group.add_argument("--trace", metavar="FILE",
                        help="write a trace (every --trace-every-th tick) as .npz at the end")
     group.add_argument("--trace-every", metavar="N", type=int, default=10)
@@ -108,7 +106,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     with exit_on_config_error():
         hardware = create_hardware(settings.rig, options.config)
     loop_options = MasterLoopOptions(
-        peer_wait_s=args.peer_wait, sync_tolerance_m=args.sync_tolerance, spin_s=args.spin_s,
+        peer_wait_s=args.peer_wait, sync_tolerance_m=args.sync_tolerance,
         trace_every=args.trace_every, trace_path=args.trace,
         record_path=args.record, record_every=args.record_every, display=args.display,
     )

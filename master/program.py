@@ -68,7 +68,6 @@ class MasterLoopOptions:
 
     peer_wait_s: float | None = None  # None: wait for the slave until stopped
     sync_tolerance_m: float = DEFAULT_SYNC_TOLERANCE_M
-    spin_s: float = 0.0003
     trace_every: int = 10
     trace_path: str | None = None
     record_path: str | None = None  # MCAP file of the run (--record)
@@ -309,7 +308,8 @@ def _run_linked_master(
                             f"{loop.last_fh[0]:+.2f} N  ft {loop.last_ft[0]:+.2f} N")
 
                 runner = RealTimeRunner(
-                    period_s, step, duration_s=options.duration_s, spin_s=loop_options.spin_s,
+                    period_s, step, duration_s=options.duration_s,
+                    spin_s=options.runner.spin_s, realtime=options.runner.realtime,
                     status=status, show_status=options.show_status, stop_signals=signals,
                 )
                 try:

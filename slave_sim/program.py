@@ -84,8 +84,6 @@ def build_parser() -> argparse.ArgumentParser:
                        default=DEFAULT_SYNC_TOLERANCE_M,
                        help=f"resync: |tool - Ah1 handle| below this, m "
                        f"(default {DEFAULT_SYNC_TOLERANCE_M:g})")
-    group.add_argument("--spin-s", metavar="S", type=float, default=0.0003,
-                       help="runner: spin this long before each tick, s (default 0.0003)")
     group.add_argument("--trace-every", metavar="N", type=int, default=10,
                        help="keep every Nth tick in the trace (default 10)")
     return parser
@@ -343,7 +341,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                     f"{flags_box['ft'][0]:+.2f} N  engagement {flags_box['engagement']:.2f}")
 
         runner = RealTimeRunner(
-            period_s, step, duration_s=options.duration_s, spin_s=args.spin_s, status=status,
+            period_s, step, duration_s=options.duration_s, spin_s=options.runner.spin_s,
+            realtime=options.runner.realtime, status=status,
             show_status=options.show_status, stop_signals=signals,
         )
         try:
