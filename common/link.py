@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import zenoh
@@ -34,7 +34,8 @@ from haptic.common.messages import (
     HandleState,
     Message,
     ToolState,
-    encode,
+    encode_around_send_time,
+    send_time_bytes,
 )
 from haptic.common.receive import LinkStats, ReceivePath
 
@@ -177,21 +178,26 @@ class Link:
 
     # -- sending -----------------------------------------------------------------------------
 
-    def next_header(self) -> tuple[int, int, int]:
-        """``(epoch, seq, send_time_ns)`` for the next message; consumes a sequence number."""
+    def next_sequence(self) -> int:
+        """The sequence number of the next message (consumes it)."""
         seq = self._seq
         self._seq = seq + 1
-        return self.epoch, seq, self._clock_ns()
+        return seq
 
-    def send(self, message: Message) -> None:
-        """Publish a message (its kind must be this side's). A Zenoh error is counted in
-        ``send_errors``, not raised: the loop must keep its period."""
+    def send(self, message: Message) -> Message:
+        """Stamp ``message`` with the send time (its own ``send_time_ns`` is ignored) and
+        publish it; returns it as sent. The time is taken after the encoding, right before
+        the put, so the measured one-way delay is the link's, not the encoder's. A Zenoh
+        error is counted in ``send_errors``, not raised: the loop must keep its period. Raises
+        ``ValueError`` for a non-finite value (the nodes never send one)."""
         if message.KIND != self._send_kind:
             raise TypeError(f"the {self.config.side} side sends kind {self._send_kind} only")
-        payload = encode(message)
+        before, after = encode_around_send_time(message)
         publisher = self._publisher
         if publisher is None:
             raise RuntimeError("link is not open")
+        send_ns = self._clock_ns()
+        payload = before + send_time_bytes(send_ns) + after
         try:
             if self._instrumentation is not None:
                 publisher.put(payload, timestamp_instrumentation=self._instrumentation)
@@ -200,6 +206,7 @@ class Link:
             self.sent += 1
         except Exception:  # noqa: BLE001 - a failed put is a lost message, never a crash
             self.send_errors += 1
+        return replace(message, send_time_ns=send_ns)
 
     def send_handle(
         self,
@@ -208,10 +215,9 @@ class Link:
         flags: Flags = NO_FLAGS,
     ) -> HandleState:
         """Master: stamp and publish the handle's force (N) and position (m)."""
-        epoch, seq, send_ns = self.next_header()
-        message = HandleState(epoch, seq, send_ns, flags, handle_force_N, handle_position_m)
-        self.send(message)
-        return message
+        message = HandleState(self.epoch, self.next_sequence(), 0, flags, handle_force_N,
+                              handle_position_m)
+        return self.send(message)  # type: ignore[return-value]
 
     def send_tool(
         self,
@@ -224,13 +230,11 @@ class Link:
     ) -> ToolState:
         """Slave: stamp and publish the tool's force (N), position (m), velocity (m/s) and the
         clay's status."""
-        epoch, seq, send_ns = self.next_header()
         message = ToolState(
-            epoch, seq, send_ns, flags, tool_force_N, tool_position_m, tool_velocity_m_s,
-            clay_engagement, removed_volume_m3,
+            self.epoch, self.next_sequence(), 0, flags, tool_force_N, tool_position_m,
+            tool_velocity_m_s, clay_engagement, removed_volume_m3,
         )
-        self.send(message)
-        return message
+        return self.send(message)  # type: ignore[return-value]
 
     # -- receiving ---------------------------------------------------------------------------
 

@@ -15,7 +15,9 @@ Every message is a msgpack array (compact: no field names on the wire)::
 ``seq``
     the sender's message counter within the epoch (unsigned 63 bit), +1 per message.
 ``send_time_ns``
-    the sender's ``CLOCK_REALTIME`` (:func:`time.time_ns`) when the message was built, ns.
+    the sender's ``CLOCK_REALTIME`` (:func:`time.time_ns`) when the message was handed to
+    Zenoh, ns; always a msgpack uint64 (``0xcf`` and 8 big-endian bytes), so a sender can
+    encode everything else first and stamp the time last (:func:`encode_around_send_time`).
 ``flags``
     a bit field of :class:`Flags`.
 payload, :class:`HandleState` (4 floats)
@@ -147,8 +149,11 @@ Message = HandleState | ToolState
 _packer = msgpack.Packer(use_bin_type=True, use_single_float=False)
 
 
-def encode(message: Message) -> bytes:
-    """The msgpack bytes of ``message``. Raises ``ValueError`` for a non-finite value."""
+def encode_around_send_time(message: Message) -> tuple[bytes, bytes]:
+    """The msgpack bytes of ``message`` before and after its send time: the payload is
+    ``before + send_time_bytes(t) + after`` for any send time ``t``. The sender stamps the
+    time last, so the measured one-way delay starts when the message goes to Zenoh, not
+    before its encoding. Raises ``ValueError`` for a non-finite value."""
     if isinstance(message, HandleState):
         floats = (*message.handle_force_N, *message.handle_position_m)
     elif isinstance(message, ToolState):
@@ -164,17 +169,27 @@ def encode(message: Message) -> bytes:
     values = [float(v) for v in floats]
     if not all(map(math.isfinite, values)):
         raise ValueError(f"non-finite value in {type(message).__name__}: {values}")
-    return _packer.pack(
-        [
-            SCHEMA_VERSION,
-            message.KIND,
-            int(message.epoch),
-            int(message.seq),
-            int(message.send_time_ns),
-            int(message.flags),
-            *values,
-        ]
-    )
+    pack = _packer.pack
+    before = b"".join((
+        _packer.pack_array_header(6 + len(values)),
+        pack(SCHEMA_VERSION),
+        pack(message.KIND),
+        pack(int(message.epoch)),
+        pack(int(message.seq)),
+    ))
+    after = b"".join((pack(int(message.flags)), *map(pack, values)))
+    return before, after
+
+
+def send_time_bytes(send_time_ns: int) -> bytes:
+    """The send time as a msgpack uint64 (9 bytes), ns since the epoch of CLOCK_REALTIME."""
+    return b"\xcf" + int(send_time_ns).to_bytes(8, "big")
+
+
+def encode(message: Message) -> bytes:
+    """The msgpack bytes of ``message``. Raises ``ValueError`` for a non-finite value."""
+    before, after = encode_around_send_time(message)
+    return before + send_time_bytes(message.send_time_ns) + after
 
 
 def _is_int(value: Any) -> bool:
