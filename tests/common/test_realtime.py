@@ -1,0 +1,436 @@
+"""Scheduling of the loop thread: LoopThreadScheduling against a fake OS (the order of the
+calls, refusals as warnings, restoring on exit), then against the real Linux calls, each in a
+fresh thread so the test process's main thread keeps its scheduling. No timing is asserted."""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from haptic.common import realtime
+from haptic.common.realtime import (
+    TIGHT_TIMER_SLACK_NS,
+    AppliedScheduling,
+    LoopThreadScheduling,
+    OsScheduling,
+    RealtimeSettings,
+)
+from haptic.common.runner import RealTimeRunner
+
+SCHED_OTHER = getattr(os, "SCHED_OTHER", 0)
+SCHED_FIFO = getattr(os, "SCHED_FIFO", 1)
+DEFAULT_SLACK_NS = 50_000
+linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux calls")
+
+
+class FakeOs(OsScheduling):
+    """A thread's scheduling state, with every call logged. ``refuse`` maps a method name to
+    the exception it raises (and then changes nothing). ``rt_zero_slack`` mimics Linux >= 6.9:
+    a SCHED_FIFO thread's timer slack reads 0 and cannot be set."""
+
+    def __init__(self, *, refuse: dict[str, BaseException] | None = None,
+                 rt_zero_slack: bool = False) -> None:
+        super().__init__()
+        self.refuse = refuse or {}
+        self.rt_zero_slack = rt_zero_slack
+        self.slack_ns = DEFAULT_SLACK_NS
+        self.policy = SCHED_OTHER
+        self.priority = 0
+        self.affinity = {0, 1, 2, 3}
+        self.calls: list[tuple[str, Any]] = []
+
+    def _call(self, name: str, argument: Any = None) -> None:
+        self.calls.append((name, argument))
+        if name in self.refuse:
+            raise self.refuse[name]
+
+    def setters(self) -> list[tuple[str, Any]]:
+        return [call for call in self.calls if call[0].startswith("set_")]
+
+    def get_timer_slack_ns(self) -> int | None:
+        self._call("get_timer_slack_ns")
+        return 0 if self.rt_zero_slack and self.policy == SCHED_FIFO else self.slack_ns
+
+    def set_timer_slack_ns(self, slack_ns: int) -> None:
+        self._call("set_timer_slack_ns", slack_ns)
+        if not (self.rt_zero_slack and self.policy == SCHED_FIFO):
+            self.slack_ns = slack_ns
+
+    def get_scheduler(self) -> tuple[int, int]:
+        self._call("get_scheduler")
+        return self.policy, self.priority
+
+    def set_scheduler(self, policy: int, priority: int) -> None:
+        self._call("set_scheduler", (policy, priority))
+        self.policy, self.priority = policy, priority
+
+    def get_affinity(self) -> set[int] | None:
+        self._call("get_affinity")
+        return set(self.affinity)
+
+    def set_affinity(self, cpus: set[int]) -> None:
+        self._call("set_affinity", set(cpus))
+        self.affinity = set(cpus)
+
+
+def state(fake: FakeOs) -> tuple[int, int, int, set[int]]:
+    return fake.slack_ns, fake.policy, fake.priority, fake.affinity
+
+
+def in_thread(function: Callable[[], Any]) -> Any:
+    """Run ``function`` in a fresh thread; return its result or re-raise what it raised
+    (pytest.skip included)."""
+    outcome: dict[str, Any] = {}
+
+    def target() -> None:
+        try:
+            outcome["result"] = function()
+        except BaseException as error:  # noqa: BLE001 - handed to the test's thread
+            outcome["error"] = error
+
+    thread = threading.Thread(target=target, name="rt-test")
+    thread.start()
+    thread.join(timeout=30.0)
+    assert not thread.is_alive()
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["result"]
+
+
+# --- RealtimeSettings --------------------------------------------------------------------
+
+
+def test_settings_defaults_are_normal_scheduling_with_tight_timers():
+    settings = RealtimeSettings()
+    assert settings.priority == 0 and settings.tight_timers and settings.cpus == ()
+
+
+@pytest.mark.parametrize("priority", [0, 1, 50, 99])
+def test_settings_accept_priorities_0_to_99(priority):
+    assert RealtimeSettings(priority=priority).priority == priority
+
+
+@pytest.mark.parametrize("priority", [-1, 100, 1000])
+def test_settings_reject_priorities_outside_0_to_99(priority):
+    with pytest.raises(ValueError, match="priority"):
+        RealtimeSettings(priority=priority)
+
+
+def test_settings_reject_negative_cpus():
+    assert RealtimeSettings(cpus=(0, 3)).cpus == (0, 3)
+    with pytest.raises(ValueError, match="cpus"):
+        RealtimeSettings(cpus=(0, -1))
+
+
+# --- LoopThreadScheduling on a fake OS ---------------------------------------------------
+
+
+def test_applies_everything_and_restores_in_reverse_order():
+    fake = FakeOs()
+    before = state(fake)
+    settings = RealtimeSettings(priority=40, tight_timers=True, cpus=(1,))
+    with LoopThreadScheduling(settings, fake) as applied:
+        assert state(fake) == (TIGHT_TIMER_SLACK_NS, SCHED_FIFO, 40, {1})
+        assert fake.setters() == [
+            ("set_timer_slack_ns", TIGHT_TIMER_SLACK_NS),
+            ("set_affinity", {1}),
+            ("set_scheduler", (SCHED_FIFO, 40)),
+        ]
+        assert applied.policy == "SCHED_FIFO" and applied.priority == 40
+        assert applied.timer_slack_ns == TIGHT_TIMER_SLACK_NS
+        assert applied.cpus == (1,)
+        assert applied.warnings == []
+        fake.calls.clear()
+    assert state(fake) == before
+    assert fake.setters() == [  # the reverse of the order they were applied in
+        ("set_scheduler", (SCHED_OTHER, 0)),
+        ("set_affinity", {0, 1, 2, 3}),
+        ("set_timer_slack_ns", DEFAULT_SLACK_NS),
+    ]
+
+
+def test_restores_a_previous_fifo_priority_and_custom_slack():
+    fake = FakeOs()
+    fake.policy, fake.priority, fake.slack_ns = SCHED_FIFO, 10, 2_000
+    with LoopThreadScheduling(RealtimeSettings(priority=70), fake):
+        assert (fake.policy, fake.priority, fake.slack_ns) == (SCHED_FIFO, 70, 1)
+    assert (fake.policy, fake.priority, fake.slack_ns) == (SCHED_FIFO, 10, 2_000)
+
+
+def test_restores_when_the_body_raises():
+    fake = FakeOs()
+    before = state(fake)
+    with pytest.raises(RuntimeError, match="loop failed"), LoopThreadScheduling(
+        RealtimeSettings(priority=5, cpus=(0, 2)), fake
+    ):
+        assert state(fake) != before
+        raise RuntimeError("loop failed")
+    assert state(fake) == before
+
+
+def test_priority_0_and_no_tight_timers_change_nothing():
+    fake = FakeOs()
+    before = state(fake)
+    with LoopThreadScheduling(RealtimeSettings(priority=0, tight_timers=False), fake) as applied:
+        assert fake.setters() == []
+        assert state(fake) == before
+    assert fake.setters() == []
+    # what the thread has is still read back and reported
+    assert applied.policy == "SCHED_OTHER" and applied.priority == 0
+    assert applied.timer_slack_ns == DEFAULT_SLACK_NS
+    assert applied.cpus == (0, 1, 2, 3)
+    assert applied.warnings == []
+
+
+@pytest.mark.parametrize(
+    ("method", "error", "warning"),
+    [
+        ("set_timer_slack_ns", OSError(1, "Operation not permitted"), "tight timers refused"),
+        ("set_affinity", OSError(22, "Invalid argument"), "CPU affinity [2] refused"),
+        ("set_scheduler", PermissionError(1, "Operation not permitted"),
+         "SCHED_FIFO 40 refused"),
+    ],
+)
+def test_one_refusal_is_a_warning_and_the_rest_applies(method, error, warning):
+    fake = FakeOs(refuse={method: error})
+    before = state(fake)
+    settings = RealtimeSettings(priority=40, tight_timers=True, cpus=(2,))
+    with LoopThreadScheduling(settings, fake) as applied:
+        assert len(applied.warnings) == 1
+        assert applied.warnings[0].startswith(warning)
+        assert str(error.strerror) in applied.warnings[0]
+        refused = {
+            "set_timer_slack_ns": (before[0], fake.slack_ns),
+            "set_affinity": (before[3], fake.affinity),
+            "set_scheduler": (before[1:3], (fake.policy, fake.priority)),
+        }
+        unchanged, now = refused[method]
+        assert now == unchanged
+        applied_ok = {
+            "set_timer_slack_ns": fake.slack_ns == TIGHT_TIMER_SLACK_NS,
+            "set_affinity": fake.affinity == {2},
+            "set_scheduler": (fake.policy, fake.priority) == (SCHED_FIFO, 40),
+        }
+        assert all(ok for name, ok in applied_ok.items() if name != method)
+        fake.calls.clear()
+    assert state(fake) == before
+    # the refused setting is not "restored" on exit: nothing of it was applied
+    assert method not in [name for name, _ in fake.setters()]
+    assert len(fake.setters()) == 2
+
+
+def test_every_refusal_leaves_the_thread_as_it_was():
+    denied = PermissionError(1, "Operation not permitted")
+    fake = FakeOs(refuse={
+        "set_timer_slack_ns": denied, "set_affinity": denied, "set_scheduler": denied,
+    })
+    before = state(fake)
+    settings = RealtimeSettings(priority=99, tight_timers=True, cpus=(0, 1))
+    with LoopThreadScheduling(settings, fake) as applied:
+        assert state(fake) == before
+        assert len(applied.warnings) == 3
+        assert "normal scheduling" in applied.warnings[2]
+        assert applied.policy == "SCHED_OTHER" and applied.priority == 0
+        assert applied.timer_slack_ns == DEFAULT_SLACK_NS
+        fake.calls.clear()
+    assert fake.setters() == []  # nothing to restore
+    assert state(fake) == before
+
+
+def test_a_refused_read_of_the_previous_value_skips_the_setting():
+    fake = FakeOs(refuse={"get_scheduler": OSError(3, "No such process")})
+    with LoopThreadScheduling(RealtimeSettings(priority=40, tight_timers=False), fake) as applied:
+        # without the previous policy it could not be restored, so it is not changed
+        assert ("set_scheduler", (SCHED_FIFO, 40)) not in fake.setters()
+        assert (fake.policy, fake.priority) == (SCHED_OTHER, 0)
+        assert applied.warnings and "SCHED_FIFO 40 refused" in applied.warnings[0]
+    assert fake.setters() == []
+
+
+def test_applied_is_what_the_os_reports_not_what_was_asked():
+    # Linux >= 6.9 gives SCHED_FIFO threads zero timer slack whatever was set
+    fake = FakeOs(rt_zero_slack=True)
+    with LoopThreadScheduling(RealtimeSettings(priority=20), fake) as applied:
+        assert applied.policy == "SCHED_FIFO"
+        assert applied.timer_slack_ns == 0
+        assert applied.describe() == "SCHED_FIFO 20, timer slack 0 ns, CPUs 0,1,2,3"
+    assert state(fake) == (DEFAULT_SLACK_NS, SCHED_OTHER, 0, {0, 1, 2, 3})
+
+
+def test_describe_and_summary():
+    applied = AppliedScheduling(
+        policy="SCHED_FIFO", priority=40, timer_slack_ns=1, cpus=(0, 1),
+        warnings=["CPU affinity [7] refused: bad"],
+    )
+    assert applied.describe() == "SCHED_FIFO 40, timer slack 1 ns, CPUs 0,1"
+    summary = applied.as_summary()
+    assert summary == {
+        "scheduling": "SCHED_FIFO 40, timer slack 1 ns, CPUs 0,1",
+        "scheduling_policy": "SCHED_FIFO",
+        "scheduling_priority": 40,
+        "timer_slack_ns": 1,
+        "scheduling_warnings": ["CPU affinity [7] refused: bad"],
+    }
+    summary["scheduling_warnings"].append("x")  # a copy: the summary never aliases the state
+    assert applied.warnings == ["CPU affinity [7] refused: bad"]
+    # normal scheduling shows no priority; unknown slack and CPUs are left out
+    assert AppliedScheduling().describe() == "SCHED_OTHER"
+    assert AppliedScheduling(timer_slack_ns=50_000).describe() == (
+        "SCHED_OTHER, timer slack 50000 ns"
+    )
+
+
+# --- the real Linux calls, each in a fresh thread ----------------------------------------
+
+
+def _fifo_permitted() -> bool:
+    def attempt() -> bool:
+        try:
+            os.sched_setscheduler(0, SCHED_FIFO, os.sched_param(1))
+        except (OSError, AttributeError):
+            return False
+        os.sched_setscheduler(0, SCHED_OTHER, os.sched_param(0))
+        return True
+
+    return bool(in_thread(attempt))
+
+
+@linux_only
+def test_tight_timers_on_the_calling_thread_only_and_restored():
+    main_before = OsScheduling().get_timer_slack_ns()
+
+    def body() -> tuple[int | None, ...]:
+        calls = OsScheduling()
+        before = calls.get_timer_slack_ns()
+        with LoopThreadScheduling(RealtimeSettings(priority=0, tight_timers=True)) as applied:
+            inside = calls.get_timer_slack_ns()
+        return before, inside, applied.timer_slack_ns, calls.get_timer_slack_ns()
+
+    before, inside, reported, after = in_thread(body)
+    assert before is not None and before > TIGHT_TIMER_SLACK_NS
+    assert inside == reported == TIGHT_TIMER_SLACK_NS
+    assert after == before
+    assert OsScheduling().get_timer_slack_ns() == main_before  # the main thread untouched
+
+
+@linux_only
+def test_real_fifo_inside_and_normal_after():
+    if not _fifo_permitted():
+        pytest.skip("SCHED_FIFO is not permitted here (needs CAP_SYS_NICE or an rtprio limit)")
+
+    def body() -> tuple[Any, ...]:
+        with LoopThreadScheduling(RealtimeSettings(priority=3, tight_timers=True)) as applied:
+            inside = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+        after = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+        return applied, inside, after, OsScheduling().get_timer_slack_ns()
+
+    applied, inside, after, slack_after = in_thread(body)
+    assert inside == (SCHED_FIFO, 3)
+    assert applied.policy == "SCHED_FIFO" and applied.priority == 3
+    assert applied.warnings == []
+    assert after == (SCHED_OTHER, 0)
+    assert slack_after is not None and slack_after > TIGHT_TIMER_SLACK_NS
+    assert os.sched_getscheduler(0) == SCHED_OTHER  # the main thread untouched
+
+
+@linux_only
+def test_real_affinity_inside_and_restored():
+    allowed = sorted(os.sched_getaffinity(0))
+
+    def body() -> tuple[Any, ...]:
+        with LoopThreadScheduling(RealtimeSettings(tight_timers=False, cpus=(allowed[0],))) as a:
+            inside = os.sched_getaffinity(0)
+        return a, inside, os.sched_getaffinity(0)
+
+    applied, inside, after = in_thread(body)
+    assert inside == {allowed[0]} and applied.cpus == (allowed[0],)
+    assert sorted(after) == allowed
+    assert sorted(os.sched_getaffinity(0)) == allowed
+
+
+# --- the runner reports its scheduling ---------------------------------------------------
+
+
+class FakeClock:
+    """Moves 1 us per read and by the requested time per sleep (see test_runner.py)."""
+
+    def __init__(self) -> None:
+        self.now = 1_000_000_000
+
+    def clock(self) -> int:
+        self.now += 1_000
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        self.now += round(seconds * 1e9)
+
+
+def run_fake(settings: RealtimeSettings | None) -> Any:
+    clock = FakeClock()
+    runner = RealTimeRunner(
+        0.00054, lambda tick, now: None, duration_s=0.01, clock_ns=clock.clock,
+        sleep=clock.sleep, handle_signals=False, show_status=False, realtime=settings,
+    )
+    return runner.run()
+
+
+SCHEDULING_KEYS = {
+    "scheduling", "scheduling_policy", "scheduling_priority", "timer_slack_ns",
+    "scheduling_warnings",
+}
+
+
+def test_runner_without_realtime_reports_no_scheduling():
+    stats = run_fake(None)
+    assert stats.scheduling is None
+    assert not SCHEDULING_KEYS & set(stats.as_summary())
+
+
+@linux_only
+def test_runner_reports_tight_timers_in_its_summary():
+    stats = in_thread(lambda: run_fake(RealtimeSettings(priority=0, tight_timers=True)))
+    assert stats.steps > 0 and stats.stop_reason == "duration"
+    assert stats.scheduling is not None
+    summary = stats.as_summary()
+    assert SCHEDULING_KEYS <= set(summary)
+    assert summary["scheduling_policy"] == "SCHED_OTHER"
+    assert summary["timer_slack_ns"] == TIGHT_TIMER_SLACK_NS
+    assert summary["scheduling_warnings"] == []
+    assert summary["scheduling"] == stats.scheduling.describe()
+    assert "timer slack 1 ns" in summary["scheduling"]
+
+
+def test_runner_runs_on_when_fifo_is_refused(monkeypatch):
+    def refuse(self: OsScheduling, policy: int, priority: int) -> None:
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(realtime.OsScheduling, "set_scheduler", refuse)
+    stats = in_thread(lambda: run_fake(RealtimeSettings(priority=40, tight_timers=False)))
+    assert stats.steps > 0 and stats.stop_reason == "duration"
+    summary = stats.as_summary()
+    assert summary["scheduling_policy"] == "SCHED_OTHER"
+    assert len(summary["scheduling_warnings"]) == 1
+    assert summary["scheduling_warnings"][0].startswith("SCHED_FIFO 40 refused")
+
+
+@linux_only
+def test_runner_under_fifo_reports_it_and_gives_it_back():
+    if not _fifo_permitted():
+        pytest.skip("SCHED_FIFO is not permitted here (needs CAP_SYS_NICE or an rtprio limit)")
+
+    def body() -> tuple[Any, int]:
+        stats = run_fake(RealtimeSettings(priority=2, tight_timers=True))
+        return stats, os.sched_getscheduler(0)
+
+    stats, policy_after = in_thread(body)
+    summary = stats.as_summary()
+    assert summary["scheduling_policy"] == "SCHED_FIFO"
+    assert summary["scheduling_priority"] == 2
+    assert summary["scheduling"].startswith("SCHED_FIFO 2")
+    assert summary["scheduling_warnings"] == []
+    assert policy_after == SCHED_OTHER

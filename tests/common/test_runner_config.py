@@ -1,0 +1,169 @@
+"""The [runner] table: CPU lists, validation through load_config, the settings it gives, and
+the --spin-s / --rt-priority / --loop-cpus flags."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+import pytest
+
+from haptic.common.cli_options import add_run_options, run_options_from_args
+from haptic.common.config import ConfigError, exit_on_config_error, load_config
+from haptic.common.realtime import RealtimeSettings
+from haptic.common.runner_config import RunnerSettings, parse_cpus, runner_settings_from
+
+VALID = {
+    "spin_s": "0.0002",
+    "realtime_priority": "10",
+    "tight_timers": "false",
+    "loop_cpus": '"0"',
+}
+
+
+def runner_file(tmp_path, **changes: str):
+    """A TOML file with a whole [runner] table (VALID with ``changes``; a value of None
+    leaves the key out)."""
+    table = {**VALID, **changes}
+    lines = [f"{key} = {value}" for key, value in table.items() if value is not None]
+    path = tmp_path / "runner.toml"
+    path.write_text("[runner]\n" + "\n".join(lines) + "\n")
+    return path
+
+
+# --- parse_cpus ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("text", "cpus"),
+    [
+        ("", ()),
+        ("  ", ()),
+        ("1", (1,)),
+        ("0,2-3", (0, 2, 3)),
+        ("3,1,1", (1, 3)),
+        ("2-2", (2,)),
+        (" 0 , 4-5 ", (0, 4, 5)),
+        ("1,", (1,)),
+    ],
+)
+def test_parse_cpus(text, cpus):
+    assert parse_cpus(text) == cpus
+
+
+@pytest.mark.parametrize("text", ["a", "-1", "3-1", "1-", "0-a", "1.5", "0;1", "1--2"])
+def test_parse_cpus_rejects(text):
+    with pytest.raises(ValueError):
+        parse_cpus(text)
+
+
+# --- the [runner] table through load_config -----------------------------------------------
+
+
+def test_defaults():
+    settings = runner_settings_from(load_config())
+    assert settings == RunnerSettings(
+        spin_s=0.0001,
+        realtime=RealtimeSettings(priority=40, tight_timers=True, cpus=()),
+    )
+    assert load_config()["runner"]["loop_cpus"] == ""
+
+
+def test_a_file_sets_the_whole_table(tmp_path):
+    settings = runner_settings_from(load_config(runner_file(tmp_path)))
+    assert settings == RunnerSettings(
+        spin_s=0.0002,
+        realtime=RealtimeSettings(priority=10, tight_timers=False, cpus=(0,)),
+    )
+
+
+@pytest.mark.parametrize(
+    ("changes", "key"),
+    [
+        ({"busy_wait": "true"}, "runner.busy_wait"),
+        ({"realtime_priority": "100"}, "runner.realtime_priority"),
+        ({"realtime_priority": "-1"}, "runner.realtime_priority"),
+        ({"realtime_priority": "1.5"}, "runner.realtime_priority"),
+        ({"loop_cpus": '"a"'}, "runner.loop_cpus"),
+        ({"loop_cpus": "1"}, "runner.loop_cpus"),  # a number, not a string
+        ({"loop_cpus": f'"{os.cpu_count()}"'}, "runner.loop_cpus"),
+        ({"spin_s": "-0.001"}, "runner.spin_s"),
+        ({"spin_s": "0.5"}, "runner.spin_s"),
+        ({"tight_timers": "1"}, "runner.tight_timers"),
+        ({"spin_s": None}, "runner.spin_s"),  # a table that gives any key gives them all
+    ],
+)
+def test_bad_values_name_the_key(tmp_path, changes, key):
+    with pytest.raises(ConfigError) as caught:
+        load_config(runner_file(tmp_path, **changes))
+    assert caught.value.key == key
+    assert str(caught.value).startswith(f"{key}: ")
+
+
+def test_a_cpu_the_machine_lacks_says_how_many_it_has(tmp_path):
+    count = os.cpu_count()
+    with pytest.raises(ConfigError, match=f"it has {count}"):
+        load_config(runner_file(tmp_path, loop_cpus=f'"0-{count}"'))
+
+
+def test_settings_from_an_unvalidated_table_still_name_the_key():
+    config = load_config()
+    config["runner"] = {**config["runner"], "loop_cpus": "zero"}
+    with pytest.raises(ConfigError) as caught:
+        runner_settings_from(config)
+    assert caught.value.key == "runner.loop_cpus"
+
+
+# --- the command-line flags ---------------------------------------------------------------
+
+
+def parse(argv: list[str], config_file=None):
+    parser = argparse.ArgumentParser()
+    add_run_options(parser)
+    if config_file is not None:
+        argv = ["--config", str(config_file), *argv]
+    return run_options_from_args(parser.parse_args(argv), "master")
+
+
+def test_flags_set_the_runner():
+    options = parse(["--spin-s", "0.00005", "--rt-priority", "0", "--loop-cpus", "0"])
+    assert options.runner == RunnerSettings(
+        spin_s=0.00005,
+        realtime=RealtimeSettings(priority=0, tight_timers=True, cpus=(0,)),
+    )
+    assert options.config["runner"]["realtime_priority"] == 0
+
+
+def test_no_flags_keep_the_defaults():
+    assert parse([]).runner == runner_settings_from(load_config())
+
+
+def test_flags_win_over_the_file(tmp_path):
+    options = parse(["--rt-priority", "60"], config_file=runner_file(tmp_path))
+    assert options.runner.realtime == RealtimeSettings(priority=60, tight_timers=False, cpus=(0,))
+    assert options.runner.spin_s == 0.0002  # from the file
+
+
+def test_an_empty_loop_cpus_flag_means_any_cpu(tmp_path):
+    options = parse(["--loop-cpus", ""], config_file=runner_file(tmp_path))
+    assert options.runner.realtime.cpus == ()
+
+
+@pytest.mark.parametrize(
+    ("argv", "named"),
+    [
+        (["--rt-priority", "120"], "--rt-priority (runner.realtime_priority)"),
+        (["--rt-priority", "-5"], "--rt-priority (runner.realtime_priority)"),
+        (["--loop-cpus", "x"], "--loop-cpus (runner.loop_cpus)"),
+        (["--loop-cpus", str(os.cpu_count())], "--loop-cpus (runner.loop_cpus)"),
+        (["--spin-s", "-1"], "--spin-s (runner.spin_s)"),
+    ],
+)
+def test_bad_flags_name_the_flag(argv, named, capsys):
+    with pytest.raises(ConfigError) as caught:
+        parse(argv)
+    assert str(caught.value).startswith(named)
+    with pytest.raises(SystemExit) as exited, exit_on_config_error():
+        parse(argv)
+    assert exited.value.code == 2
+    assert named in capsys.readouterr().err
