@@ -76,7 +76,7 @@ class AppliedScheduling:
     warnings: list[str] = field(default_factory=list)
 
     def describe(self) -> str:
-        """One line, e.g. ``SCHED_FIFO 40, timer slack 1 ns, CPUs 0-1``."""
+        """One line, e.g. ``SCHED_FIFO 40, timer slack 1 ns, CPUs 0,1``."""
         parts = [f"{self.policy} {self.priority}" if self.policy == "SCHED_FIFO"
                  else self.policy]
         if self.timer_slack_ns is not None:

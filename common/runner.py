@@ -116,9 +116,9 @@ class RealTimeRunner:
     extra text for the live status line (link delay, loss, force); the line is written to
     ``status_stream`` every ``status_interval_s`` when ``show_status`` is true (default: when
     the stream is a terminal). ``realtime``: how the loop thread is scheduled during
-    :meth:`run` (``None``: left as it is). ``stop_signals``: an outer :class:`StopSignals` the loop checks
-    (then the runner installs no handlers of its own); otherwise, with ``handle_signals``, the
-    runner installs its own for the duration of :meth:`run`.
+    :meth:`run` (``None``: left as it is). ``stop_signals``: an outer :class:`StopSignals`
+    the loop checks (then the runner installs no handlers of its own); otherwise, with
+    ``handle_signals``, the runner installs its own for the duration of :meth:`run`.
     """
 
     def __init__(
