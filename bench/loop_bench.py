@@ -50,6 +50,7 @@ from haptic.common.config import exit_on_config_error
 from haptic.common.link import Link
 from haptic.common.messages import Flags
 from haptic.common.runner import RealTimeRunner, StopSignals
+from haptic.common.runner_config import prioritise_zenoh_threads
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.watchdog import PeerWatchdog
 
@@ -176,6 +177,7 @@ def echo_node(side: str, argv: list[str]) -> int:
                 return 0
             print(f"{side}: no peer after {PEER_WAIT_S} s", file=sys.stderr)
             return 1
+        zenoh_threads = prioritise_zenoh_threads(options.runner)
         state: dict[str, Any] = {"force": (0.0, 0.0), "position": (0.0, 0.0)}
 
         def step(tick: int, now_ns: int) -> None:
@@ -217,6 +219,7 @@ def echo_node(side: str, argv: list[str]) -> int:
             watchdog_trips=watchdog.trips,
             events=[e.as_dict() for e in watchdog.events],
             side=side,
+            **zenoh_threads,
         )
     if options.json_summary is not None:
         write_json_summary(options.json_summary, summary)
@@ -259,8 +262,10 @@ def run_pair(
     port = free_port()
     prefix = f"bench/{uuid.uuid4().hex[:8]}"
     endpoint = f"tcp/127.0.0.1:{port}"
+    # SCHED_FIFO 40 for the loops, as on a rig PC (docs/link.md section 6); --extra can
+    # override it (--rt-priority 0)
     common = ["--duration", str(duration_s), "--key-prefix", prefix, "--no-status",
-              *(extra_args or [])]
+              "--rt-priority", "40", *(extra_args or [])]
     timeout = timeout_s if timeout_s is not None else duration_s + 60.0
     with tempfile.TemporaryDirectory(prefix="loop_bench_") as tmp:
         files = {side: Path(tmp) / f"{side}.json" for side in ("master", "slave")}

@@ -5,9 +5,10 @@ says how (common/realtime.py explains each setting)::
 
     [runner]
     spin_s = 0.0001          # spin this long before each tick, s
-    realtime_priority = 40   # SCHED_FIFO priority of the loop thread, 0 = normal scheduling
+    realtime_priority = 40   # SCHED_FIFO priority of the loop thread, 0 = normal (default)
     tight_timers = true      # timer slack 1 ns on the loop thread
     loop_cpus = ""           # CPUs of the loop thread, e.g. "1" or "0,1"; empty = any
+    zenoh_thread_priority = 0  # SCHED_FIFO priority of Zenoh's threads (below the loop's); 0: off
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from haptic.common.config import ConfigError, Field, Schema
-from haptic.common.realtime import MAX_FIFO_PRIORITY, RealtimeSettings
+from haptic.common.realtime import MAX_FIFO_PRIORITY, RealtimeSettings, raise_threads
 
 
 def parse_cpus(text: str) -> tuple[int, ...]:
@@ -59,6 +60,10 @@ RUNNER_SCHEMA: Schema = {
         "str", "CPUs the loop thread may run on, e.g. \"1\" or \"0,2-3\"; empty for any.",
         check=_cpus_check,
     ),
+    "zenoh_thread_priority": Field(
+        "int", "SCHED_FIFO priority of Zenoh's runtime threads, below realtime_priority; 0 "
+        "leaves them with normal scheduling.", minimum=0, maximum=MAX_FIFO_PRIORITY,
+    ),
 }
 
 
@@ -68,11 +73,18 @@ class RunnerSettings:
 
     spin_s: float
     realtime: RealtimeSettings
+    zenoh_thread_priority: int = 0
 
 
 def runner_settings_from(config: dict[str, Any]) -> RunnerSettings:
     """The :class:`RunnerSettings` of a validated configuration."""
     table = config["runner"]
+    zenoh_priority = int(table["zenoh_thread_priority"])
+    loop_priority = int(table["realtime_priority"])
+    if zenoh_priority and loop_priority and zenoh_priority >= loop_priority:
+        raise ConfigError("runner.zenoh_thread_priority",
+                          f"must be below runner.realtime_priority ({loop_priority}), or the "
+                          f"network threads preempt the loop (got {zenoh_priority})")
     try:
         cpus = parse_cpus(table["loop_cpus"])
     except ValueError as error:
@@ -84,4 +96,16 @@ def runner_settings_from(config: dict[str, Any]) -> RunnerSettings:
             tight_timers=bool(table["tight_timers"]),
             cpus=cpus,
         ),
+        zenoh_thread_priority=int(table["zenoh_thread_priority"]),
     )
+
+
+def prioritise_zenoh_threads(settings: RunnerSettings) -> dict[str, object]:
+    """Apply ``zenoh_thread_priority`` (call it once the link is up: Zenoh starts its receive
+    threads with the first connection). Returns the run summary's keys (empty when off)."""
+    priority = settings.zenoh_thread_priority
+    if not priority:
+        return {}
+    changed, warnings = raise_threads(priority)
+    return {"zenoh_thread_priority": priority, "zenoh_threads_raised": changed,
+            "zenoh_thread_warnings": warnings}

@@ -37,6 +37,7 @@ from haptic.common.messages import Flags, ToolState
 from haptic.common.model import TeleopModel
 from haptic.common.run_recording import RunRecording
 from haptic.common.runner import RealTimeRunner, StopSignals
+from haptic.common.runner_config import prioritise_zenoh_threads
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
 from haptic.common.watchdog import PeerWatchdog, WatchdogState
@@ -155,6 +156,7 @@ def _run_linked_master(
     watchdog = PeerWatchdog(link_config.max_message_age_s, link_config.resync_messages)
     trace = TraceRecorder(MASTER_TRACE_COLUMNS, loop_options.trace_every)
     loop = _Loop()
+    zenoh_threads: dict[str, object] = {}
     ft = np.zeros((1, 2))
     felt_array = np.zeros(2)
     tolerance = loop_options.sync_tolerance_m
@@ -180,6 +182,7 @@ def _run_linked_master(
                     print(f"haptic-master: no slave after {loop_options.peer_wait_s:g} s",
                           file=sys.stderr)
                     return 1
+                zenoh_threads = prioritise_zenoh_threads(options.runner)
                 hardware.activate()
                 reading = hardware.read()
                 loop.hold_m = np.nan_to_num(reading.position_m).copy()
@@ -353,7 +356,7 @@ def _run_linked_master(
         watchdog_trips=watchdog.trips, events=events, side="master",
         watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
         hardware_faults=loop.hardware_faults[:50],
-        node_faulted=loop.faulted, **(extra_summary or {}),
+        node_faulted=loop.faulted, **zenoh_threads, **(extra_summary or {}),
     )
     if display is not None:
         summary.update(display.figures)

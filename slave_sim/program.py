@@ -42,6 +42,7 @@ from haptic.common.messages import Flags, HandleState
 from haptic.common.preflight import add_preflight_options, run_preflight
 from haptic.common.run_recording import RunRecording
 from haptic.common.runner import RealTimeRunner, StopSignals
+from haptic.common.runner_config import prioritise_zenoh_threads
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
 from haptic.common.watchdog import PeerWatchdog, WatchdogState
@@ -223,6 +224,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 return 0
             print(f"haptic-slave: no master after {args.peer_wait:g} s", file=sys.stderr)
             return 1
+        zenoh_threads = prioritise_zenoh_threads(options.runner)
         realtime_start_ns = time.time_ns()
         perf_start_ns = time.perf_counter_ns()
         clay_recorded = recording is not None and node.environment_kind == "clay"
@@ -367,7 +369,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         watchdog_trips=watchdog.trips, events=all_events, side="slave",
         watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
         removed_volume_m3=flags_box["removed"],
-        final_tool_position_m=[float(final[0]), float(final[1])], **extra_summary,
+        final_tool_position_m=[float(final[0]), float(final[1])], **zenoh_threads,
+        **extra_summary,
     )
     if display is not None:
         summary.update(display.figures)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import sys
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -434,3 +435,62 @@ def test_runner_under_fifo_reports_it_and_gives_it_back():
     assert summary["scheduling"].startswith("SCHED_FIFO 2")
     assert summary["scheduling_warnings"] == []
     assert policy_after == SCHED_OTHER
+
+
+class ThreadRecorder(OsScheduling):
+    """Records set_thread_scheduler calls; refuses for the thread ids in ``refuse``."""
+
+    def __init__(self, refuse: set[int] | None = None) -> None:
+        super().__init__()
+        self.refuse = refuse or set()
+        self.calls: list[tuple[int, int, int]] = []
+
+    def set_thread_scheduler(self, thread_id: int, policy: int, priority: int) -> None:
+        if thread_id in self.refuse:
+            raise PermissionError(1, "Operation not permitted")
+        self.calls.append((thread_id, policy, priority))
+
+
+def _named_thread(name: str, stop: threading.Event, ready: dict[str, int]) -> threading.Thread:
+    def body() -> None:
+        with open("/proc/thread-self/comm", "w") as comm:  # the OS name Zenoh's threads have
+            comm.write(name)
+        ready[name] = threading.get_native_id()
+        stop.wait(5.0)
+
+    return threading.Thread(target=body, name=name, daemon=True)
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="needs Linux /proc")
+def test_raise_threads_selects_threads_by_name_and_reports_refusals():
+    from haptic.common.realtime import raise_threads
+
+    stop = threading.Event()
+    ids: dict[str, int] = {}
+    # names no Zenoh thread of this test process has (earlier tests leave Zenoh's runtimes)
+    threads = [_named_thread(name, stop, ids) for name in ("qrx-test", "qtx-test", "other")]
+    for thread in threads:
+        thread.start()
+    try:
+        deadline = time.monotonic() + 5.0
+        while len(ids) < 3 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        rx_id, tx_id, other_id = ids["qrx-test"], ids["qtx-test"], ids["other"]
+        recorder = ThreadRecorder(refuse={tx_id})
+        changed, warnings = raise_threads(7, ("qrx-", "qtx-"), recorder)
+        assert changed == 1
+        assert [c[0] for c in recorder.calls] == [rx_id]
+        assert recorder.calls[0][1:] == (os.SCHED_FIFO, 7)
+        assert len(warnings) == 1 and "qtx-test" in warnings[0]
+        assert other_id not in [c[0] for c in recorder.calls]
+    finally:
+        stop.set()
+        for thread in threads:
+            thread.join()
+
+
+def test_raise_threads_rejects_a_priority_out_of_range():
+    from haptic.common.realtime import raise_threads
+
+    with pytest.raises(ValueError):
+        raise_threads(0, ("rx-",), ThreadRecorder())

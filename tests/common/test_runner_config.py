@@ -18,6 +18,7 @@ VALID = {
     "realtime_priority": "10",
     "tight_timers": "false",
     "loop_cpus": '"0"',
+    "zenoh_thread_priority": "5",
 }
 
 
@@ -64,7 +65,7 @@ def test_defaults():
     settings = runner_settings_from(load_config())
     assert settings == RunnerSettings(
         spin_s=0.0001,
-        realtime=RealtimeSettings(priority=40, tight_timers=True, cpus=()),
+        realtime=RealtimeSettings(priority=0, tight_timers=True, cpus=()),
     )
     assert load_config()["runner"]["loop_cpus"] == ""
 
@@ -74,6 +75,7 @@ def test_a_file_sets_the_whole_table(tmp_path):
     assert settings == RunnerSettings(
         spin_s=0.0002,
         realtime=RealtimeSettings(priority=10, tight_timers=False, cpus=(0,)),
+        zenoh_thread_priority=5,
     )
 
 
@@ -167,3 +169,22 @@ def test_bad_flags_name_the_flag(argv, named, capsys):
         parse(argv)
     assert exited.value.code == 2
     assert named in capsys.readouterr().err
+
+
+def test_zenoh_thread_priority_must_stay_below_the_loop(tmp_path):
+    from haptic.common.runner_config import runner_settings_from
+
+    config = load_config(None)
+    config["runner"]["realtime_priority"] = 40
+    config["runner"]["zenoh_thread_priority"] = 40
+    with pytest.raises(ConfigError) as error:
+        runner_settings_from(config)
+    assert error.value.key == "runner.zenoh_thread_priority"
+    config["runner"]["zenoh_thread_priority"] = 30
+    assert runner_settings_from(config).zenoh_thread_priority == 30
+
+
+def test_prioritise_zenoh_threads_is_off_by_default():
+    from haptic.common.runner_config import prioritise_zenoh_threads, runner_settings_from
+
+    assert prioritise_zenoh_threads(runner_settings_from(load_config(None))) == {}
