@@ -235,6 +235,8 @@ class ReceivePath:
         expected -= len(self._pending)  # still in flight: neither delivered nor lost yet
         loss = 1.0 - n.delivered / expected if expected > 0 else math.nan
         network_loss = n.network_lost / expected if expected > 0 else math.nan
+        delay_p50, delay_p99 = self._delay.percentiles((50.0, 99.0))
+        age_p50, age_p99 = self._age.percentiles((50.0, 99.0))
         return LinkStats(
             received=n.received,
             delivered=n.delivered,
@@ -247,9 +249,9 @@ class ReceivePath:
             clock_skew=n.clock_skew,
             loss_ratio=max(0.0, loss) if expected > 0 else math.nan,
             network_loss_ratio=network_loss,
-            one_way_delay_p50_s=self._delay.percentile(50.0),
-            one_way_delay_p99_s=self._delay.percentile(99.0),
+            one_way_delay_p50_s=delay_p50,
+            one_way_delay_p99_s=delay_p99,
             one_way_delay_max_s=self._delay.max_s if self._delay.count else math.nan,
-            age_at_use_p50_s=self._age.percentile(50.0),
-            age_at_use_p99_s=self._age.percentile(99.0),
+            age_at_use_p50_s=age_p50,
+            age_at_use_p99_s=age_p99,
         )
