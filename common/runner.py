@@ -10,6 +10,8 @@ and the spin can be short, which leaves the CPUs to Zenoh's threads (common/real
 Definitions (all on the runner's monotonic clock, :func:`time.perf_counter_ns`):
 
 - period error: ``|t_k - t_(k-1) - Ts|`` between the starts of two consecutive ticks;
+- step time: how long the step function ran, tick start to return (``step_p50_s`` ...): the
+  CPU budget a node uses of each period;
 - overrun: a step that ends after the next tick's deadline;
 - stall: a tick that starts a whole period or more after its deadline (the process was not
   scheduled, or a step took very long). The schedule is then re-anchored at the late start:
@@ -85,6 +87,9 @@ class RunStats:
     skipped_ticks: int
     stop_reason: str
     scheduling: AppliedScheduling | None = None
+    step_p50_s: float = math.nan
+    step_p99_s: float = math.nan
+    step_max_s: float = math.nan
 
     @property
     def overrun_ratio(self) -> float:
@@ -105,6 +110,9 @@ class RunStats:
             "steps": self.steps,
             "duration_s": self.elapsed_s,
             "stop_reason": self.stop_reason,
+            "step_p50_s": self.step_p50_s,
+            "step_p99_s": self.step_p99_s,
+            "step_max_s": self.step_max_s,
             **(self.scheduling.as_summary() if self.scheduling is not None else {}),
         }
 
@@ -162,11 +170,19 @@ class RealTimeRunner:
         self._stop = False
         self.stop_reason = ""
         self._errors = LogHistogram()
+        self._step_times = LogHistogram()
         self.steps = 0
         self.overruns = 0
         self.stalls = 0
         self.skipped_ticks = 0
         self._elapsed_ns = 0
+        self._shift_ns = 0
+
+    def shift_schedule(self, delta_ns: int) -> None:
+        """Move the next tick's deadline by ``delta_ns`` (ns; negative: earlier), from a step
+        (a :class:`~haptic.common.phase_lock.PhaseLock` keeps the ticks in phase with the
+        peer's this way). Corrections of one tick add up; the period error shows them."""
+        self._shift_ns += delta_ns
 
     def request_stop(self, reason: str = "requested") -> None:
         """End the run after the current tick (safe from a signal handler or another thread)."""
@@ -205,6 +221,7 @@ class RealTimeRunner:
         period = self._period_ns
         spin = self._spin_ns
         errors = self._errors
+        step_times = self._step_times
         step = self._step
         start = clock()
         end = None if self._duration_ns is None else start + self._duration_ns
@@ -240,7 +257,11 @@ class RealTimeRunner:
             tick += 1
             self.steps = tick
             deadline += period
+            if self._shift_ns:
+                deadline += self._shift_ns
+                self._shift_ns = 0
             after = clock()
+            step_times.record((after - now) * 1e-9)
             if after > deadline:
                 self.overruns += 1
             if self._show_status and after >= next_status:
@@ -280,4 +301,7 @@ class RealTimeRunner:
             skipped_ticks=self.skipped_ticks,
             stop_reason=self.stop_reason,
             scheduling=self.scheduling,
+            step_p50_s=self._step_times.percentile(50.0),
+            step_p99_s=self._step_times.percentile(99.0),
+            step_max_s=self._step_times.max_s if self._step_times.count else math.nan,
         )

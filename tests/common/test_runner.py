@@ -220,3 +220,37 @@ def test_stop_signals_restore_the_previous_handlers():
         os.kill(os.getpid(), signal.SIGTERM)
         assert signals.requested and signals.reason == "SIGTERM"
     assert signal.getsignal(signal.SIGTERM) == before
+
+
+def test_shift_schedule_moves_only_the_next_tick():
+    clock = FakeClock()
+    starts = []
+    runner = None
+
+    def step(tick: int, now: int) -> None:
+        starts.append(now)
+        if tick == 10:
+            runner.shift_schedule(-3_000)  # two corrections in one tick add up
+            runner.shift_schedule(-2_000)
+
+    runner = make(clock, step, duration_s=0.02)
+    stats = runner.run()
+    gaps = [b - a for a, b in zip(starts, starts[1:], strict=False)]
+    assert abs(gaps[10] - (PERIOD_NS - 5_000)) <= 2_000  # the shifted period
+    assert all(abs(g - PERIOD_NS) <= 2_000 for i, g in enumerate(gaps) if i != 10)
+    assert stats.period_error_max_s >= 3e-6  # the shift shows in the period error
+    assert stats.overruns == 0
+
+
+def test_step_time_statistics():
+    clock = FakeClock()
+
+    def step(tick: int, _now: int) -> None:
+        clock.now += 300_000 if tick % 100 == 0 else 100_000  # charge the step's work
+
+    stats = make(clock, step, duration_s=0.5).run()
+    assert stats.step_p50_s == pytest.approx(100e-6, rel=0.05)
+    assert stats.step_max_s == pytest.approx(301e-6, rel=0.05)
+    summary = stats.as_summary()
+    assert summary["step_p50_s"] == stats.step_p50_s
+    assert summary["step_p99_s"] >= summary["step_p50_s"]
