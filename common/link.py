@@ -116,6 +116,8 @@ class Link:
         self._presence: zenoh.Subscriber | None = None
         self.peer_alive = False
         self.presence_events: list[PresenceEvent] = []
+        self.last_poll_ns = 0
+        """Time of the latest :meth:`poll` on the link's clock, ns."""
         self.sent = 0
         self.send_errors = 0
 
@@ -258,6 +260,7 @@ class Link:
             raise RuntimeError("link is not open")
         if now_ns is None:
             now_ns = self._clock_ns()
+        self.last_poll_ns = now_ns
         receive = self.receive
         sample = subscriber.try_recv()
         while sample is not None:

@@ -39,10 +39,11 @@ from haptic.common.config import ConfigError, exit_on_config_error, load_config,
 from haptic.common.display import DisplayPublisher, EventCursor
 from haptic.common.link import Link
 from haptic.common.messages import Flags, HandleState
+from haptic.common.phase_lock import PhaseLock, PhaseLockSettings
 from haptic.common.preflight import add_preflight_options, run_preflight
 from haptic.common.run_recording import RunRecording
 from haptic.common.runner import RealTimeRunner, StopSignals
-from haptic.common.runner_config import prioritise_zenoh_threads
+from haptic.common.runner_config import place_other_threads, prioritise_zenoh_threads
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
 from haptic.common.watchdog import PeerWatchdog, WatchdogState
@@ -85,6 +86,11 @@ def build_parser() -> argparse.ArgumentParser:
                        default=DEFAULT_SYNC_TOLERANCE_M,
                        help=f"resync: |tool - Ah1 handle| below this, m "
                        f"(default {DEFAULT_SYNC_TOLERANCE_M:g})")
+    group.add_argument("--phase-lag", metavar="S", type=float,
+                       help="tick this long after the master's message arrives, s "
+                       "(slave.phase_lock.lag_s)")
+    group.add_argument("--no-phase-lock", action="store_true",
+                       help="let the loop tick free-running (slave.phase_lock.enabled = false)")
     group.add_argument("--trace-every", metavar="N", type=int, default=10,
                        help="keep every Nth tick in the trace (default 10)")
     return parser
@@ -101,6 +107,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             config = override(config, "slave.scenario", args.scenario)
         if args.k is not None:
             config = override(config, "model.ch1.gain_k", args.k)
+        if args.phase_lag is not None:
+            config = override(config, "slave.phase_lock.lag_s", args.phase_lag)
+        if args.no_phase_lock:
+            config = override(config, "slave.phase_lock.enabled", False)
         options = run_options_from_args(args, "slave", config=config)
         if not args.sync_tolerance > 0.0:
             raise ConfigError("--sync-tolerance", f"must be > 0 m (got {args.sync_tolerance})")
@@ -109,6 +119,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.record_every < 1:
             raise ConfigError("--record-every", f"must be >= 1 (got {args.record_every})")
         scenario = load_scenario(options.config["slave"]["scenario"])
+        phase_lock_from(options.config, options.config["model"]["sample_period_s"])
     with exit_on_config_error():
         analysis, refused = run_preflight(options.config, args, "haptic-slave", side="slave",
                                           clay_damping_N_s_per_m=max_block_damping(scenario))
@@ -122,6 +133,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         node = SlaveNode.from_config(options.config, scenario)
     return run_slave(node, options, args, {"scenario": scenario.name,
                                            "analysis": analysis.as_dict()})
+
+
+def phase_lock_from(config: dict[str, Any], period_s: float) -> PhaseLock | None:
+    """The slave's :class:`PhaseLock` (``[slave.phase_lock]``), or ``None`` when it is off.
+    ``period_s``: the loop's period Ts, s. Raises ConfigError."""
+    section = config["slave"]["phase_lock"]
+    if not section["enabled"]:
+        return None
+    lag_s = float(section["lag_s"])
+    if lag_s >= period_s:
+        raise ConfigError("slave.phase_lock.lag_s",
+                          f"must be below the period Ts = {period_s:g} s (got {lag_s:g})")
+    return PhaseLock(period_s, PhaseLockSettings(lag_s=lag_s))
 
 
 def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
@@ -195,6 +219,7 @@ def _display_publisher(link: Link, node: SlaveNode, state: Any,
 def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                extra_summary: dict[str, Any], recording: RunRecording | None) -> int:
     period_s = node.sample_period_s
+    phase_lock = phase_lock_from(options.config, period_s)
     link_config = options.link
     watchdog = PeerWatchdog(link_config.max_message_age_s, link_config.resync_messages)
     trace = TraceRecorder(SLAVE_TRACE_COLUMNS, args.trace_every)
@@ -213,6 +238,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     y_low, y_high = grid.y_range_m[0] - margin, grid.y_range_m[1] + margin
     events: list[dict[str, Any]] = []
     run = None
+    # before Zenoh's threads start: they inherit the CPUs
+    zenoh_threads = place_other_threads(options.runner)
     with StopSignals() as signals, Link(link_config) as link:
         print(f"haptic-slave: {node.scenario.name}, environment {node.environment_kind}; "
               f"waiting for the master on {link_config.key_prefix} (connect "
@@ -224,7 +251,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 return 0
             print(f"haptic-slave: no master after {args.peer_wait:g} s", file=sys.stderr)
             return 1
-        zenoh_threads = prioritise_zenoh_threads(options.runner)
+        zenoh_threads.update(prioritise_zenoh_threads(options.runner))
         realtime_start_ns = time.time_ns()
         perf_start_ns = time.perf_counter_ns()
         clay_recorded = recording is not None and node.environment_kind == "clay"
@@ -246,6 +273,9 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             now_s = (now_ns - perf_start_ns) * 1e-9
             message = link.poll()
             fresh = message is not None
+            if fresh and phase_lock is not None:
+                runner.shift_schedule(phase_lock.update(link.receive.last_delivery_ns,
+                                                        link.last_poll_ns))
             if fresh:
                 handle: HandleState = message
                 fh = np.array([handle.handle_force_N], float)
@@ -370,6 +400,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
         removed_volume_m3=flags_box["removed"],
         final_tool_position_m=[float(final[0]), float(final[1])], **zenoh_threads,
+        **(phase_lock.summary() if phase_lock is not None else {"phase_lock": False}),
         **extra_summary,
     )
     if display is not None:

@@ -27,4 +27,14 @@ SLAVE_SCHEMA: Schema = {
                        choices=("warp", "numpy")),
     "device": Field("str", "Warp device: auto (cuda when present, else cpu), cpu, cuda, cuda:N.",
                     check=_device),
+    "phase_lock": {
+        "enabled": Field(
+            "bool", "Keep the slave's ticks lag_s after the master's messages arrive "
+            "(common/phase_lock.py); false: the loop ticks free-running.",
+        ),
+        "lag_s": Field(
+            "float", "Delivery of the master's message to the slave tick that uses it, s.",
+            minimum=0.0, maximum=0.01,
+        ),
+    },
 }
