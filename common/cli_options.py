@@ -49,6 +49,7 @@ _RUNNER_FLAGS = {
     "spin_s": ("--spin-s", "spin_s"),
     "rt_priority": ("--rt-priority", "realtime_priority"),
     "loop_cpus": ("--loop-cpus", "loop_cpus"),
+    "other_cpus": ("--other-cpus", "other_threads_cpus"),
     "zenoh_priority": ("--zenoh-priority", "zenoh_thread_priority"),
 }
 # flag dest -> key under [link]
@@ -118,6 +119,9 @@ def add_loop_options(parser: argparse.ArgumentParser) -> None:
                        "(runner.realtime_priority)")
     group.add_argument("--loop-cpus", metavar="CPUS",
                        help="CPUs of the loop thread, e.g. 1 or 0,2-3 (runner.loop_cpus)")
+    group.add_argument("--other-cpus", metavar="CPUS",
+                       help="CPUs of the program's other threads (Zenoh's, the display's), "
+                       "e.g. 0 (runner.other_threads_cpus)")
     group.add_argument("--zenoh-priority", metavar="N", type=int,
                        help="SCHED_FIFO priority of Zenoh's threads, below --rt-priority; 0: "
                        "normal scheduling (runner.zenoh_thread_priority)")

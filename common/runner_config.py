@@ -8,6 +8,8 @@ says how (common/realtime.py explains each setting)::
     realtime_priority = 40   # SCHED_FIFO priority of the loop thread, 0 = normal (default)
     tight_timers = true      # timer slack 1 ns on the loop thread
     loop_cpus = ""           # CPUs of the loop thread, e.g. "1" or "0,1"; empty = any
+    other_threads_cpus = ""  # CPUs of the program's other threads (Zenoh, display); empty = any
+    gil_switch_interval_s = 0.0002  # Python's GIL switch interval while the loop runs, s
     zenoh_thread_priority = 0  # SCHED_FIFO priority of Zenoh's threads (below the loop's); 0: off
 """
 
@@ -18,7 +20,12 @@ from dataclasses import dataclass
 from typing import Any
 
 from haptic.common.config import ConfigError, Field, Schema
-from haptic.common.realtime import MAX_FIFO_PRIORITY, RealtimeSettings, raise_threads
+from haptic.common.realtime import (
+    MAX_FIFO_PRIORITY,
+    RealtimeSettings,
+    place_process_threads,
+    raise_threads,
+)
 
 
 def parse_cpus(text: str) -> tuple[int, ...]:
@@ -60,6 +67,15 @@ RUNNER_SCHEMA: Schema = {
         "str", "CPUs the loop thread may run on, e.g. \"1\" or \"0,2-3\"; empty for any.",
         check=_cpus_check,
     ),
+    "other_threads_cpus": Field(
+        "str", "CPUs of the program's other threads (Zenoh's, the display's), set before they "
+        "start, e.g. \"0\"; empty for any.", check=_cpus_check,
+    ),
+    "gil_switch_interval_s": Field(
+        "float", "Python's GIL switch interval while the loop runs, s: the longest the loop "
+        "waits for the GIL held by another thread; 0 leaves Python's default (5 ms).",
+        minimum=0.0, maximum=0.1,
+    ),
     "zenoh_thread_priority": Field(
         "int", "SCHED_FIFO priority of Zenoh's runtime threads, below realtime_priority; 0 "
         "leaves them with normal scheduling.", minimum=0, maximum=MAX_FIFO_PRIORITY,
@@ -74,6 +90,7 @@ class RunnerSettings:
     spin_s: float
     realtime: RealtimeSettings
     zenoh_thread_priority: int = 0
+    other_threads_cpus: tuple[int, ...] = ()
 
 
 def runner_settings_from(config: dict[str, Any]) -> RunnerSettings:
@@ -85,19 +102,34 @@ def runner_settings_from(config: dict[str, Any]) -> RunnerSettings:
         raise ConfigError("runner.zenoh_thread_priority",
                           f"must be below runner.realtime_priority ({loop_priority}), or the "
                           f"network threads preempt the loop (got {zenoh_priority})")
-    try:
-        cpus = parse_cpus(table["loop_cpus"])
-    except ValueError as error:
-        raise ConfigError("runner.loop_cpus", str(error)) from None
+    cpu_sets = {}
+    for key in ("loop_cpus", "other_threads_cpus"):
+        try:
+            cpu_sets[key] = parse_cpus(table[key])
+        except ValueError as error:
+            raise ConfigError(f"runner.{key}", str(error)) from None
     return RunnerSettings(
         spin_s=float(table["spin_s"]),
         realtime=RealtimeSettings(
             priority=int(table["realtime_priority"]),
             tight_timers=bool(table["tight_timers"]),
-            cpus=cpus,
+            cpus=cpu_sets["loop_cpus"],
+            gil_switch_interval_s=float(table["gil_switch_interval_s"]),
         ),
         zenoh_thread_priority=int(table["zenoh_thread_priority"]),
+        other_threads_cpus=cpu_sets["other_threads_cpus"],
     )
+
+
+def place_other_threads(settings: RunnerSettings) -> dict[str, object]:
+    """Apply ``other_threads_cpus`` to the calling (main) thread, so the threads the program
+    starts next (Zenoh's, the display's) inherit it; call it before the link opens. Returns
+    the run summary's keys (empty when the setting is empty)."""
+    if not settings.other_threads_cpus:
+        return {}
+    cpus, warnings = place_process_threads(settings.other_threads_cpus)
+    return {"other_threads_cpus": list(cpus) if cpus is not None else None,
+            "other_threads_warnings": warnings}
 
 
 def prioritise_zenoh_threads(settings: RunnerSettings) -> dict[str, object]:

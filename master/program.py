@@ -37,7 +37,7 @@ from haptic.common.messages import Flags, ToolState
 from haptic.common.model import TeleopModel
 from haptic.common.run_recording import RunRecording
 from haptic.common.runner import RealTimeRunner, StopSignals
-from haptic.common.runner_config import prioritise_zenoh_threads
+from haptic.common.runner_config import place_other_threads, prioritise_zenoh_threads
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
 from haptic.common.watchdog import PeerWatchdog, WatchdogState
@@ -165,6 +165,8 @@ def _run_linked_master(
     run = None
     status_code = 0
     with StopSignals() as signals:
+        # before the hardware's and Zenoh's threads start: they inherit the CPUs
+        zenoh_threads.update(place_other_threads(options.runner))
         try:
             hardware.configure()
         except HardwareError as error:
@@ -182,7 +184,7 @@ def _run_linked_master(
                     print(f"haptic-master: no slave after {loop_options.peer_wait_s:g} s",
                           file=sys.stderr)
                     return 1
-                zenoh_threads = prioritise_zenoh_threads(options.runner)
+                zenoh_threads.update(prioritise_zenoh_threads(options.runner))
                 hardware.activate()
                 reading = hardware.read()
                 loop.hold_m = np.nan_to_num(reading.position_m).copy()

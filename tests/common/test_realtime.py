@@ -266,7 +266,7 @@ def test_applied_is_what_the_os_reports_not_what_was_asked():
 def test_describe_and_summary():
     applied = AppliedScheduling(
         policy="SCHED_FIFO", priority=40, timer_slack_ns=1, cpus=(0, 1),
-        warnings=["CPU affinity [7] refused: bad"],
+        warnings=["CPU affinity [7] refused: bad"], gil_switch_interval_s=0.0002,
     )
     assert applied.describe() == "SCHED_FIFO 40, timer slack 1 ns, CPUs 0,1"
     summary = applied.as_summary()
@@ -275,6 +275,7 @@ def test_describe_and_summary():
         "scheduling_policy": "SCHED_FIFO",
         "scheduling_priority": 40,
         "timer_slack_ns": 1,
+        "gil_switch_interval_s": 0.0002,
         "scheduling_warnings": ["CPU affinity [7] refused: bad"],
     }
     summary["scheduling_warnings"].append("x")  # a copy: the summary never aliases the state
@@ -494,3 +495,37 @@ def test_raise_threads_rejects_a_priority_out_of_range():
 
     with pytest.raises(ValueError):
         raise_threads(0, ("rx-",), ThreadRecorder())
+
+
+# --- the GIL switch interval and the other threads' CPUs ----------------------------------
+
+
+def test_gil_switch_interval_is_set_for_the_loop_and_restored():
+    before = sys.getswitchinterval()
+    with LoopThreadScheduling(RealtimeSettings(tight_timers=False, gil_switch_interval_s=0.0002),
+                              FakeOs()) as applied:
+        inside = sys.getswitchinterval()
+    assert inside == pytest.approx(0.0002)
+    assert applied.gil_switch_interval_s == pytest.approx(0.0002)
+    assert applied.as_summary()["gil_switch_interval_s"] == pytest.approx(0.0002)
+    assert sys.getswitchinterval() == before
+
+
+def test_gil_switch_interval_0_leaves_pythons_own():
+    before = sys.getswitchinterval()
+    with LoopThreadScheduling(RealtimeSettings(tight_timers=False), FakeOs()) as applied:
+        assert sys.getswitchinterval() == before
+    assert applied.gil_switch_interval_s == before
+    with pytest.raises(ValueError, match="gil_switch_interval_s"):
+        RealtimeSettings(gil_switch_interval_s=-1.0)
+
+
+def test_place_process_threads_on_a_fake_os():
+    fake = FakeOs()
+    cpus, warnings = realtime.place_process_threads((1, 2), fake)
+    assert cpus == (1, 2) and warnings == [] and fake.affinity == {1, 2}
+    assert realtime.place_process_threads((), fake) == ((1, 2), [])
+    refusing = FakeOs(refuse={"set_affinity": OSError(22, "Invalid argument")})
+    cpus, warnings = realtime.place_process_threads((7,), refusing)
+    assert cpus == (0, 1, 2, 3)  # unchanged
+    assert len(warnings) == 1 and "CPU affinity [7] for the other threads refused" in warnings[0]

@@ -18,6 +18,8 @@ VALID = {
     "realtime_priority": "10",
     "tight_timers": "false",
     "loop_cpus": '"0"',
+    "other_threads_cpus": '"0"',
+    "gil_switch_interval_s": "0.0005",
     "zenoh_thread_priority": "5",
 }
 
@@ -65,17 +67,21 @@ def test_defaults():
     settings = runner_settings_from(load_config())
     assert settings == RunnerSettings(
         spin_s=0.0001,
-        realtime=RealtimeSettings(priority=0, tight_timers=True, cpus=()),
+        realtime=RealtimeSettings(priority=0, tight_timers=True, cpus=(),
+                                  gil_switch_interval_s=0.0002),
     )
     assert load_config()["runner"]["loop_cpus"] == ""
+    assert settings.other_threads_cpus == ()
 
 
 def test_a_file_sets_the_whole_table(tmp_path):
     settings = runner_settings_from(load_config(runner_file(tmp_path)))
     assert settings == RunnerSettings(
         spin_s=0.0002,
-        realtime=RealtimeSettings(priority=10, tight_timers=False, cpus=(0,)),
+        realtime=RealtimeSettings(priority=10, tight_timers=False, cpus=(0,),
+                                  gil_switch_interval_s=0.0005),
         zenoh_thread_priority=5,
+        other_threads_cpus=(0,),
     )
 
 
@@ -92,6 +98,11 @@ def test_a_file_sets_the_whole_table(tmp_path):
         ({"spin_s": "-0.001"}, "runner.spin_s"),
         ({"spin_s": "0.5"}, "runner.spin_s"),
         ({"tight_timers": "1"}, "runner.tight_timers"),
+        ({"other_threads_cpus": '"0;1"'}, "runner.other_threads_cpus"),
+        ({"other_threads_cpus": f'"{os.cpu_count()}"'}, "runner.other_threads_cpus"),
+        ({"gil_switch_interval_s": "-0.001"}, "runner.gil_switch_interval_s"),
+        ({"gil_switch_interval_s": "1.0"}, "runner.gil_switch_interval_s"),
+        ({"gil_switch_interval_s": None}, "runner.gil_switch_interval_s"),
         ({"spin_s": None}, "runner.spin_s"),  # a table that gives any key gives them all
     ],
 )
@@ -128,10 +139,13 @@ def parse(argv: list[str], config_file=None):
 
 
 def test_flags_set_the_runner():
-    options = parse(["--spin-s", "0.00005", "--rt-priority", "0", "--loop-cpus", "0"])
+    options = parse(["--spin-s", "0.00005", "--rt-priority", "0", "--loop-cpus", "0",
+                     "--other-cpus", "0"])
     assert options.runner == RunnerSettings(
         spin_s=0.00005,
-        realtime=RealtimeSettings(priority=0, tight_timers=True, cpus=(0,)),
+        realtime=RealtimeSettings(priority=0, tight_timers=True, cpus=(0,),
+                                  gil_switch_interval_s=0.0002),
+        other_threads_cpus=(0,),
     )
     assert options.config["runner"]["realtime_priority"] == 0
 
@@ -142,7 +156,8 @@ def test_no_flags_keep_the_defaults():
 
 def test_flags_win_over_the_file(tmp_path):
     options = parse(["--rt-priority", "60"], config_file=runner_file(tmp_path))
-    assert options.runner.realtime == RealtimeSettings(priority=60, tight_timers=False, cpus=(0,))
+    assert options.runner.realtime == RealtimeSettings(priority=60, tight_timers=False, cpus=(0,),
+                                                       gil_switch_interval_s=0.0005)
     assert options.runner.spin_s == 0.0002  # from the file
 
 
@@ -159,6 +174,7 @@ def test_an_empty_loop_cpus_flag_means_any_cpu(tmp_path):
         (["--loop-cpus", "x"], "--loop-cpus (runner.loop_cpus)"),
         (["--loop-cpus", str(os.cpu_count())], "--loop-cpus (runner.loop_cpus)"),
         (["--spin-s", "-1"], "--spin-s (runner.spin_s)"),
+        (["--other-cpus", "0-x"], "--other-cpus (runner.other_threads_cpus)"),
     ],
 )
 def test_bad_flags_name_the_flag(argv, named, capsys):
@@ -188,3 +204,38 @@ def test_prioritise_zenoh_threads_is_off_by_default():
     from haptic.common.runner_config import prioritise_zenoh_threads, runner_settings_from
 
     assert prioritise_zenoh_threads(runner_settings_from(load_config(None))) == {}
+
+
+def test_place_other_threads_is_off_by_default():
+    from haptic.common.runner_config import place_other_threads
+
+    assert place_other_threads(runner_settings_from(load_config(None))) == {}
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="Linux CPU affinity")
+def test_place_other_threads_pins_the_thread_and_what_it_starts_next():
+    import threading
+
+    from haptic.common.runner_config import place_other_threads
+
+    allowed = sorted(os.sched_getaffinity(0))
+    config = load_config(None)
+    config["runner"]["other_threads_cpus"] = str(allowed[0])
+    settings = runner_settings_from(config)
+    seen: dict[str, object] = {}
+
+    def child() -> None:
+        seen["child"] = os.sched_getaffinity(0)
+
+    def body() -> None:  # in its own thread: affinity is per thread
+        seen["keys"] = place_other_threads(settings)
+        started = threading.Thread(target=child)
+        started.start()
+        started.join()
+
+    thread = threading.Thread(target=body)
+    thread.start()
+    thread.join(timeout=10)
+    assert seen["keys"] == {"other_threads_cpus": [allowed[0]], "other_threads_warnings": []}
+    assert seen["child"] == {allowed[0]}
+    assert sorted(os.sched_getaffinity(0)) == allowed  # the test's own thread is untouched
