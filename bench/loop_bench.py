@@ -50,7 +50,7 @@ from haptic.common.config import exit_on_config_error
 from haptic.common.link import Link
 from haptic.common.messages import Flags
 from haptic.common.runner import RealTimeRunner, StopSignals
-from haptic.common.runner_config import prioritise_zenoh_threads
+from haptic.common.runner_config import place_other_threads, prioritise_zenoh_threads
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.watchdog import PeerWatchdog
 
@@ -171,13 +171,14 @@ def echo_node(side: str, argv: list[str]) -> int:
     period_s = config["model"]["sample_period_s"]
     watchdog = PeerWatchdog(options.link.max_message_age_s, options.link.resync_messages)
     max_force = 0.0
+    zenoh_threads = place_other_threads(options.runner)  # before Zenoh's threads start
     with StopSignals() as signals, Link(options.link) as link:
         if not link.wait_for_peer(PEER_WAIT_S, lambda: signals.requested):
             if signals.requested:
                 return 0
             print(f"{side}: no peer after {PEER_WAIT_S} s", file=sys.stderr)
             return 1
-        zenoh_threads = prioritise_zenoh_threads(options.runner)
+        zenoh_threads.update(prioritise_zenoh_threads(options.runner))
         state: dict[str, Any] = {"force": (0.0, 0.0), "position": (0.0, 0.0)}
 
         def step(tick: int, now_ns: int) -> None:
@@ -249,23 +250,46 @@ def default_command(side: str, echo: bool = False, rig: str = "model") -> list[s
     return command
 
 
+#: How the benchmark places the two programs' threads on the CPUs.
+CPU_LAYOUTS = ("partitioned", "free")
+
+
+def cpu_layout_args(layout: str, cpu_count: int | None = None) -> list[str]:
+    """The run options of a CPU layout (docs/link.md section 9).
+
+    ``partitioned`` (the default with 2 CPUs or more, as on a rig PC): both loops on the last
+    CPU in SCHED_FIFO, kept apart in time by the slave's phase lock, with a 20 us spin;
+    every other thread (Zenoh's, the display's) on the other CPUs. ``free``: the loops in
+    SCHED_FIFO on any CPU with the default spin, everything else where the kernel puts it.
+    """
+    if layout not in CPU_LAYOUTS:
+        raise ValueError(f"cpu layout must be one of {', '.join(CPU_LAYOUTS)} (got {layout!r})")
+    common = ["--rt-priority", "40"]
+    count = os.cpu_count() if cpu_count is None else cpu_count
+    if layout == "free" or count is None or count < 2:
+        return common
+    loop_cpu = count - 1
+    others = "0" if loop_cpu == 1 else f"0-{loop_cpu - 1}"
+    return [*common, "--loop-cpus", str(loop_cpu), "--other-cpus", others, "--spin-s", "0.00002"]
+
+
 def run_pair(
     master_cmd: list[str],
     slave_cmd: list[str],
     duration_s: float,
     extra_args: list[str] | None = None,
     timeout_s: float | None = None,
+    cpu_layout: str = "partitioned",
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Run the master and slave commands on loopback for ``duration_s`` and return their JSON
     summaries. Both get ``--duration``, ``--json-summary``, ``--no-status``, a fresh key
-    prefix and port (master ``--listen``, slave ``--connect``) and ``extra_args``."""
+    prefix and port (master ``--listen``, slave ``--connect``), the options of ``cpu_layout``
+    (:func:`cpu_layout_args`) and ``extra_args`` (after them, so they can override)."""
     port = free_port()
     prefix = f"bench/{uuid.uuid4().hex[:8]}"
     endpoint = f"tcp/127.0.0.1:{port}"
-    # SCHED_FIFO 40 for the loops, as on a rig PC (docs/link.md section 6); --extra can
-    # override it (--rt-priority 0)
     common = ["--duration", str(duration_s), "--key-prefix", prefix, "--no-status",
-              "--rt-priority", "40", *(extra_args or [])]
+              *cpu_layout_args(cpu_layout), *(extra_args or [])]
     timeout = timeout_s if timeout_s is not None else duration_s + 60.0
     with tempfile.TemporaryDirectory(prefix="loop_bench_") as tmp:
         files = {side: Path(tmp) / f"{side}.json" for side in ("master", "slave")}
@@ -306,6 +330,9 @@ def _side_figures(summary: dict[str, Any], ts_s: float) -> dict[str, Any]:
         "overrun_ratio": summary["overrun_ratio"],
         "steps": summary["steps"],
         "stalls": summary.get("stalls"),
+        "step_p50_s": summary.get("step_p50_s"),
+        "step_p99_s": summary.get("step_p99_s"),
+        "scheduling": summary.get("scheduling"),
     }
 
 
@@ -333,6 +360,7 @@ def benchmark(
     ts_s: float = 0.00054,
     echo: bool = False,
     rig: str = "model",
+    cpu_layout: str = "partitioned",
 ) -> dict[str, Any]:
     """The whole benchmark; returns the result dict (the ``--json`` shape of issue 5, with
     per-direction details added)."""
@@ -340,6 +368,7 @@ def benchmark(
     master, slave = run_pair(
         master_cmd or default_command("master", echo, rig),
         slave_cmd or default_command("slave", echo), duration_s, extra_args,
+        cpu_layout=cpu_layout,
     )
     raw = summarise_one_way(np.concatenate([before, raw_ping_pong()]))
     to_slave = _direction(slave)   # the slave receives master -> slave
@@ -358,6 +387,8 @@ def benchmark(
     )
     return {
         "duration_s": duration_s,
+        "cpu_layout": cpu_layout,
+        "run_options": cpu_layout_args(cpu_layout) + list(extra_args or []),
         "nodes": "echo" if echo and not (master_cmd or slave_cmd) else (
             "custom" if master_cmd or slave_cmd else f"programs, rig {rig}"),
         "master": _side_figures(master, ts_s),
@@ -374,14 +405,16 @@ def _us(value: float | None) -> str:
 
 def print_table(result: dict[str, Any]) -> None:
     print(f"loop benchmark, {result['duration_s']:g} s on loopback, nodes: "
-          f"{result.get('nodes', '?')}")
+          f"{result.get('nodes', '?')}, CPU layout {result.get('cpu_layout', '?')} "
+          f"({' '.join(result.get('run_options', []))})")
     for side in ("master", "slave"):
         f = result[side]
         print(
             f"  {side:6s} rate {f['rate_hz']:8.1f} Hz (target {f['target_rate_hz']:.1f})  "
             f"period error p50 {_us(f['period_p50_error_s'])} p99 {_us(f['period_p99_error_s'])}"
             f" max {_us(f['period_max_error_s'])}  overruns {f['overruns']} "
-            f"({f['overrun_ratio'] * 100:.3f} %)"
+            f"({f['overrun_ratio'] * 100:.3f} %)  step p50 {_us(f.get('step_p50_s'))} p99 "
+            f"{_us(f.get('step_p99_s'))}"
         )
     link = result["link"]
     for name in ("master_to_slave", "slave_to_master"):
@@ -425,6 +458,9 @@ def main(argv: list[str] | None = None) -> int:
                         "or model (the rig block, no bus; default)")
     parser.add_argument("--echo", action="store_true",
                         help="run the echo nodes (link and runner only) instead of the programs")
+    parser.add_argument("--cpu-layout", choices=CPU_LAYOUTS, default="partitioned",
+                        help="partitioned (default): both loops on the last CPU, the other "
+                        "threads on the rest; free: anywhere")
     parser.add_argument(
         "--extra", default="", help="extra arguments for both commands (one shell string)"
     )
@@ -436,6 +472,7 @@ def main(argv: list[str] | None = None) -> int:
         shlex.split(args.extra),
         echo=args.echo,
         rig=args.rig,
+        cpu_layout=args.cpu_layout,
     )
     if args.json:
         print(json.dumps(result, indent=2))

@@ -30,3 +30,17 @@ def test_json_shape(capsys, monkeypatch):
     assert {"one_way_p50_s", "one_way_p99_s"} <= set(result["raw_zenoh"])
     assert result["raw_zenoh"]["round_trips"] == 600
     assert result["link_to_raw_p50_ratio"] > 0
+    assert result["cpu_layout"] == "partitioned"
+    assert result["slave"]["step_p50_s"] > 0
+
+
+def test_cpu_layouts():
+    bench = load_bench()
+    two = bench.cpu_layout_args("partitioned", 2)
+    assert two == ["--rt-priority", "40", "--loop-cpus", "1", "--other-cpus", "0",
+                   "--spin-s", "0.00002"]
+    four = bench.cpu_layout_args("partitioned", 4)
+    assert four[four.index("--loop-cpus") + 1] == "3"
+    assert four[four.index("--other-cpus") + 1] == "0-2"
+    assert bench.cpu_layout_args("partitioned", 1) == ["--rt-priority", "40"]
+    assert bench.cpu_layout_args("free", 8) == ["--rt-priority", "40"]
