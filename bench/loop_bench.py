@@ -19,6 +19,12 @@ watchdog, a poll, a send per tick; no control law, no hardware): the link and ru
 ``--json-summary``, ``--listen``/``--connect``, ``--key-prefix``, ``--no-status``);
 ``--master-cmd`` and ``--slave-cmd`` give others.
 
+CPU layout (``--cpu-layout``, :func:`cpu_layout_args`): ``partitioned`` by default, as on a rig
+PC: both loops in SCHED_FIFO 40 on the last CPU (the slave's phase lock makes them take turns),
+a 20 us spin, and every other thread (Zenoh's, the display's) on the other CPUs. ``free``:
+the loops in SCHED_FIFO anywhere, the other threads wherever the kernel puts them. The raw
+ping-pong is never pinned: it is Zenoh as it comes.
+
 Usage::
 
     python bench/loop_bench.py --duration 10            # a table
@@ -77,6 +83,9 @@ def _peer_config(listen: str | None = None, connect: str | None = None) -> zenoh
 
 # -- raw zenoh ping-pong -------------------------------------------------------------------
 
+#: Round trips of the paced ping-pong before and after the loop (one per Ts: about 1 s each).
+PACED_ROUND_TRIPS = 2000
+
 
 def pong(endpoint: str, prefix: str) -> None:
     """Echo every ``<prefix>/ping`` sample on ``<prefix>/pong`` until the ping says stop."""
@@ -96,9 +105,10 @@ def pong(endpoint: str, prefix: str) -> None:
         token.undeclare()
 
 
-def raw_ping_pong(round_trips: int = 10000, warmup: int = 200) -> np.ndarray:
+def raw_ping_pong(round_trips: int = 10000, warmup: int = 200,
+                  period_s: float = 0.0) -> np.ndarray:
     """One-way delays (s, round trip / 2) of a raw zenoh-python ping-pong with a child
-    process."""
+    process: back to back by default, or one ping every ``period_s`` (s) as the loop sends."""
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     prefix = f"bench/{uuid.uuid4().hex[:8]}"
@@ -123,7 +133,13 @@ def raw_ping_pong(round_trips: int = 10000, warmup: int = 200) -> np.ndarray:
                     raise RuntimeError("the pong process did not come up")
                 time.sleep(0.005)
             i = -warmup
+            next_ping = time.perf_counter()
             while i < round_trips:
+                if period_s > 0.0:
+                    next_ping += period_s
+                    wait = next_ping - time.perf_counter()
+                    if wait > 0.0:
+                        time.sleep(wait)
                 payload = i.to_bytes(8, "little", signed=True)
                 t0 = time.perf_counter_ns()
                 pub.put(payload)
@@ -365,12 +381,15 @@ def benchmark(
     """The whole benchmark; returns the result dict (the ``--json`` shape of issue 5, with
     per-direction details added)."""
     before = raw_ping_pong()
+    paced_before = raw_ping_pong(PACED_ROUND_TRIPS, 50, period_s=ts_s)
     master, slave = run_pair(
         master_cmd or default_command("master", echo, rig),
         slave_cmd or default_command("slave", echo), duration_s, extra_args,
         cpu_layout=cpu_layout,
     )
     raw = summarise_one_way(np.concatenate([before, raw_ping_pong()]))
+    paced = summarise_one_way(np.concatenate(
+        [paced_before, raw_ping_pong(PACED_ROUND_TRIPS, 50, period_s=ts_s)]))
     to_slave = _direction(slave)   # the slave receives master -> slave
     to_master = _direction(master)
     link = {
@@ -396,6 +415,11 @@ def benchmark(
         "link": link,
         "raw_zenoh": raw,
         "link_to_raw_p50_ratio": ratio,
+        # context, not the target: the same ping-pong one ping per Ts, as the loop sends
+        "raw_zenoh_paced": {**paced, "period_s": ts_s},
+        "link_to_raw_paced_p50_ratio": (
+            link["one_way_p50_s"] / paced["one_way_p50_s"]
+            if link["one_way_p50_s"] is not None and paced["one_way_p50_s"] > 0 else None),
     }
 
 
@@ -430,6 +454,12 @@ def print_table(result: dict[str, Any]) -> None:
           f"{_us(raw['one_way_p99_s'])}")
     ratio = result["link_to_raw_p50_ratio"]
     print(f"  link / raw one-way p50: {ratio:.2f}" if ratio is not None else "  ratio: n/a")
+    paced = result.get("raw_zenoh_paced")
+    if paced is not None:
+        paced_ratio = result.get("link_to_raw_paced_p50_ratio")
+        print(f"  (context) raw ping-pong paced at Ts one-way p50 {_us(paced['one_way_p50_s'])} "
+              f"p99 {_us(paced['one_way_p99_s'])}; link / paced p50: "
+              + (f"{paced_ratio:.2f}" if paced_ratio is not None else "n/a"))
 
 
 def main(argv: list[str] | None = None) -> int:

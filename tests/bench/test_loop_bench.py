@@ -20,7 +20,8 @@ def load_bench():
 def test_json_shape(capsys, monkeypatch):
     bench = load_bench()
     real = bench.raw_ping_pong
-    monkeypatch.setattr(bench, "raw_ping_pong", lambda: real(round_trips=300, warmup=20))
+    monkeypatch.setattr(bench, "raw_ping_pong",
+                        lambda *_args, period_s=0.0: real(300, 20, period_s=period_s))
     assert bench.main(["--duration", "1.0", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     for side in ("master", "slave"):
@@ -29,6 +30,8 @@ def test_json_shape(capsys, monkeypatch):
     assert {"one_way_p50_s", "one_way_p99_s", "loss_ratio"} <= set(result["link"])
     assert {"one_way_p50_s", "one_way_p99_s"} <= set(result["raw_zenoh"])
     assert result["raw_zenoh"]["round_trips"] == 600
+    assert result["raw_zenoh_paced"]["round_trips"] == 600
+    assert result["raw_zenoh_paced"]["period_s"] == 0.00054
     assert result["link_to_raw_p50_ratio"] > 0
     assert result["cpu_layout"] == "partitioned"
     assert result["slave"]["step_p50_s"] > 0
