@@ -86,9 +86,9 @@ def build_parser() -> argparse.ArgumentParser:
                        default=DEFAULT_SYNC_TOLERANCE_M,
                        help=f"resync: |tool - Ah1 handle| below this, m "
                        f"(default {DEFAULT_SYNC_TOLERANCE_M:g})")
-    group.add_argument("--phase-lag", metavar="S", type=float,
-                       help="tick this long after the master's message arrives, s "
-                       "(slave.phase_lock.lag_s)")
+    group.add_argument("--phase-margin", metavar="S", type=float,
+                       help="start the spin before the tick this long after the master's "
+                       "message arrives, s (slave.phase_lock.margin_s)")
     group.add_argument("--no-phase-lock", action="store_true",
                        help="let the loop tick free-running (slave.phase_lock.enabled = false)")
     group.add_argument("--trace-every", metavar="N", type=int, default=10,
@@ -107,8 +107,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             config = override(config, "slave.scenario", args.scenario)
         if args.k is not None:
             config = override(config, "model.ch1.gain_k", args.k)
-        if args.phase_lag is not None:
-            config = override(config, "slave.phase_lock.lag_s", args.phase_lag)
+        if args.phase_margin is not None:
+            config = override(config, "slave.phase_lock.margin_s", args.phase_margin)
         if args.no_phase_lock:
             config = override(config, "slave.phase_lock.enabled", False)
         options = run_options_from_args(args, "slave", config=config)
@@ -137,14 +137,18 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def phase_lock_from(config: dict[str, Any], period_s: float) -> PhaseLock | None:
     """The slave's :class:`PhaseLock` (``[slave.phase_lock]``), or ``None`` when it is off.
-    ``period_s``: the loop's period Ts, s. Raises ConfigError."""
+    Its lag (delivery of the master's message to the tick using it) is the runner's spin plus
+    ``margin_s``: the loop starts spinning only after the message is in, so a SCHED_FIFO spin
+    never holds up the Zenoh thread receiving it (with the spin over the arrival, the arrival
+    waits for the tick and the lock chases it). ``period_s``: Ts, s. Raises ConfigError."""
     section = config["slave"]["phase_lock"]
     if not section["enabled"]:
         return None
-    lag_s = float(section["lag_s"])
+    lag_s = float(config["runner"]["spin_s"]) + float(section["margin_s"])
     if lag_s >= period_s:
-        raise ConfigError("slave.phase_lock.lag_s",
-                          f"must be below the period Ts = {period_s:g} s (got {lag_s:g})")
+        raise ConfigError("slave.phase_lock.margin_s",
+                          f"runner.spin_s + margin_s must be below the period Ts = "
+                          f"{period_s:g} s (got {lag_s:g})")
     return PhaseLock(period_s, PhaseLockSettings(lag_s=lag_s))
 
 

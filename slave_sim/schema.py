@@ -29,11 +29,12 @@ SLAVE_SCHEMA: Schema = {
                     check=_device),
     "phase_lock": {
         "enabled": Field(
-            "bool", "Keep the slave's ticks lag_s after the master's messages arrive "
+            "bool", "Keep the slave's ticks a set lag after the master's messages arrive "
             "(common/phase_lock.py); false: the loop ticks free-running.",
         ),
-        "lag_s": Field(
-            "float", "Delivery of the master's message to the slave tick that uses it, s.",
+        "margin_s": Field(
+            "float", "The slave's spin before its tick starts this long after the master's "
+            "message arrives, s: the tick comes runner.spin_s + margin_s after the arrival.",
             minimum=0.0, maximum=0.01,
         ),
     },

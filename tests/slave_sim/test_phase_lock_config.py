@@ -1,4 +1,5 @@
-"""The slave's [slave.phase_lock] table and its flags: validated at start, one-line errors."""
+"""The slave's [slave.phase_lock] table and its flags: validated at start, one-line errors.
+The lock's lag is the runner's spin plus the margin (common/phase_lock.py)."""
 
 from __future__ import annotations
 
@@ -13,9 +14,13 @@ from haptic.slave_sim.program import phase_lock_from
 PERIOD_S = 0.00054
 
 
-def test_on_by_default_with_a_50_us_lag():
-    lock = phase_lock_from(load_config(), PERIOD_S)
-    assert lock is not None and lock.settings.lag_s == pytest.approx(50e-6)
+def test_on_by_default_the_lag_is_the_spin_plus_the_margin():
+    config = load_config()
+    lock = phase_lock_from(config, PERIOD_S)
+    assert lock is not None
+    assert lock.settings.lag_s == pytest.approx(config["runner"]["spin_s"] + 30e-6)
+    short_spin = override(config, "runner.spin_s", 20e-6)
+    assert phase_lock_from(short_spin, PERIOD_S).settings.lag_s == pytest.approx(50e-6)
 
 
 def test_off_gives_no_lock():
@@ -24,25 +29,25 @@ def test_off_gives_no_lock():
 
 
 def test_a_lag_of_a_period_or_more_names_the_key():
-    config = override(load_config(), "slave.phase_lock.lag_s", PERIOD_S)
+    config = override(load_config(), "slave.phase_lock.margin_s", PERIOD_S)
     with pytest.raises(ConfigError) as caught:
         phase_lock_from(config, PERIOD_S)
-    assert caught.value.key == "slave.phase_lock.lag_s"
+    assert caught.value.key == "slave.phase_lock.margin_s"
 
 
 def test_a_file_giving_the_slave_table_keeps_the_default_lock(tmp_path):
     path = tmp_path / "slave.toml"
     path.write_text('[slave]\nscenario = "constant-rate"\nenvironment = "linear"\n'
                     'clay_impl = "numpy"\ndevice = "cpu"\n')
-    assert load_config(path)["slave"]["phase_lock"] == {"enabled": True, "lag_s": 5e-05}
+    assert load_config(path)["slave"]["phase_lock"] == {"enabled": True, "margin_s": 3e-05}
     path.write_text("[slave.phase_lock]\nenabled = false\n")
-    with pytest.raises(ConfigError, match="slave.phase_lock.lag_s: missing key"):
+    with pytest.raises(ConfigError, match="slave.phase_lock.margin_s: missing key"):
         load_config(path)
 
 
 @pytest.mark.parametrize(("argv", "named"), [
-    (["--phase-lag", "0.001"], "slave.phase_lock.lag_s: must be below the period"),
-    (["--phase-lag", "-1"], "slave.phase_lock.lag_s"),
+    (["--phase-margin", "0.001"], "slave.phase_lock.margin_s: runner.spin_s + margin_s must"),
+    (["--phase-margin", "-1"], "slave.phase_lock.margin_s"),
 ])
 def test_bad_flags_exit_2_with_one_line(argv, named):
     done = subprocess.run([sys.executable, "-m", "haptic.slave_sim.program", *argv,

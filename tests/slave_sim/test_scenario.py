@@ -110,7 +110,7 @@ def test_slave_config_section_is_validated() -> None:
     config = load_config()
     assert config["slave"] == {"scenario": "constant-rate", "environment": "scenario",
                                "clay_impl": "warp", "device": "auto",
-                               "phase_lock": {"enabled": True, "lag_s": 5e-05}}
+                               "phase_lock": {"enabled": True, "margin_s": 3e-05}}
     assert override(config, "slave.device", "cuda:1")["slave"]["device"] == "cuda:1"
     with pytest.raises(ConfigError) as error:
         override(config, "slave.device", "tpu")
