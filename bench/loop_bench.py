@@ -21,8 +21,9 @@ watchdog, a poll, a send per tick; no control law, no hardware): the link and ru
 
 CPU layout (``--cpu-layout``, :func:`cpu_layout_args`): ``partitioned`` by default, as on a rig
 PC: both loops in SCHED_FIFO 40 on the last CPU (the slave's phase lock makes them take turns),
-a 20 us spin, and every other thread (Zenoh's, the display's) on the other CPUs. ``free``:
-the loops in SCHED_FIFO anywhere, the other threads wherever the kernel puts them. The raw
+a 20 us spin, and every other thread (Zenoh's, the display's) on the other CPUs. ``free``
+(the default for ``--echo`` and custom commands, which have no phase lock): the loops in
+SCHED_FIFO anywhere, the other threads wherever the kernel puts them. The raw
 ping-pong is never pinned: it is Zenoh as it comes.
 
 Usage::
@@ -270,23 +271,26 @@ def default_command(side: str, echo: bool = False, rig: str = "model") -> list[s
 CPU_LAYOUTS = ("partitioned", "free")
 
 
-def cpu_layout_args(layout: str, cpu_count: int | None = None) -> list[str]:
-    """The run options of a CPU layout (docs/link.md section 9).
+def cpu_layout_args(layout: str, cpus: list[int] | None = None) -> list[str]:
+    """The run options of a CPU layout (docs/link.md section 9) on the CPUs this process may
+    use (``cpus``; default: its affinity).
 
-    ``partitioned`` (the default with 2 CPUs or more, as on a rig PC): both loops on the last
-    CPU in SCHED_FIFO, kept apart in time by the slave's phase lock, with a 20 us spin;
-    every other thread (Zenoh's, the display's) on the other CPUs. ``free``: the loops in
-    SCHED_FIFO on any CPU with the default spin, everything else where the kernel puts it.
+    ``partitioned`` (the default for the programs with 2 CPUs or more, as on a rig PC): both
+    loops on the last CPU in SCHED_FIFO, kept apart in time by the slave's phase lock, with a
+    20 us spin; every other thread (Zenoh's, the display's) on the other CPUs. ``free``: the
+    loops in SCHED_FIFO on any CPU with the default spin, everything else where the kernel
+    puts it.
     """
     if layout not in CPU_LAYOUTS:
         raise ValueError(f"cpu layout must be one of {', '.join(CPU_LAYOUTS)} (got {layout!r})")
     common = ["--rt-priority", "40"]
-    count = os.cpu_count() if cpu_count is None else cpu_count
-    if layout == "free" or count is None or count < 2:
+    if cpus is None:
+        cpus = (sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                else list(range(os.cpu_count() or 1)))
+    if layout == "free" or len(cpus) < 2:
         return common
-    loop_cpu = count - 1
-    others = "0" if loop_cpu == 1 else f"0-{loop_cpu - 1}"
-    return [*common, "--loop-cpus", str(loop_cpu), "--other-cpus", others, "--spin-s", "0.00002"]
+    others = ",".join(str(cpu) for cpu in cpus[:-1])
+    return [*common, "--loop-cpus", str(cpus[-1]), "--other-cpus", others, "--spin-s", "0.00002"]
 
 
 def run_pair(
@@ -488,9 +492,10 @@ def main(argv: list[str] | None = None) -> int:
                         "or model (the rig block, no bus; default)")
     parser.add_argument("--echo", action="store_true",
                         help="run the echo nodes (link and runner only) instead of the programs")
-    parser.add_argument("--cpu-layout", choices=CPU_LAYOUTS, default="partitioned",
-                        help="partitioned (default): both loops on the last CPU, the other "
-                        "threads on the rest; free: anywhere")
+    parser.add_argument("--cpu-layout", choices=CPU_LAYOUTS,
+                        help="partitioned (default for the programs): both loops on the last "
+                        "CPU, the other threads on the rest; free (default for --echo and "
+                        "custom commands, which have no phase lock): anywhere")
     parser.add_argument(
         "--extra", default="", help="extra arguments for both commands (one shell string)"
     )
@@ -502,7 +507,8 @@ def main(argv: list[str] | None = None) -> int:
         shlex.split(args.extra),
         echo=args.echo,
         rig=args.rig,
-        cpu_layout=args.cpu_layout,
+        cpu_layout=args.cpu_layout or (
+            "free" if args.echo or args.master_cmd or args.slave_cmd else "partitioned"),
     )
     if args.json:
         print(json.dumps(result, indent=2))

@@ -27,7 +27,7 @@ class LogHistogram:
         self._step = math.log1p(rel_width)
         self._nbins = int(math.ceil(math.log(high_s / low_s) * self._inv_log_step)) + 2
         self._counts = [0] * self._nbins
-        self._first = self._nbins  # lowest and highest bin holding a value
+        self._first = self._nbins  # lowest and highest bin above the underflow holding a value
         self._last = -1
         self.count = 0
         self.max_s = -math.inf
@@ -42,10 +42,11 @@ class LogHistogram:
         else:
             index = 0
         self._counts[index] += 1
-        if index < self._first:
-            self._first = index
-        if index > self._last:
-            self._last = index
+        if index:
+            if index < self._first:
+                self._first = index
+            if index > self._last:
+                self._last = index
         self.count += 1
         self.sum_s += value_s
         if value_s > self.max_s:
@@ -62,15 +63,17 @@ class LogHistogram:
         value recorded (tens of us for delays spanning two decades)."""
         if self.count == 0:
             return tuple(math.nan for _ in qs)
+        underflow = self._counts[0]
         first = self._first
-        cumulative = list(accumulate(self._counts[first:self._last + 1]))
+        cumulative = list(accumulate(self._counts[first:self._last + 1], initial=underflow))
         results = []
         for q in qs:
             rank = max(q / 100.0 * self.count, 1e-12)
-            index = first + bisect.bisect_left(cumulative, rank)
-            if index == 0:
+            if rank <= underflow:
                 results.append(0.0)
-            elif index >= self._nbins - 1:
+                continue
+            index = first - 1 + bisect.bisect_left(cumulative, rank)
+            if index >= self._nbins - 1:
                 results.append(self.max_s)
             else:
                 centre = math.exp(self._log_low + (index - 0.5) * self._step)

@@ -277,6 +277,15 @@ class Link:
                 change = presence.try_recv()
         return receive.release(now_ns)
 
+    @property
+    def last_delivery_measured(self) -> bool:
+        """Whether the newest delivered message's delivery time is a measurement: Zenoh's
+        arrival stamp or an injected delivery time. Without a stamp (a peer without timestamp
+        instrumentation) the arrival is the draining poll's own time, which says nothing
+        about when the message came."""
+        delivery = self.receive.last_delivery_ns
+        return delivery is not None and delivery != self.last_poll_ns
+
     def wait_for_peer(
         self,
         timeout_s: float | None,

@@ -31,7 +31,7 @@ class PhaseLockSettings:
     fraction of the phase error corrected per tick (0..1]. ``max_step_s``: the largest
     correction per tick, s. ``deadband_s``: errors smaller than this are left alone, s."""
 
-    lag_s: float = 0.00015
+    lag_s: float = 0.00013
     gain: float = 0.05
     max_step_s: float = 0.000002
     deadband_s: float = 0.000003
@@ -62,6 +62,7 @@ class PhaseLock:
         self.total_shift_ns = 0
         self.locked_ticks = 0
         self.updates = 0
+        self.unmeasured = 0
 
     def phase_error_ns(self, delivery_ns: int, use_ns: int) -> int:
         """The lag from ``delivery_ns`` to ``use_ns`` minus ``lag_s``, wrapped into
@@ -88,10 +89,17 @@ class PhaseLock:
         self.total_shift_ns += step
         return step
 
+    def skip_unmeasured(self) -> None:
+        """A fresh message whose delivery time is not a measurement (no arrival stamp): no
+        correction, counted in the summary."""
+        self.unmeasured += 1
+
     def summary(self) -> dict[str, object]:
         """The run summary's keys: the target lag, the last error, how often it was locked."""
         return {
+            "phase_lock_enabled": True,
             "phase_lock_lag_s": self.settings.lag_s,
+            "phase_lock_unstamped": self.unmeasured,
             "phase_lock_last_error_s": self.last_error_ns * 1e-9,
             "phase_lock_locked_ratio": self.locked_ticks / self.updates if self.updates else 0.0,
             "phase_lock_total_shift_s": self.total_shift_ns * 1e-9,

@@ -21,10 +21,12 @@ long it must spin is set by how late a sleep wakes up, and that is set by the OS
   display's: they inherit the main thread's CPUs when they start) on other CPUs, so that
   neither waits for the other: on the 2-core VM, both programs' loops on CPU 1 (kept apart in
   time by the slave's phase lock, common/phase_lock.py) and everything else on CPU 0 brought
-  the link's one-way p50 from 26 to 16-18 us and its p99 from 300 to 30-70 us.
+  the link's one-way p50 from 23-30 to 15-19 us and its p99 from 120-550 to 26-95 us
+  (docs/link.md section 9).
 - :attr:`RealtimeSettings.gil_switch_interval_s` shortens Python's GIL switch interval
   (5 ms by default) while the loop runs: a loop that wants the GIL back from another thread
-  of the process (the display's JSON encoding) then waits at most about this long.
+  of the process (the display's JSON encoding) then waits at most about this long. 0 leaves
+  the interval as it is.
 
 Everything applies to the *calling thread* only (on Linux, pid 0 means the calling thread for
 these calls), so the Zenoh and CAN threads a program started before keep normal scheduling.
@@ -230,8 +232,12 @@ class LoopThreadScheduling:
 
     def __exit__(self, *_exc: object) -> None:
         calls = self._os
+        # each restore on its own: one that fails must not keep the others from running
         if self._previous_switch_interval_s is not None:
-            sys.setswitchinterval(self._previous_switch_interval_s)
+            try:
+                sys.setswitchinterval(self._previous_switch_interval_s)
+            except ValueError:
+                pass
             self._previous_switch_interval_s = None
         if self._previous_scheduler is not None:
             policy, priority = self._previous_scheduler

@@ -223,6 +223,7 @@ class RealTimeRunner:
         errors = self._errors
         step_times = self._step_times
         step = self._step
+        self._shift_ns = 0  # a shift asked for outside a run does not carry into this one
         start = clock()
         end = None if self._duration_ns is None else start + self._duration_ns
         deadline = start

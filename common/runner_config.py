@@ -9,7 +9,7 @@ says how (common/realtime.py explains each setting)::
     tight_timers = true      # timer slack 1 ns on the loop thread
     loop_cpus = ""           # CPUs of the loop thread, e.g. "1" or "0,1"; empty = any
     other_threads_cpus = ""  # CPUs of the program's other threads (Zenoh, display); empty = any
-    gil_switch_interval_s = 0.0002  # Python's GIL switch interval while the loop runs, s
+    gil_switch_interval_s = 0.0002  # Python's GIL switch interval while the loop runs, s (0: as is)
     zenoh_thread_priority = 0  # SCHED_FIFO priority of Zenoh's threads (below the loop's); 0: off
 """
 
@@ -53,6 +53,12 @@ def _cpus_check(text: str) -> str | None:
     return None
 
 
+def _switch_interval_check(value: float) -> str | None:
+    if 0.0 < value < 1e-6:
+        return f"must be 0 or at least 1e-6 s: Python counts it in whole us (got {value:g})"
+    return None
+
+
 RUNNER_SCHEMA: Schema = {
     "spin_s": Field(
         "float", "Spin on the clock this long before each tick's deadline (sleep before), s.",
@@ -73,8 +79,8 @@ RUNNER_SCHEMA: Schema = {
     ),
     "gil_switch_interval_s": Field(
         "float", "Python's GIL switch interval while the loop runs, s: the longest the loop "
-        "waits for the GIL held by another thread; 0 leaves Python's default (5 ms).",
-        minimum=0.0, maximum=0.1,
+        "waits for the GIL held by another thread; 0 leaves it as it is (Python's default is "
+        "5 ms).", minimum=0.0, maximum=0.1, check=_switch_interval_check,
     ),
     "zenoh_thread_priority": Field(
         "int", "SCHED_FIFO priority of Zenoh's runtime threads, below realtime_priority; 0 "
@@ -108,6 +114,10 @@ def runner_settings_from(config: dict[str, Any]) -> RunnerSettings:
             cpu_sets[key] = parse_cpus(table[key])
         except ValueError as error:
             raise ConfigError(f"runner.{key}", str(error)) from None
+    if cpu_sets["other_threads_cpus"] and not cpu_sets["loop_cpus"]:
+        raise ConfigError("runner.other_threads_cpus",
+                          "needs runner.loop_cpus too: the loop runs on the main thread, which "
+                          "would otherwise stay on the other threads' CPUs")
     return RunnerSettings(
         spin_s=float(table["spin_s"]),
         realtime=RealtimeSettings(

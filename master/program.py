@@ -129,6 +129,8 @@ def run_linked_master(
     that latched the safe state: a hardware fault or a trip of the node's safety layer).
     With ``loop_options.record_path`` the run is recorded to MCAP (common/run_recording.py);
     the file is closed properly on every way out."""
+    # first: the recorder's, the hardware's and Zenoh's threads inherit these CPUs
+    extra_summary = {**place_other_threads(options.runner), **(extra_summary or {})}
     recording = None
     if loop_options.record_path:
         recording = RunRecording(loop_options.record_path, "master", MASTER_RECORD_COLUMNS,
@@ -165,8 +167,6 @@ def _run_linked_master(
     run = None
     status_code = 0
     with StopSignals() as signals:
-        # before the hardware's and Zenoh's threads start: they inherit the CPUs
-        zenoh_threads.update(place_other_threads(options.runner))
         try:
             hardware.configure()
         except HardwareError as error:

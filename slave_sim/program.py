@@ -120,6 +120,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ConfigError("--record-every", f"must be >= 1 (got {args.record_every})")
         scenario = load_scenario(options.config["slave"]["scenario"])
         phase_lock_from(options.config, options.config["model"]["sample_period_s"])
+    # before Warp's, the recorder's and Zenoh's threads start: they inherit these CPUs
+    placement = place_other_threads(options.runner)
     with exit_on_config_error():
         analysis, refused = run_preflight(options.config, args, "haptic-slave", side="slave",
                                           clay_damping_N_s_per_m=max_block_damping(scenario))
@@ -132,7 +134,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     with exit_on_config_error():
         node = SlaveNode.from_config(options.config, scenario)
     return run_slave(node, options, args, {"scenario": scenario.name,
-                                           "analysis": analysis.as_dict()})
+                                           "analysis": analysis.as_dict(), **placement})
 
 
 def phase_lock_from(config: dict[str, Any], period_s: float) -> PhaseLock | None:
@@ -144,11 +146,12 @@ def phase_lock_from(config: dict[str, Any], period_s: float) -> PhaseLock | None
     section = config["slave"]["phase_lock"]
     if not section["enabled"]:
         return None
-    lag_s = float(config["runner"]["spin_s"]) + float(section["margin_s"])
+    spin_s = float(config["runner"]["spin_s"])
+    lag_s = spin_s + float(section["margin_s"])
     if lag_s >= period_s:
-        raise ConfigError("slave.phase_lock.margin_s",
-                          f"runner.spin_s + margin_s must be below the period Ts = "
-                          f"{period_s:g} s (got {lag_s:g})")
+        key = "runner.spin_s" if spin_s >= period_s else "slave.phase_lock.margin_s"
+        raise ConfigError(key, f"runner.spin_s + slave.phase_lock.margin_s must be below the "
+                          f"period Ts = {period_s:g} s for the phase lock (got {lag_s:g})")
     return PhaseLock(period_s, PhaseLockSettings(lag_s=lag_s))
 
 
@@ -242,8 +245,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     y_low, y_high = grid.y_range_m[0] - margin, grid.y_range_m[1] + margin
     events: list[dict[str, Any]] = []
     run = None
-    # before Zenoh's threads start: they inherit the CPUs
-    zenoh_threads = place_other_threads(options.runner)
+    zenoh_threads: dict[str, object] = {}
     with StopSignals() as signals, Link(link_config) as link:
         print(f"haptic-slave: {node.scenario.name}, environment {node.environment_kind}; "
               f"waiting for the master on {link_config.key_prefix} (connect "
@@ -278,8 +280,11 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             message = link.poll()
             fresh = message is not None
             if fresh and phase_lock is not None:
-                runner.shift_schedule(phase_lock.update(link.receive.last_delivery_ns,
-                                                        link.last_poll_ns))
+                if link.last_delivery_measured:
+                    runner.shift_schedule(phase_lock.update(link.receive.last_delivery_ns,
+                                                            link.last_poll_ns))
+                else:
+                    phase_lock.skip_unmeasured()
             if fresh:
                 handle: HandleState = message
                 fh = np.array([handle.handle_force_N], float)
@@ -404,7 +409,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
         removed_volume_m3=flags_box["removed"],
         final_tool_position_m=[float(final[0]), float(final[1])], **zenoh_threads,
-        **(phase_lock.summary() if phase_lock is not None else {"phase_lock": False}),
+        **(phase_lock.summary() if phase_lock is not None else {"phase_lock_enabled": False}),
         **extra_summary,
     )
     if display is not None:

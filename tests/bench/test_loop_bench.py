@@ -7,6 +7,8 @@ import importlib.util
 import json
 from pathlib import Path
 
+import pytest
+
 BENCH = Path(__file__).resolve().parents[2] / "bench" / "loop_bench.py"
 
 
@@ -39,11 +41,13 @@ def test_json_shape(capsys, monkeypatch):
 
 def test_cpu_layouts():
     bench = load_bench()
-    two = bench.cpu_layout_args("partitioned", 2)
+    two = bench.cpu_layout_args("partitioned", [0, 1])
     assert two == ["--rt-priority", "40", "--loop-cpus", "1", "--other-cpus", "0",
                    "--spin-s", "0.00002"]
-    four = bench.cpu_layout_args("partitioned", 4)
-    assert four[four.index("--loop-cpus") + 1] == "3"
-    assert four[four.index("--other-cpus") + 1] == "0-2"
-    assert bench.cpu_layout_args("partitioned", 1) == ["--rt-priority", "40"]
-    assert bench.cpu_layout_args("free", 8) == ["--rt-priority", "40"]
+    allowed = bench.cpu_layout_args("partitioned", [2, 3, 5])  # e.g. under taskset
+    assert allowed[allowed.index("--loop-cpus") + 1] == "5"
+    assert allowed[allowed.index("--other-cpus") + 1] == "2,3"
+    assert bench.cpu_layout_args("partitioned", [0]) == ["--rt-priority", "40"]
+    assert bench.cpu_layout_args("free", list(range(8))) == ["--rt-priority", "40"]
+    with pytest.raises(ValueError, match="cpu layout"):
+        bench.cpu_layout_args("isolated", [0, 1])

@@ -87,6 +87,36 @@ def test_messages_flow_both_ways_with_presence():
     assert not master.is_open and not slave.is_open
 
 
+def first_message(link: Link):
+    deadline = time.monotonic() + WAIT_S
+    while time.monotonic() < deadline:
+        message = link.poll()
+        if message is not None:
+            return message
+        time.sleep(0.0002)
+    raise AssertionError("no message came")
+
+
+@pytest.mark.parametrize("stamped", [True, False])
+def test_delivery_time_is_a_measurement_only_with_an_arrival_stamp(stamped, monkeypatch):
+    import haptic.common.link as link_module
+
+    if not stamped:  # as with a Zenoh without timestamp stacks
+        monkeypatch.setattr(link_module, "_RECEIVE_POINT", None)
+    elif link_module._RECEIVE_POINT is None:
+        pytest.skip("this Zenoh has no timestamp instrumentation")
+    master_cfg, slave_cfg = configs()
+    with Link(master_cfg) as master, Link(slave_cfg) as slave:
+        wait_for_peers(master, slave)
+        master.send_handle((1.0, 0.0), (0.0, 0.0), Flags.FORCES_ENABLED)
+        first_message(slave)
+        assert slave.last_delivery_measured is stamped
+        if stamped:  # Zenoh's stamp: before the poll that drained it
+            assert slave.receive.last_delivery_ns < slave.last_poll_ns
+        else:
+            assert slave.receive.last_delivery_ns == slave.last_poll_ns
+
+
 def test_peer_leaving_is_reported_by_liveliness():
     master_cfg, slave_cfg = configs()
     with Link(master_cfg) as master:

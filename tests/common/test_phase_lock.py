@@ -102,7 +102,7 @@ def run_locked_slave(master_phase_ns: int, lag_s: float, rate_ratio: float = 1.0
 @pytest.mark.parametrize("master_phase_us", [0, 100, 260, 280, 400, 530])
 def test_the_slave_converges_to_the_lag_after_the_masters_messages(master_phase_us):
     lags, starts = run_locked_slave(master_phase_us * US, lag_s=50e-6)
-    settled = lags[len(lags) // 2:]  # 0.25 s in; the worst start needs 135 ticks of 2 us
+    settled = lags[len(lags) // 2:]  # 0.25 s in; the worst start needs ~165 ticks
     assert all(abs(lag - 50 * US) <= 5 * US for lag in settled), (min(settled), max(settled))
     # each correction is at most 2 us: the period never moves by more than that (+ the
     # fake clock's 1 us per read)
@@ -128,3 +128,13 @@ def test_without_the_lock_the_lag_stays_wherever_the_loops_started():
     RealTimeRunner(PERIOD_S, step, duration_s=0.2, clock_ns=clock.clock, sleep=clock.sleep,
                    handle_signals=False, show_status=False).run()
     assert min(lags[10:]) > 200 * US  # never near 50 us: the phase is the start's accident
+
+
+def test_unmeasured_deliveries_are_counted_not_corrected():
+    lock = PhaseLock(PERIOD_S)
+    lock.skip_unmeasured()
+    lock.skip_unmeasured()
+    summary = lock.summary()
+    assert summary["phase_lock_enabled"] is True
+    assert summary["phase_lock_unstamped"] == 2
+    assert summary["phase_lock_total_shift_s"] == 0.0 and lock.updates == 0

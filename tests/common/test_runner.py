@@ -254,3 +254,13 @@ def test_step_time_statistics():
     summary = stats.as_summary()
     assert summary["step_p50_s"] == stats.step_p50_s
     assert summary["step_p99_s"] >= summary["step_p50_s"]
+
+
+def test_a_shift_asked_outside_a_run_does_not_move_the_next_run():
+    clock = FakeClock()
+    starts = []
+    runner = make(clock, lambda tick, now: starts.append(now), duration_s=0.01)
+    runner.shift_schedule(-200_000)
+    runner.run()
+    gaps = [b - a for a, b in zip(starts, starts[1:], strict=False)]
+    assert all(abs(g - PERIOD_NS) <= 2_000 for g in gaps)

@@ -103,6 +103,7 @@ def test_a_file_sets_the_whole_table(tmp_path):
         ({"gil_switch_interval_s": "-0.001"}, "runner.gil_switch_interval_s"),
         ({"gil_switch_interval_s": "1.0"}, "runner.gil_switch_interval_s"),
         ({"gil_switch_interval_s": None}, "runner.gil_switch_interval_s"),
+        ({"gil_switch_interval_s": "5e-7"}, "runner.gil_switch_interval_s"),
         ({"spin_s": None}, "runner.spin_s"),  # a table that gives any key gives them all
     ],
 )
@@ -162,7 +163,7 @@ def test_flags_win_over_the_file(tmp_path):
 
 
 def test_an_empty_loop_cpus_flag_means_any_cpu(tmp_path):
-    options = parse(["--loop-cpus", ""], config_file=runner_file(tmp_path))
+    options = parse(["--loop-cpus", "", "--other-cpus", ""], config_file=runner_file(tmp_path))
     assert options.runner.realtime.cpus == ()
 
 
@@ -221,6 +222,7 @@ def test_place_other_threads_pins_the_thread_and_what_it_starts_next():
     allowed = sorted(os.sched_getaffinity(0))
     config = load_config(None)
     config["runner"]["other_threads_cpus"] = str(allowed[0])
+    config["runner"]["loop_cpus"] = str(allowed[-1])
     settings = runner_settings_from(config)
     seen: dict[str, object] = {}
 
@@ -239,3 +241,13 @@ def test_place_other_threads_pins_the_thread_and_what_it_starts_next():
     assert seen["keys"] == {"other_threads_cpus": [allowed[0]], "other_threads_warnings": []}
     assert seen["child"] == {allowed[0]}
     assert sorted(os.sched_getaffinity(0)) == allowed  # the test's own thread is untouched
+
+
+def test_other_threads_cpus_need_loop_cpus(tmp_path):
+    config = load_config(runner_file(tmp_path, loop_cpus='""'))
+    with pytest.raises(ConfigError) as caught:
+        runner_settings_from(config)
+    assert caught.value.key == "runner.other_threads_cpus"
+    assert "needs runner.loop_cpus" in str(caught.value)
+    with pytest.raises(ConfigError, match="needs runner.loop_cpus"):
+        parse(["--other-cpus", "0", "--loop-cpus", ""])

@@ -46,7 +46,8 @@ def test_a_file_giving_the_slave_table_keeps_the_default_lock(tmp_path):
 
 
 @pytest.mark.parametrize(("argv", "named"), [
-    (["--phase-margin", "0.001"], "slave.phase_lock.margin_s: runner.spin_s + margin_s must"),
+    (["--phase-margin", "0.001"], "slave.phase_lock.margin_s: runner.spin_s + slave.phase_l"),
+    (["--spin-s", "0.0006"], "runner.spin_s: runner.spin_s + slave.phase_lock.margin_s must"),
     (["--phase-margin", "-1"], "slave.phase_lock.margin_s"),
 ])
 def test_bad_flags_exit_2_with_one_line(argv, named):
