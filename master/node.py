@@ -24,23 +24,35 @@ A trip latches the lane in its safe state: the command holds the position measur
 trip, the compensator is frozen and no force (handle or reflected) moves the handle, until
 the node is activated again. Every trip and every onset of a saturation is a
 :class:`SafetyEvent`; the node never raises on bad data.
+
+The law runs as one Warp kernel over all lanes (:mod:`haptic.master.node_kernels`): the
+real-time master steps one lane through a recorded CPU launch, the lockstep simulator a whole
+sweep, with the same code. The state's arrays are numpy views of the kernel's buffers: change
+them in place (``state.faulted[lane] = True``), never rebind them. Each step also reports what
+the compensator used (``handle_force_used_N``, ``tool_force_used_N``: saturated and scaled by
+the ramp, zero in a faulted lane), which the master sends to the slave so that Ch2 there
+integrates exactly the force Ch1 integrated here.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from haptic.common.lti import DiscreteLTI, Path, combine, discretize
 from haptic.common.model import TeleopModel
 from haptic.common.synthesis import synthesize
+from haptic.master import node_kernels as kernels
 from haptic.master.settings import SafetySettings
 
 AXES = ("x", "y")
 COMPENSATOR_INPUTS = ("fh_x", "fh_y", "ft_x", "ft_y")
 COMPENSATOR_OUTPUTS = ("vh_x", "vh_y")
 _LIMITS = ("handle force", "tool force", "command velocity", "workspace")
+#: The Warp device of the node's buffers: the CPU, whose arrays numpy views share.
+DEVICE = "cpu"
 
 
 @dataclass(frozen=True)
@@ -56,9 +68,10 @@ class SafetyEvent:
     axis: str | None = None
 
 
-@dataclass
+@dataclass(eq=False)
 class MasterNodeState:
-    """Per-lane state of the node (the caller owns it); arrays have the lanes first."""
+    """Per-lane state of the node (the caller owns it); arrays have the lanes first and are
+    views of the kernel's buffers (modify in place, never rebind)."""
 
     compensator: np.ndarray  # (lanes, n) compensator state
     origin_m: np.ndarray  # (lanes, 2) command offset
@@ -71,8 +84,22 @@ class MasterNodeState:
     force_scale: np.ndarray  # (lanes,) ramp factor applied at the last step, 0..1
     faulted: np.ndarray  # (lanes,) bool
     limiting: np.ndarray  # (lanes, 4, 2) bool: which limit was active at the last step
+    command_m: np.ndarray  # (lanes, 2) the last step's command
+    handle_force_used_N: np.ndarray  # (lanes, 2) fh the compensator used at the last step
+    tool_force_used_N: np.ndarray  # (lanes, 2) ft the compensator used at the last step
+    inputs: np.ndarray  # (lanes, 6) the kernel's inputs: fh x y (N), yh x y (m), ft x y (N)
     step: int = 0
     events: list[SafetyEvent] = field(default_factory=list)
+    _kernel: Any = field(default=None, repr=False)  # the recorded launch over these buffers
+    _trip_code: np.ndarray | None = field(default=None, repr=False)
+    _event_bits: np.ndarray | None = field(default=None, repr=False)
+    _event_count: np.ndarray | None = field(default=None, repr=False)
+    _buffers: tuple = field(default=(), repr=False)  # keeps the Warp arrays alive
+
+    @property
+    def lanes(self) -> int:
+        """Number of lanes."""
+        return self.faulted.shape[0]
 
 
 def master_compensator(model: TeleopModel) -> DiscreteLTI:
@@ -86,12 +113,24 @@ def master_compensator(model: TeleopModel) -> DiscreteLTI:
     return combine(paths, COMPENSATOR_INPUTS, COMPENSATOR_OUTPUTS)
 
 
-class MasterNode:
-    """Compensator plus safety layer; :meth:`step` maps (fh, yh, ft_recv) to the command."""
+def _warp() -> Any:
+    import warp as wp
 
-    def __init__(self, compensator: DiscreteLTI, safety: SafetySettings) -> None:
-        if compensator.input_names != COMPENSATOR_INPUTS or (
-            compensator.output_names != COMPENSATOR_OUTPUTS
+    wp.config.log_level = wp.LOG_WARNING  # no start-up banner on stdout
+    wp.init()
+    return wp
+
+
+class MasterNode:
+    """Compensator plus safety layer; :meth:`step` maps (fh, yh, ft_recv) to the command.
+
+    ``compensator``: one block for every lane (:class:`~haptic.common.lti.DiscreteLTI`) or
+    one per lane (a stacked block whose ``A`` is (lanes, n, n), as the sweep uses).
+    """
+
+    def __init__(self, compensator: Any, safety: SafetySettings) -> None:
+        if tuple(compensator.input_names) != COMPENSATOR_INPUTS or (
+            tuple(compensator.output_names) != COMPENSATOR_OUTPUTS
         ):
             raise ValueError("compensator must map [fh_x, fh_y, ft_x, ft_y] to [vh_x, vh_y]")
         self.compensator = compensator
@@ -99,27 +138,113 @@ class MasterNode:
         self.period_s = compensator.period_s
         self._workspace_min = np.asarray(safety.workspace_min_m, float)
         self._workspace_max = np.asarray(safety.workspace_max_m, float)
+        self._matrices: tuple | None = None
+        self._limits: Any = None
+        self._trip_reasons = (
+            "non-finite handle force", "non-finite handle position", "non-finite tool force",
+            f"handle force beyond {safety.force_trip_N:g} N",
+            f"handle speed beyond {safety.velocity_trip_m_per_s:g} m/s",
+            "handle outside the workspace")
+        limit = safety.force_limit_N
+        self._limit_reasons = (
+            f"handle force saturated at {limit:g} N", f"tool force saturated at {limit:g} N",
+            f"command rate limited to {safety.velocity_limit_m_per_s:g} m/s",
+            "command clamped to the workspace")
 
     @classmethod
     def from_model(cls, model: TeleopModel, safety: SafetySettings) -> MasterNode:
         """The node for the configured model and safety limits."""
         return cls(master_compensator(model), safety)
 
+    def _kernel_constants(self) -> tuple[tuple, Any]:
+        """The compensator's matrices as (L, ., .) Warp arrays and the limits struct, built
+        once per node (L = 1: one block for all lanes)."""
+        if self._matrices is None:
+            wp = _warp()
+            block = self.compensator
+            per_lane = np.ndim(block.A) == 3
+            arrays = [np.ascontiguousarray(np.asarray(m, float) if per_lane
+                                           else np.asarray(m, float)[None])
+                      for m in (block.A, block.B, block.C, block.D)]
+            self._matrices = (tuple(wp.array(m, dtype=wp.float64, device=DEVICE)
+                                    for m in arrays), int(per_lane))
+            safety = self.safety
+            limits = kernels.MasterLimits()
+            limits.period_s = self.period_s
+            limits.force_limit_N = safety.force_limit_N
+            limits.force_trip_N = safety.force_trip_N
+            limits.max_command_step_m = safety.velocity_limit_m_per_s * self.period_s
+            limits.velocity_trip_m_per_s = safety.velocity_trip_m_per_s
+            limits.workspace_min_x_m, limits.workspace_min_y_m = map(float,
+                                                                     self._workspace_min)
+            limits.workspace_max_x_m, limits.workspace_max_y_m = map(float,
+                                                                     self._workspace_max)
+            limits.workspace_trip_margin_m = safety.workspace_trip_margin_m
+            limits.ramp_small_force_N = safety.ramp_small_force_N
+            limits.ramp_small_samples = int(safety.ramp_small_samples)
+            limits.ramp_time_s = safety.ramp_time_s
+            self._limits = limits
+        return self._matrices, self._limits
+
     def activate(self, position_m: np.ndarray) -> MasterNodeState:
         """A fresh state for lanes starting at ``position_m`` (lanes, 2): the command holds
         that position, forces are not yet enabled."""
+        wp = _warp()
         position = np.array(np.atleast_2d(position_m), float)
         lanes = position.shape[0]
-        faulted = ~np.all(np.isfinite(position), axis=1)
+        (matrices, per_lane), limits = self._kernel_constants()
+        if per_lane and matrices[0].shape[0] != lanes:
+            raise ValueError(f"compensator stacked for {matrices[0].shape[0]} lanes, "
+                             f"activated with {lanes}")
+        faulted_at_start = ~np.all(np.isfinite(position), axis=1)
         safe = np.nan_to_num(position)
+        n = int(matrices[0].shape[1])
+
+        def buffer(shape: tuple, dtype: Any, value: np.ndarray | None = None) -> Any:
+            array = wp.zeros(shape, dtype=dtype, device=DEVICE)
+            if value is not None:
+                array.numpy()[...] = value
+            return array
+
+        f64, i32 = wp.float64, wp.int32
+        compensator = buffer((lanes, n), f64)
+        scratch = buffer((lanes, n), f64)
+        origin, last_command = buffer((lanes, 2), f64, safe), buffer((lanes, 2), f64, safe)
+        last_position, hold = buffer((lanes, 2), f64, safe), buffer((lanes, 2), f64, safe)
+        small_count = buffer((lanes,), i32)
+        enabled = buffer((lanes,), wp.bool)
+        ramp_elapsed, force_scale = buffer((lanes,), f64), buffer((lanes,), f64)
+        faulted = buffer((lanes,), wp.bool)
+        limiting = buffer((lanes, len(_LIMITS), 2), wp.bool)
+        command = buffer((lanes, 2), f64, safe)
+        used = buffer((lanes, 4), f64)
+        inputs = buffer((lanes, 6), f64)
+        trip_code = buffer((lanes,), i32)
+        event_bits = buffer((lanes,), i32)
+        event_count = buffer((1,), i32)
+        buffers = (inputs, *matrices, compensator, scratch, origin, last_command,
+                   last_position, hold, small_count, enabled, ramp_elapsed, force_scale,
+                   faulted, limiting, command, used, trip_code, event_bits, event_count)
+        launch = wp.launch(kernels.master_step_kernel, dim=lanes, device=DEVICE,
+                           inputs=[inputs, *matrices, per_lane, compensator, scratch, origin,
+                                   last_command, last_position, hold, small_count, enabled,
+                                   ramp_elapsed, force_scale, faulted, limiting, command, used,
+                                   trip_code, event_bits, event_count, limits],
+                           record_cmd=True)
+        used_view = used.numpy()
         state = MasterNodeState(
-            compensator=self.compensator.initial_state(lanes), origin_m=safe.copy(),
-            last_command_m=safe.copy(), last_position_m=safe.copy(), hold_m=safe.copy(),
-            small_force_count=np.zeros(lanes, int), forces_enabled=np.zeros(lanes, bool),
-            ramp_elapsed_s=np.zeros(lanes), force_scale=np.zeros(lanes),
-            faulted=np.zeros(lanes, bool), limiting=np.zeros((lanes, len(_LIMITS), 2), bool),
+            compensator=compensator.numpy(), origin_m=origin.numpy(),
+            last_command_m=last_command.numpy(), last_position_m=last_position.numpy(),
+            hold_m=hold.numpy(), small_force_count=small_count.numpy(),
+            forces_enabled=enabled.numpy(), ramp_elapsed_s=ramp_elapsed.numpy(),
+            force_scale=force_scale.numpy(), faulted=faulted.numpy(),
+            limiting=limiting.numpy(), command_m=command.numpy(),
+            handle_force_used_N=used_view[:, 0:2], tool_force_used_N=used_view[:, 2:4],
+            inputs=inputs.numpy(), _kernel=launch, _trip_code=trip_code.numpy(),
+            _event_bits=event_bits.numpy(), _event_count=event_count.numpy(),
+            _buffers=buffers,
         )
-        for lane in np.flatnonzero(faulted):
+        for lane in np.flatnonzero(faulted_at_start):
             self._trip(state, lane, "non-finite handle position at activation", None)
         return state
 
@@ -151,8 +276,8 @@ class MasterNode:
             return
         state.faulted[lane] = True
         state.hold_m[lane] = state.last_position_m[lane]
-        state.events.append(SafetyEvent(state.step, state.step * self.period_s, lane, "trip",
-                                        reason, axis))
+        state.events.append(SafetyEvent(state.step, state.step * self.period_s, int(lane),
+                                        "trip", reason, axis))
 
     def step(
         self,
@@ -167,100 +292,48 @@ class MasterNode:
         the encoders (m); ``tool_force_recv_N``: the tool force received from the slave (N),
         zero when there is none.
         """
-        safety = self.safety
-        fh = np.asarray(handle_force_N, float)
-        yh = np.asarray(handle_position_m, float)
-        ft = np.asarray(tool_force_recv_N, float)
-        period = self.period_s
+        inputs = state.inputs
+        inputs[:, 0:2] = handle_force_N
+        inputs[:, 2:4] = handle_position_m
+        inputs[:, 4:6] = tool_force_recv_N
+        return self.step_inputs(state).copy()
 
-        # 1. Non-finite inputs: the lane trips and holds its last finite position.
-        fh_ok, yh_ok, ft_ok = np.isfinite(fh), np.isfinite(yh), np.isfinite(ft)
-        if not (fh_ok.all() and yh_ok.all() and ft_ok.all()):
-            for name, ok in (("handle force", fh_ok), ("handle position", yh_ok),
-                             ("tool force", ft_ok)):
-                self._trip_where(state, ~ok, f"non-finite {name}")
-        measured = np.where(yh_ok, yh, state.last_position_m)
-        velocity = (measured - state.last_position_m) / period
-        state.last_position_m[...] = measured
-        fh = np.where(fh_ok, fh, 0.0)
-        ft = np.where(ft_ok, ft, 0.0)
-
-        # 2. Trips on measured force, speed and position.
-        self._trip_where(state, np.abs(fh) > safety.force_trip_N,
-                         f"handle force beyond {safety.force_trip_N:g} N")
-        self._trip_where(state, np.abs(velocity) > safety.velocity_trip_m_per_s,
-                         f"handle speed beyond {safety.velocity_trip_m_per_s:g} m/s")
-        margin = safety.workspace_trip_margin_m
-        outside = (measured < self._workspace_min - margin) | (
-            measured > self._workspace_max + margin)
-        self._trip_where(state, outside, "handle outside the workspace")
-
-        # 3. Force saturation.
-        limit = safety.force_limit_N
-        self._note_limits(state, 0, np.abs(fh) > limit, f"handle force saturated at {limit:g} N")
-        self._note_limits(state, 1, np.abs(ft) > limit, f"tool force saturated at {limit:g} N")
-        fh = np.minimum(np.maximum(fh, -limit), limit)
-        ft = np.minimum(np.maximum(ft, -limit), limit)
-
-        # 4. Force ramp after activation.
-        small = np.all(np.abs(fh) < safety.ramp_small_force_N, axis=1)
-        waiting = ~state.forces_enabled & ~state.faulted
-        state.small_force_count[...] = np.where(small, state.small_force_count + 1, 0)
-        opening = waiting & (state.small_force_count >= safety.ramp_small_samples)
-        state.forces_enabled |= opening
-        for lane in np.flatnonzero(opening) if opening.any() else ():
-            state.events.append(SafetyEvent(state.step, state.step * period, int(lane),
-                                            "enable", "forces enabled after "
-                                            f"{safety.ramp_small_samples} small-force samples"))
-        if safety.ramp_time_s > 0.0:
-            scale = np.clip(state.ramp_elapsed_s / safety.ramp_time_s, 0.0, 1.0)
-        else:
-            scale = np.ones_like(state.ramp_elapsed_s)
-        scale = np.where(state.forces_enabled, scale, 0.0)
-        state.ramp_elapsed_s += np.where(state.forces_enabled, period, 0.0)
-        state.force_scale[...] = scale
-
-        # The compensator: a position offset from the origin; frozen in faulted lanes.
-        inputs = scale[:, None] * np.concatenate([fh, ft], axis=1)
-        any_faulted = bool(state.faulted.any())
-        if any_faulted:
-            frozen = state.compensator[state.faulted].copy()
-        offset = self.compensator.step(state.compensator, inputs)
-        if any_faulted:
-            state.compensator[state.faulted] = frozen
-        raw = state.origin_m + offset
-
-        # 5. Command rate and workspace limits, re-basing the offset when they act.
-        max_step = safety.velocity_limit_m_per_s * period
-        delta = raw - state.last_command_m
-        self._note_limits(state, 2, np.abs(delta) > max_step,
-                          f"command rate limited to {safety.velocity_limit_m_per_s:g} m/s")
-        command = state.last_command_m + np.minimum(np.maximum(delta, -max_step), max_step)
-        outside_box = (command < self._workspace_min) | (command > self._workspace_max)
-        self._note_limits(state, 3, outside_box, "command clamped to the workspace")
-        command = np.minimum(np.maximum(command, self._workspace_min), self._workspace_max)
-        state.origin_m += command - raw
-
-        command = np.where(state.faulted[:, None], state.hold_m, command)
-        state.last_command_m[...] = command
+    def step_inputs(self, state: MasterNodeState) -> np.ndarray:
+        """One period on the inputs already written to ``state.inputs`` (lanes, 6: fh x y in
+        N, yh x y in m, ft x y in N); returns ``state.command_m`` (lanes, 2), m, a view the
+        next step overwrites. The real-time tick writes its six numbers and calls this."""
+        state._kernel.launch()
+        if state._event_count[0]:
+            self._collect_events(state)
         state.step += 1
-        return command.copy()
+        return state.command_m
 
-    def _trip_where(self, state: MasterNodeState, condition: np.ndarray, reason: str) -> None:
-        if not condition.any():
-            return
-        for lane, axis in zip(*np.nonzero(condition), strict=True):
-            self._trip(state, int(lane), reason, AXES[axis])
-
-    def _note_limits(self, state: MasterNodeState, which: int, active: np.ndarray,
-                     reason: str) -> None:
-        starting = active & ~state.limiting[:, which, :] & ~state.faulted[:, None]
-        state.limiting[:, which, :] = active
-        if not starting.any():
-            return
-        for lane, axis in zip(*np.nonzero(starting), strict=True):
-            state.events.append(SafetyEvent(state.step, state.step * self.period_s, int(lane),
-                                            "saturate", reason, AXES[axis]))
+    def _collect_events(self, state: MasterNodeState) -> None:
+        """Turn the kernel's event codes into :class:`SafetyEvent` in the safety layer's
+        order: trips, handle and tool force saturation, the gate opening, rate, workspace."""
+        state._event_count[0] = 0
+        step, time_s = state.step, state.step * self.period_s
+        codes, bits = state._trip_code, state._event_bits
+        tripped = np.flatnonzero(codes >= 0)
+        for lane in sorted(tripped, key=lambda lane: (codes[lane] // 2, lane)):
+            code = int(codes[lane])
+            state.events.append(SafetyEvent(step, time_s, int(lane), "trip",
+                                            self._trip_reasons[code // 2], AXES[code % 2]))
+        flagged = np.flatnonzero(bits)
+        for which in (0, 1, "enable", 2, 3):
+            for lane in flagged:
+                value = int(bits[lane])
+                if which == "enable":
+                    if value >> kernels.ENABLE_BIT & 1:
+                        state.events.append(SafetyEvent(
+                            step, time_s, int(lane), "enable", "forces enabled after "
+                            f"{self.safety.ramp_small_samples} small-force samples"))
+                    continue
+                for axis in (0, 1):
+                    if value >> (2 * which + axis) & 1:
+                        state.events.append(SafetyEvent(step, time_s, int(lane), "saturate",
+                                                        self._limit_reasons[which],
+                                                        AXES[axis]))
 
 
 def _mask(lanes: np.ndarray, count: int) -> np.ndarray:
