@@ -80,6 +80,12 @@ def format_summary(summary: Mapping[str, Any]) -> str:
 
     loss = summary.get("loss_ratio")
     loss_text = "n/a" if loss is None or not math.isfinite(loss) else f"{loss * 100:.3f} %"
+    stage_lines = []
+    if summary.get("stages"):
+        from haptic.common.stage_times import format_stages
+
+        stage_lines.append(f"step p50 {us('step_p50_s')}  p99 {us('step_p99_s')}; stages "
+                           + format_stages(summary["stages"]))
     return "\n".join(
         [
             f"steps {summary['steps']}  rate {summary['rate_hz']:.1f} Hz  period error p99 "
@@ -88,5 +94,6 @@ def format_summary(summary: Mapping[str, Any]) -> str:
             f"{us('link_one_way_delay_p99_s')}  loss {loss_text}",
             f"max |force| {summary['max_abs_force_N']:.3f} N  watchdog trips "
             f"{summary['watchdog_trips']}  events {len(summary['events'])}",
+            *stage_lines,
         ]
     )

@@ -3,7 +3,8 @@
 Where ``sim`` (:mod:`haptic.master.sim_rig`) runs the rig model behind emulated CiA 402 drives
 and the force sensor on python-can's virtual bus (the real driver's code path, a thread and
 about 170 us of frame traffic per cycle), ``model`` steps the same
-:class:`~haptic.master.rig_model.RigModel` inside ``read()``: no bus, no thread, about 25 us.
+:class:`~haptic.master.rig_model.RigModel` kernel inside ``read()``: no bus, no thread, a few
+us.
 It keeps the timing contract (a command written in cycle k is applied at SYNC k+1) and the
 sensor's quantisation (encoder counts and force counts from ``[master.can]``), so the loop
 sees the same signals; it cannot inject bus faults. Use it where the loop, not the drives, is
@@ -12,6 +13,7 @@ under test: the loop benchmark, long sessions on a small machine.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -30,7 +32,9 @@ from haptic.master.settings import CanSettings, master_settings
 
 class ModelRigHardware(HandleHardware):
     """The rig block as handle hardware (one lane). ``initial_position_m`` (x, y) in m;
-    ``rng`` drives the sensor noise."""
+    ``rng`` drives the sensor noise. ``write()`` and ``present_tool_force()`` fill the rig
+    kernel's input buffers; ``read()`` steps it and quantises the sample as the encoders and
+    the force sensor do."""
 
     def __init__(self, model: RigModel, can: CanSettings,
                  initial_position_m: tuple[float, float], rng: np.random.Generator) -> None:
@@ -40,10 +44,9 @@ class ModelRigHardware(HandleHardware):
         self._rng = rng
         self._state = None
         self._lifecycle = LifecycleState.UNCONFIGURED
-        self._target = np.full((1, 2), np.nan)
-        self._tool_force = np.zeros((1, 2))
-        self._force_step = np.asarray(can.force_scale_N_per_count, float)
-        self._force_offset = np.asarray(can.force_offset_count, float)
+        self._metres_per_count = can.metres_per_count
+        self._force_step = tuple(float(v) for v in can.force_scale_N_per_count)
+        self._force_offset = tuple(float(v) for v in can.force_offset_count)
         self.cycle = 0
 
     @property
@@ -59,12 +62,12 @@ class ModelRigHardware(HandleHardware):
     def activate(self) -> None:
         if self._lifecycle is not LifecycleState.INACTIVE:
             raise HardwareError(f"activate from {self._lifecycle.value}")
-        self._target = np.full((1, 2), np.nan)  # hold: the applied command stays
+        self._state.target_m[...] = np.nan  # hold: the applied command stays
         self._lifecycle = LifecycleState.ACTIVE
 
     def deactivate(self) -> None:
         if self._lifecycle is LifecycleState.ACTIVE:
-            self._target = np.full((1, 2), np.nan)
+            self._state.target_m[...] = np.nan
             self._lifecycle = LifecycleState.INACTIVE
 
     def cleanup(self) -> None:
@@ -72,26 +75,41 @@ class ModelRigHardware(HandleHardware):
         self._state = None
 
     def read(self) -> HandleReading:
-        if self._state is None:
+        state = self._state
+        if state is None:
             raise HardwareError("read before configure")
-        sample = self.model.step(self._state, self._target, self._tool_force)
-        self._target = np.full((1, 2), np.nan)
+        sample = self.model.step_inputs(state)
+        target = state.target_m
+        target[0, 0] = target[0, 1] = np.nan  # a command is applied at one SYNC only
         self.cycle += 1
-        counts = self.can.counts_from_metres(sample.handle_position_m[0])
-        position = self.can.metres_from_counts(counts)
-        raw = np.rint(sample.handle_force_measured_N[0] / self._force_step + self._force_offset)
-        force = (raw - self._force_offset) * self._force_step
+        x, y, _, _, _, _, _, _, _, _, fx, fy = sample[0].tolist()
+        step, offset = self._force_step, self._force_offset
+        per_count = self._metres_per_count
+        position = np.array((_quantise(x, per_count, 0.0), _quantise(y, per_count, 0.0)))
+        force = np.array((_quantise(fx, step[0], offset[0]), _quantise(fy, step[1], offset[1])))
         return HandleReading(force, position, self.cycle)
 
     def write(self, position_command_m: np.ndarray) -> None:
         if self._lifecycle is not LifecycleState.ACTIVE:
             return
-        command = np.asarray(position_command_m, float).reshape(1, 2)
-        # as the CAN driver: a non-finite command is never applied (the previous one stays)
-        self._target = np.where(np.isfinite(command), command, np.nan)
+        # as the CAN driver: a non-finite command is never applied (the previous one stays;
+        # the kernel ignores a NaN target per axis)
+        x, y = np.asarray(position_command_m, float).reshape(2).tolist()
+        target = self._state.target_m
+        target[0, 0] = x if math.isfinite(x) else math.nan
+        target[0, 1] = y if math.isfinite(y) else math.nan
 
     def present_tool_force(self, tool_force_N: np.ndarray) -> None:
-        self._tool_force = np.asarray(tool_force_N, float).reshape(1, 2).copy()
+        if self._state is not None:
+            self._state.tool_force_N[0] = np.asarray(tool_force_N, float).reshape(2)
+
+
+def _quantise(value: float, step: float, offset_counts: float) -> float:
+    """``value`` through a converter of ``step`` units per count with an offset (counts),
+    rounded half to even as the drives' and sensor's conversions; NaN if not finite."""
+    if not math.isfinite(value):
+        return math.nan
+    return (round(value / step + offset_counts) - offset_counts) * step
 
 
 @register_hardware("model")

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -35,37 +36,72 @@ from haptic.common.config import ConfigError
 OPERATOR_KINDS = ("constant", "regulate", "track")
 
 
-@dataclass
+@dataclass(eq=False)
 class OperatorState:
-    """Per-lane operator state: elapsed time (s), regulator integral (N s), felt force (N)."""
+    """Per-lane operator state (numpy views of the kernel's buffers: change them in place):
+    elapsed time (s), regulator integral (N s), felt force (N)."""
 
     time_s: np.ndarray
     integral_N_s: np.ndarray
     felt_tool_force_N: np.ndarray
+    buffers: tuple = field(default=(), repr=False)  # the Warp arrays behind the views
+
+    @property
+    def lanes(self) -> int:
+        """Number of lanes."""
+        return self.time_s.shape[0]
 
 
-def _envelope(time_s: np.ndarray, onset_s: float, rise_s: float) -> np.ndarray:
-    """0 before onset, a linear ramp over ``rise_s``, then 1; shape (lanes, 1)."""
-    if rise_s > 0.0:
-        value = np.clip((time_s - onset_s) / rise_s, 0.0, 1.0)
-    else:
-        value = (time_s >= onset_s).astype(float)
-    return value[:, None]
+_KINDS = {"constant": 0, "regulate": 1, "track": 2}
+
+
+def _warp() -> Any:
+    import warp as wp
+
+    wp.config.log_level = wp.LOG_WARNING
+    wp.init()
+    return wp
 
 
 @dataclass(frozen=True)
 class OperatorModel:
-    """One scripted operator (see the module docstring for the kinds and parameters)."""
+    """One scripted operator (see the module docstring for the kinds and parameters). Its
+    law runs in a Warp kernel (:func:`haptic.master.rig_kernels.operator_intent`), alone
+    through :meth:`intent_force` or inside the rig's step."""
 
     kind: str
     params: dict[str, float | str] = field(default_factory=dict)
 
     def _p(self, name: str) -> float:
-        return float(self.params[name])
+        return float(self.params.get(name, 0.0))
+
+    def kernel_params(self, period_s: float) -> Any:
+        """The parameters as the kernel's struct, for the sample period ``period_s`` (s)."""
+        from haptic.master import rig_kernels
+
+        params = rig_kernels.OperatorParams()
+        params.kind = _KINDS[self.kind]
+        params.shape = rig_kernels.SHAPE_SINE if self.params.get("shape") == "sine" else (
+            rig_kernels.SHAPE_RAMP)
+        params.fx, params.fy = self._p("fx"), self._p("fy")
+        params.onset_s, params.rise_s = self._p("onset"), self._p("rise")
+        params.kp, params.ki, params.kd = self._p("kp"), self._p("ki"), self._p("kd")
+        lag_s = self._p("lag")
+        params.lag_alpha = 1.0 if lag_s == 0.0 else 1.0 - math.exp(-period_s / lag_s)
+        params.max_N = self._p("max")
+        params.vx, params.vy = self._p("vx"), self._p("vy")
+        params.ax, params.ay = self._p("ax"), self._p("ay")
+        params.omega_rad_s = 2.0 * math.pi * self._p("freq")
+        return params
 
     def initial_state(self, lanes: int = 1) -> OperatorState:
         """Zero time, zero integral, nothing felt yet."""
-        return OperatorState(np.zeros(lanes), np.zeros((lanes, 2)), np.zeros((lanes, 2)))
+        wp = _warp()
+        time_s = wp.zeros(lanes, dtype=wp.float64, device="cpu")
+        integral = wp.zeros((lanes, 2), dtype=wp.float64, device="cpu")
+        felt = wp.zeros((lanes, 2), dtype=wp.float64, device="cpu")
+        return OperatorState(time_s.numpy(), integral.numpy(), felt.numpy(),
+                             (time_s, integral, felt))
 
     def intent_force(
         self,
@@ -78,52 +114,21 @@ class OperatorModel:
         """The intent force uh (N), shape (lanes, 2), at the state's time; then advances the
         state by ``period_s``. ``handle_offset_m`` is the handle position relative to where
         the operator grasped it; ``tool_force_N`` is the tool force the operator feels."""
-        time_s = state.time_s
-        if self.kind == "constant":
-            envelope = _envelope(time_s, self._p("onset"), self._p("rise"))
-            force = envelope * np.array([self._p("fx"), self._p("fy")])
-        elif self.kind == "regulate":
-            envelope = _envelope(time_s, self._p("onset"), self._p("rise"))
-            force = envelope * self._regulate(state, tool_force_N, period_s, envelope)
-        else:
-            force = self._track(time_s, handle_offset_m, handle_velocity_m_per_s)
-        state.time_s = time_s + period_s
-        return force
+        from haptic.master import rig_kernels
 
-    def _regulate(self, state: OperatorState, tool_force_N: np.ndarray, period_s: float,
-                  envelope: np.ndarray) -> np.ndarray:
-        target = np.array([self._p("fx"), self._p("fy")])
-        lag_s = self._p("lag")
-        alpha = 1.0 if lag_s == 0.0 else 1.0 - math.exp(-period_s / lag_s)
-        felt = state.felt_tool_force_N
-        felt += alpha * (np.nan_to_num(tool_force_N) - felt)
-        error = target - felt
-        limit = self._p("max")
-        raw = target + self._p("kp") * error + self._p("ki") * state.integral_N_s
-        limited = np.clip(raw, -limit, limit)
-        # Conditional integration: integrate only while active and not pushing the limit.
-        pushing_limit = (raw != limited) & (np.sign(error) == np.sign(raw))
-        active = envelope > 0.0
-        state.integral_N_s += np.where(active & ~pushing_limit, error * period_s, 0.0)
-        return limited
-
-    def _track(self, time_s: np.ndarray, offset_m: np.ndarray,
-               velocity_m_per_s: np.ndarray) -> np.ndarray:
-        elapsed = np.maximum(time_s - self._p("onset"), 0.0)[:, None]
-        started = (time_s >= self._p("onset"))[:, None]
-        if self.params["shape"] == "ramp":
-            rate = np.array([self._p("vx"), self._p("vy")])
-            reference = rate * elapsed
-            reference_rate = np.where(started, rate, 0.0)
-        else:
-            amplitude = np.array([self._p("ax"), self._p("ay")])
-            omega = 2.0 * math.pi * self._p("freq")
-            reference = amplitude * np.sin(omega * elapsed)
-            reference_rate = np.where(started, amplitude * omega * np.cos(omega * elapsed), 0.0)
-        force = self._p("kp") * (reference - offset_m) + self._p("kd") * (
-            reference_rate - velocity_m_per_s)
-        limit = self._p("max")
-        return np.clip(force, -limit, limit)
+        wp = _warp()
+        lanes = state.lanes
+        inputs = np.empty((lanes, 6))
+        inputs[:, 0:2] = handle_offset_m
+        inputs[:, 2:4] = handle_velocity_m_per_s
+        inputs[:, 4:6] = tool_force_N
+        force = wp.zeros((lanes, 2), dtype=wp.float64, device="cpu")
+        time_s, integral, felt = state.buffers
+        wp.launch(rig_kernels.operator_kernel, dim=lanes, device="cpu",
+                  inputs=[self.kernel_params(period_s), float(period_s),
+                          wp.array(inputs, dtype=wp.float64, device="cpu"), time_s, integral,
+                          felt, force])
+        return force.numpy().copy()
 
 
 _DEFAULTS: dict[str, dict[str, float | str]] = {

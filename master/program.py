@@ -16,8 +16,11 @@ One tick at Ts (docs/programs.md):
    whose forces ramp in (``MasterNode.resume``; at the very first start the node's own
    small-force gate applies);
 5. ``hardware.write(command)``; ``link.send_handle(fh_used, yh, flags)``, where fh_used is the
-   force the compensator used (saturated, scaled by the force ramp; zero in the safe state),
-   so that Ch2 at the slave sees the same force as Ch1 here.
+   force the compensator used as the node reports it (saturated, scaled by the force ramp;
+   zero in the safe state), so that Ch2 at the slave sees the same force as Ch1 here.
+
+Each tick's stages (read, poll, supervise, node, write, send, telemetry) are timed; the
+summary's ``stages`` gives their p50/p99 (common/stage_times.py).
 """
 
 from __future__ import annotations
@@ -38,11 +41,15 @@ from haptic.common.model import TeleopModel
 from haptic.common.run_recording import RunRecording
 from haptic.common.runner import RealTimeRunner, StopSignals
 from haptic.common.runner_config import place_other_threads, prioritise_zenoh_threads
+from haptic.common.stage_times import StageTimes
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
 from haptic.common.watchdog import PeerWatchdog, WatchdogState
 from haptic.master.hardware import HandleHardware, HardwareError
 from haptic.master.node import MasterNode, MasterNodeState, SafetyEvent
+
+#: The stages of one tick, in order (the summary's ``stages``).
+TICK_STAGES = ("read", "poll", "supervise", "node", "write", "send", "telemetry")
 
 #: Default tolerance of the resync position check, m per axis.
 DEFAULT_SYNC_TOLERANCE_M = 0.001
@@ -92,13 +99,6 @@ class _Loop:
     faulted: bool = False
     last_fh: tuple[float, float] = (0.0, 0.0)
     last_ft: tuple[float, float] = (0.0, 0.0)
-
-
-def _clip(value: float, limit: float) -> float:
-    """``value`` limited to +-``limit``; NaN becomes 0."""
-    if value != value:  # NaN
-        return 0.0
-    return limit if value > limit else -limit if value < -limit else value
 
 
 def _flush_node_events(loop: _Loop) -> None:
@@ -158,8 +158,8 @@ def _run_linked_master(
     watchdog = PeerWatchdog(link_config.max_message_age_s, link_config.resync_messages)
     trace = TraceRecorder(MASTER_TRACE_COLUMNS, loop_options.trace_every)
     loop = _Loop()
+    stages = StageTimes(TICK_STAGES)
     zenoh_threads: dict[str, object] = {}
-    ft = np.zeros((1, 2))
     felt_array = np.zeros(2)
     tolerance = loop_options.sync_tolerance_m
     realtime_start_ns = 0
@@ -201,18 +201,22 @@ def _run_linked_master(
                 view_every = display.state_every(period_s) if display is not None else 1
 
                 rx, ry = float(ratio[0]), float(ratio[1])
-                limit = node.safety.force_limit_N
+                clock = time.perf_counter_ns
+                zero_force = (0.0, 0.0)
 
                 def step(tick: int, now_ns: int) -> None:
                     nonlocal reading
+                    # read: this SYNC's handle force and position
                     if tick > 0:
                         reading = hardware.read()
-                    now_s = (now_ns - perf_start_ns) * 1e-9
-                    fh = reading.force_N
-                    yh = reading.position_m
-                    fhx, fhy = fh.tolist()
-                    yhx, yhy = yh.tolist()
+                    fhx, fhy = reading.force_N.tolist()
+                    yhx, yhy = reading.position_m.tolist()
+                    read_ns = clock()
+                    # poll: the newest tool message whose delivery time has come
                     message = link.poll()
+                    poll_ns = clock()
+                    # supervise: watchdog, resync check, hardware faults
+                    now_s = (now_ns - perf_start_ns) * 1e-9
                     fresh = message is not None
                     if fresh:
                         loop.tool = message
@@ -237,46 +241,54 @@ def _run_linked_master(
                     if enabled != loop.enabled:
                         if enabled:
                             _flush_node_events(loop)
-                            position = np.nan_to_num(yh)[None, :]
+                            position = np.nan_to_num(reading.position_m)[None, :]
                             loop.node_state = (node.resume(position) if loop.ever_enabled
                                                else node.activate(position))
                             loop.node_offset_s = now_s
                             loop.ever_enabled = True
                         else:
-                            loop.hold_m = np.nan_to_num(yh).copy()
+                            loop.hold_m = np.nan_to_num(reading.position_m).copy()
                         loop.enabled = enabled
+                    supervise_ns = clock()
+                    # node: vh = Ch1 fh - Ct1 ft behind the safety layer, or the safe state
                     if enabled:
                         state = loop.node_state
-                        ftx, fty = tool.tool_force_N if tool is not None else (0.0, 0.0)
-                        ft[0, 0] = ftx
-                        ft[0, 1] = fty
-                        command = node.step(state, fh[None, :], yh[None, :], ft)[0]
+                        ftx, fty = tool.tool_force_N if tool is not None else zero_force
+                        state.inputs[0] = (fhx, fhy, yhx, yhy, ftx, fty)
+                        command = node.step_inputs(state)[0]
                         if state.faulted[0]:
                             loop.faulted = True
-                        scale = float(state.force_scale[0])
-                        # what the compensator used: saturated, scaled by the force ramp
-                        sent = (_clip(fhx, limit) * scale, _clip(fhy, limit) * scale)
-                        felt = (_clip(ftx, limit) * scale, _clip(fty, limit) * scale)
+                        # what the compensator used: saturated, scaled by the force ramp (the
+                        # slave's Ch2 integrates exactly this force)
+                        sent = state.handle_force_used_N[0].tolist()
+                        felt = state.tool_force_used_N[0].tolist()
                         flags = Flags.FORCES_ENABLED
                     else:
                         command = loop.hold_m
-                        sent = felt = (0.0, 0.0)
+                        sent = felt = zero_force
                         flags = Flags.SAFE_STATE
+                    node_ns = clock()
+                    # write: the handle command (and, on a simulated rig, the felt force)
                     felt_array[0] = felt[0]
                     felt_array[1] = felt[1]
                     hardware.present_tool_force(felt_array)
                     hardware.write(command)
+                    write_ns = clock()
+                    # send: the force the compensator used and the handle position
                     link.send_handle(sent, (yhx, yhy), flags)
+                    send_ns = clock()
+                    # telemetry: summary figures, trace, recording, display
                     magnitude = math.hypot(felt[0], felt[1])
                     if magnitude > loop.max_force_N:
                         loop.max_force_N = magnitude
                     loop.last_fh = (fhx, fhy)
                     loop.last_ft = felt
+                    cx, cy = command.tolist()
                     if trace.due():
                         tool_pos = (tool.tool_position_m if tool is not None
                                     else (math.nan, math.nan))
                         trace.record((now_s, fhx, fhy, yhx, yhy, felt[0], felt[1], tool_pos[0],
-                                      tool_pos[1], command[0], command[1], float(enabled)))
+                                      tool_pos[1], cx, cy, float(enabled)))
                     else:
                         trace.skip()
                     if recording is not None:
@@ -287,8 +299,7 @@ def _run_linked_master(
                             rft = tool_pos = (math.nan, math.nan)
                         recording.state(tick, now_ns, (
                             now_s, fhx, fhy, yhx, yhy, rft[0], rft[1], felt[0], felt[1],
-                            tool_pos[0], tool_pos[1], float(command[0]), float(command[1]),
-                            sent[0], sent[1], float(enabled)))
+                            tool_pos[0], tool_pos[1], cx, cy, sent[0], sent[1], float(enabled)))
                     if display is not None and tick % view_every == 0:
                         display.offer_state({
                             "handle_force_N": [fhx, fhy], "handle_position_m": [yhx, yhy],
@@ -305,6 +316,8 @@ def _run_linked_master(
                             recording.status(now_ns, figures, new_events)
                         if display is not None:
                             display.offer_status(figures, new_events)
+                    stages.record(now_ns, (read_ns, poll_ns, supervise_ns, node_ns, write_ns,
+                                           send_ns, clock()))
 
                 def status() -> str:
                     stats = link.stats()
@@ -358,7 +371,8 @@ def _run_linked_master(
         watchdog_trips=watchdog.trips, events=events, side="master",
         watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
         hardware_faults=loop.hardware_faults[:50],
-        node_faulted=loop.faulted, **zenoh_threads, **(extra_summary or {}),
+        node_faulted=loop.faulted, stages=stages.summary(), **zenoh_threads,
+        **(extra_summary or {}),
     )
     if display is not None:
         summary.update(display.figures)

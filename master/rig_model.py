@@ -20,13 +20,16 @@ to the call at SYNC k+1: zero-order hold plus one sample of computation delay, n
 algebraic loop.
 
 The block holds only matrices; :class:`RigState` (owned by the caller) holds the state of
-every lane, so a lockstep simulator can step many lanes at once, without CAN.
+every lane, so a lockstep simulator can step many lanes at once, without CAN. The step runs
+as one Warp kernel over the lanes (:mod:`haptic.master.rig_kernels`), with the operator
+model's law inside it.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import control
 import numpy as np
@@ -38,14 +41,25 @@ from haptic.master.operator import OperatorModel, OperatorState
 AXES = ("x", "y")
 
 
-@dataclass
+def _warp() -> Any:
+    import warp as wp
+
+    wp.config.log_level = wp.LOG_WARNING  # no start-up banner on stdout
+    wp.init()
+    return wp
+
+
+@dataclass(eq=False)
 class RigState:
-    """Per-lane rig state (the caller owns it).
+    """Per-lane rig state (the caller owns it); the arrays are numpy views of the kernel's
+    buffers (change them in place, never rebind them).
 
     ``plant``: (lanes, n) axis states at t_{k-1}; ``applied_command_m``: (lanes, 2) the
     command applied over [t_{k-1}, t_k); ``grasp_position_m``: (lanes, 2) handle position
     where the operator's arm is at rest; ``operator``: the operator model's state; ``rng``:
-    the seeded generator for sensor noise.
+    the seeded generator for sensor noise. The step's inputs: ``target_m`` (lanes, 2), m
+    (NaN: keep the applied command) and ``tool_force_N`` (lanes, 2), N; ``sample`` (lanes, 12)
+    the last step's outputs (:data:`~haptic.master.rig_kernels.SAMPLE_PAIRS`).
     """
 
     plant: np.ndarray
@@ -53,6 +67,12 @@ class RigState:
     grasp_position_m: np.ndarray
     operator: OperatorState
     rng: np.random.Generator
+    target_m: np.ndarray | None = None
+    tool_force_N: np.ndarray | None = None
+    noise_N: np.ndarray | None = None
+    sample: np.ndarray | None = None
+    kernel: Any = field(default=None, repr=False)  # the recorded launch over these buffers
+    buffers: tuple = field(default=(), repr=False)  # keeps the Warp arrays alive
 
 
 @dataclass(frozen=True)
@@ -141,6 +161,7 @@ class RigModel:
             impedance[axis, 3 - coefficients.size:] = coefficients
         #: Th per axis as [mass kg, damping N s/m, stiffness N/m].
         self.operator_impedance = impedance
+        self._constants: tuple | None = None
 
     def _axis_blocks(self, gh: control.TransferFunction, name: str) -> dict[str, np.ndarray]:
         realisation = control.ss(gh)
@@ -183,14 +204,50 @@ class RigModel:
             model.sample_period_s, operator, force_noise_std_N,
         )
 
+    def _kernel_constants(self) -> tuple:
+        """The matrices as Warp arrays, built once per rig."""
+        if self._constants is None:
+            wp = _warp()
+            outputs_c = np.stack([self.position_C, self.velocity_C, self.acceleration_C])
+            outputs_d = np.stack([np.zeros(2), self.velocity_D, self.acceleration_D])
+            self._constants = tuple(
+                wp.array(np.ascontiguousarray(m), dtype=wp.float64, device="cpu")
+                for m in (self.A, self.B, outputs_c, outputs_d, self.operator_impedance))
+        return self._constants
+
     def initial_state(self, position_m: np.ndarray, rng: np.random.Generator) -> RigState:
         """Every lane at rest at ``position_m`` (lanes, 2), holding that position, the
         operator grasping the handle there."""
+        from haptic.master import rig_kernels
+
+        wp = _warp()
         position = np.atleast_2d(np.asarray(position_m, float))
         lanes = position.shape[0]
-        plant = position @ self._equilibrium
-        command = position / self.dc_gains
-        return RigState(plant, command, position.copy(), self.operator.initial_state(lanes), rng)
+
+        def buffer(columns: int, value: np.ndarray | None = None) -> Any:
+            array = wp.zeros((lanes, columns), dtype=wp.float64, device="cpu")
+            if value is not None:
+                array.numpy()[...] = value
+            return array
+
+        target = buffer(2, np.nan)
+        tool_force, noise = buffer(2), buffer(2)
+        plant = buffer(self.n_states, position @ self._equilibrium)
+        scratch = buffer(self.n_states)
+        applied = buffer(2, position / self.dc_gains)
+        grasp = buffer(2, position)
+        sample = buffer(2 * len(rig_kernels.SAMPLE_PAIRS))
+        operator = self.operator.initial_state(lanes)
+        launch = wp.launch(rig_kernels.rig_step_kernel, dim=lanes, device="cpu",
+                           inputs=[*self._kernel_constants(),
+                                   self.operator.kernel_params(self.period_s), self.period_s,
+                                   target, tool_force, noise, plant, scratch, applied, grasp,
+                                   *operator.buffers, sample], record_cmd=True)
+        return RigState(plant.numpy(), applied.numpy(), grasp.numpy(), operator, rng,
+                        target_m=target.numpy(), tool_force_N=tool_force.numpy(),
+                        noise_N=noise.numpy(), sample=sample.numpy(), kernel=launch,
+                        buffers=(target, tool_force, noise, plant, scratch, applied, grasp,
+                                 sample))
 
     def step(self, state: RigState, target_m: np.ndarray, tool_force_N: np.ndarray) -> RigSample:
         """One SYNC: advance over the last period, apply ``target_m`` (lanes, 2), sample.
@@ -199,23 +256,21 @@ class RigModel:
         rejects it. ``tool_force_N`` (lanes, 2) is the tool force the operator feels (used
         by the force-regulating operator only).
         """
-        target = np.asarray(target_m, float)
-        state.plant[...] = state.plant @ self.A.T + state.applied_command_m @ self.B.T
-        state.applied_command_m[...] = np.where(np.isfinite(target), target,
-                                                state.applied_command_m)
-        applied = state.applied_command_m
-        position = state.plant @ self.position_C.T
-        velocity = state.plant @ self.velocity_C.T + applied * self.velocity_D
-        acceleration = state.plant @ self.acceleration_C.T + applied * self.acceleration_D
-        offset = position - state.grasp_position_m
-        intent = self.operator.intent_force(state.operator, offset, velocity,
-                                            np.asarray(tool_force_N, float), self.period_s)
-        mass, damping, stiffness = self.operator_impedance.T
-        force = intent - (mass * acceleration + damping * velocity + stiffness * offset)
-        measured = force
+        state.target_m[...] = target_m
+        state.tool_force_N[...] = tool_force_N
+        values = self.step_inputs(state).copy()
+        pairs = [values[:, 2 * i:2 * i + 2] for i in range(6)]
+        return RigSample(*pairs)
+
+    def step_inputs(self, state: RigState) -> np.ndarray:
+        """One SYNC on the inputs already in ``state.target_m`` and ``state.tool_force_N``;
+        returns ``state.sample`` (lanes, 12), a view the next step overwrites (columns in
+        :data:`~haptic.master.rig_kernels.SAMPLE_PAIRS` order)."""
         if self.force_noise_std_N > 0.0:
-            measured = force + self.force_noise_std_N * state.rng.standard_normal(force.shape)
-        return RigSample(position, velocity, acceleration, intent, force, measured)
+            state.noise_N[...] = self.force_noise_std_N * state.rng.standard_normal(
+                state.noise_N.shape)
+        state.kernel.launch()
+        return state.sample
 
     def frequency_response(self, omega_rad_s: np.ndarray) -> np.ndarray:
         """The discretised plant's response from held command to sampled position,

@@ -233,6 +233,11 @@ class SlaveNode:
         state.handle_position_m = np.array(np.broadcast_to(handle_position_m,
                                                            state.handle_position_m.shape))
 
+    @property
+    def position_ratio(self) -> np.ndarray:
+        """Ah1 per axis (x, y), dimensionless: the tool follows ``Ah1 yh``."""
+        return self._position_ratio.copy()
+
     def tracking_error_m(self, state: SlaveState, handle_position_m: np.ndarray) -> np.ndarray:
         """yt - Ah1 yh for every lane (lanes, 2), m."""
         return state.tool_position_m() - self._position_ratio * np.asarray(handle_position_m)

@@ -44,12 +44,15 @@ from haptic.common.preflight import add_preflight_options, run_preflight
 from haptic.common.run_recording import RunRecording
 from haptic.common.runner import RealTimeRunner, StopSignals
 from haptic.common.runner_config import place_other_threads, prioritise_zenoh_threads
+from haptic.common.stage_times import StageTimes
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
 from haptic.common.watchdog import PeerWatchdog, WatchdogState
 from haptic.slave_sim.node import SlaveNode
 from haptic.slave_sim.scenario import load_scenario
 
+#: The stages of one tick, in order (the summary's ``stages``).
+TICK_STAGES = ("poll", "supervise", "node", "send", "telemetry")
 #: How far the tool may leave the scenario's grid before the work-area guard stops it, m.
 WORK_AREA_MARGIN_M = 0.01
 #: Default tolerance of the resync position check, m per axis.
@@ -233,6 +236,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     tolerance = args.sync_tolerance
     state = node.initial_state(1)
     node.safe_stop(state)
+    stages = StageTimes(TICK_STAGES)
+    zero_force = np.zeros((1, 2))
     path_every = max(1, args.trace_every)
     tool_path: list[tuple[float, float]] = []
     fh = np.zeros((1, 2))
@@ -274,10 +279,16 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             display = _display_publisher(link, node, state, recording)
         view_every = display.state_every(period_s) if display is not None else 1
 
+        clock = time.perf_counter_ns
+        rx, ry = (float(v) for v in node.position_ratio)
+        fh_row, yh_row = fh, yh  # the newest handle message, updated in place
+
         def step(tick: int, now_ns: int) -> None:
-            nonlocal fh, yh
             now_s = (now_ns - perf_start_ns) * 1e-9
+            # poll: the newest handle message whose delivery time has come
             message = link.poll()
+            poll_ns = clock()
+            # supervise: phase lock, watchdog, resync, work-area guard
             fresh = message is not None
             if fresh and phase_lock is not None:
                 if link.last_delivery_measured:
@@ -287,13 +298,16 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                     phase_lock.skip_unmeasured()
             if fresh:
                 handle: HandleState = message
-                fh = np.array([handle.handle_force_N], float)
-                yh = np.array([handle.handle_position_m], float)
+                fh_row[0] = handle.handle_force_N
+                yh_row[0] = handle.handle_position_m
                 flags_box["master_enabled"] = Flags.FORCES_ENABLED in handle.flags
             running_before = flags_box["running"]
             if not running_before and fresh and not flags_box["outside"]:
                 node.resync(state, yh)  # follow the (held) handle while not running
-            in_sync = bool(np.all(np.abs(node.tracking_error_m(state, yh)) < tolerance))
+            hx, hy = yh_row[0].tolist()
+            tool_row = state.tool[0]
+            in_sync = (abs(tool_row[0] - rx * hx) < tolerance
+                       and abs(tool_row[2] - ry * hy) < tolerance)  # |yt - Ah1 yh| per axis
             wd_state = watchdog.update(now_s, fresh, link.silence_s(), in_sync,
                                        link.peer_alive)
             ready = wd_state is WatchdogState.OK
@@ -321,7 +335,9 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                     events.append({"time_s": now_s, "kind": "tool_stopped",
                                    "reason": f"{reason}: the tool stops"})
             flags_box["running"] = running
-            out = node.step(state, fh if running else np.zeros((1, 2)), yh)
+            supervise_ns = clock()
+            # node: Ch2/Ct2, the tool and the clay
+            out = node.step(state, fh if running else zero_force, yh)
             ft = out.tool_force_N[0]
             position = out.tool_position_m[0]
             velocity = out.tool_velocity_m_s[0]
@@ -333,8 +349,12 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             flags = Flags.FORCES_ENABLED if ready_flag else Flags.SAFE_STATE
             if out.cutting[0]:
                 flags |= Flags.IN_CONTACT
+            node_ns = clock()
+            # send: the tool force, position and velocity, the clay's status
             link.send_tool((float(ft[0]), float(ft[1])), (float(position[0]), float(position[1])),
                            (float(velocity[0]), float(velocity[1])), engagement, removed, flags)
+            send_ns = clock()
+            # telemetry: summary figures, trace, recording, display
             magnitude = math.hypot(ft[0], ft[1])
             if magnitude > flags_box["max_force"]:
                 flags_box["max_force"] = magnitude
@@ -374,6 +394,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                     recording.status(now_ns, figures, new_events)
                 if display is not None:
                     display.offer_status(figures, new_events)
+            stages.record(now_ns, (poll_ns, supervise_ns, node_ns, send_ns, clock()))
 
         def status() -> str:
             stats = link.stats()
@@ -408,7 +429,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         watchdog_trips=watchdog.trips, events=all_events, side="slave",
         watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
         removed_volume_m3=flags_box["removed"],
-        final_tool_position_m=[float(final[0]), float(final[1])], **zenoh_threads,
+        final_tool_position_m=[float(final[0]), float(final[1])], stages=stages.summary(),
+        **zenoh_threads,
         **(phase_lock.summary() if phase_lock is not None else {"phase_lock_enabled": False}),
         **extra_summary,
     )
