@@ -150,6 +150,9 @@ class MasterNode:
             f"handle force saturated at {limit:g} N", f"tool force saturated at {limit:g} N",
             f"command rate limited to {safety.velocity_limit_m_per_s:g} m/s",
             "command clamped to the workspace")
+        # Load (or compile, about 2 s the first time) the kernel now, never inside a tick.
+        self._kernel_constants()
+        _warp().load_module(kernels, device=DEVICE)
 
     @classmethod
     def from_model(cls, model: TeleopModel, safety: SafetySettings) -> MasterNode:

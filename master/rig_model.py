@@ -162,6 +162,10 @@ class RigModel:
         #: Th per axis as [mass kg, damping N s/m, stiffness N/m].
         self.operator_impedance = impedance
         self._constants: tuple | None = None
+        # Load (or compile, about 2 s the first time) the kernels now, never inside a tick.
+        from haptic.master import rig_kernels
+
+        _warp().load_module(rig_kernels, device="cpu")
 
     def _axis_blocks(self, gh: control.TransferFunction, name: str) -> dict[str, np.ndarray]:
         realisation = control.ss(gh)
