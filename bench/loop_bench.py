@@ -58,6 +58,7 @@ from haptic.common.link import Link
 from haptic.common.messages import Flags
 from haptic.common.runner import RealTimeRunner, StopSignals
 from haptic.common.runner_config import place_other_threads, prioritise_zenoh_threads
+from haptic.common.stage_times import in_tick_order
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.watchdog import PeerWatchdog
 
@@ -352,8 +353,22 @@ def _side_figures(summary: dict[str, Any], ts_s: float) -> dict[str, Any]:
         "stalls": summary.get("stalls"),
         "step_p50_s": summary.get("step_p50_s"),
         "step_p99_s": summary.get("step_p99_s"),
+        "stages": {name: {"p50_s": f["p50_s"], "p99_s": f["p99_s"]}
+                   for name, f in in_tick_order(summary.get("stages") or {})},
+        "watchdog_trips": summary.get("watchdog_trips"),
         "scheduling": summary.get("scheduling"),
     }
+
+
+def _phase_lock(slave: dict[str, Any]) -> dict[str, Any] | None:
+    """How closely the slave's phase lock held its lag: the master's messages used this long
+    after they arrived (age at use minus one-way delay, p50), s."""
+    if not slave.get("phase_lock_enabled"):
+        return None
+    age, delay = slave.get("link_age_at_use_p50_s"), slave.get("link_one_way_delay_p50_s")
+    used_after = age - delay if age is not None and delay is not None else None
+    return {"lag_s": slave.get("phase_lock_lag_s"), "used_after_arrival_p50_s": used_after,
+            "locked_ratio": slave.get("phase_lock_locked_ratio")}
 
 
 def _direction(summary: dict[str, Any]) -> dict[str, Any]:
@@ -414,8 +429,10 @@ def benchmark(
         "run_options": cpu_layout_args(cpu_layout) + list(extra_args or []),
         "nodes": "echo" if echo and not (master_cmd or slave_cmd) else (
             "custom" if master_cmd or slave_cmd else f"programs, rig {rig}"),
+        "period_s": ts_s,
         "master": _side_figures(master, ts_s),
         "slave": _side_figures(slave, ts_s),
+        "phase_lock": _phase_lock(slave),
         "link": link,
         "raw_zenoh": raw,
         "link_to_raw_p50_ratio": ratio,
@@ -444,6 +461,16 @@ def print_table(result: dict[str, Any]) -> None:
             f"({f['overrun_ratio'] * 100:.3f} %)  step p50 {_us(f.get('step_p50_s'))} p99 "
             f"{_us(f.get('step_p99_s'))}"
         )
+        if f.get("stages"):
+            print("         stages p50/p99: " + "  ".join(
+                f"{name} {g['p50_s'] * 1e6:.1f}/{g['p99_s'] * 1e6:.1f}"
+                for name, g in f["stages"].items()) + " us")
+    lock = result.get("phase_lock")
+    if lock and lock.get("used_after_arrival_p50_s") is not None:
+        print(f"  slave phase lock: the master's messages used "
+              f"{lock['used_after_arrival_p50_s'] * 1e6:.1f} us after arrival (p50; target lag "
+              f"{lock['lag_s'] * 1e6:.1f} us), locked {lock['locked_ratio'] * 100:.1f} % of "
+              "updates")
     link = result["link"]
     for name in ("master_to_slave", "slave_to_master"):
         d = link[name]
@@ -499,22 +526,55 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--extra", default="", help="extra arguments for both commands (one shell string)"
     )
+    parser.add_argument("--period", type=float, default=None, metavar="S",
+                        help="sample period Ts of both programs, s (default: the configured "
+                        "0.54 ms); the compensators are synthesised at this period")
     args = parser.parse_args(argv)
-    result = benchmark(
-        args.duration,
-        shlex.split(args.master_cmd) if args.master_cmd else None,
-        shlex.split(args.slave_cmd) if args.slave_cmd else None,
-        shlex.split(args.extra),
-        echo=args.echo,
-        rig=args.rig,
-        cpu_layout=args.cpu_layout or (
-            "free" if args.echo or args.master_cmd or args.slave_cmd else "partitioned"),
-    )
+    extra = shlex.split(args.extra)
+    ts_s = 0.00054
+    with tempfile.TemporaryDirectory() as folder:
+        if args.period is not None:
+            if not 0.0 < args.period <= 0.01:
+                print(f"config error: --period: must be in (0, 0.01] s (got {args.period:g})",
+                      file=sys.stderr)
+                return 2
+            ts_s = args.period
+            extra += ["--config", str(period_config(Path(folder), ts_s))]
+        result = _run(args, extra, ts_s)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
         print_table(result)
     return 0
+
+
+def period_config(folder: Path, period_s: float) -> Path:
+    """A configuration file that sets only the sample period (the rest of ``[model]`` as
+    shipped: a file replaces whole tables)."""
+    from haptic.common.config import load_config
+
+    model = load_config()["model"]
+    path = folder / "period.toml"
+    path.write_text(
+        "[model]\n"
+        f"sample_period_s = {period_s!r}\n"
+        f"position_ratio_ah1 = {json.dumps(model['position_ratio_ah1'])}\n"
+        f"force_ratio_ah2 = {json.dumps(model['force_ratio_ah2'])}\n")
+    return path
+
+
+def _run(args: argparse.Namespace, extra: list[str], ts_s: float) -> dict[str, Any]:
+    return benchmark(
+        args.duration,
+        shlex.split(args.master_cmd) if args.master_cmd else None,
+        shlex.split(args.slave_cmd) if args.slave_cmd else None,
+        extra,
+        ts_s=ts_s,
+        echo=args.echo,
+        rig=args.rig,
+        cpu_layout=args.cpu_layout or (
+            "free" if args.echo or args.master_cmd or args.slave_cmd else "partitioned"),
+    )
 
 
 if __name__ == "__main__":

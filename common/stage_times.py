@@ -4,7 +4,8 @@ A program marks the clock (:func:`time.perf_counter_ns`, the runner's clock) at 
 stage of its tick and hands the marks to :meth:`StageTimes.record` with the tick's start. One
 :class:`~haptic.common.histogram.LogHistogram` per stage keeps the figures in constant memory;
 a record costs well under a microsecond per stage. The run summary gets
-``stages``: stage name -> ``{"p50_s", "p99_s", "max_s", "mean_s"}``.
+``stages``: stage name -> ``{"index", "p50_s", "p99_s", "max_s", "mean_s"}`` (``index``: the
+stage's place in the tick, since JSON summaries sort their keys).
 """
 
 from __future__ import annotations
@@ -38,20 +39,27 @@ class StageTimes:
         return self._histograms[0].count
 
     def summary(self) -> dict[str, dict[str, float]]:
-        """Per stage: p50, p99, max and mean duration, s (NaN before the first tick)."""
+        """Per stage: its index in the tick, and p50, p99, max and mean duration, s (NaN
+        before the first tick)."""
         result = {}
-        for name, histogram in zip(self.names, self._histograms, strict=True):
+        for index, (name, histogram) in enumerate(zip(self.names, self._histograms,
+                                                      strict=True)):
             p50, p99 = histogram.percentiles((50.0, 99.0))
             count = histogram.count
             result[name] = {
-                "p50_s": p50, "p99_s": p99,
+                "index": index, "p50_s": p50, "p99_s": p99,
                 "max_s": histogram.max_s if count else math.nan,
                 "mean_s": histogram.sum_s / count if count else math.nan,
             }
         return result
 
 
+def in_tick_order(stages: dict[str, dict[str, float]]) -> list[tuple[str, dict[str, float]]]:
+    """The stages of a summary in the order they run in the tick."""
+    return sorted(stages.items(), key=lambda item: item[1].get("index", 0))
+
+
 def format_stages(stages: dict[str, dict[str, float]]) -> str:
-    """One line: ``read 12.3/20.1 us  poll ...`` (p50/p99 per stage)."""
+    """One line: ``read 12.3/20.1  poll ... us (p50/p99)`` in tick order."""
     return "  ".join(f"{name} {figures['p50_s'] * 1e6:.1f}/{figures['p99_s'] * 1e6:.1f}"
-                     for name, figures in stages.items()) + " us (p50/p99)"
+                     for name, figures in in_tick_order(stages)) + " us (p50/p99)"
