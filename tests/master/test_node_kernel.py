@@ -317,3 +317,30 @@ def test_step_inputs_reads_the_state_buffer_and_returns_a_live_view(paper_model)
     for _ in range(50):
         node.step_inputs(state)
     assert view[0, 0] > first[0, 0] > 0.0  # Ch1 integrates the push; the view follows
+
+
+def test_the_program_tick_and_the_lockstep_lanes_step_the_same_law(paper_model) -> None:
+    """The real-time tick writes one lane's six inputs and calls step_inputs; the lockstep
+    simulator steps every lane with step(): lane by lane, the same commands and used forces,
+    bit for bit."""
+    rng = np.random.default_rng(3)
+    safety = _safety(ramp_small_samples=4, ramp_time_s=0.005)
+    node = MasterNode.from_model(paper_model, safety)
+    lanes, steps = 3, 400
+    fh, yh, ft = _inputs(rng, steps, lanes)
+    start = np.zeros((lanes, 2))
+    together = node.activate(start)
+    alone = [node.activate(start[lane:lane + 1]) for lane in range(lanes)]
+    for k in range(steps):
+        commands = node.step(together, fh[k], yh[k], ft[k])
+        for lane, state in enumerate(alone):
+            state.inputs[0] = (*fh[k, lane], *yh[k, lane], *ft[k, lane])
+            command = node.step_inputs(state)[0]
+            np.testing.assert_array_equal(command, commands[lane])
+            np.testing.assert_array_equal(state.handle_force_used_N[0],
+                                          together.handle_force_used_N[lane])
+            np.testing.assert_array_equal(state.tool_force_used_N[0],
+                                          together.tool_force_used_N[lane])
+    for lane, state in enumerate(alone):
+        assert [(e.kind, e.reason, e.axis) for e in state.events] == [
+            (e.kind, e.reason, e.axis) for e in together.events if e.lane == lane]
