@@ -191,7 +191,7 @@ def real_time_misses(master: dict[str, Any], slave: dict[str, Any]) -> list[str]
     for name, s in (("master", master), ("slave", slave)):
         target_hz = 1.0 / s["period_s"] if s.get("period_s") else math.nan
         if not s["rate_hz"] >= MIN_RATE_RATIO * target_hz:
-            misses.append(f"{name} rate {s['rate_hz']:.1f} Hz < {MIN_RATE_RATIO * target_hz:.0f}")
+            misses.append(f"{name} rate {s['rate_hz']:.1f} Hz < {MIN_RATE_RATIO * target_hz:.1f}")
         if not s["overrun_ratio"] <= MAX_OVERRUN_RATIO:
             misses.append(f"{name} overruns {s['overrun_ratio'] * 100:.2f} % > "
                           f"{MAX_OVERRUN_RATIO * 100:g} %")

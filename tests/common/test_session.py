@@ -54,7 +54,7 @@ def test_real_time_verdict_names_each_missed_target() -> None:
         _loop_summary(period_p99_error_s=None,
                       events=[{"kind": "trip", "time_s": 1.0},
                               {"kind": "peer_returned", "time_s": 1.2}]))
-    assert misses == ["master rate 1409.0 Hz < 1844", "master overruns 98.90 % > 0.1 %",
+    assert misses == ["master rate 1409.0 Hz < 1844.4", "master overruns 98.90 % > 0.1 %",
                       "master period error p99 1100.0 us > 50 us",
                       "slave period error p99 n/a > 50 us",
                       "slave watchdog tripped 1x during the run"]
