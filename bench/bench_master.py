@@ -1,15 +1,33 @@
 """Benchmark of the master side: node and rig-model step costs, and the control cycle over
-the simulated rig's virtual CAN bus (SYNC -> TPDOs -> node -> RPDOs).
+the simulated rig's CAN bus (SYNC -> TPDOs -> node -> RPDOs), in process and across
+processes.
 
-    python bench/bench_master.py [--cycles N] [--lanes L] [--json]
+    python bench/bench_master.py [--cycles N] [--lanes L] [--rigs NAME,...] [--spin-s S] [--json]
 
-Figures are wall-clock on this machine (noisy; compare ratios). Nothing is asserted.
+The simulated rigs (``--rigs``, default all of them): the same devices and the same CAN
+driver on
+
+- ``inproc``: a thread of this process on python-can's virtual bus (backend ``sim-inproc``;
+  the devices compete with the loop for the interpreter);
+- ``emulator_unix``: their own process, ``haptic-rig-sim``, on the ``unix_datagram`` bus
+  (backend ``sim`` as shipped);
+- ``emulator_udp``: their own process on python-can's ``udp_multicast`` (a private port).
+
+For each: the CAN cycle (``hardware.read()``: SYNC sent to the last PDO received) and the
+whole control cycle (read + node step + operator display + RPDOs), back to back
+(``unpaced``) and paced at Ts as the real-time runner paces (sleep, then spin the last
+``[runner] spin_s``, 0.1 ms; re-anchored after an overrun), with p50/p99/max, the overruns
+and the largest lateness.
+Figures are wall-clock on this machine (noisy: other programs on a 2-core machine move them
+a lot, so the 1-minute load average is printed with them). Nothing is asserted.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import platform
 import time
 import uuid
 
@@ -17,17 +35,36 @@ import numpy as np
 
 from haptic.common.config import load_config, override
 from haptic.common.model import model_from_config
-from haptic.master.hardware import create_hardware
+from haptic.master.hardware import HandleHardware, create_hardware
 from haptic.master.node import MasterNode
 from haptic.master.rig_model import RigModel
-from haptic.master.runner import run_master
 from haptic.master.settings import master_settings
+
+#: The simulated rigs: name -> (backend, configuration overrides).
+RIGS: dict[str, tuple[str, dict[str, object]]] = {
+    "inproc": ("sim-inproc", {}),
+    "emulator_unix": ("sim", {}),
+    "emulator_udp": ("sim", {"master.sim.emulator.interface": "udp_multicast",
+                             "master.sim.emulator.channel": "239.74.163.2"}),
+}
 
 
 def _percentiles_us(samples_s: np.ndarray) -> dict[str, float]:
-    us = samples_s * 1e6
+    us = np.asarray(samples_s) * 1e6
     return {"mean_us": float(us.mean()), "p50_us": float(np.percentile(us, 50)),
             "p99_us": float(np.percentile(us, 99)), "max_us": float(us.max())}
+
+
+def cpu_model() -> str:
+    """The CPU's model name (/proc/cpuinfo), or the platform's processor string."""
+    try:
+        with open("/proc/cpuinfo") as cpuinfo:
+            for line in cpuinfo:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
 
 
 def bench_blocks(config: dict, cycles: int, lanes: int) -> dict[str, dict[str, float]]:
@@ -57,38 +94,78 @@ def bench_blocks(config: dict, cycles: int, lanes: int) -> dict[str, dict[str, f
     return results
 
 
-def bench_can_cycle(config: dict, cycles: int) -> dict[str, dict[str, float]]:
-    """One control cycle over the virtual bus: read (SYNC, wait for TPDOs and the sensor
-    frame) + node step + write (RPDOs), back to back; then a run paced at Ts."""
+def _run_cycles(hardware: HandleHardware, node: MasterNode, cycles: int, pace: bool,
+                spin_s: float) -> dict[str, float]:
+    """``cycles`` control cycles on configured-active ``hardware``: read, node step, present
+    the (zero) tool force, write; paced at the node's Ts when ``pace`` (sleep, then spin the
+    last ``spin_s``). Figures of the read (the CAN cycle) and of the whole cycle, the overruns
+    and the faulted cycles."""
+    period_s = node.period_s
+    reading = hardware.read()
+    state = node.activate(reading.position_m[None])
+    zero = np.zeros((1, 2))
+    reads = np.empty(cycles)
+    totals = np.empty(cycles)
+    overruns = 0
+    faulted = 0
+    max_lateness = 0.0
+    deadline = time.perf_counter()
+    for k in range(cycles):
+        t0 = time.perf_counter()
+        reading = hardware.read()
+        t1 = time.perf_counter()
+        faulted += bool(reading.faults)
+        command = node.step(state, reading.force_N[None], reading.position_m[None], zero)
+        hardware.present_tool_force(zero[0])
+        hardware.write(command[0])
+        t2 = time.perf_counter()
+        reads[k], totals[k] = t1 - t0, t2 - t0
+        if pace:
+            deadline += period_s
+            now = time.perf_counter()
+            if now > deadline:
+                overruns += 1
+                max_lateness = max(max_lateness, now - deadline)
+                deadline = now  # re-anchor after a stall
+            else:
+                if deadline - now > spin_s:
+                    time.sleep(deadline - now - spin_s)
+                while time.perf_counter() < deadline:
+                    pass
+    figures = {f"read_{k}": v for k, v in _percentiles_us(reads).items()}
+    figures.update({f"cycle_{k}": v for k, v in _percentiles_us(totals).items()})
+    figures["cycles"] = float(cycles)
+    figures["faulted_cycles"] = float(faulted)
+    if pace:
+        figures.update({"overruns": float(overruns), "overrun_fraction": overruns / cycles,
+                        "max_lateness_us": max_lateness * 1e6,
+                        "target_period_us": period_s * 1e6})
+    return figures
+
+
+def bench_can_cycle(config: dict, cycles: int, rig: str,
+                    spin_s: float | None = None) -> dict[str, dict[str, float]]:
+    """The CAN cycle and the control cycle on the simulated rig ``rig`` (a :data:`RIGS`
+    name), back to back and paced at Ts (spinning the last ``spin_s``, default the
+    configuration's ``[runner] spin_s``)."""
+    backend, overrides = RIGS[rig]
     config = override(config, "master.sim.channel", f"bench-{uuid.uuid4().hex}")
+    for key, value in overrides.items():
+        config = override(config, key, value)
     model = model_from_config(config)
-    node = MasterNode.from_model(model, master_settings(config).safety)
+    safety = master_settings(config).safety
+    spin_s = config["runner"]["spin_s"] if spin_s is None else spin_s
     results = {}
-    with create_hardware("sim", config) as hardware:
+    with create_hardware(backend, config) as hardware:
         hardware.configure()
         hardware.activate()
-        reading = hardware.read()
-        state = node.activate(reading.position_m[None])
-        times = np.empty(cycles)
-        zero = np.zeros((1, 2))
-        for k in range(cycles):
-            t0 = time.perf_counter()
-            command = node.step(state, reading.force_N[None], reading.position_m[None], zero)
-            hardware.write(command[0])
-            reading = hardware.read()
-            times[k] = time.perf_counter() - t0
+        warm_up = min(cycles, 500)
+        _run_cycles(hardware, MasterNode.from_model(model, safety), warm_up, False, spin_s)
+        results[f"can_{rig}_unpaced"] = _run_cycles(
+            hardware, MasterNode.from_model(model, safety), cycles, False, spin_s)
+        results[f"can_{rig}_paced_at_ts"] = _run_cycles(
+            hardware, MasterNode.from_model(model, safety), cycles, True, spin_s)
         hardware.deactivate()
-        results["can_cycle_unpaced"] = _percentiles_us(times)
-    with create_hardware("sim", config) as hardware:
-        summary = run_master(hardware, MasterNode.from_model(model, master_settings(
-            config).safety), cycles, pace=True)
-    results["can_cycle_paced_at_ts"] = {
-        "cycles": float(summary.cycles), "overruns": float(summary.overruns),
-        "overrun_fraction": summary.overruns / summary.cycles,
-        "max_lateness_us": summary.max_lateness_s * 1e6,
-        "achieved_period_us": summary.wall_time_s / summary.cycles * 1e6,
-        "target_period_us": model.sample_period_s * 1e6,
-    }
     return results
 
 
@@ -96,18 +173,33 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--cycles", type=int, default=5000)
     parser.add_argument("--lanes", type=int, default=64)
+    parser.add_argument("--rigs", default=",".join(RIGS),
+                        help="simulated rigs to run the CAN cycle on, comma-separated, of "
+                        f"{', '.join(RIGS)} (default all)")
+    parser.add_argument("--spin-s", type=float, metavar="S",
+                        help="paced runs spin this long before each tick, s (default [runner] "
+                        "spin_s, 0.0001)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     config = load_config()
-    results = bench_blocks(config, args.cycles, args.lanes)
-    results.update(bench_can_cycle(config, args.cycles))
+    results: dict[str, dict[str, float | str]] = {"machine": {
+        "cpu_model": cpu_model(), "cpus": float(os.cpu_count() or 0),
+        "load_average_1min_at_start": os.getloadavg()[0]}}
+    results.update(bench_blocks(config, args.cycles, args.lanes))
+    rigs = [name.strip() for name in args.rigs.split(",") if name.strip()]
+    unknown = [name for name in rigs if name not in RIGS]
+    if unknown:
+        parser.error(f"unknown rig {', '.join(unknown)}; known: {', '.join(RIGS)}")
+    for rig in rigs:
+        results.update(bench_can_cycle(config, args.cycles, rig, args.spin_s))
+    results["machine"]["load_average_1min_at_end"] = os.getloadavg()[0]
     if args.json:
         print(json.dumps(results))
         return
     for name, figures in results.items():
         text = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
                          for k, v in figures.items())
-        print(f"{name:28s} {text}")
+        print(f"{name:38s} {text}")
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ Rules, the same for every program:
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 import tomllib
@@ -206,6 +207,47 @@ def override(config: dict[str, Any], dotted_key: str, value: Any) -> dict[str, A
         node = node[part]
     node[parts[-1]] = checked
     return result
+
+
+def _toml_key(name: str) -> str:
+    return name if name and all(c.isascii() and (c.isalnum() or c in "_-") for c in name) \
+        else json.dumps(name, ensure_ascii=False)
+
+
+def _toml_value(key: str, value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            return ("-inf" if value < 0 else "inf") if math.isinf(value) else "nan"
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)  # a JSON string is a TOML basic string
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(key, item) for item in value) + "]"
+    raise ConfigError(key, f"cannot be written as TOML (a {type(value).__name__})")
+
+
+def to_toml(config: Mapping[str, Any]) -> str:
+    """A configuration (nested tables of the schema's value kinds) as TOML text that
+    :func:`load_config` reads back to the same values: every table with all its keys, so
+    another process can be given exactly this run's configuration."""
+    lines: list[str] = []
+
+    def table(node: Mapping[str, Any], path: list[str]) -> None:
+        plain = [(k, v) for k, v in node.items() if not isinstance(v, Mapping)]
+        if path and plain:
+            lines.extend(["", "[" + ".".join(map(_toml_key, path)) + "]"])
+        for name, value in plain:
+            lines.append(f"{_toml_key(name)} = {_toml_value('.'.join([*path, name]), value)}")
+        for name, value in node.items():
+            if isinstance(value, Mapping):
+                table(value, [*path, name])
+
+    table(config, [])
+    return "\n".join(lines).lstrip("\n") + "\n"
 
 
 def _deep_copy(value: Any) -> Any:

@@ -69,6 +69,13 @@ class CanHandleDriver(HandleHardware):
         self.last_reading: HandleReading | None = None
         #: Frames that arrived after their cycle's timeout and were discarded.
         self.late_frames = 0
+        # What this driver sends (NMT, SYNC, its RPDO1s and SDO requests; extra frames by
+        # id): an interface that hands a process its own frames back (udp_multicast) does
+        # not make them late frames.
+        self._own_ids = ({cia402.NMT_COB_ID, cia402.SYNC_COB_ID}
+                         | {cia402.RPDO1_BASE + n for n in settings.node_ids}
+                         | {cia402.SDO_RX_BASE + n for n in settings.node_ids})
+        self._own_extended_ids: set[int] = set()
 
     # --- lifecycle -------------------------------------------------------------------
 
@@ -247,6 +254,9 @@ class CanHandleDriver(HandleHardware):
         emcy_ids = {cia402.EMCY_BASE + node: axis
                     for axis, node in enumerate(self.settings.node_ids)}
         while (message := self._bus.recv(timeout=0.0)) is not None:
+            if message.arbitration_id in (self._own_extended_ids if message.is_extended_id
+                                          else self._own_ids):
+                continue  # our own frame, back from an interface that echoes
             self.late_frames += 1
             if message.arbitration_id in emcy_ids:
                 code, register = cia402.decode_emcy(bytes(message.data))
@@ -286,6 +296,15 @@ class CanHandleDriver(HandleHardware):
         self._send_both(cia402.CW_ENABLE_OPERATION)
 
     # --- frames ----------------------------------------------------------------------
+
+    def send_frame(self, frame_id: int, data: bytes, extended: bool = False) -> None:
+        """Send one frame as is on the driver's bus (a simulated rig's extra frames, e.g. its
+        operator display frame); ``extended``: a 29-bit identifier. :class:`HardwareError`
+        when the bus is not open."""
+        if self._bus is None:
+            raise HardwareError("send_frame needs a configured driver")
+        (self._own_extended_ids if extended else self._own_ids).add(frame_id)
+        self._bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=extended))
 
     def _send(self, frame_id: int, data: bytes) -> None:
         assert self._bus is not None

@@ -33,7 +33,14 @@ def build_parser() -> argparse.ArgumentParser:
     """The command line."""
     parser = argparse.ArgumentParser(prog="haptic-master", description=__doc__.split("\n")[0])
     add_run_options(parser)
-    parser.add_argument("--rig", help="handle hardware by name: can or sim ([master] rig)")
+    parser.add_argument("--rig", help="handle hardware by name: can, sim, sim-inproc or model "
+                        "([master] rig)")
+    parser.add_argument("--can-interface", metavar="NAME",
+                        help="python-can interface of the rig's bus ([master.can] interface), "
+                        "e.g. socketcan, or unix_datagram / udp_multicast to reach a "
+                        "haptic-rig-sim started by hand")
+    parser.add_argument("--can-channel", metavar="CHANNEL",
+                        help="channel on that interface ([master.can] channel), e.g. can0")
     parser.add_argument("--operator", help="simulated operator spec ([master.sim] operator), "
                         "e.g. regulate:fx=3.6,onset=0.2")
     add_preflight_options(parser)
@@ -63,6 +70,13 @@ def _config(args: argparse.Namespace) -> dict:
         config = override(config, "master.rig", args.rig)
     if args.operator is not None:
         config = override(config, "master.sim.operator", args.operator)
+    for flag, key, value in (("--can-interface", "master.can.interface", args.can_interface),
+                             ("--can-channel", "master.can.channel", args.can_channel)):
+        if value is not None:
+            try:
+                config = override(config, key, value)
+            except ConfigError as error:
+                raise ConfigError(f"{flag} ({key})", str(error).removeprefix(f"{key}: ")) from None
     if args.k is not None:
         config = override(config, "model.ch1.gain_k", args.k)
     return config

@@ -123,6 +123,7 @@ def _load_builtin_backends() -> None:
     # The built-in backends register themselves on import.
     import haptic.master.can_driver  # noqa: F401
     import haptic.master.model_rig  # noqa: F401
+    import haptic.master.rig_emulator  # noqa: F401
     import haptic.master.sim_rig  # noqa: F401
 
 

@@ -42,10 +42,32 @@ CAN_SCHEMA: Schema = {
                                 check=_pair),
 }
 
+def _emulator_interface(name: Any) -> str | None:
+    if name == "virtual":
+        return ("python-can's virtual bus does not cross processes; use unix_datagram or "
+                "udp_multicast (or the in-process rig, rig = \"sim-inproc\")")
+    return None if name else "must name a python-can interface, e.g. unix_datagram"
+
+
+EMULATOR_SCHEMA: Schema = {
+    "interface": Field("str", "python-can interface between the sim backend's CAN driver and "
+                       "its emulator process (haptic-rig-sim): unix_datagram (this package's "
+                       "Unix-socket bus, the fastest on one host) or udp_multicast.",
+                       check=_emulator_interface),
+    "channel": Field("str", "Channel on it: unix_datagram the bus's directory, empty for a "
+                     "private temporary one per run; udp_multicast an IPv4 or IPv6 multicast "
+                     "group, e.g. 239.74.163.2."),
+    "port": Field("int", "UDP port of udp_multicast; 0 picks a free port per run, private to "
+                  "it (two runs never hear each other).", minimum=0, maximum=65535),
+    "start_timeout_s": Field("float", "How long configure() waits for the emulator process "
+                             "to say it is ready, s.", minimum=0.0, exclusive_minimum=True),
+}
+
 SIM_SCHEMA: Schema = {
-    "channel": Field("str", "python-can virtual bus channel the simulated rig speaks on."),
+    "channel": Field("str", "python-can virtual bus channel of the in-process simulated rig "
+                     "(rig sim-inproc)."),
     "pdo_timeout_s": Field("float", "How long read() waits for the simulated devices' "
-                           "frames, s (they answer from a thread).", minimum=0.0,
+                           "frames, s (they share the machine with the loop).", minimum=0.0,
                            exclusive_minimum=True),
     "operator": Field("str", "Operator model spec, kind:key=value,... (docs/master.md).",
                       check=check_operator_spec),
@@ -54,6 +76,7 @@ SIM_SCHEMA: Schema = {
     "seed": Field("int", "Seed of the sensor noise generator.", minimum=0),
     "initial_position_m": Field("float_list", "Handle position at start (x, y), m.",
                                 check=_pair),
+    "emulator": EMULATOR_SCHEMA,
 }
 
 SAFETY_SCHEMA: Schema = {
@@ -81,7 +104,9 @@ SAFETY_SCHEMA: Schema = {
 
 MASTER_SCHEMA: Schema = {
     "rig": Field("str", "Handle hardware by name: can (servo drives on a CAN bus), sim "
-                 "(the simulated rig on a virtual bus) or model (the rig block, no bus).",
+                 "(the simulated drives and sensor in their own process, haptic-rig-sim), "
+                 "sim-inproc (the same devices on a thread of the master, virtual bus) or "
+                 "model (the rig block, no bus).",
                  check=_rig_name),
     "can": CAN_SCHEMA,
     "sim": SIM_SCHEMA,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ipaddress
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,8 +49,29 @@ class CanSettings:
 
 
 @dataclass(frozen=True)
+class EmulatorSettings:
+    """The bus between the ``sim`` backend's CAN driver and its emulator process
+    (``haptic-rig-sim``). A run's private bus: ``channel`` "" (unix_datagram: a temporary
+    directory) or ``port`` 0 (udp_multicast: a free UDP port)."""
+
+    interface: str
+    channel: str
+    port: int
+    start_timeout_s: float
+
+    def bus_options(self, channel: str, port: int) -> dict[str, Any]:
+        """``can.Bus`` keyword arguments for ``channel`` (and UDP ``port``: udp_multicast
+        only takes one)."""
+        options: dict[str, Any] = {"interface": self.interface, "channel": channel}
+        if self.interface == "udp_multicast":
+            options["port"] = port
+        return options
+
+
+@dataclass(frozen=True)
 class SimSettings:
-    """The simulated rig on python-can's virtual bus."""
+    """The simulated rig: the operator and sensor it simulates, the virtual bus channel of
+    the in-process variant and the emulator process's bus."""
 
     channel: str
     pdo_timeout_s: float
@@ -57,6 +79,7 @@ class SimSettings:
     force_noise_std_N: float
     seed: int
     initial_position_m: tuple[float, float]
+    emulator: EmulatorSettings
 
 
 @dataclass(frozen=True)
@@ -102,6 +125,28 @@ def safety_from_table(table: dict[str, Any], prefix: str = "master.safety") -> S
     return safety
 
 
+def emulator_settings(table: dict[str, Any],
+                      prefix: str = "master.sim.emulator") -> EmulatorSettings:
+    """:class:`EmulatorSettings` from a validated table; a udp_multicast channel must be a
+    multicast group (:class:`ConfigError` naming the key)."""
+    emulator = EmulatorSettings(**table)
+    if emulator.interface == "udp_multicast":
+        check_multicast_group(emulator.channel, f"{prefix}.channel")
+    return emulator
+
+
+def check_multicast_group(channel: str, key: str) -> None:
+    """:class:`ConfigError` naming ``key`` unless ``channel`` is an IPv4 (224.0.0.0/4) or
+    IPv6 (ff00::/8) multicast address, as python-can's udp_multicast needs."""
+    try:
+        multicast = ipaddress.ip_address(channel).is_multicast
+    except ValueError:
+        multicast = False
+    if not multicast:
+        raise ConfigError(key, "udp_multicast needs a multicast IP address, e.g. "
+                          f"239.74.163.2 (got {channel!r})")
+
+
 def master_settings(config: dict[str, Any]) -> MasterSettings:
     """:class:`MasterSettings` from a validated configuration; :class:`ConfigError` names
     the key for cross-key problems."""
@@ -120,5 +165,6 @@ def master_settings(config: dict[str, Any]) -> MasterSettings:
         operator=parse_operator_spec(sim_table["operator"], "master.sim.operator"),
         force_noise_std_N=sim_table["force_noise_std_N"], seed=sim_table["seed"],
         initial_position_m=tuple(sim_table["initial_position_m"]),
+        emulator=emulator_settings(sim_table["emulator"]),
     )
     return MasterSettings(section["rig"], can, sim, safety_from_table(section["safety"]))

@@ -1,12 +1,26 @@
-"""The simulated rig: two CiA 402 drives and the force sensor on python-can's virtual bus.
+"""The simulated rig: two CiA 402 drives and the force sensor as CAN frame logic.
 
 :class:`SimulatedCanRig` runs the pure :class:`~haptic.master.rig_model.RigModel` and speaks
 the real frames (NMT, SDO, RPDO1/TPDO1, SYNC, EMCY, the sensor's DBC frame), so the CAN
 driver (:class:`~haptic.master.can_driver.CanHandleDriver`) runs unchanged against it. The
 devices are stepped by the driver's SYNC frames, one model step per SYNC, so a run is
-deterministic whatever the thread timing: RPDOs are synchronous (transmission type 1), a
-controlword or target received in cycle k is applied at SYNC k+1, then the model advances,
-then each drive answers with TPDO1 and the sensor with its frame sampled at that SYNC.
+deterministic whatever the thread or process timing: RPDOs are synchronous (transmission
+type 1), a controlword or target received in cycle k is applied at SYNC k+1, then the model
+advances, then each drive answers with TPDO1 and the sensor with its frame sampled at that
+SYNC.
+
+The frame logic does not care who feeds it frames. :meth:`SimulatedCanRig.start` serves
+python-can's ``virtual`` bus from a background thread of this process (backend
+``sim-inproc``: the tests that inject faults use it); :mod:`haptic.master.rig_emulator`
+serves a bus that crosses processes from its own process, ``haptic-rig-sim`` (backend
+``sim``, as a real rig's drives are separate devices). Both call :meth:`SimulatedCanRig.serve`.
+
+The operator display frame (simulated rigs only, :data:`OPERATOR_DISPLAY_ID`) carries the
+tool force the master reflects to the simulated operator, who feels it. It is also the last
+frame the ``sim`` backend sends in a cycle, so on it the devices prepare their answer to the
+next SYNC (model step and frames), and the SYNC itself only sends the prepared frames; any
+later frame that changes an input (RPDO, NMT, SDO, fault injection) discards the prepared
+answer, which is then computed at the SYNC as before. The answer is the same either way.
 
 Faults can be injected for tests and drills: a drive fault (EMCY, statusword Fault), lost
 frames, an invalid or overloaded sensor sample.
@@ -14,8 +28,11 @@ frames, an invalid or overloaded sensor sample.
 
 from __future__ import annotations
 
+import copy
+import struct
 import threading
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import can
@@ -33,8 +50,32 @@ from haptic.master.force_sensor import (
     load_database,
 )
 from haptic.master.hardware import HandleHardware, HandleReading, LifecycleState, register_hardware
-from haptic.master.rig_model import RigModel, RigSample
+from haptic.master.rig_model import RigModel, RigSample, RigState
 from haptic.master.settings import CanSettings, master_settings
+
+#: COB-ID of the emulator-only operator display frame: the tool force (N) the master reflects,
+#: for the simulated operator. A 29-bit (extended) identifier, outside CANopen's 11-bit
+#: COB-IDs, so no CiA 301/402 device sends, answers or filters for it; only the simulated
+#: rigs read it, and the ``can`` backend never sends it. Payload: 8 bytes, x then y as
+#: little-endian IEEE float32, N.
+OPERATOR_DISPLAY_ID = 0x1FFFF000
+_DISPLAY_PAYLOAD = struct.Struct("<ff")
+
+
+def encode_operator_display(tool_force_N: np.ndarray) -> bytes:
+    """The operator display frame's payload for a tool force (N, x and y)."""
+    force = np.asarray(tool_force_N, float).reshape(2)
+    return _DISPLAY_PAYLOAD.pack(float(force[0]), float(force[1]))
+
+
+def decode_operator_display(data: bytes) -> np.ndarray:
+    """The tool force (N, x and y) of an operator display payload; ``ValueError`` on a
+    payload that is not 8 bytes."""
+    if len(data) != _DISPLAY_PAYLOAD.size:
+        raise ValueError(f"operator display payload of {len(data)} bytes, expected "
+                         f"{_DISPLAY_PAYLOAD.size}")
+    return np.array(_DISPLAY_PAYLOAD.unpack(data), float)
+
 
 NMT_PRE_OPERATIONAL_STATE = "pre-operational"
 NMT_OPERATIONAL_STATE = "operational"
@@ -55,8 +96,33 @@ class _Drive:
     drop_tpdo: int = 0
 
 
+@dataclass
+class _SyncAnswer:
+    """What the devices do at one SYNC: the drives after it, the sample, the frames to send
+    and the sensor's counters. The model has already stepped; ``undo`` holds the rig state's
+    arrays (and ``rng_undo`` the noise generator's state) from before the step, so a prepared
+    answer can be taken back (both empty for an answer committed at once)."""
+
+    drives: list[_Drive]
+    sample: RigSample
+    messages: list[can.Message]
+    sensor_counter: int
+    drop_sensor: int
+    sensor_status_cycles: int
+    undo: list[tuple[Any, str, np.ndarray]] = field(default_factory=list)
+    rng_undo: dict[str, Any] | None = None
+
+
+def _state_arrays(state: RigState) -> list[tuple[Any, str]]:
+    """(holder, attribute) of every array of the rig state and its operator state."""
+    return [(holder, item.name) for holder in (state, state.operator)
+            for item in fields(holder) if isinstance(getattr(holder, item.name), np.ndarray)]
+
+
 class SimulatedCanRig:
-    """The rig's devices on a virtual bus channel, answering from a background thread.
+    """The rig's devices: CAN frame logic over :class:`RigModel`, fed frames either by its own
+    thread on a virtual bus (:meth:`start`) or by a caller's loop (:meth:`attach`, then
+    :meth:`serve`).
 
     Parameters
     ----------
@@ -65,7 +131,7 @@ class SimulatedCanRig:
     settings:
         Node ids, unit conversions and sensor calibration (the same the driver uses).
     channel:
-        python-can virtual bus channel.
+        python-can virtual bus channel :meth:`start` opens (informative for :meth:`attach`).
     initial_position_m:
         Handle position at start (x, y), m.
     rng:
@@ -81,32 +147,47 @@ class SimulatedCanRig:
                                       settings.force_offset_count,
                                       load_database(settings.dbc_file or None))
         self.state = model.initial_state(np.asarray([initial_position_m], float), rng)
+        self._state_arrays = _state_arrays(self.state)
         self.drives = [_Drive(node) for node in settings.node_ids]
         self.tool_force_N = np.zeros((1, 2))
         self.last_sample: RigSample | None = None
         self.sync_count = 0
+        #: SYNCs answered with an answer prepared on the operator display frame.
+        self.prepared_syncs = 0
         self.errors: list[str] = []
         self._sensor_counter = 0
         self._sensor_status_override: int | None = None
         self._sensor_status_cycles = 0
         self._drop_sensor = 0
+        self._prepared: _SyncAnswer | None = None
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._bus: can.BusABC | None = None
         self._thread: threading.Thread | None = None
 
+    @classmethod
+    def from_config(cls, config: dict[str, Any], channel: str) -> SimulatedCanRig:
+        """The devices of a validated configuration: ``[model]`` (Ts, Gh, Th), ``[master.can]``
+        (node ids, conversions, DBC) and ``[master.sim]`` (operator, noise, seed, start)."""
+        settings = master_settings(config)
+        sim = settings.sim
+        rig_model = RigModel.from_model(model_from_config(config), sim.operator,
+                                        sim.force_noise_std_N)
+        return cls(rig_model, settings.can, channel, sim.initial_position_m,
+                   np.random.default_rng(sim.seed))
+
     # --- lifecycle -------------------------------------------------------------------
 
     def start(self) -> None:
-        """Connect to the virtual bus and start answering frames; send the boot-ups."""
+        """Connect to the virtual bus ``channel`` and answer frames from a background thread
+        of this process; send the boot-ups."""
         if self._thread is not None:
             return
-        self._bus = can.Bus(interface="virtual", channel=self.channel)
         self._stop.clear()
-        self._thread = threading.Thread(target=self._serve, name="sim-rig", daemon=True)
+        self.attach(can.Bus(interface="virtual", channel=self.channel))
+        self._thread = threading.Thread(target=self.serve, args=(self._stop.is_set,),
+                                        name="sim-rig", daemon=True)
         self._thread.start()
-        for drive in self.drives:
-            self._send(0x700 + drive.node_id, b"\x00")  # boot-up
 
     def stop(self) -> None:
         """Stop the thread (joined) and leave the bus."""
@@ -118,71 +199,114 @@ class SimulatedCanRig:
             self._bus.shutdown()
             self._bus = None
 
+    def attach(self, bus: can.BusABC) -> None:
+        """Speak on ``bus`` (opened by the caller, who also shuts it down) from now on, and
+        send the drives' boot-ups."""
+        self._bus = bus
+        for drive in self.drives:
+            self._send(0x700 + drive.node_id, b"\x00")  # boot-up
+
+    def serve(self, should_stop: Callable[[], bool], poll_s: float = 0.05,
+              on_error: Callable[[str], None] | None = None) -> None:
+        """Block on the bus and answer each frame until ``should_stop()`` is true (checked
+        after each frame and at least every ``poll_s`` s). A frame that raises is recorded
+        in :attr:`errors` (and passed to ``on_error``) and serving goes on."""
+        while not should_stop():
+            bus = self._bus
+            if bus is None:
+                return
+            message = bus.recv(timeout=poll_s)
+            if message is None:
+                continue
+            error = self.handle_message(message)
+            if error is not None and on_error is not None:
+                on_error(error)
+
+    def handle_message(self, message: can.Message) -> str | None:
+        """Act on one received frame (thread-safe); returns the error text when it raised
+        (also kept in :attr:`errors`), else ``None``."""
+        try:
+            with self._lock:
+                self._handle(message.arbitration_id, bytes(message.data),
+                             message.is_extended_id)
+        except Exception as error:  # keep serving; the test or user sees .errors
+            text = f"{type(error).__name__}: {error}"
+            self.errors.append(text)
+            return text
+        return None
+
     # --- fault injection (thread-safe; acts at the next SYNC) -------------------------
 
     def inject_drive_fault(self, axis: int, error_code: int = 0x2310) -> None:
         """The drive of ``axis`` (0 x, 1 y) faults: EMCY ``error_code`` and statusword Fault."""
         with self._lock:
             self.drives[axis].pending_fault_code = error_code
+            self._discard_prepared()
 
     def drop_tpdo(self, axis: int, count: int = 1) -> None:
         """The drive of ``axis`` sends no TPDO1 for the next ``count`` SYNCs."""
         with self._lock:
             self.drives[axis].drop_tpdo = count
+            self._discard_prepared()
 
     def drop_sensor_frames(self, count: int = 1) -> None:
         """The sensor sends nothing for the next ``count`` SYNCs."""
         with self._lock:
             self._drop_sensor = count
+            self._discard_prepared()
 
     def set_sensor_status(self, status: int, count: int = 1) -> None:
         """The sensor reports ``status`` (e.g. 2 invalid) for the next ``count`` SYNCs."""
         with self._lock:
             self._sensor_status_override = status
             self._sensor_status_cycles = count
+            self._discard_prepared()
 
     def set_tool_force(self, tool_force_N: np.ndarray) -> None:
         """The tool force (N, x and y) the operator feels from now on."""
         with self._lock:
             self.tool_force_N = np.asarray(tool_force_N, float).reshape(1, 2).copy()
+            self._discard_prepared()
 
-    # --- frame handling (the thread) --------------------------------------------------
-
-    def _serve(self) -> None:
-        while not self._stop.is_set():
-            bus = self._bus
-            if bus is None:
-                return
-            message = bus.recv(timeout=0.05)
-            if message is None:
-                continue
-            try:
-                with self._lock:
-                    self._handle(message.arbitration_id, bytes(message.data))
-            except Exception as error:  # keep serving; the test or user sees .errors
-                self.errors.append(f"{type(error).__name__}: {error}")
+    # --- frame handling (under the lock) ----------------------------------------------
 
     def _send(self, frame_id: int, data: bytes) -> None:
         if self._bus is not None:
             self._bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False))
 
-    def _handle(self, frame_id: int, data: bytes) -> None:
+    def _handle(self, frame_id: int, data: bytes, extended: bool = False) -> None:
+        if extended:  # CANopen is 11-bit: the only 29-bit frame here is the display frame
+            if frame_id == OPERATOR_DISPLAY_ID:
+                tool_force_N = decode_operator_display(data).reshape(1, 2)
+                self._discard_prepared()
+                self.tool_force_N = tool_force_N
+                self._prepared = self._prepare_sync(undoable=True)
+            return
         if frame_id == cia402.SYNC_COB_ID:
-            self._on_sync()
+            answer, self._prepared = self._prepared, None
+            if answer is None:
+                answer = self._prepare_sync(undoable=False)
+            else:
+                self.prepared_syncs += 1
+            self._commit_sync(answer)
             return
         if frame_id == cia402.NMT_COB_ID and len(data) >= 2:
+            self._discard_prepared()
             self._on_nmt(data[0], data[1])
             return
         for drive in self.drives:
             if frame_id == cia402.RPDO1_BASE + drive.node_id:
                 if drive.nmt_state == NMT_OPERATIONAL_STATE:
+                    self._discard_prepared()
                     controlword, target = cia402.decode_pdo(cia402.RPDO1_MAPPING, data)
                     drive.received_controlword, drive.received_target = controlword, target
                 return
             if frame_id == cia402.SDO_RX_BASE + drive.node_id:
                 if drive.nmt_state != NMT_STOPPED_STATE:
+                    self._discard_prepared()
                     self._send(cia402.SDO_TX_BASE + drive.node_id, self._on_sdo(drive, data))
                 return
+        # Anything else (another node's frames, this bus's own frames coming back) is not ours.
 
     def _on_nmt(self, command: int, node: int) -> None:
         for drive in self.drives:
@@ -231,19 +355,27 @@ class SimulatedCanRig:
     def _statusword(self, drive: _Drive) -> int:
         return cia402.statusword_for(drive.state, following_target=True)
 
-    def _position_counts(self, axis: int) -> int:
-        position = self.last_sample.handle_position_m[0, axis] if self.last_sample else (
+    def _position_counts(self, axis: int, sample: RigSample | None = None) -> int:
+        """Encoder counts of ``axis`` in ``sample`` (default: the last SYNC's)."""
+        sample = self.last_sample if sample is None else sample
+        position = sample.handle_position_m[0, axis] if sample is not None else (
             self.state.plant[0] @ self.model.position_C[axis])
         return int(self.settings.counts_from_metres(position))
 
-    def _on_sync(self) -> None:
-        self.sync_count += 1
+    def _prepare_sync(self, undoable: bool) -> _SyncAnswer:
+        """The devices' answer to the next SYNC: each drive applies the controlword and
+        target it latched (a pending fault first, with its EMCY), the model advances one
+        period with the enabled drives' targets, then each operational drive's TPDO1 and the
+        sensor frame sampled at this SYNC. Only the model's state changes here (``undoable``:
+        keep what :meth:`_discard_prepared` needs to restore it); the rest at the commit."""
+        drives = [copy.copy(drive) for drive in self.drives]
+        frames: list[tuple[int, bytes]] = []
         targets = np.full((1, 2), np.nan)
-        for axis, drive in enumerate(self.drives):
+        for axis, drive in enumerate(drives):
             if drive.pending_fault_code:
                 drive.state = DriveState.FAULT
-                self._send(cia402.EMCY_BASE + drive.node_id,
-                           cia402.emcy_frame(drive.pending_fault_code))
+                frames.append((cia402.EMCY_BASE + drive.node_id,
+                               cia402.emcy_frame(drive.pending_fault_code)))
                 drive.pending_fault_code = 0
             if drive.received_controlword is not None:
                 previous = drive.controlword
@@ -259,38 +391,73 @@ class SimulatedCanRig:
             drive.received_controlword = drive.received_target = None
             if drive.state is DriveState.OPERATION_ENABLED:
                 targets[0, axis] = self.settings.metres_from_counts(drive.target_counts)
+        undo: list[tuple[Any, str, np.ndarray]] = []
+        rng_undo = None
+        if undoable:
+            undo = [(holder, name, getattr(holder, name).copy())
+                    for holder, name in self._state_arrays]
+            if self.model.force_noise_std_N > 0.0:
+                rng_undo = self.state.rng.bit_generator.state
         # Disabled or faulted drives keep the command they applied (brake, lead screw).
         sample = self.model.step(self.state, targets, self.tool_force_N)
-        self.last_sample = sample
-        for axis, drive in enumerate(self.drives):
+        for axis, drive in enumerate(drives):
             if drive.nmt_state != NMT_OPERATIONAL_STATE:
                 continue
             if drive.drop_tpdo > 0:
                 drive.drop_tpdo -= 1
                 continue
-            self._send(cia402.TPDO1_BASE + drive.node_id, cia402.encode_pdo(
-                cia402.TPDO1_MAPPING, (self._statusword(drive), self._position_counts(axis))))
-        self._send_sensor(sample.handle_force_measured_N[0])
-
-    def _send_sensor(self, force_N: np.ndarray) -> None:
+            frames.append((cia402.TPDO1_BASE + drive.node_id, cia402.encode_pdo(
+                cia402.TPDO1_MAPPING,
+                (self._statusword(drive), self._position_counts(axis, sample)))))
         counter = self._sensor_counter
-        self._sensor_counter = (counter + 1) % 256
-        if self._drop_sensor > 0:
-            self._drop_sensor -= 1
+        drop_sensor, status_cycles = self._drop_sensor, self._sensor_status_cycles
+        if drop_sensor > 0:
+            drop_sensor -= 1
+        else:
+            raw_x, raw_y, saturated = self.codec.to_counts(sample.handle_force_measured_N[0])
+            status = STATUS_OVERLOAD if saturated else STATUS_OK
+            if status_cycles > 0 and self._sensor_status_override is not None:
+                status = self._sensor_status_override
+                status_cycles -= 1
+            frames.append((self.codec.frame_id,
+                           self.codec.encode(ForceSample(raw_x, raw_y, counter, status))))
+        messages = [can.Message(arbitration_id=frame_id, data=data, is_extended_id=False)
+                    for frame_id, data in frames]
+        return _SyncAnswer(drives, sample, messages, (counter + 1) % 256, drop_sensor,
+                           status_cycles, undo, rng_undo)
+
+    def _discard_prepared(self) -> None:
+        """Take back a prepared answer (an input changed after it): the model's state as it
+        was before its step."""
+        answer, self._prepared = self._prepared, None
+        if answer is None:
             return
-        raw_x, raw_y, saturated = self.codec.to_counts(force_N)
-        status = STATUS_OVERLOAD if saturated else STATUS_OK
-        if self._sensor_status_cycles > 0 and self._sensor_status_override is not None:
-            status = self._sensor_status_override
-            self._sensor_status_cycles -= 1
-        self._send(self.codec.frame_id, self.codec.encode(ForceSample(raw_x, raw_y, counter,
-                                                                      status)))
+        for holder, name, saved in answer.undo:
+            getattr(holder, name)[...] = saved  # in place: the arrays may be bound buffers
+        if answer.rng_undo is not None:
+            self.state.rng.bit_generator.state = answer.rng_undo
+
+    def _commit_sync(self, answer: _SyncAnswer) -> None:
+        """Make ``answer`` the devices' state, then send its frames (in that order, so whoever
+        has received them sees the devices' new state)."""
+        for drive, after in zip(self.drives, answer.drives, strict=True):
+            vars(drive).update(vars(after))
+        self.last_sample = answer.sample
+        self._sensor_counter = answer.sensor_counter
+        self._drop_sensor = answer.drop_sensor
+        self._sensor_status_cycles = answer.sensor_status_cycles
+        self.sync_count += 1
+        bus = self._bus
+        if bus is not None:
+            for message in answer.messages:
+                bus.send(message)
 
 
 class SimulatedRigHardware(HandleHardware):
-    """The simulated rig behind the hardware interface: the CAN driver talking to a
-    :class:`SimulatedCanRig` on a virtual bus (the control code cannot tell it from the
-    real rig)."""
+    """The simulated rig in this process (backend ``sim-inproc``): the CAN driver talking to a
+    :class:`SimulatedCanRig` that answers from a thread on a virtual bus (the control code
+    cannot tell it from the real rig). The devices are reachable as :attr:`rig` for fault
+    injection; the tool force goes to the operator directly (no display frame)."""
 
     def __init__(self, rig: SimulatedCanRig, driver: CanHandleDriver) -> None:
         self.rig = rig
@@ -330,18 +497,13 @@ class SimulatedRigHardware(HandleHardware):
         self.rig.set_tool_force(tool_force_N)
 
 
+@register_hardware("sim-inproc")
 def simulated_rig_hardware(config: dict[str, Any]) -> SimulatedRigHardware:
-    """The simulated rig for a validated configuration (``[model]``, ``[master.can]`` for
-    node ids and conversions, ``[master.sim]``)."""
-    settings = master_settings(config)
-    model = model_from_config(config)
-    sim = settings.sim
-    rig_model = RigModel.from_model(model, sim.operator, sim.force_noise_std_N)
-    rig = SimulatedCanRig(rig_model, settings.can, sim.channel, sim.initial_position_m,
-                          np.random.default_rng(sim.seed))
-    driver = CanHandleDriver(settings.can, {"interface": "virtual", "channel": sim.channel},
+    """The in-process simulated rig for a validated configuration (``[model]``,
+    ``[master.can]`` for node ids and conversions, ``[master.sim]``; the virtual bus
+    ``[master.sim] channel``)."""
+    sim = master_settings(config).sim
+    rig = SimulatedCanRig.from_config(config, sim.channel)
+    driver = CanHandleDriver(rig.settings, {"interface": "virtual", "channel": sim.channel},
                              sim.pdo_timeout_s)
     return SimulatedRigHardware(rig, driver)
-
-
-register_hardware("sim")(simulated_rig_hardware)

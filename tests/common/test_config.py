@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from haptic.common.config import ConfigError, load_config, override
+from haptic.common.config import ConfigError, load_config, override, to_toml
 from haptic.common.model import model_from_config
 
 
@@ -86,3 +86,14 @@ def test_override_validates_the_value(paper_config: dict) -> None:
         override(paper_config, "model.ch1.gain_k", -1.0)
     with pytest.raises(ConfigError, match="unknown key"):
         override(paper_config, "model.ch1.gain", 1.0)
+
+
+def test_to_toml_gives_another_process_the_same_configuration(paper_config: dict,
+                                                               tmp_path: Path) -> None:
+    changed = override(paper_config, "master.sim.operator", 'regulate:fx=3.6,onset=0.2')
+    changed = override(changed, "model.sample_period_s", 1e-05)
+    changed = override(changed, "master.sim.emulator.channel", 'dir "quoted" \\ \u00e9')
+    changed = override(changed, "model.ch1.gain_k", 13)
+    for config in (paper_config, changed):
+        assert load_config(write(tmp_path, to_toml(config))) == config
+    assert load_config(write(tmp_path, to_toml(changed))) != paper_config

@@ -97,6 +97,19 @@ def _wait(process: subprocess.Popen, timeout: float = WAIT_S) -> tuple[int, str]
     return process.returncode, out
 
 
+def _read_until(process: subprocess.Popen, text: str) -> str:
+    """Read the child's output up to the line containing ``text`` (the lines so far); fails
+    when the output ends first (bounded by the child's own start-up timeouts). Its output is
+    short, so a later ``_wait`` reads the rest."""
+    assert process.stdout is not None
+    lines = []
+    for line in process.stdout:
+        lines.append(line)
+        if text in line:
+            return "".join(lines)
+    raise AssertionError(f"no line with {text!r} in: {''.join(lines)}")
+
+
 def _wait_for_file(path: Path, timeout: float = WAIT_S) -> None:
     deadline = time.monotonic() + timeout
     while not path.exists():
@@ -152,6 +165,8 @@ def test_two_processes_exchange_forces_and_positions(pair, tmp_path) -> None:
 def test_killed_slave_trips_the_master_and_a_new_slave_resumes(pair, tmp_path) -> None:
     master_json = tmp_path / "master.json"
     master = pair.master(None, master_json, "--max-message-age", "0.03")
+    # The master waits for a slave once its simulated rig (a child process) answers.
+    _read_until(master, "waiting for the slave")
     first = pair.slave(None, tmp_path / "slave1.json")
     time.sleep(0.5)
     assert first.poll() is None and master.poll() is None
@@ -253,7 +268,7 @@ def test_a_drive_fault_latches_the_linked_master_in_its_safe_state(pair, tmp_pat
     options = run_options_from_args(args, "master", config=config)
     model = model_from_config(options.config)
     node = MasterNode.from_model(model, master_settings(options.config).safety)
-    hardware = create_hardware("sim", options.config)
+    hardware = create_hardware("sim-inproc", options.config)  # in process: faults injected
     slave = pair.slave(None, tmp_path / "slave.json")
     fault = threading.Timer(0.0, lambda: None)
 

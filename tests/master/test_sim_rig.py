@@ -48,7 +48,7 @@ def test_backends_are_registered_by_name() -> None:
 
 def test_configure_sets_csp_mode_over_sdo_and_the_enable_sequence_runs() -> None:
     config = _config(master__sim__initial_position_m=[0.012, -0.034])
-    with create_hardware("sim", config) as hardware:
+    with create_hardware("sim-inproc", config) as hardware:
         assert isinstance(hardware, SimulatedRigHardware)
         assert hardware.lifecycle_state is LifecycleState.UNCONFIGURED
         hardware.configure()
@@ -78,7 +78,7 @@ def test_configure_sets_csp_mode_over_sdo_and_the_enable_sequence_runs() -> None
 
 
 def test_enable_sequence_resets_a_faulted_drive() -> None:
-    with create_hardware("sim", _config()) as hardware:
+    with create_hardware("sim-inproc", _config()) as hardware:
         hardware.configure()
         hardware.rig.inject_drive_fault(0, 0x7500)
         reading = hardware.read()
@@ -90,7 +90,7 @@ def test_enable_sequence_resets_a_faulted_drive() -> None:
 
 def test_activate_reports_a_drive_that_will_not_enable() -> None:
     config = _config(master__can__enable_timeout_cycles=6)
-    with create_hardware("sim", config) as hardware:
+    with create_hardware("sim-inproc", config) as hardware:
         hardware.configure()
         hardware.rig.drives[1].mode = 0  # the y drive left CSP mode: it ignores controlwords
         with pytest.raises(HardwareError, match="did not reach operation enabled"):
@@ -134,7 +134,7 @@ def test_the_can_backend_runs_unchanged_against_the_simulated_devices() -> None:
 
 def test_missing_pdo_is_reported_and_the_master_goes_safe() -> None:
     config = _config("constant:fx=1,fy=0,onset=0.02", master__sim__pdo_timeout_s=0.25)
-    hardware = create_hardware("sim", config)
+    hardware = create_hardware("sim-inproc", config)
 
     def drop(cycle: int) -> None:
         if cycle == 300:
@@ -155,7 +155,7 @@ def test_missing_pdo_is_reported_and_the_master_goes_safe() -> None:
 
 def test_drive_fault_during_a_run_is_reported_and_the_master_goes_safe() -> None:
     config = _config("constant:fx=1,fy=0,onset=0.02")
-    hardware = create_hardware("sim", config)
+    hardware = create_hardware("sim-inproc", config)
 
     def fault(cycle: int) -> None:
         if cycle == 200:
@@ -170,7 +170,7 @@ def test_drive_fault_during_a_run_is_reported_and_the_master_goes_safe() -> None
 
 def test_a_nan_force_from_the_sensor_never_reaches_a_drive() -> None:
     config = _config("constant:fx=2,fy=-1,onset=0.02,rise=0.02")
-    hardware = create_hardware("sim", config)
+    hardware = create_hardware("sim-inproc", config)
     received_targets: list[list[int]] = []
 
     def watch(cycle: int) -> None:
@@ -202,7 +202,7 @@ def test_a_nan_force_from_the_sensor_never_reaches_a_drive() -> None:
 
 
 def test_driver_never_sends_a_non_finite_command() -> None:
-    with create_hardware("sim", _config()) as hardware:
+    with create_hardware("sim-inproc", _config()) as hardware:
         hardware.configure()
         hardware.activate()
         before = [d.target_counts for d in hardware.rig.drives]
@@ -250,7 +250,7 @@ def test_the_handle_moves_as_ch1_predicts_for_a_constant_operator_force() -> Non
     model = model_from_config(config)
     settings = master_settings(config)
     ts = model.sample_period_s
-    with create_hardware("sim", config) as hardware:
+    with create_hardware("sim-inproc", config) as hardware:
         summary = run_master(hardware, _node(config), round(1.5 / ts), pace=False,
                              record=True)
     assert not summary.safe_state and not summary.hardware_faults
@@ -279,7 +279,7 @@ def test_runs_are_deterministic_with_seeded_sensor_noise() -> None:
     def run() -> np.ndarray:
         config = _config("constant:fx=0.5,fy=0.2,onset=0.02", master__sim__force_noise_std_N=0.05,
                          master__sim__seed=7)
-        with create_hardware("sim", config) as hardware:
+        with create_hardware("sim-inproc", config) as hardware:
             return run_master(hardware, _node(config), 300, pace=False,
                               record=True).trace.handle_position_m
 
@@ -288,7 +288,7 @@ def test_runs_are_deterministic_with_seeded_sensor_noise() -> None:
 
 def test_regulating_operator_feels_the_tool_force_through_the_rig() -> None:
     config = _config("regulate:fx=2,fy=0,kp=0.5,ki=4,lag=0.02,max=10")
-    with create_hardware("sim", config) as hardware:
+    with create_hardware("sim-inproc", config) as hardware:
         assert isinstance(hardware, HandleHardware)
         hardware.configure()
         hardware.activate()

@@ -1,0 +1,435 @@
+"""The ``sim`` backend: the CAN driver against the rig's devices in their own process
+(``haptic-rig-sim``), and the emulator's frame handling and command line.
+
+Every emulator a test starts is ended by its own PID and reaped (the backend's cleanup, or
+the test's ``finally``); every wait is bounded. Nothing here asserts a timing figure.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+from haptic.common.config import load_config, override, to_toml
+from haptic.common.model import model_from_config
+from haptic.master import cia402
+from haptic.master.can_driver import CanHandleDriver
+from haptic.master.cia402 import DriveState
+from haptic.master.hardware import HardwareError, LifecycleState, create_hardware
+from haptic.master.node import MasterNode
+from haptic.master.rig_emulator import READY_PREFIX, EmulatedRigHardware
+from haptic.master.rig_sim_cli import main as rig_sim_main
+from haptic.master.runner import run_master
+from haptic.master.settings import master_settings
+from haptic.master.sim_rig import (
+    OPERATOR_DISPLAY_ID,
+    SimulatedCanRig,
+    decode_operator_display,
+    encode_operator_display,
+)
+
+#: Cap on waiting for anything a child does, s.
+WAIT_S = 40.0
+
+
+def _config(operator: str = "constant:fx=0,fy=0", **overrides: object) -> dict:
+    config = override(load_config(), "master.sim.operator", operator)
+    for key, value in overrides.items():
+        config = override(config, key.replace("__", "."), value)
+    return config
+
+
+def _node(config: dict) -> MasterNode:
+    return MasterNode.from_model(model_from_config(config), master_settings(config).safety)
+
+
+def _reaped(process: subprocess.Popen | None) -> bool:
+    """The child has ended and was waited for (its PID released)."""
+    if process is None or process.returncode is None:
+        return False
+    try:
+        os.waitpid(process.pid, os.WNOHANG)
+    except ChildProcessError:
+        return True
+    return False
+
+
+# --- the frame logic: an answer prepared on the display frame is the answer --------------
+
+
+class _RecordingBus:
+    """Stands in for a bus: keeps what the devices send."""
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[int, bytes]] = []
+
+    def send(self, message: can.Message) -> None:
+        self.sent.append((message.arbitration_id, bytes(message.data)))
+
+
+def _frame(frame_id: int, data: bytes = b"", extended: bool = False) -> can.Message:
+    return can.Message(arbitration_id=frame_id, data=data, is_extended_id=extended)
+
+
+def _rpdo(node: int, controlword: int, target: int) -> can.Message:
+    return _frame(cia402.RPDO1_BASE + node,
+                  cia402.encode_pdo(cia402.RPDO1_MAPPING, (controlword, target)))
+
+
+def _enabled_rig(config: dict) -> tuple[SimulatedCanRig, _RecordingBus]:
+    """Devices started over NMT and SDO and enabled with the CiA 402 sequence, by frames."""
+    rig = SimulatedCanRig.from_config(config, "frames")
+    bus = _RecordingBus()
+    rig.attach(bus)  # type: ignore[arg-type]
+    rig.handle_message(_frame(cia402.NMT_COB_ID, bytes([cia402.NMT_START, 0])))
+    for node in rig.settings.node_ids:
+        rig.handle_message(_frame(cia402.SDO_RX_BASE + node, cia402.sdo_download_request(
+            cia402.MODES_OF_OPERATION, cia402.MODE_CYCLIC_SYNC_POSITION)))
+    for controlword in (cia402.CW_SHUTDOWN, cia402.CW_SWITCH_ON, cia402.CW_ENABLE_OPERATION):
+        for node in rig.settings.node_ids:
+            rig.handle_message(_rpdo(node, controlword, 0))
+        rig.handle_message(_frame(cia402.SYNC_COB_ID))
+    assert [d.state for d in rig.drives] == [DriveState.OPERATION_ENABLED] * 2
+    return rig, bus
+
+
+def test_the_operator_display_payload_round_trips() -> None:
+    force = np.array([3.25, -0.5])
+    assert len(encode_operator_display(force)) == 8
+    np.testing.assert_array_equal(decode_operator_display(encode_operator_display(force)), force)
+    with pytest.raises(ValueError, match="8"):
+        decode_operator_display(b"\x00" * 6)
+
+
+def test_an_answer_prepared_on_the_display_frame_equals_one_computed_at_the_sync() -> None:
+    """Frames in the order the sim backend sends them (RPDOs, display, SYNC), with sensor
+    noise, a regulating operator and inputs that change after the display frame now and then
+    (the prepared answer is taken back): the same frames and samples as devices given the
+    tool force directly and computing every answer at the SYNC."""
+    config = _config("regulate:fx=2,kp=0.5,ki=4,lag=0.02,max=10",
+                     master__sim__force_noise_std_N=0.05, master__sim__seed=3)
+    prepared, prepared_bus = _enabled_rig(config)
+    direct, direct_bus = _enabled_rig(config)
+    nodes = prepared.settings.node_ids
+    prepared_bus.sent.clear()
+    direct_bus.sent.clear()
+    late_inputs = 0
+    for cycle in range(300):
+        force = np.array([0.01 * cycle, -0.5])
+        target = 4 * cycle
+        for rig in (prepared, direct):
+            for node in nodes:
+                rig.handle_message(_rpdo(node, cia402.CW_ENABLE_OPERATION, target))
+        prepared.handle_message(_frame(OPERATOR_DISPLAY_ID, encode_operator_display(force),
+                                       extended=True))
+        direct.set_tool_force(decode_operator_display(encode_operator_display(force)))
+        if cycle % 7 == 3:  # an input after the display frame: the prepared answer goes
+            late_inputs += 1
+            for rig in (prepared, direct):
+                rig.handle_message(_rpdo(nodes[1], cia402.CW_ENABLE_OPERATION, -target))
+        if cycle == 151:  # a fault injected between the display frame and the SYNC
+            for rig in (prepared, direct):
+                rig.inject_drive_fault(0, 0x5530)
+        for rig in (prepared, direct):
+            rig.handle_message(_frame(cia402.SYNC_COB_ID))
+        for name in ("handle_position_m", "handle_force_measured_N",
+                     "operator_intent_force_N"):
+            np.testing.assert_array_equal(getattr(prepared.last_sample, name),
+                                          getattr(direct.last_sample, name))
+    assert prepared_bus.sent == direct_bus.sent
+    assert any(frame_id == cia402.EMCY_BASE + nodes[0] for frame_id, _ in prepared_bus.sent)
+    assert prepared.prepared_syncs == 300 - late_inputs - 1
+    assert direct.prepared_syncs == 0
+    assert not prepared.errors and not direct.errors
+    moved = prepared.last_sample.operator_intent_force_N[0, 0]
+    assert moved != 2.0  # the operator reacted to the displayed force
+
+
+# --- the sim backend against the emulator process ------------------------------------------
+
+
+def test_the_sim_backend_configures_enables_and_follows_commands() -> None:
+    config = _config(master__sim__initial_position_m=[0.012, -0.034])
+    hardware = create_hardware("sim", config)
+    assert isinstance(hardware, EmulatedRigHardware)
+    assert hardware.lifecycle_state is LifecycleState.UNCONFIGURED
+    try:
+        hardware.configure()
+        assert hardware.lifecycle_state is LifecycleState.INACTIVE
+        process = hardware.process
+        assert process is not None and process.poll() is None
+        # its wake-ups never preempt the loops: SCHED_BATCH
+        assert os.sched_getscheduler(process.pid) == os.SCHED_BATCH
+        directory = Path(hardware.bus_options["channel"])
+        assert hardware.bus_options["interface"] == "unix_datagram" and directory.is_dir()
+        reading = hardware.read()
+        assert reading.ok, reading.faults
+        np.testing.assert_allclose(reading.position_m, [0.012, -0.034], atol=5e-7)
+        hardware.activate()
+        assert hardware.lifecycle_state is LifecycleState.ACTIVE
+        assert hardware.driver.drive_states == (DriveState.OPERATION_ENABLED,) * 2
+        target = np.array([0.012 + 1e-4, -0.034 - 2e-4])
+        for _ in range(400):
+            hardware.write(target)
+            reading = hardware.read()
+            assert reading.ok, reading.faults
+        np.testing.assert_allclose(reading.position_m, target, atol=1e-6)
+        hardware.deactivate()
+        assert hardware.driver.drive_states == (DriveState.READY_TO_SWITCH_ON,) * 2
+        assert hardware.driver.late_frames == 0
+    finally:
+        hardware.cleanup()
+    assert hardware.lifecycle_state is LifecycleState.UNCONFIGURED
+    assert _reaped(process) and process.returncode == 0  # SIGTERM: a clean exit
+    assert not directory.exists()
+    assert "answered as prepared" in hardware.emulator_output
+    hardware.cleanup()  # a second cleanup is harmless
+
+
+def test_the_emulated_operator_feels_the_presented_tool_force() -> None:
+    """A regulating operator (target 2 N) holding the handle still (drives not enabled), so
+    the sensor reads its intent force: steady while the displayed tool force is at the target,
+    growing once the tool force drops 1.5 N below it (kp 0.5 at once, ki 4 over time)."""
+    config = _config("regulate:fx=2,fy=0,kp=0.5,ki=4,lag=0.02,max=10")
+    with create_hardware("sim", config) as hardware:
+        hardware.configure()
+        forces = []
+        for tool_force in [2.0] * 300 + [0.5] * 200:
+            hardware.present_tool_force(np.array([tool_force, 0.0]))
+            reading = hardware.read()
+            assert reading.ok, reading.faults
+            forces.append(reading.force_N)
+    forces = np.array(forces)
+    steady = forces[299, 0]
+    assert abs(forces[250, 0] - steady) < 0.02 and forces[299, 1] == 0.0
+    assert forces[-1, 0] > steady + 1.0  # felt below the target: pushes harder
+
+
+def test_the_emulator_process_gives_the_in_process_rigs_trajectory() -> None:
+    """The same devices, the same driver: the run over the emulator process (with sensor
+    noise) is the run over the in-process rig, sample for sample."""
+    config = _config("constant:fx=0.6,fy=-0.4,onset=0.05,rise=0.05",
+                     master__sim__force_noise_std_N=0.05, master__sim__seed=11)
+    traces = {}
+    for rig in ("sim", "sim-inproc"):
+        with create_hardware(rig, config) as hardware:
+            summary = run_master(hardware, _node(config), 400, pace=False, record=True)
+        assert not summary.hardware_faults
+        traces[rig] = summary.trace
+    np.testing.assert_array_equal(traces["sim"].handle_position_m,
+                                  traces["sim-inproc"].handle_position_m)
+    np.testing.assert_array_equal(traces["sim"].handle_force_N,
+                                  traces["sim-inproc"].handle_force_N)
+    assert abs(traces["sim"].handle_position_m[-1, 0]) > 1e-4
+
+
+def test_runs_on_udp_multicast_get_private_ports_and_never_hear_each_other() -> None:
+    base = _config(master__sim__emulator__interface="udp_multicast",
+                   master__sim__emulator__channel="239.74.163.2")
+    starts = {"a": [0.01, 0.02], "b": [-0.03, 0.04]}
+    hardware = {name: create_hardware("sim", override(base, "master.sim.initial_position_m",
+                                                      start))
+                for name, start in starts.items()}
+    try:
+        for item in hardware.values():
+            item.configure()
+        assert hardware["a"].bus_options["port"] != hardware["b"].bus_options["port"]
+        for item in hardware.values():
+            item.activate()
+        for _ in range(50):
+            readings = {name: item.read() for name, item in hardware.items()}
+            for name, reading in readings.items():
+                assert reading.ok, reading.faults
+                np.testing.assert_allclose(reading.position_m, starts[name], atol=5e-7)
+        # udp_multicast hands the driver its own frames back: they are not late frames
+        assert all(item.driver.late_frames == 0 for item in hardware.values())
+    finally:
+        for item in hardware.values():
+            item.cleanup()
+    assert all(_reaped(item.process) for item in hardware.values())
+
+
+def test_a_start_timeout_is_a_hardware_error_and_the_child_is_reaped() -> None:
+    hardware = create_hardware("sim", _config(master__sim__emulator__start_timeout_s=1e-3))
+    with pytest.raises(HardwareError, match="not ready within"):
+        hardware.configure()
+    assert hardware.lifecycle_state is LifecycleState.UNCONFIGURED
+    assert _reaped(hardware.process)
+    assert not Path(hardware.bus_options["channel"]).exists()
+
+
+def test_an_emulator_that_cannot_open_its_bus_fails_configure_with_its_message() -> None:
+    config = _config(master__sim__emulator__interface="no-such-interface",
+                     master__sim__emulator__channel="x")
+    hardware = create_hardware("sim", config)
+    with pytest.raises(HardwareError, match="ended .exit status 1.*cannot open the CAN bus"):
+        hardware.configure()
+    assert _reaped(hardware.process) and hardware.process.returncode == 1
+
+
+def test_a_driver_that_fails_to_configure_leaves_no_emulator(monkeypatch) -> None:
+    def refuse(self: CanHandleDriver) -> None:
+        raise HardwareError("x drive write Modes of operation: no SDO reply from node 1")
+
+    monkeypatch.setattr(CanHandleDriver, "configure", refuse)
+    hardware = create_hardware("sim", _config())
+    with pytest.raises(HardwareError, match="no SDO reply"):
+        hardware.configure()
+    assert hardware.lifecycle_state is LifecycleState.UNCONFIGURED
+    assert _reaped(hardware.process) and hardware.process.returncode == 0
+    with pytest.raises(HardwareError, match="configured"):
+        hardware.read()
+    hardware.write(np.zeros(2))  # unconfigured: ignored
+    hardware.cleanup()
+
+
+def test_the_can_backend_sends_no_operator_display_frame(tmp_path) -> None:
+    """Real hardware keeps ignoring the presented tool force: nothing goes on the bus."""
+    config = _config(master__can__interface="unix_datagram",
+                     master__can__channel=str(tmp_path))
+    listener = can.Bus(interface="unix_datagram", channel=str(tmp_path))
+    try:
+        hardware = create_hardware("can", config)
+        assert type(hardware) is CanHandleDriver
+        hardware.present_tool_force(np.array([1.0, 2.0]))
+        assert listener.recv(0.05) is None
+    finally:
+        listener.shutdown()
+
+
+# --- haptic-rig-sim ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("argv", "named"), [
+    (["--operator", "wiggle"], "--operator (master.sim.operator)"),
+    (["--can-port", "0"], "--can-port"),
+    (["--duration", "-1"], "--duration"),
+    (["--can-interface", "udp_multicast", "--can-channel", "10.0.0.1"],
+     "--can-channel (master.sim.emulator.channel)"),
+    (["--can-interface", "virtual"], "--can-interface (master.sim.emulator.interface)"),
+    (["--parent-pid", "0"], "--parent-pid"),
+    (["--config", "/no/such/file.toml"], "cannot read config file"),
+])
+def test_bad_options_exit_2_with_one_line_naming_them(argv, named, capsys) -> None:
+    with pytest.raises(SystemExit) as caught:
+        rig_sim_main(argv)
+    assert caught.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and named in err[0], err
+
+
+def test_a_bad_config_file_exits_2_naming_the_key(tmp_path, capsys) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text("[master.sim.emulator]\ninterface = \"unix_datagram\"\nchannel = \"\"\n"
+                    "port = 70000\nstart_timeout_s = 1.0\n")
+    with pytest.raises(SystemExit) as caught:
+        rig_sim_main(["--config", str(path)])
+    assert caught.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "master.sim.emulator.port" in err[0]
+
+
+def _start_emulator(*argv: str) -> tuple[subprocess.Popen, str]:
+    process = subprocess.Popen([sys.executable, "-m", "haptic.master.rig_sim_cli", *argv],
+                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    assert process.stdout is not None
+    ready = process.stdout.readline()
+    return process, ready
+
+
+def _end(process: subprocess.Popen) -> None:
+    if process.poll() is None:
+        process.kill()
+    process.wait(timeout=WAIT_S)
+    if process.stdout is not None:
+        process.stdout.close()
+
+
+@pytest.mark.parametrize("number", [signal.SIGTERM, signal.SIGINT])
+def test_the_emulator_says_when_it_is_ready_and_ends_cleanly_on_a_signal(tmp_path,
+                                                                          number) -> None:
+    process, ready = _start_emulator("--can-channel", str(tmp_path / "bus"))
+    try:
+        assert ready.startswith(READY_PREFIX) and str(tmp_path / "bus") in ready
+        process.send_signal(number)
+        out, _ = process.communicate(timeout=WAIT_S)
+        assert process.returncode == 0
+        assert "stopped after 0 SYNCs" in out
+    finally:
+        _end(process)
+    assert list((tmp_path / "bus").iterdir()) == []  # it left the bus
+
+
+def test_the_emulator_ends_after_its_duration_and_when_its_parent_is_gone(tmp_path) -> None:
+    process, ready = _start_emulator("--can-channel", str(tmp_path), "--duration", "0.3")
+    try:
+        assert ready.startswith(READY_PREFIX)
+        assert process.wait(timeout=WAIT_S) == 0
+    finally:
+        _end(process)
+    # A parent that starts an emulator watching it, prints its PID and exits (SIGKILL-like:
+    # no cleanup): the emulator notices and ends by itself.
+    script = ("import os, subprocess, sys\n"
+              "child = subprocess.Popen([sys.executable, '-m', 'haptic.master.rig_sim_cli',"
+              f" '--can-channel', {str(tmp_path / 'orphan')!r}, '--parent-pid',"
+              " str(os.getpid())], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,"
+              " text=True)\n"
+              "print(child.stdout.readline().strip(), flush=True)\n"
+              "print(child.pid, flush=True)\n"
+              "os._exit(0)\n")
+    parent = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                            timeout=WAIT_S)
+    ready_line, pid_line = parent.stdout.strip().splitlines()
+    assert ready_line.startswith(READY_PREFIX)
+    orphan = int(pid_line)
+    deadline = time.monotonic() + WAIT_S
+    while _alive(orphan):
+        assert time.monotonic() < deadline, "the orphaned emulator kept running"
+        time.sleep(0.05)
+    assert list((tmp_path / "orphan").iterdir()) == []
+
+
+def _alive(pid: int) -> bool:
+    """The process runs (a zombie waiting for its new parent's reaping does not)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, IndexError):
+        return False
+    return state not in ("Z", "X")
+
+
+def test_haptic_master_drives_an_emulator_started_by_hand(tmp_path, capsys) -> None:
+    """``haptic-rig-sim`` by hand, then the master's ``can`` backend on the same bus."""
+    from haptic.master.cli import main as master_main
+
+    bus = tmp_path / "bus"
+    config = override(_config("constant:fx=1,fy=0,onset=0.02"), "master.can.pdo_timeout_s",
+                      0.5)  # a shared machine: the real-rig 2 ms timeout is too tight here
+    path = tmp_path / "rig.toml"
+    path.write_text(to_toml(config))
+    process, ready = _start_emulator("--config", str(path), "--can-channel", str(bus))
+    try:
+        assert ready.startswith(READY_PREFIX)
+        status = master_main(["--config", str(path), "--rig", "can", "--can-interface",
+                              "unix_datagram", "--can-channel", str(bus), "--no-link",
+                              "--no-pace", "--duration", "0.1", "--json"])
+        result = json.loads(capsys.readouterr().out)
+        assert status == 0, result
+        assert result["rig"] == "can" and result["cycles"] == 185
+        assert result["final_position_m"][0] > 0.0 and not result["hardware_faults"]
+    finally:
+        process.send_signal(signal.SIGTERM)
+        try:
+            process.wait(timeout=WAIT_S)
+        finally:
+            _end(process)
+    assert process.returncode == 0

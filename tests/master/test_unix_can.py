@@ -1,0 +1,146 @@
+"""The ``unix_datagram`` python-can interface: a CAN bus between processes on Unix datagrams."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import pytest
+
+from haptic.master.unix_can import RESCAN_S, UnixDatagramBus
+
+
+@pytest.fixture
+def buses(tmp_path):
+    opened: list[can.BusABC] = []
+
+    def open_bus(directory: Path = tmp_path) -> can.BusABC:
+        bus = can.Bus(interface="unix_datagram", channel=str(directory))
+        opened.append(bus)
+        return bus
+
+    yield open_bus
+    for bus in opened:
+        bus.shutdown()
+
+
+def _frame(frame_id: int = 0x181, data: bytes = b"\x01\x02\x03", **flags: bool) -> can.Message:
+    return can.Message(arbitration_id=frame_id, data=data, **{"is_extended_id": False, **flags})
+
+
+def test_python_can_opens_it_by_name_and_members_hear_each_other_not_themselves(buses) -> None:
+    a, b, c = buses(), buses(), buses()
+    assert isinstance(a, UnixDatagramBus)
+    a.send(_frame())
+    for bus in (b, c):
+        received = bus.recv(1.0)
+        assert received is not None
+        assert (received.arbitration_id, bytes(received.data)) == (0x181, b"\x01\x02\x03")
+        assert not received.is_extended_id
+    assert a.recv(0.05) is None  # never its own frame
+    b.send(_frame(0x1FFFF000, b"12345678", is_extended_id=True))
+    got = [bus.recv(1.0) for bus in (a, c)]
+    assert all(m is not None and m.is_extended_id and m.arbitration_id == 0x1FFFF000
+               and bytes(m.data) == b"12345678" for m in got)
+
+
+def test_flags_and_order_survive_the_trip(buses) -> None:
+    a, b = buses(), buses()
+    frames = [_frame(0x080, b""), _frame(0x201, b"\x0f\x00\x10\x27\x00\x00"),
+              _frame(0x123, b"", is_remote_frame=True),
+              can.Message(arbitration_id=0x7FF, data=bytes(range(12)), is_fd=True,
+                          bitrate_switch=True, is_extended_id=False)]
+    for frame in frames:
+        a.send(frame)
+    for sent in frames:
+        received = b.recv(1.0)
+        assert received is not None and received.equals(sent, timestamp_delta=None,
+                                                       check_channel=False)
+
+
+def test_a_member_that_joins_later_is_heard_and_hears(buses) -> None:
+    first = buses()
+    first.send(_frame(0x100))  # nobody there yet: lost, as on an empty bus
+    late = buses()
+    late.send(_frame(0x101))  # the late member found the first in the directory
+    received = first.recv(1.0)
+    assert received is not None and received.arbitration_id == 0x101
+    first.send(_frame(0x102))  # ... and the first knows the late member from its frame
+    received = late.recv(1.0)
+    assert received is not None and received.arbitration_id == 0x102
+    silent = buses()  # joins and never sends: found in the directory
+    first.send(_frame(0x103))
+    time.sleep(2 * RESCAN_S)  # a directory change older than the file system's clock tick
+    also_silent = buses()
+    first.send(_frame(0x104))
+    assert [silent.recv(1.0).arbitration_id for _ in range(2)] == [0x103, 0x104]
+    received = also_silent.recv(1.0)
+    assert received is not None and received.arbitration_id == 0x104
+
+
+def test_a_member_that_leaves_is_forgotten_and_its_socket_removed(buses, tmp_path) -> None:
+    a, b = buses(), buses()
+    a.send(_frame())
+    assert b.recv(1.0) is not None
+    path = b.path
+    assert Path(path).exists() and path in a.members
+    b.shutdown()
+    assert not Path(path).exists()
+    a.send(_frame())  # to a socket that is gone: no error, the member is dropped
+    assert path not in a.members
+
+
+def test_a_member_that_does_not_read_never_blocks_a_sender(buses) -> None:
+    a, b = buses(), buses()
+    started = time.monotonic()
+    for _ in range(5000):  # far beyond any datagram queue
+        a.send(_frame())
+    assert time.monotonic() - started < 30.0  # returned: frames beyond b's queue are dropped
+    assert b.recv(1.0) is not None
+
+
+def test_buses_in_other_directories_never_hear_each_other(buses, tmp_path) -> None:
+    a = buses(tmp_path / "one")
+    b = buses(tmp_path / "two")
+    a.send(_frame())
+    assert b.recv(0.1) is None
+
+
+def test_it_crosses_processes(buses, tmp_path) -> None:
+    here = buses()
+    script = ("import can, sys\n"
+              f"bus = can.Bus(interface='unix_datagram', channel={str(tmp_path)!r})\n"
+              "print('ready', flush=True)\n"
+              "message = bus.recv(10.0)\n"
+              "bus.send(can.Message(arbitration_id=message.arbitration_id + 1,"
+              " data=bytes(message.data), is_extended_id=False))\n"
+              "bus.shutdown()\n")
+    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout is not None and child.stdout.readline().strip() == "ready"
+        here.send(_frame(0x200, b"\xaa"))
+        answer = here.recv(10.0)
+        assert answer is not None and (answer.arbitration_id, bytes(answer.data)) == (
+            0x201, b"\xaa")
+        assert child.wait(timeout=10.0) == 0
+    finally:
+        if child.poll() is None:
+            child.kill()
+        child.wait()
+        child.stdout.close()
+    assert [p.name for p in tmp_path.iterdir()] == [os.path.basename(here.path)]
+
+
+def test_bad_channels_are_initialisation_errors(tmp_path) -> None:
+    with pytest.raises(can.CanInitializationError, match="needs a channel"):
+        UnixDatagramBus("")
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    with pytest.raises(can.CanInitializationError, match="cannot use directory"):
+        UnixDatagramBus(str(blocker / "bus"))
+    with pytest.raises(can.CanInterfaceNotImplementedError):
+        UnixDatagramBus(str(tmp_path), receive_own_messages=True)
