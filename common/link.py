@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import zenoh
 
+from haptic.common.failures import LinkOpenError, one_line
 from haptic.common.link_config import LinkConfig
 from haptic.common.messages import (
     KIND_HANDLE,
@@ -124,11 +125,20 @@ class Link:
     # -- lifecycle ---------------------------------------------------------------------------
 
     def open(self) -> Link:
-        """Open the session and declare the publisher, subscribers and liveliness token."""
+        """Open the session and declare the publisher, subscribers and liveliness token.
+        Raises :class:`~haptic.common.failures.LinkOpenError` (one line) when Zenoh cannot
+        open the session."""
         if self._session is not None:
             return self
         c = self.config
-        self._session = zenoh.open(zenoh_config(c))
+        try:
+            self._session = zenoh.open(zenoh_config(c))
+        except zenoh.ZError as error:  # a port in use, an unreachable router, a bad file
+            raise LinkOpenError(
+                f"cannot open the Zenoh session (mode {c.mode}, listen "
+                f"{(c.mode != 'client' and ','.join(c.listen)) or '-'}, connect "
+                f"{','.join(c.connect) or '-'}): "
+                f"{one_line(error)}") from None
         try:
             self._publisher = self._session.declare_publisher(
                 c.publish_key,

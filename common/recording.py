@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 from mcap.exceptions import McapError
-from mcap.records import Channel, DataEnd, Footer, Message, Metadata, Schema
+from mcap.records import Channel, DataEnd, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 
@@ -55,15 +55,20 @@ class Recording:
 
 
 def read_recording(path: str | Path) -> Recording:
-    """Decode the MCAP file at ``path`` (see the module docstring)."""
+    """Decode the MCAP file at ``path`` (see the module docstring). Raises ``ValueError`` for a
+    file that does not start as MCAP (no magic or no header record) and ``OSError`` for one
+    that cannot be opened."""
     recording = Recording(Path(path))
     channels: dict[int, Channel] = {}
     schemas: dict[int, Schema] = {}
+    header = False
     with open(path, "rb") as stream:
         reader = StreamReader(stream, skip_magic=False)
         try:
             for record in reader.records:
-                if isinstance(record, Schema):
+                if isinstance(record, Header):
+                    header = True
+                elif isinstance(record, Schema):
                     schemas[record.id] = record
                 elif isinstance(record, Channel):
                     if record.id not in channels:
@@ -87,6 +92,8 @@ def read_recording(path: str | Path) -> Recording:
                     continue
         except (McapError, EOFError, ValueError, RuntimeError, struct.error) as error:
             recording.error = f"{type(error).__name__}: {error}"
+    if not header:
+        raise ValueError(f"not an MCAP recording ({recording.error or 'no header record'})")
     for items in recording.messages.values():
         items.sort(key=lambda item: item[0])
     return recording

@@ -37,6 +37,7 @@ import zenoh
 from haptic.common.cli_options import add_run_options, run_options_from_args
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.display import DisplayPublisher, EventCursor
+from haptic.common.failures import exit_on_link_error
 from haptic.common.link import Link
 from haptic.common.messages import Flags, HandleState
 from haptic.common.phase_lock import PhaseLock, PhaseLockSettings
@@ -101,7 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit status: 0; 1 when no master came within --peer-wait;
-    2 for a configuration error (one line); 3 when the stability analysis refuses the loop."""
+    2 for a configuration error (one line); 3 when the stability analysis refuses the loop;
+    4 when the link cannot open (a port in use, an unreachable router; one line)."""
     args = build_parser().parse_args(argv)
     zenoh.init_log_from_env_or("error")
     with exit_on_config_error():
@@ -136,8 +138,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     warp.config.quiet = True
     with exit_on_config_error():
         node = SlaveNode.from_config(options.config, scenario)
-    return run_slave(node, options, args, {"scenario": scenario.name,
-                                           "analysis": analysis.as_dict(), **placement})
+    with exit_on_link_error("haptic-slave"):
+        return run_slave(node, options, args, {"scenario": scenario.name,
+                                               "analysis": analysis.as_dict(), **placement})
 
 
 def phase_lock_from(config: dict[str, Any], period_s: float) -> PhaseLock | None:
