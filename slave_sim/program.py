@@ -49,6 +49,7 @@ from haptic.common.stage_times import StageTimes
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
 from haptic.common.watchdog import PeerWatchdog, WatchdogState
+from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from haptic.slave_sim.node import SlaveNode
 from haptic.slave_sim.scenario import load_scenario
 
@@ -125,6 +126,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ConfigError("--record-every", f"must be >= 1 (got {args.record_every})")
         scenario = load_scenario(options.config["slave"]["scenario"])
         phase_lock_from(options.config, options.config["model"]["sample_period_s"])
+        InputGuardSettings.from_config(options.config)  # [slave.safety]'s cross-key checks
     # before Warp's, the recorder's and Zenoh's threads start: they inherit these CPUs
     placement = place_other_threads(options.runner)
     with exit_on_config_error():
@@ -252,6 +254,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     x_low, x_high = grid.x_range_m[0] - margin, grid.x_range_m[1] + margin
     y_low, y_high = grid.y_range_m[0] - margin, grid.y_range_m[1] + margin
     events: list[dict[str, Any]] = []
+    guard = InputGuard(InputGuardSettings.from_config(options.config), period_s, events=events)
     run = None
     zenoh_threads: dict[str, object] = {}
     with StopSignals() as signals, Link(link_config) as link:
@@ -291,8 +294,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             # poll: the newest handle message whose delivery time has come
             message = link.poll()
             poll_ns = clock()
-            # supervise: phase lock, watchdog, resync, work-area guard
-            fresh = message is not None
+            # supervise: input bounds, phase lock, watchdog, resync, work-area guard
+            fresh = message is not None and guard.admit(message, now_s)
             if fresh and phase_lock is not None:
                 if link.last_delivery_measured:
                     runner.shift_schedule(phase_lock.update(link.receive.last_delivery_ns,
@@ -301,8 +304,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                     phase_lock.skip_unmeasured()
             if fresh:
                 handle: HandleState = message
-                fh_row[0] = handle.handle_force_N
-                yh_row[0] = handle.handle_position_m
+                fh_row[0] = guard.force_N  # bounded (slave_sim/input_guard.py)
+                yh_row[0] = guard.position_m
                 flags_box["master_enabled"] = Flags.FORCES_ENABLED in handle.flags
             running_before = flags_box["running"]
             if not running_before and fresh and not flags_box["outside"]:
@@ -325,7 +328,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                     events.append({"time_s": now_s, "kind": "tool_stopped",
                                    "reason": f"tool left the work area at ({tx:.4f}, "
                                    f"{ty:.4f}) m"})
-            running = ready and master_enabled and not flags_box["outside"]
+            running = (ready and master_enabled and not flags_box["outside"]
+                       and not guard.faulted)
             if running and not running_before:
                 node.resume(state)
                 events.append({"time_s": now_s, "kind": "tool_resumed",
@@ -334,6 +338,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 node.safe_stop(state)
                 if not flags_box["outside"]:
                     reason = (f"watchdog {wd_state.value}" if not ready
+                              else "input fault" if guard.faulted
                               else "the master is in its safe state")
                     events.append({"time_s": now_s, "kind": "tool_stopped",
                                    "reason": f"{reason}: the tool stops"})
@@ -348,7 +353,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             removed = _removed_total_m3(state)
             # FORCES_ENABLED: this side is ready (link in sync, tool at the handle or running);
             # the master enables its forces on it, the slave runs once the master has.
-            ready_flag = ready and not flags_box["outside"]
+            ready_flag = ready and not flags_box["outside"] and not guard.faulted
             flags = Flags.FORCES_ENABLED if ready_flag else Flags.SAFE_STATE
             if out.cutting[0]:
                 flags |= Flags.IN_CONTACT
@@ -433,6 +438,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
         removed_volume_m3=flags_box["removed"],
         final_tool_position_m=[float(final[0]), float(final[1])], stages=stages.summary(),
+        **guard.summary(),
         **zenoh_threads,
         **(phase_lock.summary() if phase_lock is not None else {"phase_lock_enabled": False}),
         **extra_summary,

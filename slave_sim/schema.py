@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 
 from haptic.common.config import Field, Schema
+from haptic.slave_sim.input_guard import SAFETY_SCHEMA
 
 
 def _device(value: str) -> str | None:
@@ -27,6 +28,7 @@ SLAVE_SCHEMA: Schema = {
                        choices=("warp", "numpy")),
     "device": Field("str", "Warp device: auto (cuda when present, else cpu), cpu, cuda, cuda:N.",
                     check=_device),
+    "safety": SAFETY_SCHEMA,
     "phase_lock": {
         "enabled": Field(
             "bool", "Keep the slave's ticks a set lag after the master's messages arrive "
