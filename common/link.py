@@ -121,6 +121,8 @@ class Link:
         """Time of the latest :meth:`poll` on the link's clock, ns."""
         self.sent = 0
         self.send_errors = 0
+        self.capped_polls = 0
+        """Polls that took ``max_samples_per_poll`` samples and left the rest for the next."""
 
     # -- lifecycle ---------------------------------------------------------------------------
 
@@ -262,9 +264,11 @@ class Link:
         return now_ns
 
     def poll(self, now_ns: int | None = None) -> Message | None:
-        """Drain everything received since the last poll into the receive path and return the
-        newest message whose delivery time has come (``None`` if there is none). Also updates
-        ``peer_alive`` from the liveliness subscriber. Never blocks."""
+        """Drain what was received since the last poll (at most ``max_samples_per_poll``
+        samples: the rest wait for the next poll; ``capped_polls`` counts polls that reached
+        the bound) into the receive path and return the newest message whose delivery time has
+        come (``None`` if none). Also updates ``peer_alive`` from the liveliness subscriber.
+        Never blocks."""
         subscriber = self._subscriber
         if subscriber is None:
             raise RuntimeError("link is not open")
@@ -272,9 +276,16 @@ class Link:
             now_ns = self._clock_ns()
         self.last_poll_ns = now_ns
         receive = self.receive
+        budget = self.config.max_samples_per_poll  # flood bound: the rest wait in the ring
         sample = subscriber.try_recv()
         while sample is not None:
-            receive.accept(sample.payload.to_bytes(), self._arrival_ns(sample, now_ns))
+            payload = sample.payload.to_bytes()
+            if not receive.rejects_at_once(payload):  # junk costs no stamp, no decode
+                receive.accept(payload, self._arrival_ns(sample, now_ns))
+            budget -= 1
+            if budget == 0:
+                self.capped_polls += 1
+                break
             sample = subscriber.try_recv()
         presence = self._presence
         if presence is not None:
@@ -349,5 +360,6 @@ class Link:
         result = self.stats().as_summary()
         result["link_sent"] = self.sent
         result["link_send_errors"] = self.send_errors
+        result["link_capped_polls"] = self.capped_polls
         result["link_peer_alive"] = self.peer_alive
         return result

@@ -36,6 +36,8 @@ from haptic.common.injection import Impairment, InjectionConfig
 from haptic.common.messages import DecodeError, DropReason, Message, decode
 
 _CLOCK_SKEW_TOLERANCE_NS = 1_000_000
+_MAX_PAYLOAD_BYTES = 1024
+_MALFORMED = DropReason.MALFORMED.value
 
 
 @dataclass(frozen=True)
@@ -140,6 +142,17 @@ class ReceivePath:
 
     def _drop(self, reason: DropReason) -> None:
         self._n.dropped[reason.value] += 1
+
+    def rejects_at_once(self, payload: bytes) -> bool:
+        """The flood filter, before anything costly (the arrival stamp, msgpack): a payload
+        that cannot be a message (every message is a msgpack fixarray of 6 to 15 items, at
+        most 1024 bytes) is counted (received, ``malformed``) and True is returned; False:
+        hand it to :meth:`accept`."""
+        if payload and 0x96 <= payload[0] <= 0x9F and len(payload) <= _MAX_PAYLOAD_BYTES:
+            return False
+        self._n.received += 1
+        self._n.dropped[_MALFORMED] += 1
+        return True
 
     def accept(self, payload: bytes, arrival_ns: int) -> None:
         """Take one received payload that arrived at ``arrival_ns``. Never raises."""

@@ -100,13 +100,17 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=1000.0)
     parser.add_argument("--duration", type=float, default=3.0)
     parser.add_argument("--force", type=float, default=1e9)
+    parser.add_argument("--victim", choices=("master", "slave"), default="master",
+                        help="junk: whose receive key to flood (master: <prefix>/tool)")
     args = parser.parse_args()
     config = zenoh.Config()
     config.insert_json5("connect/endpoints", json.dumps([args.connect]))
     config.insert_json5("scouting/multicast/enabled", "false")
     with zenoh.open(config) as session:
+        time.sleep(0.5)  # let the victims' subscriptions reach this session
         if args.attack == "junk":
-            sent = flood(session, f"{args.key_prefix}/handle", args.rate, args.duration,
+            key = "tool" if args.victim == "master" else "handle"
+            sent = flood(session, f"{args.key_prefix}/{key}", args.rate, args.duration,
                          lambda i: bytes(50))
         else:
             kind = KIND_TOOL if args.attack == "forge-tool" else KIND_HANDLE
