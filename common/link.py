@@ -19,6 +19,7 @@ Injection, ordering and the counters live in :class:`haptic.common.receive.Recei
 
 from __future__ import annotations
 
+import secrets
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -26,11 +27,22 @@ from dataclasses import dataclass, replace
 import numpy as np
 import zenoh
 
+from haptic.common.auth import (
+    HELLO_PERIOD_S,
+    NONCE_BYTES,
+    Hello,
+    HelloError,
+    SessionAuth,
+    decode_hello,
+    encode_hello,
+)
 from haptic.common.failures import LinkOpenError, one_line
 from haptic.common.link_config import LinkConfig
 from haptic.common.messages import (
     KIND_HANDLE,
     KIND_TOOL,
+    SCHEMA_VERSION,
+    DropReason,
     Flags,
     HandleState,
     Message,
@@ -41,6 +53,9 @@ from haptic.common.messages import (
 from haptic.common.receive import LinkStats, ReceivePath
 
 NO_FLAGS = Flags(0)
+#: A mismatched peer (another schema version, authentication on one side) seen this long
+#: without a pairing stops the start, s.
+MISMATCH_GRACE_S = 1.0
 _CONGESTION = {"drop": zenoh.CongestionControl.DROP, "block": zenoh.CongestionControl.BLOCK}
 
 
@@ -123,6 +138,21 @@ class Link:
         self.send_errors = 0
         self.capped_polls = 0
         """Polls that took ``max_samples_per_poll`` samples and left the rest for the next."""
+        # pairing (common/auth.py): hellos on <prefix>/pair/<side>, tags with a session key
+        self._psk = config.session_key
+        self.auth = SessionAuth(self._psk, config.side, self.epoch) if self._psk else None
+        self._nonce = self.auth.nonce if self.auth else secrets.token_bytes(NONCE_BYTES)
+        self._hello_publisher: zenoh.Publisher | None = None
+        self._hello_subscriber: zenoh.Subscriber | None = None
+        self._next_hello_ns = 0
+        self.peer_hello: Hello | None = None
+        """The peer's latest valid hello (its run's epoch; None before the first)."""
+        self.peer_mismatch: str | None = None
+        """Why the peer cannot be paired with (another schema version, authentication on one
+        side only), or None."""
+        self.unpaired_sends = 0
+        self._mismatch_since: float | None = None
+        """Messages not sent because this authenticated side was not paired yet."""
 
     # -- lifecycle ---------------------------------------------------------------------------
 
@@ -156,6 +186,10 @@ class Link:
                 c.liveliness_key(c.peer_side), zenoh.handlers.FifoChannel(64), history=True
             )
             self._token = liveliness.declare_token(c.liveliness_key(c.side))
+            self._hello_publisher = self._session.declare_publisher(
+                c.key(f"pair/{c.side}"), congestion_control=zenoh.CongestionControl.BLOCK)
+            self._hello_subscriber = self._session.declare_subscriber(
+                c.key(f"pair/{c.peer_side}"), zenoh.handlers.FifoChannel(16))
         except BaseException:
             self.close()
             raise
@@ -164,7 +198,8 @@ class Link:
     def close(self) -> None:
         """Undeclare everything and close the session (idempotent)."""
         session, self._session = self._session, None
-        for name in ("_token", "_presence", "_subscriber", "_publisher"):
+        for name in ("_token", "_presence", "_subscriber", "_publisher", "_hello_subscriber",
+                     "_hello_publisher"):
             entity = getattr(self, name)
             setattr(self, name, None)
             if entity is not None and session is not None:
@@ -212,6 +247,12 @@ class Link:
             raise RuntimeError("link is not open")
         send_ns = self._clock_ns()
         payload = before + send_time_bytes(send_ns) + after
+        auth = self.auth
+        if auth is not None:
+            if not auth.paired:  # nothing leaves before the pairing: the peer would drop it
+                self.unpaired_sends += 1
+                return replace(message, send_time_ns=send_ns)
+            payload += auth.tag(payload)
         try:
             if self._instrumentation is not None:
                 publisher.put(payload, timestamp_instrumentation=self._instrumentation)
@@ -278,15 +319,24 @@ class Link:
         receive = self.receive
         budget = self.config.max_samples_per_poll  # flood bound: the rest wait in the ring
         sample = subscriber.try_recv()
+        auth = self.auth
         while sample is not None:
             payload = sample.payload.to_bytes()
-            if not receive.rejects_at_once(payload):  # junk costs no stamp, no decode
+            if receive.rejects_at_once(payload):  # junk costs no stamp, no decode
+                pass
+            elif auth is None:
                 receive.accept(payload, self._arrival_ns(sample, now_ns))
+            elif (body := auth.verify(payload)) is not None:
+                receive.accept(body, self._arrival_ns(sample, now_ns))
+            else:
+                receive.drop(DropReason.UNAUTHENTICATED if auth.paired
+                             else DropReason.UNPAIRED)
             budget -= 1
             if budget == 0:
                 self.capped_polls += 1
                 break
             sample = subscriber.try_recv()
+        self._pair(now_ns)
         presence = self._presence
         if presence is not None:
             change = presence.try_recv()
@@ -297,6 +347,78 @@ class Link:
                     self.presence_events.append(PresenceEvent(now_ns, alive))
                 change = presence.try_recv()
         return receive.release(now_ns)
+
+    def _pair(self, now_ns: int) -> None:
+        """Take the peer's hellos (at most 8 per poll), pair on a new authenticated one, and
+        publish this side's hello every HELLO_PERIOD_S (at once after a new pairing)."""
+        subscriber = self._hello_subscriber
+        if subscriber is None:
+            return
+        auth = self.auth
+        for _ in range(8):
+            sample = subscriber.try_recv()
+            if sample is None:
+                break
+            try:
+                hello = decode_hello(sample.payload.to_bytes(), self._psk)
+            except HelloError:
+                if auth is not None:
+                    auth.rejected_hellos += 1
+                continue
+            if hello.version != SCHEMA_VERSION:
+                self.peer_mismatch = (
+                    f"the {self.config.peer_side} speaks wire schema version {hello.version}, "
+                    f"this program {SCHEMA_VERSION}: run the same haptic-teleop on both sides")
+                continue
+            if hello.authenticated != (auth is not None):
+                self.peer_mismatch = (
+                    f"the {self.config.peer_side} "
+                    f"{'authenticates' if hello.authenticated else 'does not authenticate'} "
+                    f"its messages and this side "
+                    f"{'does' if auth is not None else 'does not'}: give both sides the same "
+                    "[link.security] session_key_file (--session-key), or neither")
+                continue
+            if auth is None:
+                if hello.side == self.config.peer_side:
+                    self.peer_hello = hello
+            elif auth.accept_hello(hello, now_ns):
+                self.peer_hello = hello
+                self.receive.pin_epoch(hello.epoch)
+                self._next_hello_ns = 0  # answer at once, so the peer pairs too
+        publisher = self._hello_publisher
+        if publisher is not None and now_ns >= self._next_hello_ns:
+            self._next_hello_ns = now_ns + int(HELLO_PERIOD_S * 1e9)
+            payload = (auth.hello(now_ns) if auth is not None else
+                       encode_hello(self.config.side, self.epoch, self._nonce, now_ns, None))
+            try:
+                publisher.put(payload)
+            except Exception:  # noqa: BLE001 - a lost hello is sent again
+                self.send_errors += 1
+
+    @property
+    def paired(self) -> bool:
+        """The peer's hello came (and, authenticated, the session key is derived)."""
+        if self.auth is not None:
+            return self.auth.paired
+        return self.peer_hello is not None
+
+    def _check_peer(self) -> None:
+        """Raise :class:`LinkOpenError` when, unpaired, a mismatched peer has been seen for
+        :data:`MISMATCH_GRACE_S` (a stranger's single mismatched hello does not stop a start
+        that pairs with the real peer meanwhile)."""
+        version = self.receive.last_unknown_version
+        if self.peer_mismatch is None and version is not None:
+            self.peer_mismatch = (
+                f"the {self.config.peer_side} speaks wire schema version {version}, this "
+                f"program {SCHEMA_VERSION}: run the same haptic-teleop on both sides")
+        if self.peer_mismatch is None or self.paired:
+            self._mismatch_since = None
+            return
+        now = time.monotonic()
+        if self._mismatch_since is None:
+            self._mismatch_since = now
+        if now - self._mismatch_since >= MISMATCH_GRACE_S:
+            raise LinkOpenError(self.peer_mismatch)
 
     @property
     def last_delivery_measured(self) -> bool:
@@ -313,17 +435,20 @@ class Link:
         should_stop: Callable[[], bool] | None = None,
         poll_interval_s: float = 0.001,
     ) -> bool:
-        """Poll until the peer's liveliness token is seen (True), or ``timeout_s`` passes
-        (``None``: no limit) or ``should_stop()`` says so (False). Messages that arrive
-        meanwhile go through the receive path as usual."""
+        """Poll until the peer's liveliness token is seen and the peer paired (its hello came
+        and, authenticated, verified) (True), or ``timeout_s`` passes (``None``: no limit) or
+        ``should_stop()`` says so (False). Messages that arrive meanwhile go through the
+        receive path as usual. Raises :class:`LinkOpenError` for a peer that cannot be paired
+        with (another wire schema version, authentication on one side only)."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
-        while not self.peer_alive:
+        while not (self.peer_alive and self.paired):
+            self._check_peer()
             if should_stop is not None and should_stop():
                 return False
             if deadline is not None and time.monotonic() > deadline:
                 return False
             self.poll()
-            if not self.peer_alive:
+            if not (self.peer_alive and self.paired):
                 time.sleep(poll_interval_s)
         return True
 
@@ -361,5 +486,10 @@ class Link:
         result["link_sent"] = self.sent
         result["link_send_errors"] = self.send_errors
         result["link_capped_polls"] = self.capped_polls
+        result["link_authenticated"] = self.auth is not None
+        result["link_pairings"] = self.auth.pairings if self.auth is not None else None
+        result["link_rejected_hellos"] = (self.auth.rejected_hellos if self.auth is not None
+                                          else None)
+        result["link_unpaired_sends"] = self.unpaired_sends
         result["link_peer_alive"] = self.peer_alive
         return result

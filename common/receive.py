@@ -139,9 +139,33 @@ class ReceivePath:
         self._age = LogHistogram()
         self.last_delivered: Message | None = None
         self.last_delivery_ns: int | None = None
+        self._pinned_epoch: int | None = None
+        self._epochs_pinned = False
+        self.last_unknown_version: int | None = None
+        """The version of the latest message dropped ``unknown_version`` (a mismatched peer)."""
 
     def _drop(self, reason: DropReason) -> None:
         self._n.dropped[reason.value] += 1
+
+    def pin_epoch(self, epoch: int) -> None:
+        """Authenticated link: accept messages of ``epoch`` only, from now on; a new epoch
+        comes only from here (an authenticated re-pairing), never from a newer send time.
+        Pinning another epoch than the current one is a peer restart."""
+        self._epochs_pinned = True
+        if self._pinned_epoch == epoch:
+            return
+        self._pinned_epoch = epoch
+        seq_state = self._seq
+        if seq_state is not None and seq_state.epoch != epoch:
+            self._n.peer_restarts += 1
+            self._n.expected_closed += seq_state.highest_seq - seq_state.first_seq + 1
+            self._pending.clear()
+            self._seq = None
+
+    def drop(self, reason: DropReason) -> None:
+        """Count one received payload dropped before :meth:`accept` (its tag, its pairing)."""
+        self._n.received += 1
+        self._drop(reason)
 
     def rejects_at_once(self, payload: bytes) -> bool:
         """The flood filter, before anything costly (the arrival stamp, msgpack): a payload
@@ -162,8 +186,13 @@ class ReceivePath:
             message = decode(payload, self.expected_kind)
         except DecodeError as error:
             self._drop(error.reason)
+            if error.reason is DropReason.UNKNOWN_VERSION:
+                self.last_unknown_version = error.version
             return
         send_ns = message.send_time_ns
+        if self._epochs_pinned and message.epoch != self._pinned_epoch:
+            self._drop(DropReason.UNPAIRED)  # a new epoch only through an explicit pairing
+            return
         seq_state = self._seq
         if seq_state is None or message.epoch != seq_state.epoch:
             if seq_state is not None and send_ns <= seq_state.highest_send_ns:

@@ -21,18 +21,23 @@ summaries; otherwise 1 (or the first non-zero child status, e.g. 3 for the analy
 from __future__ import annotations
 
 import argparse
+import atexit
 import json
 import math
 import shlex
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 import uuid
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+from haptic.common.auth import write_key_file
 
 DEFAULT_OPERATOR = "regulate:fx=3.6,onset=0.2,max=5"
 #: Seconds a child gets after SIGTERM before SIGKILL.
@@ -81,12 +86,21 @@ def _end(process: subprocess.Popen) -> None:
     process.wait()
 
 
+def _session_key() -> Path:
+    """A fresh pre-shared key for this session's two programs (common/auth.py), in a private
+    directory removed when the session ends: no other process can join the pair."""
+    directory = tempfile.mkdtemp(prefix="haptic-session-")
+    atexit.register(shutil.rmtree, directory, True)
+    return write_key_file(Path(directory) / "session.key")
+
+
 def run_session(args: argparse.Namespace) -> int:
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     prefix = f"haptic/session-{uuid.uuid4().hex[:8]}"
-    common = ["--key-prefix", prefix, "--no-status", "--peer-wait", "30"]
+    common = ["--key-prefix", prefix, "--no-status", "--peer-wait", "30",
+              "--session-key", str(_session_key())]
     if args.config:
         common += ["--config", args.config]
     if args.k is not None:
