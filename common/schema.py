@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 from haptic.common.config import Field, Schema
+from haptic.common.inert import SUPERVISION_SCHEMA
 from haptic.common.link_config import LINK_SCHEMA
 from haptic.common.runner_config import RUNNER_SCHEMA
 from haptic.lockstep.schema import LOCKSTEP_SCHEMA
@@ -127,4 +128,5 @@ SCHEMA: Schema = {
     "link": LINK_SCHEMA,
     "lockstep": LOCKSTEP_SCHEMA,
     "runner": RUNNER_SCHEMA,
+    "supervision": SUPERVISION_SCHEMA,
 }

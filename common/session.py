@@ -162,12 +162,21 @@ def run_session(args: argparse.Namespace) -> int:
             print(f"haptic-session: {side} wrote no summary", file=sys.stderr)
             return 1
         summaries[side] = json.loads(path.read_text())
-    text = combined_summary(summaries["master"], summaries["slave"])
+    text = combined_summary(summaries["master"], summaries["slave"]) + inert_flag(summaries)
     print(text)
     plot = _plot(out)
     _report(out, args, text, summaries, plot)
     print(f"haptic-session: report in {out}/report.md")
     return 0
+
+
+def inert_flag(summaries: dict[str, dict[str, Any]]) -> str:
+    """The report's flag for a session that was inert (common/inert.py): a side whose peer
+    was there but whose forces stayed off; empty when neither was."""
+    lines = [f"\n  INERT SESSION: {side} forces off {summary.get('inert_time_s', 0.0):.1f} s "
+             f"with the peer present ({summary.get('inert_reason')})"
+             for side, summary in summaries.items() if summary.get("inert")]
+    return "".join(lines)
 
 
 def _us(value: Any) -> str:

@@ -38,6 +38,7 @@ from haptic.common.cli_options import add_run_options, run_options_from_args
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.display import DisplayPublisher, EventCursor
 from haptic.common.failures import exit_on_link_error
+from haptic.common.inert import InertMonitor
 from haptic.common.link import Link
 from haptic.common.messages import Flags, HandleState
 from haptic.common.phase_lock import PhaseLock, PhaseLockSettings
@@ -253,8 +254,11 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     margin = WORK_AREA_MARGIN_M
     x_low, x_high = grid.x_range_m[0] - margin, grid.x_range_m[1] + margin
     y_low, y_high = grid.y_range_m[0] - margin, grid.y_range_m[1] + margin
+    grid_x, grid_y = grid.x_range_m, grid.y_range_m  # the resync policy's area (no margin)
     events: list[dict[str, Any]] = []
     guard = InputGuard(InputGuardSettings.from_config(options.config), period_s, events=events)
+    inert = InertMonitor(options.config["supervision"]["inert_after_s"], events=events)
+    max_age_s = link_config.max_message_age_s
     run = None
     zenoh_threads: dict[str, object] = {}
     with StopSignals() as signals, Link(link_config) as link:
@@ -328,6 +332,14 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                     events.append({"time_s": now_s, "kind": "tool_stopped",
                                    "reason": f"tool left the work area at ({tx:.4f}, "
                                    f"{ty:.4f}) m"})
+            elif (grid_x[0] <= rx * hx <= grid_x[1] and grid_y[0] <= ry * hy <= grid_y[1]
+                  and fresh):
+                # resync policy: the handle is back over the grid: the tool rejoins it there
+                node.resync(state, yh)
+                flags_box["outside"] = False
+                events.append({"time_s": now_s, "kind": "tool_resync",
+                               "reason": "the handle is back over the work area: the tool "
+                               "rejoins it"})
             running = (ready and master_enabled and not flags_box["outside"]
                        and not guard.faulted)
             if running and not running_before:
@@ -343,6 +355,11 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                     events.append({"time_s": now_s, "kind": "tool_stopped",
                                    "reason": f"{reason}: the tool stops"})
             flags_box["running"] = running
+            inert.update(now_s, link.peer_alive and link.silence_s() < max_age_s, running,
+                         "the tool is stopped by the work-area guard" if flags_box["outside"]
+                         else "input fault" if guard.faulted
+                         else f"watchdog {wd_state.value}" if not ready
+                         else "the master's forces are off")
             supervise_ns = clock()
             # node: Ch2/Ct2, the tool and the clay
             out = node.step(state, fh if running else zero_force, yh)
@@ -408,7 +425,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             stats = link.stats()
             return (f"link p50 {stats.one_way_delay_p50_s * 1e3:.3f} ms  loss "
                     f"{stats.loss_ratio * 100:.2f} %  {watchdog.state.value}  ft "
-                    f"{flags_box['ft'][0]:+.2f} N  engagement {flags_box['engagement']:.2f}")
+                    f"{flags_box['ft'][0]:+.2f} N  engagement {flags_box['engagement']:.2f}"
+                    f"{inert.status()}")
 
         runner = RealTimeRunner(
             period_s, step, duration_s=options.duration_s, spin_s=options.runner.spin_s,
@@ -438,7 +456,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
         removed_volume_m3=flags_box["removed"],
         final_tool_position_m=[float(final[0]), float(final[1])], stages=stages.summary(),
-        **guard.summary(),
+        **guard.summary(), **inert.summary(run.elapsed_s),
         **zenoh_threads,
         **(phase_lock.summary() if phase_lock is not None else {"phase_lock_enabled": False}),
         **extra_summary,
