@@ -23,7 +23,8 @@ from mcap.stream_reader import StreamReader
 class Recording:
     """A decoded recording: ``messages[topic]`` is a list of ``(log_time_ns, dict)`` in file
     order; ``schemas[topic]`` the channel's JSON schema; ``metadata[name]`` the metadata
-    records; ``complete``: the file ended with its footer (closed properly)."""
+    records; ``complete``: the file ended with its data-end record and footer (closed
+    properly)."""
 
     path: Path
     messages: dict[str, list[tuple[int, dict[str, Any]]]] = field(default_factory=dict)
@@ -61,7 +62,7 @@ def read_recording(path: str | Path) -> Recording:
     recording = Recording(Path(path))
     channels: dict[int, Channel] = {}
     schemas: dict[int, Schema] = {}
-    header = False
+    header = data_end = False
     with open(path, "rb") as stream:
         reader = StreamReader(stream, skip_magic=False)
         try:
@@ -86,10 +87,12 @@ def read_recording(path: str | Path) -> Recording:
                 elif isinstance(record, Metadata):
                     recording.metadata[record.name] = dict(record.metadata)
                 elif isinstance(record, Footer):
-                    recording.complete = True
+                    # closed properly: DataEnd, then the footer; a killed recorder's file ends
+                    # in a provisional footer without DataEnd (common/recorder.py)
+                    recording.complete = data_end
                     break
                 elif isinstance(record, DataEnd):
-                    continue
+                    data_end = True
         except (McapError, EOFError, ValueError, RuntimeError, struct.error) as error:
             recording.error = f"{type(error).__name__}: {error}"
     if not header:
