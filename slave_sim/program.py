@@ -53,6 +53,7 @@ from haptic.common.watchdog import PeerWatchdog, WatchdogState
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from haptic.slave_sim.node import SlaveNode
 from haptic.slave_sim.scenario import load_scenario
+from haptic.slave_sim.tool_path import ToolPath
 
 #: The stages of one tick, in order (the summary's ``stages``).
 TICK_STAGES = ("poll", "supervise", "node", "send", "telemetry")
@@ -245,7 +246,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     stages = StageTimes(TICK_STAGES)
     zero_force = np.zeros((1, 2))
     path_every = max(1, args.trace_every)
-    tool_path: list[tuple[float, float]] = []
+    tool_path = ToolPath()  # bounded memory (slave_sim/tool_path.py)
     fh = np.zeros((1, 2))
     yh = state.handle_position_m.copy()
     flags_box = {"running": False, "master_enabled": False, "max_force": 0.0,
@@ -387,7 +388,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             flags_box["engagement"] = engagement
             flags_box["removed"] = removed
             if tick % path_every == 0:
-                tool_path.append((float(position[0]), float(position[1])))
+                tool_path.add(float(position[0]), float(position[1]))
             if trace.due():
                 trace.record((now_s, fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], position[0],
                               position[1], velocity[0], velocity[1], ft[0], ft[1], engagement,
@@ -471,7 +472,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         summary["trace"] = str(out / "slave_trace.npz")
         if node.environment_kind == "clay":
             state.environment.save_npz(out / "clay.npz")
-            path = np.array(tool_path) if tool_path else None
+            path = tool_path.array()
             state.environment.render_png(
                 out / "clay.png", path,
                 title=f"{node.scenario.name}: networked run, {run.elapsed_s:.1f} s")
