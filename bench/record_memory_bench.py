@@ -55,7 +55,8 @@ def run(duration_s: float, settle_s: float, linear: bool) -> dict:
         try:
             processes["master"] = subprocess.Popen(
                 [sys.executable, "-m", "haptic.master.cli", *common, "--listen", endpoint,
-                 "--rig", "model", "--record", str(tmp / "master.mcap")],
+                 "--rig", "model", "--record", str(tmp / "master.mcap"),
+                 "--json-summary", str(tmp / "master.json")],
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             processes["slave"] = subprocess.Popen(
                 [sys.executable, "-m", "haptic.slave_sim.program", *common, "--connect",
@@ -79,6 +80,13 @@ def run(duration_s: float, settle_s: float, linear: bool) -> dict:
                 process.wait(timeout=10)
         sizes = {side: (tmp / f"{side}.mcap").stat().st_size
                  for side in processes if (tmp / f"{side}.mcap").exists()}
+        recorder = {}
+        for side in processes:
+            path = tmp / f"{side}.json"
+            if path.exists():
+                summary = json.loads(path.read_text())
+                recorder[side] = {k: summary.get(k) for k in (
+                    "record_max_queue_depth", "record_dropped", "rate_hz")}
     result: dict = {"duration_s": duration_s, "settle_s": settle_s, "linear": linear}
     for side, points in samples.items():
         data = np.array(points)
@@ -93,6 +101,7 @@ def run(duration_s: float, settle_s: float, linear: bool) -> dict:
             result[f"{side}_rss_end_kB"] = float(span[-1, 1])
             result[f"{side}_rss_growth_kB_per_s"] = slope
         result[f"{side}_record_bytes"] = sizes.get(side)
+        result[f"{side}_recorder"] = recorder.get(side)
     return result
 
 

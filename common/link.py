@@ -345,6 +345,8 @@ class Link:
                 if alive != self.peer_alive:
                     self.peer_alive = alive
                     self.presence_events.append(PresenceEvent(now_ns, alive))
+                    if alive:
+                        self._next_hello_ns = 0  # its session is there: pair without waiting
                 change = presence.try_recv()
         return receive.release(now_ns)
 
@@ -380,6 +382,9 @@ class Link:
                 continue
             if auth is None:
                 if hello.side == self.config.peer_side:
+                    known = self.peer_hello
+                    if known is None or (known.epoch, known.nonce) != (hello.epoch, hello.nonce):
+                        self._next_hello_ns = 0  # a new peer run: answer at once
                     self.peer_hello = hello
             elif auth.accept_hello(hello, now_ns):
                 self.peer_hello = hello
