@@ -14,15 +14,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from haptic.common.config import Field, Schema
-
-SUPERVISION_SCHEMA: Schema = {
-    "inert_after_s": Field(
-        "float", "A side whose peer is present but whose forces are off this long says so "
-        "(status line, summary, session report), s.", minimum=0.0, exclusive_minimum=True,
-        maximum=3600.0),
-}
-
 
 @dataclass
 class InertMonitor:

@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.config.scenario import Scenario
 from haptic.slave_sim.clay_numpy import GeometryConstants, cut_numpy, window_starts
-from haptic.slave_sim.scenario import Scenario
 from haptic.slave_sim.workpiece import NO_BLOCK, Workpiece, build_workpiece
 
 CLAY_IMPLEMENTATIONS = ("warp", "numpy")

@@ -77,7 +77,7 @@ def test_binary_scenario_file_is_a_config_error(tmp_path):
 
 
 def test_replay_refuses_a_file_that_is_not_mcap(tmp_path, capsys):
-    from haptic.common.replay import main
+    from haptic.view.replay_cli import main
 
     for name, data in (("junk.mcap", BINARY), ("text.mcap", b"hello"), ("empty.mcap", b"")):
         path = tmp_path / name
