@@ -68,7 +68,7 @@ def test_binary_config_is_one_line_and_exit_2(program, binary_file, capsys):
 
 def test_binary_scenario_file_is_a_config_error(tmp_path):
     from haptic.common.config import ConfigError
-    from haptic.slave_sim.scenario import load_scenario
+    from haptic.common.config.scenario import load_scenario
 
     path = tmp_path / "scenario.toml"
     path.write_bytes(BINARY)
