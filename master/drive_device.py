@@ -114,6 +114,8 @@ class DriveRuntime:
     #: Position actual value at the last SYNC, counts.
     position_counts: int = 0
     pending_fault_code: int = 0
+    #: A fault whose cause stays (it comes back after a reset); 0 none.
+    persistent_fault_code: int = 0
     error_code: int = 0
     drop_tpdo: int = 0
     #: SYNCs since the last RPDO while enabled (the RPDO deadline monitoring).

@@ -228,6 +228,9 @@ def _run_linked_master(
                                    and abs(ty - ry * yhy) < tolerance)
                     wd_state = watchdog.update(now_s, fresh, link.silence_s(), in_sync,
                                                link.peer_alive)
+                    if reading.events:  # e.g. a drive's statusword warning bits
+                        loop.node_events.extend({"time_s": now_s, "kind": "hardware_event",
+                                                 "reason": text} for text in reading.events)
                     if reading.faults:
                         # A hardware fault latches the safe state for the rest of the run.
                         loop.hardware_faults.extend(

@@ -291,10 +291,14 @@ class SimulatedCanRig:
 
     # --- fault injection (thread-safe; acts at the next SYNC) -------------------------
 
-    def inject_drive_fault(self, axis: int, error_code: int = 0x2310) -> None:
-        """The drive of ``axis`` (0 x, 1 y) faults: EMCY ``error_code`` and statusword Fault."""
+    def inject_drive_fault(self, axis: int, error_code: int = 0x2310,
+                           persistent: bool = False) -> None:
+        """The drive of ``axis`` (0 x, 1 y) faults: EMCY ``error_code`` and statusword Fault;
+        ``persistent``: the cause stays, so it faults again after every fault reset."""
         with self._lock:
             self.drives[axis].pending_fault_code = error_code
+            if persistent:
+                self.drives[axis].persistent_fault_code = error_code
             self._discard_prepared()
 
     def drop_tpdo(self, axis: int, count: int = 1) -> None:
@@ -423,6 +427,8 @@ class SimulatedCanRig:
         for axis, (drive, device) in enumerate(zip(drives, self.devices, strict=True)):
             if device.sync_cob_id != cia402.SYNC_COB_ID:
                 continue  # this drive listens for SYNC elsewhere
+            if drive.persistent_fault_code and drive.state is not DriveState.FAULT:
+                drive.pending_fault_code = drive.persistent_fault_code
             if drive.pending_fault_code:
                 drive.state, drive.error_code = DriveState.FAULT, drive.pending_fault_code
                 frames.append((cia402.EMCY_BASE + drive.node_id,
