@@ -222,12 +222,15 @@ class SimulatedCanRig:
         heartbeats go out and their heartbeat consumers are checked (:meth:`poll_timers`). A
         frame that raises is recorded in :attr:`errors` (and passed to ``on_error``) and
         serving goes on."""
+        timers_due_s = 0.0
         while not should_stop():
             bus = self._bus
             if bus is None:
                 return
-            wait_s = min(poll_s, max(0.0, self.poll_timers(time.monotonic())))
-            message = bus.recv(timeout=wait_s)
+            now_s = time.monotonic()
+            if now_s >= timers_due_s:  # only when a heartbeat or a consumer check is due
+                timers_due_s = now_s + max(0.0, self.poll_timers(now_s))
+            message = bus.recv(timeout=min(poll_s, max(0.0, timers_due_s - now_s)))
             if message is None:
                 continue
             error = self.handle_message(message)
