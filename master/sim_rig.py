@@ -158,6 +158,8 @@ class SimulatedCanRig:
         #: When each drive last heard the heartbeat it consumes (monotonic s; None: not yet).
         self._heartbeat_heard: list[float | None] = [None, None]
         self._heartbeat_due = [0.0, 0.0]
+        #: When the serving loop next looks at the heartbeat timers (0: at once), s.
+        self._timers_due_s = 0.0
         #: SYNCs received as CAN FD frames: the cyclic answers go out as FD frames too.
         self._sync_fd = False
         self.sync_count = 0
@@ -222,15 +224,14 @@ class SimulatedCanRig:
         heartbeats go out and their heartbeat consumers are checked (:meth:`poll_timers`). A
         frame that raises is recorded in :attr:`errors` (and passed to ``on_error``) and
         serving goes on."""
-        timers_due_s = 0.0
         while not should_stop():
             bus = self._bus
             if bus is None:
                 return
             now_s = time.monotonic()
-            if now_s >= timers_due_s:  # only when a heartbeat or a consumer check is due
-                timers_due_s = now_s + max(0.0, self.poll_timers(now_s))
-            message = bus.recv(timeout=min(poll_s, max(0.0, timers_due_s - now_s)))
+            if now_s >= self._timers_due_s:  # only when a heartbeat or a check is due
+                self._timers_due_s = now_s + max(0.0, self.poll_timers(now_s))
+            message = bus.recv(timeout=min(poll_s, max(0.0, self._timers_due_s - now_s)))
             if message is None:
                 continue
             error = self.handle_message(message)
@@ -361,6 +362,8 @@ class SimulatedCanRig:
             return
         for axis, (drive, device) in enumerate(zip(self.drives, self.devices, strict=True)):
             if 0x700 <= frame_id <= 0x77F and frame_id == 0x700 + device.heartbeat_consumer_node:
+                if self._heartbeat_heard[axis] is None:
+                    self._timers_due_s = 0.0  # its consumer starts now
                 self._heartbeat_heard[axis] = time.monotonic()  # changes no input
                 continue
             if frame_id == device.rpdo.cob_id and device.rpdo.enabled:
@@ -379,7 +382,8 @@ class SimulatedCanRig:
                 if drive.nmt_state != NMT_STOPPED_STATE:
                     self._discard_prepared()
                     device.on_sdo_request(data)
-                    device.refresh_if_changed()
+                    if device.refresh_if_changed():
+                        self._timers_due_s = 0.0  # a heartbeat time may have changed
                 return
         # Anything else (another node's frames, this bus's own frames coming back) is not ours.
 
