@@ -96,6 +96,17 @@ class PdoLayout:
         """Payload length, bytes."""
         return sum(len(variable) // 8 for variable in self.mapping)
 
+    @property
+    def indices(self) -> tuple[int, ...]:
+        """The mapped objects' indices, in order."""
+        return tuple(variable.index for variable in self.mapping)
+
+    def codec(self) -> struct.Struct:
+        """The payload's layout as one ``struct`` (little-endian, the mapped types)."""
+        return struct.Struct("<" + "".join(
+            variable.STRUCT_TYPES[variable.data_type].format.lstrip("<")
+            for variable in self.mapping))
+
 
 @dataclass
 class DriveRuntime:
@@ -252,6 +263,8 @@ class DriveObjects:
         """Read the communication configuration from the dictionary (after a write)."""
         self.rpdo = self._layout(RPDO1_COMM, RPDO1_MAP)
         self.tpdo = self._layout(TPDO1_COMM, TPDO1_MAP)
+        self._rpdo_codec, self._rpdo_indices = self.rpdo.codec(), self.rpdo.indices
+        self._tpdo_codec, self._tpdo_indices = self.tpdo.codec(), self.tpdo.indices
         self.sync_cob_id = self.raw(0x1005) & 0x7FF
         self.heartbeat_producer_ms = self.raw(0x1017)
         consumer = self.raw(0x1016, 1)
@@ -293,28 +306,24 @@ class DriveObjects:
 
     def encode_tpdo(self, runtime: DriveRuntime, position_counts: int) -> bytes:
         """TPDO1's payload as mapped, from ``runtime`` and the position (counts)."""
+        indices = self._tpdo_indices
+        if indices == (0x6041, 0x6064):  # the loop's mapping
+            return self._tpdo_codec.pack(self.statusword(runtime), position_counts)
         values = {0x6041: self.statusword(runtime), 0x6064: position_counts,
                   0x6061: runtime.mode, 0x603F: runtime.error_code,
                   0x607A: runtime.target_counts,
                   0x60F4: runtime.target_counts - position_counts, 0x6040: runtime.controlword}
-        return b"".join(variable.encode_raw(values.get(variable.index, 0))
-                        for variable in self.tpdo.mapping)
+        return self._tpdo_codec.pack(*(values.get(index, 0) for index in indices))
 
     def decode_rpdo(self, data: bytes) -> dict[int, int] | int:
         """The mapped objects' values (index -> value) of an RPDO1 payload, or the EMCY code
         of a length error (0x8210 too short, 0x8220 too long)."""
-        layout = self.rpdo
-        if len(data) < layout.size:
+        codec = self._rpdo_codec
+        if len(data) < codec.size:
             return EMCY_PDO_LENGTH_SHORT
-        if len(data) > layout.size:
+        if len(data) > codec.size:
             return EMCY_PDO_LENGTH_EXCEEDED
-        values: dict[int, int] = {}
-        offset = 0
-        for variable in layout.mapping:
-            size = len(variable) // 8
-            values[variable.index] = int(variable.decode_raw(data[offset:offset + size]))
-            offset += size
-        return values
+        return dict(zip(self._rpdo_indices, codec.unpack(data), strict=True))
 
     def heartbeat_payload(self) -> bytes:
         """This drive's heartbeat: its NMT state."""
