@@ -1,8 +1,12 @@
 """The simulated rig: two CiA 402 drives and the force sensor as CAN frame logic.
 
 :class:`SimulatedCanRig` runs the pure :class:`~haptic.master.rig_model.RigModel` and speaks
-the real frames (NMT, SDO, RPDO1/TPDO1, SYNC, EMCY, the sensor's DBC frame), so the CAN
-driver (:class:`~haptic.master.can_driver.CanHandleDriver`) runs unchanged against it. The
+the real frames (NMT, SDO, RPDO1/TPDO1, SYNC, EMCY, heartbeat, the sensor's DBC frame), so the
+CAN driver (:class:`~haptic.master.can_driver.CanHandleDriver`) runs unchanged against it.
+Each drive is a conformant CiA 301/402 device (:mod:`haptic.master.drive_device`: canopen's
+``LocalNode`` with the object dictionary of its EDS, PDOs as configured by SDO, heartbeat
+producer and consumer, RPDO deadline, following error window, quick stop); the driver
+configures it from scratch as it would a real drive. The
 devices are stepped by the driver's SYNC frames, one model step per SYNC, so a run is
 deterministic whatever the thread or process timing: RPDOs are synchronous (transmission
 type 1), a controlword or target received in cycle k is applied at SYNC k+1, then the model

@@ -383,3 +383,53 @@ def test_a_node_reset_restores_the_eds_defaults() -> None:
                                        data=bytes([cia402.NMT_RESET_COMMUNICATION, 1])))
         assert not rig.devices[0].tpdo.enabled and rig.devices[1].tpdo.enabled
         assert rig.drives[0].nmt_state == NMT_PRE_OPERATIONAL_STATE
+
+
+class _Replies:
+    """Collects what a drive sends (its SDO replies)."""
+
+    def __init__(self) -> None:
+        self.frames: list[tuple[int, bytes]] = []
+
+    def __call__(self, frame_id: int, data: bytes) -> None:
+        self.frames.append((frame_id, data))
+
+
+def _write(device, replies: _Replies, index: int, subindex: int, value: int) -> int | None:
+    """SDO download to ``device``; the abort code, or None when accepted."""
+    variable = device._variable(index, subindex)
+    device.on_sdo_request(cia402.sdo_download_request(variable, value))
+    reply = cia402.decode_sdo(replies.frames[-1][1])
+    assert (reply.index, reply.subindex) == (index, subindex)
+    device.refresh_if_changed()
+    return int.from_bytes(reply.data, "little") if reply.command == 0x80 else None
+
+
+def test_the_emulated_drive_enforces_the_cia301_pdo_rules() -> None:
+    from haptic.master.drive_device import DriveObjects, DriveRuntime
+
+    replies = _Replies()
+    device = DriveObjects(3, None, replies, DriveRuntime(3), lambda: 0)
+    assert device.rpdo.cob_id == 0x203 and not device.rpdo.enabled  # $NODEID resolved
+    assert _write(device, replies, 0x1400, 1, 0x203) is None  # enable with the default map
+    assert _write(device, replies, 0x1600, 0, 0) == 0x06010000  # mapping a valid PDO
+    assert _write(device, replies, 0x1400, 1, 0x80000203) is None
+    assert _write(device, replies, 0x1600, 1, 0x607A0020) == 0x06010000  # count not 0
+    assert _write(device, replies, 0x1600, 0, 0) is None
+    assert _write(device, replies, 0x1600, 1, 0x60410010) is None  # statusword: read-only
+    assert _write(device, replies, 0x1600, 0, 1) == 0x06040041
+    assert _write(device, replies, 0x1600, 1, 0x12340020) is None  # no such object
+    assert _write(device, replies, 0x1600, 0, 1) == 0x06040041
+    assert _write(device, replies, 0x1600, 1, 0x607A0010) is None  # wrong length
+    assert _write(device, replies, 0x1600, 0, 1) == 0x06040041
+    assert _write(device, replies, 0x1600, 1, 0x607A0020) is None
+    assert _write(device, replies, 0x1600, 0, 1) is None
+    assert _write(device, replies, 0x1400, 2, 250) == 0x06090030  # reserved type
+    assert _write(device, replies, 0x1400, 1, 0xA0000203) == 0x06090030  # 29-bit id
+    assert _write(device, replies, 0x6060, 0, 3) == 0x06090030  # profile velocity: no
+    assert _write(device, replies, 0x1018, 1, 5) == 0x06010002  # read-only
+    assert _write(device, replies, 0x1400, 1, 0x203) is None
+    assert device.rpdo.enabled and [v.index for v in device.rpdo.mapping] == [0x607A]
+    assert device.decode_rpdo(bytes(4)) == {0x607A: 0}
+    assert device.decode_rpdo(bytes(6)) == 0x8220  # too long: EMCY, not applied
+    assert device.decode_rpdo(bytes(2)) == 0x8210
