@@ -252,7 +252,8 @@ class EmulatedRigHardware(HandleHardware):
             self.bus_options = self._private_bus()
             self._start_emulator(self.bus_options)
             self.driver = CanHandleDriver(self.settings.can, self.bus_options,
-                                          self.settings.sim.pdo_timeout_s)
+                                          self.settings.sim.pdo_timeout_s,
+                                          self.config["model"]["sample_period_s"])
             self.driver.configure()
         except BaseException:
             self.driver = None

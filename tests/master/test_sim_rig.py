@@ -102,7 +102,8 @@ def test_configure_without_an_answering_drive_is_a_hardware_error() -> None:
     config = _config(master__can__enable_timeout_cycles=2, master__sim__pdo_timeout_s=0.02)
     settings = master_settings(config)
     driver = CanHandleDriver(settings.can, {"interface": "virtual",
-                                            "channel": settings.sim.channel}, 0.02)
+                                            "channel": settings.sim.channel}, 0.02,
+                             config["model"]["sample_period_s"])
     with pytest.raises(HardwareError, match="no SDO reply"):
         driver.configure()
     assert driver.lifecycle_state is LifecycleState.UNCONFIGURED
