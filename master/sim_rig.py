@@ -74,6 +74,10 @@ from haptic.master.settings import CanSettings, master_settings
 #: little-endian IEEE float32, N.
 OPERATOR_DISPLAY_ID = 0x1FFFF000
 _DISPLAY_PAYLOAD = struct.Struct("<ff")
+#: COB-ID of the emulator-only ready-lamp frame (29-bit, like the display frame): one byte,
+#: 1 when the master's forces are enabled. The simulated operator grasps the handle, and the
+#: clock of its script starts, at the first 1 (a real operator waits for the lamp too).
+OPERATOR_READY_ID = 0x1FFFF001
 
 
 def encode_operator_display(tool_force_N: np.ndarray) -> bytes:
@@ -149,6 +153,8 @@ class SimulatedCanRig:
         self.state = model.initial_state(np.asarray([initial_position_m], float), rng)
         self._state_arrays = _state_arrays(self.state)
         self.tool_force_N = np.zeros((1, 2))
+        #: whether the operator has grasped the handle (the ready lamp has been on)
+        self.operator_grasped = False
         self.last_sample: RigSample | None = None
         self.drives = [DriveRuntime(node) for node in settings.node_ids]
         #: Each drive's object dictionary (its EDS) and communication objects.
@@ -181,15 +187,21 @@ class SimulatedCanRig:
         self._thread: threading.Thread | None = None
 
     @classmethod
-    def from_config(cls, config: dict[str, Any], channel: str) -> SimulatedCanRig:
+    def from_config(cls, config: dict[str, Any], channel: str,
+                    operator_waits_for_lamp: bool = False) -> SimulatedCanRig:
         """The devices of a validated configuration: ``[model]`` (Ts, Gh, Th), ``[master.can]``
-        (node ids, conversions, DBC) and ``[master.sim]`` (operator, noise, seed, start)."""
+        (node ids, conversions, DBC) and ``[master.sim]`` (operator, noise, seed, start).
+        ``operator_waits_for_lamp``: the operator's script starts at the first ready-lamp
+        frame (:data:`OPERATOR_READY_ID`, sent by the simulated backends); otherwise at the
+        first SYNC (a rig driven by the ``can`` backend, which sends no emulator frames)."""
         settings = master_settings(config)
         sim = settings.sim
         rig_model = RigModel.from_model(model_from_config(config), sim.operator,
                                         sim.force_noise_std_N)
-        return cls(rig_model, settings.can, channel, sim.initial_position_m,
-                   np.random.default_rng(sim.seed))
+        rig = cls(rig_model, settings.can, channel, sim.initial_position_m,
+                  np.random.default_rng(sim.seed))
+        rig.operator_grasped = not operator_waits_for_lamp
+        return rig
 
     # --- lifecycle -------------------------------------------------------------------
 
@@ -334,6 +346,13 @@ class SimulatedCanRig:
             self.tool_force_N = np.asarray(tool_force_N, float).reshape(1, 2).copy()
             self._discard_prepared()
 
+    def set_operator_ready(self, enabled: bool) -> None:
+        """The master's ready lamp: the operator grasps the handle the first time it is on."""
+        with self._lock:
+            if enabled and not self.operator_grasped:
+                self.operator_grasped = True
+                self._discard_prepared()
+
     # --- frame handling (under the lock) ----------------------------------------------
 
     def _send(self, frame_id: int, data: bytes) -> None:
@@ -348,6 +367,10 @@ class SimulatedCanRig:
                 self._discard_prepared()
                 self.tool_force_N = tool_force_N
                 self._prepared = self._prepare_sync(undoable=True)
+            elif frame_id == OPERATOR_READY_ID and data[:1] == b"\x01":
+                if not self.operator_grasped:
+                    self.operator_grasped = True
+                    self._discard_prepared()
             return
         if frame_id == cia402.SYNC_COB_ID:
             if fd != self._sync_fd:
@@ -488,6 +511,11 @@ class SimulatedCanRig:
                     for holder, name in self._state_arrays]
             if self.model.force_noise_std_N > 0.0:
                 rng_undo = self.state.rng.bit_generator.state
+        if not self.operator_grasped:
+            # the operator waits for the ready lamp: the script's clock has not started
+            # (one period before its start: no intent yet, even with onset 0)
+            self.state.operator.time_s[0] = -self.model.period_s
+            self.state.operator.integral_N_s[0] = 0.0
         # Disabled or faulted drives keep the command they applied (brake, lead screw).
         sample = self.model.step(self.state, targets, self.tool_force_N)
         for axis, (drive, device) in enumerate(zip(drives, self.devices, strict=True)):
@@ -622,6 +650,9 @@ class SimulatedRigHardware(HandleHardware):
     def present_tool_force(self, tool_force_N: np.ndarray) -> None:
         self.rig.set_tool_force(tool_force_N)
 
+    def present_forces_enabled(self, enabled: bool) -> None:
+        self.rig.set_operator_ready(enabled)
+
 
 @register_hardware("sim-inproc")
 def simulated_rig_hardware(config: dict[str, Any]) -> SimulatedRigHardware:
@@ -629,7 +660,7 @@ def simulated_rig_hardware(config: dict[str, Any]) -> SimulatedRigHardware:
     ``[master.can]`` for node ids and conversions, ``[master.sim]``; the virtual bus
     ``[master.sim] channel``)."""
     sim = master_settings(config).sim
-    rig = SimulatedCanRig.from_config(config, sim.channel)
+    rig = SimulatedCanRig.from_config(config, sim.channel, operator_waits_for_lamp=True)
     driver = CanHandleDriver(rig.settings, {"interface": "virtual", "channel": sim.channel},
                              sim.pdo_timeout_s, config["model"]["sample_period_s"])
     return SimulatedRigHardware(rig, driver)

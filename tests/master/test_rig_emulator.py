@@ -206,6 +206,8 @@ def test_the_emulated_operator_feels_the_presented_tool_force() -> None:
     config = _config("regulate:fx=2,fy=0,kp=0.5,ki=4,lag=0.02,max=10")
     with create_hardware("sim", config) as hardware:
         hardware.configure()
+        idle = hardware.read().force_N  # the operator waits for the ready lamp
+        hardware.present_forces_enabled(True)
         forces = []
         for tool_force in [2.0] * 300 + [0.5] * 200:
             hardware.present_tool_force(np.array([tool_force, 0.0]))
@@ -213,6 +215,7 @@ def test_the_emulated_operator_feels_the_presented_tool_force() -> None:
             assert reading.ok, reading.faults
             forces.append(reading.force_N)
     forces = np.array(forces)
+    assert abs(idle[0]) < 0.05
     steady = forces[299, 0]
     assert abs(forces[250, 0] - steady) < 0.02 and forces[299, 1] == 0.0
     assert forces[-1, 0] > steady + 1.0  # felt below the target: pushes harder

@@ -293,6 +293,10 @@ def test_regulating_operator_feels_the_tool_force_through_the_rig() -> None:
         assert isinstance(hardware, HandleHardware)
         hardware.configure()
         hardware.activate()
+        for _ in range(20):  # the operator waits for the master's ready lamp
+            hardware.read()
+        assert hardware.rig.last_sample.operator_intent_force_N[0, 0] == 0.0
+        hardware.present_forces_enabled(True)
         hardware.present_tool_force(np.array([1.5, 0.0]))
         hardware.read()
         np.testing.assert_array_equal(hardware.rig.tool_force_N, [[1.5, 0.0]])
