@@ -52,9 +52,12 @@ def test_removed_volume_is_conserved_and_matches_the_swept_volume(cut_across_all
     assert removed.sum() == pytest.approx(state.removed_total_m3[0], rel=1e-12)
     assert abs(state.conservation_error_m3()[0]) < 1e-5 * state.removed_total_m3[0]
     tool = clay.scenario.tool
-    analytic = 2 * tool.radius_m * tool.reference_depth_m * SPEED_M_S * SAMPLE_PERIOD_S
-    steady = (positions[:, 0] > 0.03) & (positions[:, 0] < 0.16)
-    assert removed[steady].mean() == pytest.approx(analytic, rel=0.01)
+    # the clay is cut where the proxy goes: the reference cut over the proxy's travel
+    proxy = np.array([r.proxy_position_m[0, 0] for r in results])
+    steady = np.flatnonzero((positions[:, 0] > 0.03) & (positions[:, 0] < 0.16))
+    analytic = 2 * tool.radius_m * tool.reference_depth_m * (proxy[steady[-1]]
+                                                             - proxy[steady[0] - 1])
+    assert removed[steady].sum() == pytest.approx(analytic, rel=5e-4)  # 2.6e-4 here
     heights = state.heights_m()
     assert heights.min() >= 0.0
     assert (heights <= clay.workpiece.heights_m[None] + 1e-15).all()
@@ -81,24 +84,36 @@ def test_start_inside_the_clay_gives_no_force_spike(variable_rate) -> None:
     clay = WarpClay(variable_rate, SAMPLE_PERIOD_S, device="cpu")
     state = clay.initial_state(1)
     damping_max = 100.0
-    position = np.array([[0.035, 0.0]])
-    # accelerate from rest at 2 m/s^2, inside the first block
-    worst = 0.0
+    position = np.array([[0.026, 0.0]])
+    proxy = position.copy()
+    # accelerate from rest at 2 m/s^2, inside the first block (p100, x = 2..5 cm)
     forces = []
-    for k in range(400):
+    for k in range(150):
         speed = 2.0 * (k + 1) * SAMPLE_PERIOD_S
         previous = position
         position = previous + np.array([[speed * SAMPLE_PERIOD_S, 0.0]])
         result = clay.step(state, previous, position, np.array([[speed, 0.0]]))
-        forces.append(result.force_N[0, 0])
-        worst = max(worst, np.linalg.norm(result.force_N[0]) / (damping_max * speed))
-    assert worst <= 2.0
-    assert max(forces) < 2.0 * damping_max * 2.0 * 400 * SAMPLE_PERIOD_S
-    # a stationary tool inside the clay stops feeling force once its footprint is cleared
-    still = np.array([[0.0, 0.0]])
-    for _ in range(20):
+        force = np.linalg.norm(result.force_N[0])
+        proxy_speed = np.linalg.norm(result.proxy_position_m[0] - proxy[0]) / SAMPLE_PERIOD_S
+        proxy = result.proxy_position_m
+        # the law: f = c dp/dt with c <= B_max; the proxy lags an accelerating tool
+        assert force <= damping_max * proxy_speed * (1 + 1e-9)
+        assert proxy_speed <= speed * (1 + 1e-9)
+        forces.append(force)
+    assert forces[-1] > 0.4 * damping_max * speed  # it cuts (the proxy lags the ramp)
+    # a tool that stops inside the clay: the proxy creeps on as the clay yields, the force
+    # decays (time constant (c + b) / K) and never reverses
+    still = np.zeros((1, 2))
+    decay = []
+    for _ in range(2000):
         result = clay.step(state, position, position, still)
-    assert not result.cutting[0] and not result.force_N.any()
+        decay.append(result.force_N[0, 0])
+    decay = np.array(decay)
+    assert (np.diff(decay) <= 1e-15).all() and decay.min() >= 0.0
+    tau_s = (damping_max + clay.coupling_damping_N_s_per_m) / clay.coupling_stiffness_N_per_m
+    # (the first still step drops the damper term b v at once)
+    one_tau = 1 + int(round(tau_s / SAMPLE_PERIOD_S))
+    assert decay[one_tau] == pytest.approx(decay[1] / np.e, rel=0.01)
 
 
 def test_lanes_are_independent_and_take_their_own_damping(variable_rate, drive) -> None:
@@ -110,11 +125,17 @@ def test_lanes_are_independent_and_take_their_own_damping(variable_rate, drive) 
     np.testing.assert_array_equal(state.block_damping_N_s_per_m(), damping)
     with pytest.raises(ValueError):
         state.set_block_damping(-damping)
-    start = np.array([[0.025, 0.0], [0.025, 0.0]])
-    _, results = drive(clay, state, start, [[SPEED_M_S, 0.0]] * 2, 600)
-    late = np.array([r.force_N[:, 0] for r in results[-100:]]).mean(axis=0)
-    assert late[1] == pytest.approx(0.5 * late[0], rel=1e-9)
-    np.testing.assert_array_equal(state.heights_m()[0], state.heights_m()[1])
+    start = np.array([[0.065, -0.019], [0.065, -0.019]])  # along y inside p80
+    _, results = drive(clay, state, start, [[0.0, SPEED_M_S]] * 2, 1500)
+    late = np.array([r.force_N[:, 1] for r in results[-100:]]).mean(axis=0)
+    assert late[0] == pytest.approx(80.0 * SPEED_M_S, rel=5e-3)  # 0.33 % here (0.31 mm cells)
+    assert late[1] == pytest.approx(0.5 * late[0], rel=3e-3)  # 0.15 % (different lags)
+    # the softer lane's proxy lags less (B v / K): it has cut that much further
+    proxy = state.proxy_position_m()
+    lag = proxy[1, 1] - proxy[0, 1]
+    assert lag == pytest.approx((late[0] - late[1]) / clay.coupling_stiffness_N_per_m, rel=2e-3)
+    extra = state.removed_total_m3[1] - state.removed_total_m3[0]
+    assert extra == pytest.approx(clay.reference_area_m2 * lag, rel=1e-2)
 
 
 def test_warp_kernels_and_numpy_reference_agree() -> None:
