@@ -88,4 +88,30 @@ def cutting_steadiness(time_s: np.ndarray, tool_force_N: np.ndarray,
                              float(along.mean()), ripple, reversals)
 
 
-__all__ = ["CONTACT_FORCE_N", "SETTLE_S", "CuttingSteadiness", "cutting_steadiness"]
+def steady_cut_fields(trace: dict[str, np.ndarray]) -> dict[str, Any]:
+    """The steadiness of a slave trace (``time_s``, ``tool_force_x_N``, ``tool_force_y_N``,
+    ``tool_velocity_x_m_s``, ``tool_velocity_y_m_s``) as summary fields:
+    ``cutting_force_ripple_ratio``, ``cutting_velocity_reversals``, ``steady_cut_force_N``,
+    ``steady_cut_speed_m_s``, ``steady_cut_start_s``, ``steady_cut_end_s`` (None when the trace
+    has no steady part). For a session's summary and report."""
+    names = ("time_s", "tool_force_x_N", "tool_force_y_N", "tool_velocity_x_m_s",
+             "tool_velocity_y_m_s")
+    empty = {"cutting_force_ripple_ratio": None, "cutting_velocity_reversals": None,
+             "steady_cut_force_N": None, "steady_cut_speed_m_s": None,
+             "steady_cut_start_s": None, "steady_cut_end_s": None}
+    if not trace or any(name not in trace for name in names) or trace["time_s"].size < 2:
+        return empty
+    steady = cutting_steadiness(
+        trace["time_s"], np.column_stack([trace["tool_force_x_N"], trace["tool_force_y_N"]]),
+        np.column_stack([trace["tool_velocity_x_m_s"], trace["tool_velocity_y_m_s"]]))
+    if steady.samples < 2:
+        return empty
+    return {"cutting_force_ripple_ratio": steady.force_ripple_ratio,
+            "cutting_velocity_reversals": steady.velocity_reversals,
+            "steady_cut_force_N": steady.mean_force_N,
+            "steady_cut_speed_m_s": steady.mean_speed_m_s,
+            "steady_cut_start_s": steady.start_s, "steady_cut_end_s": steady.end_s}
+
+
+__all__ = ["CONTACT_FORCE_N", "SETTLE_S", "CuttingSteadiness", "cutting_steadiness",
+           "steady_cut_fields"]

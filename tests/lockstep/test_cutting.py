@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptic.common.cutting import cutting_steadiness
+from haptic.common.cutting import cutting_steadiness, steady_cut_fields
 from haptic.lockstep.simulator import TRANSPARENT_SAFETY, LockstepSimulator
 from haptic.master.operator import parse_operator_spec
 from haptic.slave_sim.clay import make_clay
@@ -73,3 +73,17 @@ def test_steadiness_figures_on_known_traces() -> None:
     none = cutting_steadiness(time, np.zeros(time.size), velocity)
     assert none.samples == 0 and np.isnan(none.force_ripple_ratio)
     assert none.as_dict()["force_ripple_ratio"] is None
+
+
+def test_summary_fields_of_a_slave_trace() -> None:
+    time = np.arange(0.0, 2.0, 0.001)
+    force = np.where((time >= 0.2) & (time <= 1.8), 3.6, 0.0)
+    trace = {"time_s": time, "tool_force_x_N": force, "tool_force_y_N": np.zeros(time.size),
+             "tool_velocity_x_m_s": np.full(time.size, 0.038),
+             "tool_velocity_y_m_s": np.zeros(time.size)}
+    fields = steady_cut_fields(trace)
+    assert fields["cutting_force_ripple_ratio"] == pytest.approx(0.0, abs=1e-12)
+    assert fields["cutting_velocity_reversals"] == 0
+    assert fields["steady_cut_force_N"] == pytest.approx(3.6)
+    assert fields["steady_cut_speed_m_s"] == pytest.approx(0.038)
+    assert steady_cut_fields({})["cutting_force_ripple_ratio"] is None
