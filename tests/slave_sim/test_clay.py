@@ -10,6 +10,12 @@ from haptic.slave_sim.scenario import load_scenario
 
 SAMPLE_PERIOD_S = 0.00054
 SPEED_M_S = 0.04
+#: Partial engagement against its analytic value on 0.1 mm cells: 0.066 % achieved (the
+#: grid is the residue).
+ENGAGEMENT_REL = 0.002
+#: Steady force against B v in each block on the 0.39 mm cells of the fixture: 0.20 %
+#: achieved (0.14 % at 0.2 mm cells in the bench).
+FORCE_REL = 0.004
 BLOCKS = [(0.02, 0.05, 100.0), (0.05, 0.08, 80.0), (0.08, 0.11, 60.0), (0.11, 0.14, 40.0),
           (0.14, 0.17, 20.0)]
 
@@ -25,13 +31,14 @@ def cut_across_all_blocks(variable_rate, drive):
 
 
 def test_steady_force_in_each_block_is_b_v(cut_across_all_blocks) -> None:
-    _, _, positions, results = cut_across_all_blocks
-    x = positions[:, 0]
+    _, _, _, results = cut_across_all_blocks
+    # where the proxy cuts at full depth, 6 mm (three settling times) into the block
+    x = np.array([r.proxy_position_m[0, 0] for r in results])
     force = np.array([r.force_N[0] for r in results])
     for start, end, damping in BLOCKS:
-        steady = (x > start + 0.008) & (x < end - 0.008)
+        steady = (x > start + 0.0055 + 0.006) & (x < end - 0.0055)
         mean = force[steady].mean(axis=0)
-        assert mean[0] == pytest.approx(damping * SPEED_M_S, rel=0.05), (damping, mean)
+        assert mean[0] == pytest.approx(damping * SPEED_M_S, rel=FORCE_REL), (damping, mean)
         assert abs(mean[1]) < 1e-9
         # the force pushes the clay along the tool's velocity: the clay's reaction opposes it
         assert (force[steady, 0] > 0).all()
@@ -77,7 +84,8 @@ def test_force_follows_the_velocity_on_both_axes(variable_rate, drive) -> None:
     _, results = drive(clay, state, start, velocity, int(0.018 / (speed * SAMPLE_PERIOD_S)))
     late = np.array([r.force_N for r in results[-200:]]).mean(axis=0)
     expected_damping = np.array([80.0, 60.0, 40.0])
-    np.testing.assert_allclose(late, expected_damping[:, None] * velocity, rtol=0.05, atol=1e-9)
+    # 0.35 % at most here (0.31-0.39 mm cells, cuts along y and diagonal)
+    np.testing.assert_allclose(late, expected_damping[:, None] * velocity, rtol=0.006, atol=1e-9)
 
 
 def test_start_inside_the_clay_gives_no_force_spike(variable_rate) -> None:
@@ -182,3 +190,88 @@ def test_device_auto_picks_cuda_only_when_present() -> None:
     assert resolve_device("cpu") == "cpu"
     with pytest.raises(ValueError, match="implementation"):
         make_clay(load_scenario("constant-rate"), SAMPLE_PERIOD_S, "taichi")
+
+
+SHALLOW_SCENARIO = """
+[scenario]
+name = "shallow"
+description = "three blocks cut at a fraction of the reference depth"
+environment = "clay"
+[grid]
+x_range_m = [0.0, 0.14]
+y_range_m = [-0.025, 0.025]
+cells_x = 1400
+cells_y = 500
+[tool]
+radius_m = 0.005
+bottom_height_m = 0.007
+reference_depth_m = 0.003
+edge_width_m = 0.001
+max_speed_m_s = 0.5
+start_position_m = [0.0, 0.0]
+[operator]
+handle_force_N = [3.0, 0.0]
+[workpiece]
+blocks = ["a", "b", "c"]
+[blocks.a]
+shape = "box"
+x_range_m = [0.02, 0.12]
+y_range_m = [-0.024, -0.008]
+height_m = 0.0075
+damping_N_s_per_m = 100.0
+[blocks.b]
+shape = "box"
+x_range_m = [0.02, 0.12]
+y_range_m = [-0.008, 0.008]
+height_m = 0.0085
+damping_N_s_per_m = 60.0
+[blocks.c]
+shape = "box"
+x_range_m = [0.02, 0.12]
+y_range_m = [0.008, 0.024]
+height_m = 0.0095
+damping_N_s_per_m = 30.0
+"""
+
+
+def analytic_engagement(depth_m: float, radius_m: float, reference_depth_m: float,
+                        edge_width_m: float) -> float:
+    """Engagement of a steady straight cut ``depth_m`` deep: the groove's cross-section over
+    the reference's 2 R d_ref. Across the path at offset y the tool's lowest point is its
+    surface at distance |y| from the axis, so the groove is depth_m deep out to R - w/2 and
+    max(0, depth_m - d_ref S(u)) over the chamfer, S the smoothstep, u = (|y| - R + w/2)/w."""
+    from scipy.integrate import quad
+    from scipy.optimize import brentq
+
+    def smoothstep(u: float) -> float:
+        return u * u * (3.0 - 2.0 * u)
+
+    ratio = depth_m / reference_depth_m
+    reach = 1.0 if ratio >= 1.0 else brentq(lambda u: smoothstep(u) - ratio, 0.0, 1.0)
+    chamfer, _ = quad(lambda u: depth_m - reference_depth_m * smoothstep(u), 0.0, reach)
+    area = 2.0 * ((radius_m - 0.5 * edge_width_m) * depth_m + edge_width_m * chamfer)
+    return area / (2.0 * radius_m * reference_depth_m)
+
+
+def test_partial_engagement_matches_its_analytic_value(tmp_path, drive) -> None:
+    """Blocks 0.5, 1.5 and 2.5 mm above the tool's bottom (d_ref = 3 mm): the engagement and
+    the force B e v of a steady cut against the groove's analytic cross-section."""
+    path = tmp_path / "shallow.toml"
+    path.write_text(SHALLOW_SCENARIO)
+    scenario = load_scenario(str(path))
+    clay = WarpClay(scenario, SAMPLE_PERIOD_S, device="cpu")
+    state = clay.initial_state(3)
+    start = np.array([[0.0, -0.016], [0.0, 0.0], [0.0, 0.016]])
+    positions, results = drive(clay, state, start, [[SPEED_M_S, 0.0]] * 3,
+                               int(0.11 / (SPEED_M_S * SAMPLE_PERIOD_S)))
+    proxy = np.array([r.proxy_position_m[:, 0] for r in results])
+    tool = scenario.tool
+    for lane, (depth, damping) in enumerate(((0.0005, 100.0), (0.0015, 60.0), (0.0025, 30.0))):
+        expected = analytic_engagement(depth, tool.radius_m, tool.reference_depth_m,
+                                       tool.edge_width_m)
+        steady = (proxy[:, lane] > 0.02 + 0.0055 + 0.006) & (proxy[:, lane] < 0.12 - 0.0055)
+        engagement = np.array([r.engagement[lane] for r in results])[steady].mean()
+        force = np.array([r.force_N[lane, 0] for r in results])[steady].mean()
+        assert 0.15 < expected < 0.85
+        assert engagement == pytest.approx(expected, rel=ENGAGEMENT_REL), (depth, engagement)
+        assert force == pytest.approx(damping * expected * SPEED_M_S, rel=ENGAGEMENT_REL)
