@@ -7,9 +7,9 @@ One tick at Ts (docs/programs.md):
    the master's compensator used, the handle position, the master's flags);
 2. the watchdog (fresh? silence? master alive?). In its safe states (``waiting`` at start,
    ``tripped``, ``resyncing``) the node is halted (``SlaveNode.safe_stop``: the tool stops, no
-   force goes back) and, on every fresh message, re-synchronised to the received handle
-   position (``SlaveNode.resync``: tool at Ah1 yh at rest); ``in_sync`` is then
-   |yt - Ah1 yh| below the tolerance. Back to ``ok``: ``SlaveNode.resume``;
+   force goes back) and, on every fresh message, brought towards the received handle
+   position (``ToolResync.step``: through the clay at a bounded speed, cutting); ``in_sync``
+   is then |yt - Ah1 yh| below the tolerance. Back to ``ok``: ``SlaveNode.resume``;
 3. ``node.step(fh_recv, yh_recv)``: the tool moves and cuts the clay;
 4. ``link.send_tool(ft, yt, vt, engagement, removed volume, flags)``.
 
@@ -49,6 +49,7 @@ from haptic.common.summary import format_summary, make_summary, write_json_summa
 from haptic.common.trace import TraceRecorder
 from haptic.common.watchdog import PeerWatchdog, WatchdogState
 from haptic.slave_sim.node import SlaveNode
+from haptic.slave_sim.resync import ToolResync
 from haptic.slave_sim.scenario import load_scenario
 
 #: The stages of one tick, in order (the summary's ``stages``).
@@ -236,6 +237,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     tolerance = args.sync_tolerance
     state = node.initial_state(1)
     node.safe_stop(state)
+    resync = ToolResync(node)  # to the handle through the clay at a bounded speed
     stages = StageTimes(TICK_STAGES)
     zero_force = np.zeros((1, 2))
     path_every = max(1, args.trace_every)
@@ -303,7 +305,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 flags_box["master_enabled"] = Flags.FORCES_ENABLED in handle.flags
             running_before = flags_box["running"]
             if not running_before and fresh and not flags_box["outside"]:
-                node.resync(state, yh)  # follow the (held) handle while not running
+                resync.step(state, yh)  # follow the (held) handle, cutting (resync.py)
             hx, hy = yh_row[0].tolist()
             tool_row = state.tool[0]
             in_sync = (abs(tool_row[0] - rx * hx) < tolerance
