@@ -34,10 +34,10 @@ from typing import Any
 import numpy as np
 
 from haptic.common.config import load_config
+from haptic.common.config.scenario import Scenario, load_scenario
 from haptic.common.model import model_from_config
 from haptic.slave_sim.clay import make_clay
 from haptic.slave_sim.node import SlaveNode
-from haptic.slave_sim.scenario import Scenario, load_scenario
 
 GRIDS = ((256, 64), (1024, 256), (2048, 512))
 BUDGET_S = 0.00054

@@ -549,17 +549,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def period_config(folder: Path, period_s: float) -> Path:
-    """A configuration file that sets only the sample period (the rest of ``[model]`` as
-    shipped: a file replaces whole tables)."""
-    from haptic.common.config import load_config
-
-    model = load_config()["model"]
+    """A configuration file that sets only the sample period, s (every other key keeps its
+    default: a file is merged over the defaults key by key)."""
     path = folder / "period.toml"
-    path.write_text(
-        "[model]\n"
-        f"sample_period_s = {period_s!r}\n"
-        f"position_ratio_ah1 = {json.dumps(model['position_ratio_ah1'])}\n"
-        f"force_ratio_ah2 = {json.dumps(model['force_ratio_ah2'])}\n")
+    path.write_text(f"[model]\nsample_period_s = {period_s!r}\n")
     return path
 
 

@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 
 from haptic.common.analysis.report import Analysis, AnalysisSettings, analyse
-from haptic.common.config import ConfigError, exit_on_config_error, load_config
+from haptic.common.cli_options import add_retired_delay_option
+from haptic.common.config import ConfigError, exit_on_config_error, load_config, to_toml
 from haptic.common.model import TeleopModel, model_from_config
 from haptic.common.summary import json_safe
 from haptic.common.synthesis import SynthesisError
@@ -30,12 +31,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--config", type=Path, help="TOML configuration (default: the paper's)")
     parser.add_argument("--k", type=float, help="gain k of Ch1 = k num/den (default: config)")
-    parser.add_argument("--delay", type=float, metavar="SECONDS",
+    parser.add_argument("--round-trip-delay", dest="delay", type=float, metavar="S",
                         help="round-trip network delay tau, s (default: config)")
-    parser.add_argument("--sampled", action="store_true",
+    add_retired_delay_option(parser)
+    parser.add_argument("--sampled-analysis", dest="sampled", action="store_true",
                         help="analyse the sampled loop at Ts (ZOH, one sample of compute delay)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--plot", type=Path, metavar="DIR", help="write PNG plots into DIR")
+    parser.add_argument("--print-config", action="store_true",
+                        help="print the merged configuration (the defaults with --config over "
+                        "them) as TOML and exit")
     return parser
 
 
@@ -117,12 +122,16 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     with exit_on_config_error():
         config = load_config(args.config)
+        if args.print_config:
+            print(to_toml(config), end="")
+            return 0
         model = model_from_config(config)
         if args.k is not None:
             model = model.with_gain(args.k)
         delay_s = config["analysis"]["round_trip_delay_s"] if args.delay is None else args.delay
         if not (math.isfinite(delay_s) and delay_s >= 0.0):
-            raise ConfigError("--delay", f"must be a finite number >= 0 s (got {delay_s})")
+            raise ConfigError("--round-trip-delay",
+                              f"must be a finite number >= 0 s (got {delay_s})")
         settings = _settings(config, model, args.sampled)
         try:
             analysis = analyse(model, model.ch1_gain_k, delay_s, settings)

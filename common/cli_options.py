@@ -5,7 +5,7 @@ on the parsed arguments. Order of precedence, lowest first: the shipped defaults
 file of ``--config``, then the flags. For Zenoh itself: the ``--zenoh-config`` json5 file,
 then the ``[link]`` settings and connection flags, then every ``--zenoh-set KEY=VALUE``.
 
-Injection flags (``--delay``, ``--jitter``, ``--loss`` ...) set what *this side's receiving*
+Injection flags (``--one-way-delay``, ``--jitter``, ``--loss`` ...) set what *this side's receiving*
 link injects, one way (``[link.<side>.injection]``). Every invalid value raises a
 :class:`~haptic.common.config.ConfigError` naming the flag and the key; wrap the call in
 :func:`~haptic.common.config.exit_on_config_error` to exit with status 2 and one line.
@@ -35,7 +35,7 @@ from haptic.common.runner_config import RunnerSettings, runner_settings_from
 
 # flag dest -> key under [link.<side>.injection]
 _INJECTION_FLAGS = {
-    "delay": ("--delay", "delay_s"),
+    "delay": ("--one-way-delay", "delay_s"),
     "jitter": ("--jitter", "jitter_s"),
     "jitter_distribution": ("--jitter-distribution", "jitter_distribution"),
     "loss": ("--loss", "loss_probability"),
@@ -159,10 +159,28 @@ def add_connection_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+class _RetiredDelayOption(argparse.Action):
+    """``--delay``: refused with the two options that say which delay is meant."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        parser.error("--delay is ambiguous and not accepted: use --one-way-delay S (each "
+                     "direction, what a receiving link injects) or --round-trip-delay S "
+                     "(tau, both directions together, what the analysis and haptic-sim take)")
+
+
+def add_retired_delay_option(parser: Any) -> None:
+    """Refuse a bare ``--delay`` (it meant the round trip in some programs and one way in
+    others) with an error naming ``--one-way-delay`` and ``--round-trip-delay``."""
+    parser.add_argument("--delay", action=_RetiredDelayOption, help=argparse.SUPPRESS)
+
+
 def add_injection_options(parser: argparse.ArgumentParser) -> None:
     """What this side's receiving link injects, one way (``[link.<side>.injection]``)."""
     group = parser.add_argument_group("injected impairment (this side's receiving link)")
-    group.add_argument("--delay", metavar="S", type=float, help="one-way delay, s")
+    group.add_argument("--one-way-delay", dest="delay", metavar="S", type=float,
+                       help="one-way delay of the messages this side receives, s")
+    add_retired_delay_option(group)
     group.add_argument("--jitter", metavar="S", type=float, help="extra delay in [0, S], s")
     group.add_argument("--jitter-distribution", choices=JITTER_DISTRIBUTIONS)
     group.add_argument("--loss", metavar="P", type=float, help="independent loss probability")

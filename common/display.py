@@ -190,7 +190,7 @@ class DisplayPublisher:
                 if now >= next_clay:
                     next_clay = now + self._clay_period_s
                     started = time.perf_counter()
-                    from haptic.slave_sim.clay_view import downsample_heights, heights_to_bytes
+                    from haptic.common.heightmap_codec import downsample_heights, heights_to_bytes
 
                     heights = self._clay_source()
                     if heights is not None:

@@ -11,10 +11,10 @@ The round-trip delay analysed is
           + 2 x assumed network one-way delay (``--assumed-link-delay``, default 0.5 ms)
 
 with this side's injection from its flags and the other side's from the configuration (the
-two programs should share one configuration file), or from ``--peer-delay S`` when given (the
-one-way delay plus jitter the peer's receiving link injects, for the analysis only). 0.5 ms
-one way is above the loopback p99 measured in docs/link.md (tens to a few hundred us); on
-two hosts pass the measured figure. Only the verdict and the delay margin
+two programs should share one configuration file), or from ``--peer-one-way-delay S`` when
+given (the one-way delay plus jitter the peer's receiving link injects, for the analysis
+only). 0.5 ms one way is above the loopback p99 measured in docs/link.md (tens to a few
+hundred us); on two hosts pass the measured figure. Only the verdict and the delay margin
 are computed (the continuous model by default, ``--sampled-analysis`` for the sampled-data
 loop at Ts): no gain searches, so it takes tens of milliseconds; ``haptic-analyze`` gives the
 full report.
@@ -94,7 +94,7 @@ def add_preflight_options(parser: argparse.ArgumentParser) -> None:
                        "B s with the scenario's largest block damping")
     group.add_argument("--sampled-analysis", action="store_true",
                        help="analyse the sampled-data loop at Ts instead of the continuous model")
-    group.add_argument("--peer-delay", metavar="S", type=float,
+    group.add_argument("--peer-one-way-delay", dest="peer_delay", metavar="S", type=float,
                        help="the one-way delay (plus jitter) the peer injects on this side's "
                        "messages, s, for the analysis (default: the peer's [link.<peer>."
                        "injection] in the configuration)")
@@ -165,9 +165,9 @@ def run_preflight(config: dict[str, Any], args: argparse.Namespace, program: str
     """Analyse, print the verdict line to ``stream`` (stderr) and return the result and
     ``None`` to go on, or :data:`EXIT_UNSTABLE` when the loop is unstable and
     ``--allow-unstable`` was not given (one line saying why is printed). ``side`` is the
-    program's (for ``--peer-delay``); ``clay_damping_N_s_per_m`` the scenario's largest block
-    damping (for ``--analysis-environment clay``). Raises :class:`ConfigError` for a bad
-    flag."""
+    program's (for ``--peer-one-way-delay``); ``clay_damping_N_s_per_m`` the scenario's
+    largest block damping (for ``--analysis-environment clay``). Raises
+    :class:`ConfigError` for a bad flag."""
     stream = stream if stream is not None else sys.stderr
     assumed = getattr(args, "assumed_link_delay", DEFAULT_ASSUMED_LINK_DELAY_S)
     if not (math.isfinite(assumed) and assumed >= 0.0):
@@ -175,7 +175,7 @@ def run_preflight(config: dict[str, Any], args: argparse.Namespace, program: str
                           f"must be a finite number >= 0 s (got {assumed})")
     peer = getattr(args, "peer_delay", None)
     if peer is not None and not (math.isfinite(peer) and peer >= 0.0):
-        raise ConfigError("--peer-delay", f"must be a finite number >= 0 s (got {peer})")
+        raise ConfigError("--peer-one-way-delay", f"must be a finite number >= 0 s (got {peer})")
     tau = round_trip_delay_s(config, assumed, side, peer)
     analysed = config
     environment = ""

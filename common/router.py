@@ -4,10 +4,10 @@ zenohd (the Zenoh project's router binary) is not a PyPI package; this runs the 
 from the eclipse-zenoh wheel, with the same json5 configuration files (deploy/zenoh/), so
 either can serve the deployment::
 
-    haptic-router --config deploy/zenoh/router.json5
+    haptic-router --zenoh-config deploy/zenoh/router.json5
     haptic-router --listen tcp/0.0.0.0:7447 [--zenoh-set KEY=VALUE ...]
 
-``--config`` is loaded first, then ``--listen`` (replaces ``listen/endpoints``), then every
+``--zenoh-config`` is loaded first, then ``--listen`` (replaces ``listen/endpoints``), then every
 ``--zenoh-set`` (json5 value). Mode is always ``router``. Runs until SIGINT or SIGTERM, then
 closes its session and exits 0; a configuration Zenoh rejects exits 2 with one line.
 """
@@ -45,10 +45,11 @@ def router_config(
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="haptic-router", description=__doc__.splitlines()[0])
-    parser.add_argument("--config", metavar="FILE", help="Zenoh json5 configuration file")
+    parser.add_argument("--zenoh-config", metavar="FILE",
+                        help="Zenoh json5 configuration file (as --zenoh-config of the programs)")
     parser.add_argument(
         "--listen", action="append", default=[], metavar="ENDPOINT",
-        help=f"endpoint to listen on (repeatable; default {DEFAULT_LISTEN} without --config)",
+        help=f"endpoint to listen on (repeatable; default {DEFAULT_LISTEN} without --zenoh-config)",
     )
     parser.add_argument(
         "--zenoh-set", action="append", default=[], metavar="KEY=VALUE",
@@ -56,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     try:
-        config = router_config(args.config, args.listen, args.zenoh_set)
+        config = router_config(args.zenoh_config, args.listen, args.zenoh_set)
     except Exception as error:  # noqa: BLE001 - zenoh raises its own ZError
         print(f"haptic-router: {' '.join(str(error).split())[:240]}", file=sys.stderr)
         return 2

@@ -34,6 +34,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from haptic.common.cli_options import add_retired_delay_option
+
 DEFAULT_OPERATOR = "regulate:fx=3.6,onset=0.2,max=5"
 #: Seconds a child gets after SIGTERM before SIGKILL.
 TERM_GRACE_S = 3.0
@@ -61,8 +63,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="the master's simulated handle: sim (emulated CAN drives and "
                         "sensor, default) or model (the rig block, no bus)")
     parser.add_argument("--k", type=float, help="gain k of Ch1 (both programs)")
-    parser.add_argument("--delay", type=float, metavar="S",
+    parser.add_argument("--one-way-delay", dest="delay", type=float, metavar="S",
                         help="one-way delay injected in each direction, s")
+    add_retired_delay_option(parser)
     parser.add_argument("--allow-unstable", action="store_true",
                         help="pass --allow-unstable to both programs")
     parser.add_argument("--master-args", default="", help="extra master arguments (one string)")
@@ -93,7 +96,7 @@ def run_session(args: argparse.Namespace) -> int:
         common += ["--k", repr(args.k)]
     if args.delay is not None:
         # each side injects it on what it receives; each side's analysis counts both
-        common += ["--delay", repr(args.delay), "--peer-delay", repr(args.delay)]
+        common += ["--one-way-delay", repr(args.delay), "--peer-one-way-delay", repr(args.delay)]
     if args.allow_unstable:
         common.append("--allow-unstable")
     files = {"master": out / "master.json", "slave": out / "slave.json"}
@@ -107,7 +110,7 @@ def run_session(args: argparse.Namespace) -> int:
                   "--json-summary", str(files["slave"]), *shlex.split(args.slave_args)],
         "master": [sys.executable, "-m", "haptic.master.cli", *common,
                    "--duration", repr(args.duration), "--listen", endpoint, "--rig", args.rig,
-                   "--operator", args.operator, "--trace", str(out / "master_trace.npz"),
+                   "--operator", args.operator, "--out", str(out),
                    "--json-summary", str(files["master"]), *shlex.split(args.master_args)],
     }
     print(f"haptic-session: {args.scenario}, rig {args.rig}, operator {args.operator}, "

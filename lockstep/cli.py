@@ -17,13 +17,14 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.cli_options import add_retired_delay_option
 from haptic.common.config import ConfigError, exit_on_config_error, load_config
+from haptic.common.config.scenario import load_scenario
 from haptic.common.injection import InjectionConfig
 from haptic.common.model import model_from_config
 from haptic.lockstep.simulator import ENVIRONMENTS, TRANSPARENT_SAFETY, LockstepSimulator
 from haptic.master.operator import parse_operator_spec
 from haptic.master.settings import master_settings
-from haptic.slave_sim.scenario import load_scenario
 
 DEFAULT_GAINS = (1.0, 3.0, 5.0, 8.0, 10.0, 13.0, 16.0, 19.0, 25.0, 30.0)
 
@@ -50,8 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--operator", default=None, help="operator spec (default: the "
                      "config's [lockstep] constant_rate_operator)")
     run.add_argument("--k", type=float, default=None, help="Ch1 gain k (default: config)")
-    run.add_argument("--delay", type=float, default=0.0, metavar="SECONDS",
-                     help="round-trip delay, s (rounded to whole samples)")
+    run.add_argument("--round-trip-delay", dest="delay", type=float, default=0.0, metavar="S",
+                     help="round-trip delay tau, s (rounded to whole samples)")
+    add_retired_delay_option(run)
     run.add_argument("--jitter", type=float, default=0.0, metavar="SECONDS",
                      help="jitter bound on each line, s (uniform)")
     run.add_argument("--loss", type=float, default=0.0, help="loss probability per message")
@@ -90,8 +92,8 @@ def _check_seconds(name: str, value: float) -> None:
 
 def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, Any]:
     """Run one scenario; write traces.npz and traces.png; return a summary."""
-    for name in ("--delay", "--jitter"):
-        _check_seconds(name, getattr(args, name[2:]))
+    for name, value in (("--round-trip-delay", args.delay), ("--jitter", args.jitter)):
+        _check_seconds(name, value)
     if not args.duration > 0.0:
         raise ConfigError("--duration", "must be > 0 s")
     if not 0.0 <= args.loss <= 1.0:

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from haptic.common.config.scenario import load_scenario
 from haptic.common.injection import InjectionConfig
 from haptic.common.link import Link
 from haptic.common.link_config import LinkConfig
@@ -28,7 +29,6 @@ from haptic.common.model import TeleopModel
 from haptic.lockstep.simulator import LockstepSimulator
 from haptic.lockstep.sweep import PULSE_FORCE_N, PULSE_SAMPLES, analytic_margin_s
 from haptic.master.operator import parse_operator_spec
-from haptic.slave_sim.scenario import load_scenario
 
 #: Sleep until this long before a tick's deadline, then spin (docs/link.md's pacing).
 SPIN_S = 0.0003

@@ -23,12 +23,12 @@ from typing import Any
 import numpy as np
 
 from haptic.common.analysis.report import AnalysisSettings, analyse
+from haptic.common.config.scenario import load_scenario
 from haptic.common.cutting import cutting_steadiness
 from haptic.common.model import TeleopModel, model_from_config
 from haptic.lockstep.simulator import TRANSPARENT_SAFETY, LockstepSimulator
 from haptic.lockstep.sweep import analytic_margin_s
 from haptic.master.operator import parse_operator_spec
-from haptic.slave_sim.scenario import load_scenario
 
 GAINS = (3.0, 13.0, 19.0)
 #: Force above which the tool counts as in contact with the clay, N.

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.config.scenario import Scenario
 from haptic.common.injection import InjectionConfig
 from haptic.common.lti import DiscreteLTI
 from haptic.common.model import TeleopModel
@@ -41,7 +42,6 @@ from haptic.master.settings import SafetySettings
 from haptic.slave_sim.clay import ClayStepResult
 from haptic.slave_sim.environment import LinearEnvironment, make_environment
 from haptic.slave_sim.node import SlaveNode, slave_compensators
-from haptic.slave_sim.scenario import Scenario
 
 ENVIRONMENTS = ("linear", "clay", "clay+linear")
 

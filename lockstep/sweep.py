@@ -20,13 +20,13 @@ import numpy as np
 
 from haptic.common.analysis.report import AnalysisSettings, axis_loop
 from haptic.common.analysis.stability import delay_margin
+from haptic.common.config.scenario import load_scenario
 from haptic.common.injection import InjectionConfig
 from haptic.common.model import TeleopModel
 from haptic.common.synthesis import SynthesisError
 from haptic.lockstep.simulator import LockstepSimulator
 from haptic.lockstep.verdict import growth_verdict
 from haptic.master.operator import parse_operator_spec
-from haptic.slave_sim.scenario import load_scenario
 
 MODES = ("linear", "clay")
 #: The test pulse of the linear mode: 1 N on both axes for 20 samples (10.8 ms).

@@ -12,6 +12,7 @@ import argparse
 import json
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 import zenoh
 
@@ -51,8 +52,8 @@ def build_parser() -> argparse.ArgumentParser:
                        default=DEFAULT_SYNC_TOLERANCE_M,
                        help="resync: |tool - Ah1 handle| below this on both axes, m "
                        f"(default {DEFAULT_SYNC_TOLERANCE_M:g})")
-    group.add_argument("--trace", metavar="FILE",
-                       help="write a trace (every --trace-every-th tick) as .npz at the end")
+    group.add_argument("--out", metavar="DIR", type=Path,
+                       help="write master_trace.npz (every --trace-every-th tick) here at the end")
     group.add_argument("--trace-every", metavar="N", type=int, default=10)
     alone = parser.add_argument_group("master alone")
     alone.add_argument("--no-link", action="store_true",
@@ -109,8 +110,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     with exit_on_config_error():
         clay = None
         if args.analysis_environment == "clay":
-            from haptic.slave_sim.program import max_block_damping
-            from haptic.slave_sim.scenario import load_scenario
+            from haptic.common.config.scenario import load_scenario, max_block_damping
 
             clay = max_block_damping(load_scenario(options.config["slave"]["scenario"]))
         analysis, refused = run_preflight(options.config, args, "haptic-master", side="master",
@@ -121,7 +121,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         hardware = create_hardware(settings.rig, options.config)
     loop_options = MasterLoopOptions(
         peer_wait_s=args.peer_wait, sync_tolerance_m=args.sync_tolerance,
-        trace_every=args.trace_every, trace_path=args.trace,
+        trace_every=args.trace_every,
+        trace_path=None if args.out is None else str(Path(args.out) / "master_trace.npz"),
         record_path=args.record, record_every=args.record_every, display=args.display,
     )
     return run_linked_master(options, model, node, hardware, loop_options,

@@ -98,6 +98,13 @@ class HandleHardware(ABC):
         its operator model. Not a command: it never moves anything."""
         del tool_force_N
 
+    def present_forces_enabled(self, enabled: bool) -> None:
+        """Whether the master's forces are enabled (the rig's ready lamp). Real hardware may
+        show it to the operator; a simulated rig's operator grasps the handle, and the clock
+        of its script starts, the first time it comes on (a real operator waits for the lamp
+        too). Not a command: it never moves anything."""
+        del enabled
+
     def __enter__(self) -> HandleHardware:
         return self
 

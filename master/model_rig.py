@@ -43,6 +43,7 @@ class ModelRigHardware(HandleHardware):
         self._initial = np.asarray([initial_position_m], float)
         self._rng = rng
         self._state = None
+        self._operator_grasped = False
         self._lifecycle = LifecycleState.UNCONFIGURED
         self._metres_per_count = can.metres_per_count
         self._force_step = tuple(float(v) for v in can.force_scale_N_per_count)
@@ -57,6 +58,7 @@ class ModelRigHardware(HandleHardware):
         if self._lifecycle is not LifecycleState.UNCONFIGURED:
             raise HardwareError(f"configure from {self._lifecycle.value}")
         self._state = self.model.initial_state(self._initial, self._rng)
+        self._operator_grasped = False
         self._lifecycle = LifecycleState.INACTIVE
 
     def activate(self) -> None:
@@ -78,6 +80,10 @@ class ModelRigHardware(HandleHardware):
         state = self._state
         if state is None:
             raise HardwareError("read before configure")
+        if not self._operator_grasped:
+            # the operator waits for the ready lamp: the script's clock has not started
+            state.operator.time_s[0] = 0.0
+            state.operator.integral_N_s[0] = 0.0
         sample = self.model.step_inputs(state)
         target = state.target_m
         target[0, 0] = target[0, 1] = np.nan  # a command is applied at one SYNC only
@@ -102,6 +108,10 @@ class ModelRigHardware(HandleHardware):
     def present_tool_force(self, tool_force_N: np.ndarray) -> None:
         if self._state is not None:
             self._state.tool_force_N[0] = np.asarray(tool_force_N, float).reshape(2)
+
+    def present_forces_enabled(self, enabled: bool) -> None:
+        if enabled:
+            self._operator_grasped = True
 
 
 def _quantise(value: float, step: float, offset_counts: float) -> float:

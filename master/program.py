@@ -36,7 +36,7 @@ import numpy as np
 from haptic.common.cli_options import RunOptions
 from haptic.common.display import DisplayPublisher, EventCursor
 from haptic.common.link import Link
-from haptic.common.messages import Flags, ToolState
+from haptic.common.messages import Flags
 from haptic.common.model import TeleopModel
 from haptic.common.run_recording import RunRecording
 from haptic.common.runner import RealTimeRunner, StopSignals
@@ -44,9 +44,9 @@ from haptic.common.runner_config import place_other_threads, prioritise_zenoh_th
 from haptic.common.stage_times import StageTimes
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
-from haptic.common.watchdog import PeerWatchdog, WatchdogState
 from haptic.master.hardware import HandleHardware, HardwareError
 from haptic.master.node import MasterNode, MasterNodeState, SafetyEvent
+from haptic.master.supervisor import MasterSupervisor, Transition
 
 #: The stages of one tick, in order (the summary's ``stages``).
 TICK_STAGES = ("read", "poll", "supervise", "node", "write", "send", "telemetry")
@@ -89,14 +89,8 @@ class _Loop:
 
     node_state: MasterNodeState | None = None
     node_offset_s: float = 0.0
-    hold_m: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    tool: ToolState | None = None
-    ever_enabled: bool = False
-    enabled: bool = False
     max_force_N: float = 0.0
     node_events: list[dict[str, Any]] = field(default_factory=list)
-    hardware_faults: list[str] = field(default_factory=list)
-    faulted: bool = False
     last_fh: tuple[float, float] = (0.0, 0.0)
     last_ft: tuple[float, float] = (0.0, 0.0)
 
@@ -155,13 +149,15 @@ def _run_linked_master(
     period_s = model.sample_period_s
     ratio = np.array([axis.position_ratio_ah1 for axis in model.axes])
     link_config = options.link
-    watchdog = PeerWatchdog(link_config.max_message_age_s, link_config.resync_messages)
+    supervisor = MasterSupervisor((float(ratio[0]), float(ratio[1])),
+                                  loop_options.sync_tolerance_m, link_config.max_message_age_s,
+                                  link_config.resync_messages)
+    watchdog = supervisor.watchdog
     trace = TraceRecorder(MASTER_TRACE_COLUMNS, loop_options.trace_every)
     loop = _Loop()
     stages = StageTimes(TICK_STAGES)
     zenoh_threads: dict[str, object] = {}
     felt_array = np.zeros(2)
-    tolerance = loop_options.sync_tolerance_m
     realtime_start_ns = 0
     perf_start_ns = 0
     run = None
@@ -187,7 +183,7 @@ def _run_linked_master(
                 zenoh_threads.update(prioritise_zenoh_threads(options.runner))
                 hardware.activate()
                 reading = hardware.read()
-                loop.hold_m = np.nan_to_num(reading.position_m).copy()
+                supervisor.start(reading.position_m)
                 realtime_start_ns = time.time_ns()
                 perf_start_ns = time.perf_counter_ns()
                 if recording is not None:
@@ -200,7 +196,6 @@ def _run_linked_master(
                                                "master").start()
                 view_every = display.state_every(period_s) if display is not None else 1
 
-                rx, ry = float(ratio[0]), float(ratio[1])
                 clock = time.perf_counter_ns
                 zero_force = (0.0, 0.0)
 
@@ -215,40 +210,22 @@ def _run_linked_master(
                     # poll: the newest tool message whose delivery time has come
                     message = link.poll()
                     poll_ns = clock()
-                    # supervise: watchdog, resync check, hardware faults
+                    # supervise: watchdog, resync check, fault latch (master/supervisor.py)
                     now_s = (now_ns - perf_start_ns) * 1e-9
-                    fresh = message is not None
-                    if fresh:
-                        loop.tool = message
-                    tool = loop.tool
-                    in_sync = False
-                    if tool is not None and Flags.FORCES_ENABLED in tool.flags:
-                        tx, ty = tool.tool_position_m
-                        in_sync = (abs(tx - rx * yhx) < tolerance
-                                   and abs(ty - ry * yhy) < tolerance)
-                    wd_state = watchdog.update(now_s, fresh, link.silence_s(), in_sync,
-                                               link.peer_alive)
-                    if reading.faults:
-                        # A hardware fault latches the safe state for the rest of the run.
-                        loop.hardware_faults.extend(
-                            f"cycle {reading.cycle}: {f}" for f in reading.faults)
-                        if not loop.faulted:
-                            loop.faulted = True
-                            loop.node_events.append({
-                                "time_s": now_s, "kind": "node_trip",
-                                "reason": "hardware: " + "; ".join(reading.faults)})
-                    enabled = wd_state is WatchdogState.OK and not loop.faulted
-                    if enabled != loop.enabled:
-                        if enabled:
-                            _flush_node_events(loop)
-                            position = np.nan_to_num(reading.position_m)[None, :]
-                            loop.node_state = (node.resume(position) if loop.ever_enabled
-                                               else node.activate(position))
-                            loop.node_offset_s = now_s
-                            loop.ever_enabled = True
-                        else:
-                            loop.hold_m = np.nan_to_num(reading.position_m).copy()
-                        loop.enabled = enabled
+                    transition = supervisor.update(now_s, message, (yhx, yhy), reading.faults,
+                                                   reading.cycle, link.silence_s(),
+                                                   link.peer_alive)
+                    if transition is not Transition.NONE:
+                        hardware.present_forces_enabled(supervisor.enabled)
+                    if transition is Transition.ACTIVATE or transition is Transition.RESUME:
+                        _flush_node_events(loop)
+                        position = np.nan_to_num(reading.position_m)[None, :]
+                        loop.node_state = (node.activate(position)
+                                           if transition is Transition.ACTIVATE
+                                           else node.resume(position))
+                        loop.node_offset_s = now_s
+                    enabled = supervisor.enabled
+                    tool = supervisor.tool
                     supervise_ns = clock()
                     # node: vh = Ch1 fh - Ct1 ft behind the safety layer, or the safe state
                     if enabled:
@@ -257,14 +234,14 @@ def _run_linked_master(
                         state.inputs[0] = (fhx, fhy, yhx, yhy, ftx, fty)
                         command = node.step_inputs(state)[0]
                         if state.faulted[0]:
-                            loop.faulted = True
+                            supervisor.note_node_fault()
                         # what the compensator used: saturated, scaled by the force ramp (the
                         # slave's Ch2 integrates exactly this force)
                         sent = state.handle_force_used_N[0].tolist()
                         felt = state.tool_force_used_N[0].tolist()
                         flags = Flags.FORCES_ENABLED
                     else:
-                        command = loop.hold_m
+                        command = supervisor.hold_m
                         sent = felt = zero_force
                         flags = Flags.SAFE_STATE
                     node_ns = clock()
@@ -311,7 +288,8 @@ def _run_linked_master(
                         figures["watchdog_state"] = watchdog.state.value
                         figures["watchdog_trips"] = watchdog.trips
                         figures["forces_enabled"] = enabled
-                        new_events = cursor.new((watchdog.events, loop.node_events))
+                        new_events = cursor.new((watchdog.events, supervisor.events,
+                                                 loop.node_events))
                         if recording is not None:
                             recording.status(now_ns, figures, new_events)
                         if display is not None:
@@ -362,16 +340,17 @@ def _run_linked_master(
         return status_code or 1
     for event in presence:
         event["time_s"] = event["time_s"] - realtime_start_ns * 1e-9
-    events = [e.as_dict() for e in watchdog.events] + loop.node_events + presence
+    events = ([e.as_dict() for e in watchdog.events] + supervisor.events + loop.node_events
+              + presence)
     events.sort(key=lambda e: e["time_s"])
-    if loop.faulted:
+    if supervisor.faulted:
         status_code = 1
     summary = make_summary(
         run.as_summary(), link_summary, max_abs_force_N=loop.max_force_N,
         watchdog_trips=watchdog.trips, events=events, side="master",
         watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
-        hardware_faults=loop.hardware_faults[:50],
-        node_faulted=loop.faulted, stages=stages.summary(), **zenoh_threads,
+        hardware_faults=supervisor.hardware_faults[:50],
+        node_faulted=supervisor.faulted, stages=stages.summary(), **zenoh_threads,
         **(extra_summary or {}),
     )
     if display is not None:

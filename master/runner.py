@@ -63,6 +63,7 @@ def run_master(
     period_s = node.period_s
     hardware.configure()
     hardware.activate()
+    hardware.present_forces_enabled(True)  # alone, the master's forces are on from the start
     reading = hardware.read()
     state = node.activate(reading.position_m[None, :])
     faults: list[str] = []

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.config.scenario import Scenario
 from haptic.slave_sim.clay_numpy import (
     ContactConstants,
     GeometryConstants,
@@ -35,7 +36,6 @@ from haptic.slave_sim.clay_numpy import (
     window_starts,
     yield_numpy,
 )
-from haptic.slave_sim.scenario import Scenario
 from haptic.slave_sim.workpiece import NO_BLOCK, Workpiece, build_workpiece
 
 CLAY_IMPLEMENTATIONS = ("warp", "numpy")

@@ -13,9 +13,9 @@ from typing import Any
 import numpy as np
 
 from haptic.common.config import ConfigError
+from haptic.common.config.scenario import ENVIRONMENT_KINDS, Scenario
 from haptic.common.model import TeleopModel, polynomial_degree
 from haptic.slave_sim.clay import ClayStepResult, make_clay
-from haptic.slave_sim.scenario import ENVIRONMENT_KINDS, Scenario
 
 
 class LinearEnvironment:

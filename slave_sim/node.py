@@ -20,11 +20,11 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.config.scenario import Scenario, load_scenario
 from haptic.common.lti import DiscreteLTI, Path, combine, discretize
 from haptic.common.model import TeleopModel, model_from_config
 from haptic.common.synthesis import synthesize
 from haptic.slave_sim.environment import make_environment
-from haptic.slave_sim.scenario import Scenario, load_scenario
 from haptic.slave_sim.tool import POSITION_COLUMNS, VELOCITY_COLUMNS, tool_constants, tool_plant
 
 COMPENSATOR_INPUTS = ("fh_x", "fh_y", "ft_x", "ft_y")

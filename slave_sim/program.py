@@ -36,6 +36,8 @@ import zenoh
 
 from haptic.common.cli_options import add_run_options, run_options_from_args
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
+from haptic.common.config.scenario import load_scenario, max_block_damping
+from haptic.common.cutting_metrics import cutting_figures
 from haptic.common.display import DisplayPublisher, EventCursor
 from haptic.common.link import Link
 from haptic.common.messages import Flags, HandleState
@@ -47,10 +49,9 @@ from haptic.common.runner_config import place_other_threads, prioritise_zenoh_th
 from haptic.common.stage_times import StageTimes
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
-from haptic.common.watchdog import PeerWatchdog, WatchdogState
 from haptic.slave_sim.node import SlaveNode
 from haptic.slave_sim.resync import ToolResync
-from haptic.slave_sim.scenario import load_scenario
+from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
 
 #: The stages of one tick, in order (the summary's ``stages``).
 TICK_STAGES = ("poll", "supervise", "node", "send", "telemetry")
@@ -177,7 +178,8 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
 def _record_clay(recording: RunRecording, state: Any, log_time_ns: int,
                  layout: bool) -> None:
     """The workpiece's layout (once) and its reduced height map into the recording."""
-    from haptic.slave_sim.clay_view import heights_message, reduction_factors, workpiece_layout
+    from haptic.common.heightmap_codec import reduction_factors
+    from haptic.slave_sim.clay_view import heights_message, workpiece_layout
 
     clay = state.environment
     grid = clay.workpiece.grid
@@ -200,7 +202,8 @@ def _display_publisher(link: Link, node: SlaveNode, state: Any,
     clay_source = layout = on_clay = None
     factors = (1, 1)
     if node.environment_kind == "clay":
-        from haptic.slave_sim.clay_view import reduction_factors, workpiece_layout
+        from haptic.common.heightmap_codec import reduction_factors
+        from haptic.slave_sim.clay_view import workpiece_layout
 
         clay = state.environment
         grid = clay.workpiece.grid
@@ -232,9 +235,16 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     period_s = node.sample_period_s
     phase_lock = phase_lock_from(options.config, period_s)
     link_config = options.link
-    watchdog = PeerWatchdog(link_config.max_message_age_s, link_config.resync_messages)
+    grid = node.scenario.grid
+    margin = WORK_AREA_MARGIN_M
+    ratio = node.position_ratio
+    supervisor = SlaveSupervisor(
+        (float(ratio[0]), float(ratio[1])), args.sync_tolerance,
+        (grid.x_range_m[0] - margin, grid.x_range_m[1] + margin,
+         grid.y_range_m[0] - margin, grid.y_range_m[1] + margin),
+        link_config.max_message_age_s, link_config.resync_messages)
+    watchdog = supervisor.watchdog
     trace = TraceRecorder(SLAVE_TRACE_COLUMNS, args.trace_every)
-    tolerance = args.sync_tolerance
     state = node.initial_state(1)
     node.safe_stop(state)
     resync = ToolResync(node)  # to the handle through the clay at a bounded speed
@@ -244,13 +254,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     tool_path: list[tuple[float, float]] = []
     fh = np.zeros((1, 2))
     yh = state.handle_position_m.copy()
-    flags_box = {"running": False, "master_enabled": False, "max_force": 0.0,
-                 "ft": np.zeros(2), "engagement": 0.0, "removed": 0.0, "outside": False}
-    grid = node.scenario.grid
-    margin = WORK_AREA_MARGIN_M
-    x_low, x_high = grid.x_range_m[0] - margin, grid.x_range_m[1] + margin
-    y_low, y_high = grid.y_range_m[0] - margin, grid.y_range_m[1] + margin
-    events: list[dict[str, Any]] = []
+    flags_box = {"max_force": 0.0, "ft": np.zeros(2), "engagement": 0.0, "removed": 0.0}
     run = None
     zenoh_threads: dict[str, object] = {}
     with StopSignals() as signals, Link(link_config) as link:
@@ -282,7 +286,6 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         view_every = display.state_every(period_s) if display is not None else 1
 
         clock = time.perf_counter_ns
-        rx, ry = (float(v) for v in node.position_ratio)
         fh_row, yh_row = fh, yh  # the newest handle message, updated in place
 
         def step(tick: int, now_ns: int) -> None:
@@ -290,7 +293,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             # poll: the newest handle message whose delivery time has come
             message = link.poll()
             poll_ns = clock()
-            # supervise: phase lock, watchdog, resync, work-area guard
+            # supervise: phase lock, watchdog, resync, work-area guard (slave_sim/supervisor.py)
             fresh = message is not None
             if fresh and phase_lock is not None:
                 if link.last_delivery_measured:
@@ -302,41 +305,16 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 handle: HandleState = message
                 fh_row[0] = handle.handle_force_N
                 yh_row[0] = handle.handle_position_m
-                flags_box["master_enabled"] = Flags.FORCES_ENABLED in handle.flags
-            running_before = flags_box["running"]
-            if not running_before and fresh and not flags_box["outside"]:
+            if supervisor.receive(message):
                 resync.step(state, yh)  # follow the (held) handle, cutting (resync.py)
-            hx, hy = yh_row[0].tolist()
             tool_row = state.tool[0]
-            in_sync = (abs(tool_row[0] - rx * hx) < tolerance
-                       and abs(tool_row[2] - ry * hy) < tolerance)  # |yt - Ah1 yh| per axis
-            wd_state = watchdog.update(now_s, fresh, link.silence_s(), in_sync,
-                                       link.peer_alive)
-            ready = wd_state is WatchdogState.OK
-            master_enabled = flags_box["master_enabled"]
-            if not (ready and master_enabled):
-                flags_box["outside"] = False  # a resync cycle ends the work-area stop
-            elif not flags_box["outside"]:
-                tx, ty = state.tool[0, 0], state.tool[0, 2]
-                if not (x_low <= tx <= x_high and y_low <= ty <= y_high):
-                    # The work area's guard: the tool stops at its edge until a resync.
-                    flags_box["outside"] = True
-                    events.append({"time_s": now_s, "kind": "tool_stopped",
-                                   "reason": f"tool left the work area at ({tx:.4f}, "
-                                   f"{ty:.4f}) m"})
-            running = ready and master_enabled and not flags_box["outside"]
-            if running and not running_before:
+            transition = supervisor.update(now_s, fresh, (tool_row[0], tool_row[2]),
+                                           link.silence_s(), link.peer_alive)
+            if transition is Transition.RESUME:
                 node.resume(state)
-                events.append({"time_s": now_s, "kind": "tool_resumed",
-                               "reason": "positions in sync and the master's forces enabled"})
-            elif running_before and not running:
+            elif transition is Transition.STOP:
                 node.safe_stop(state)
-                if not flags_box["outside"]:
-                    reason = (f"watchdog {wd_state.value}" if not ready
-                              else "the master is in its safe state")
-                    events.append({"time_s": now_s, "kind": "tool_stopped",
-                                   "reason": f"{reason}: the tool stops"})
-            flags_box["running"] = running
+            running = supervisor.running
             supervise_ns = clock()
             # node: Ch2/Ct2, the tool and the clay
             out = node.step(state, fh if running else zero_force, yh)
@@ -347,7 +325,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             removed = _removed_total_m3(state)
             # FORCES_ENABLED: this side is ready (link in sync, tool at the handle or running);
             # the master enables its forces on it, the slave runs once the master has.
-            ready_flag = ready and not flags_box["outside"]
+            ready_flag = supervisor.ready
             flags = Flags.FORCES_ENABLED if ready_flag else Flags.SAFE_STATE
             if out.cutting[0]:
                 flags |= Flags.IN_CONTACT
@@ -391,7 +369,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 figures["watchdog_state"] = watchdog.state.value
                 figures["watchdog_trips"] = watchdog.trips
                 figures["running"] = running
-                new_events = cursor.new((watchdog.events, events))
+                new_events = cursor.new((watchdog.events, supervisor.events))
                 if recording is not None:
                     recording.status(now_ns, figures, new_events)
                 if display is not None:
@@ -423,7 +401,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         presence = [e.as_dict() for e in link.presence_events]
     for event in presence:
         event["time_s"] = event["time_s"] - realtime_start_ns * 1e-9
-    all_events = [e.as_dict() for e in watchdog.events] + events + presence
+    all_events = [e.as_dict() for e in watchdog.events] + supervisor.events + presence
     all_events.sort(key=lambda e: e["time_s"])
     final = state.tool_position_m()[0]
     summary = make_summary(
@@ -472,46 +450,6 @@ def _removed_total_m3(state: Any) -> float:
     """Clay removed since the start, m^3 (0 for the linear environment)."""
     total = getattr(state.environment, "removed_total_m3", None)
     return 0.0 if total is None else float(total[0])
-
-
-def max_block_damping(scenario: Any) -> float | None:
-    """The largest block damping of a scenario, N s/m (``None`` without blocks)."""
-    values = [block.damping_N_s_per_m for block in scenario.blocks]
-    return max(values) if values else None
-
-
-def cutting_figures(trace: dict[str, np.ndarray]) -> dict[str, Any]:
-    """Figures of the cut from the trace, over the span from the first to the last traced
-    sample that removed clay with forces enabled: its duration (s), the time-averaged tool
-    force magnitude (N) and received handle force x (N), and the mean speed (distance over
-    time, m/s); plus the mean force magnitude (N) and speed (m/s) over the removing samples
-    alone. ``None`` figures when the tool never cut."""
-    none = {"cutting_time_s": 0.0, "cut_mean_force_N": None, "cut_mean_speed_m_s": None,
-            "cut_mean_handle_force_N": None, "cutting_mean_force_N": None,
-            "cutting_mean_speed_m_s": None}
-    if not trace or trace["time_s"].size < 2:
-        return none
-    cutting = (trace["cutting"] > 0.5) & (trace["forces_enabled"] > 0.5)
-    if cutting.sum() < 2:
-        return none
-    indices = np.flatnonzero(cutting)
-    span = slice(indices[0], indices[-1] + 1)
-    times = trace["time_s"]
-    duration = float(times[indices[-1]] - times[indices[0]])
-    if duration <= 0.0:
-        return none
-    force = np.hypot(trace["tool_force_x_N"], trace["tool_force_y_N"])
-    speed = np.hypot(trace["tool_velocity_x_m_s"], trace["tool_velocity_y_m_s"])
-    distance = float(np.hypot(trace["tool_position_x_m"][indices[-1]]
-                              - trace["tool_position_x_m"][indices[0]],
-                              trace["tool_position_y_m"][indices[-1]]
-                              - trace["tool_position_y_m"][indices[0]]))
-    return {"cutting_time_s": duration,
-            "cut_mean_force_N": float(force[span].mean()),
-            "cut_mean_speed_m_s": distance / duration,
-            "cut_mean_handle_force_N": float(trace["handle_force_x_N"][span].mean()),
-            "cutting_mean_force_N": float(force[cutting].mean()),
-            "cutting_mean_speed_m_s": float(speed[cutting].mean())}
 
 
 if __name__ == "__main__":

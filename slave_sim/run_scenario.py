@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from haptic.common.config import exit_on_config_error, load_config, override
+from haptic.common.config.scenario import load_scenario
 from haptic.slave_sim.node import SlaveNode
-from haptic.slave_sim.scenario import load_scenario
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haptic.slave_sim.scenario import GridSpec, Scenario
+from haptic.common.config.scenario import GridSpec, Scenario
 
 NO_BLOCK = -1
 

@@ -48,7 +48,7 @@ def frame_parts(topic: str, message: dict[str, Any]) -> dict[str, Any]:
     if topic == "/slave/clay":
         import numpy as np
 
-        from haptic.slave_sim.clay_view import heights_to_bytes
+        from haptic.common.heightmap_codec import heights_to_bytes
 
         heights = np.array(message["heights_mm"], float) * 1e-3
         header = {"cells_x": message["cells_x"], "cells_y": message["cells_y"]}

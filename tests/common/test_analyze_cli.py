@@ -16,7 +16,7 @@ REQUIRED_KEYS = {"k", "delay_s", "stable", "delay_margin_s", "k_max", "k_max_del
 
 
 def test_json_has_the_contract_keys(capsys) -> None:
-    assert main(["--k", "19", "--delay", "0.005", "--json"]) == 0
+    assert main(["--k", "19", "--round-trip-delay", "0.005", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert REQUIRED_KEYS <= set(result)
     assert result["k"] == 19.0 and result["delay_s"] == 0.005
@@ -28,7 +28,7 @@ def test_json_has_the_contract_keys(capsys) -> None:
 def test_sampled_margin_is_smaller(capsys) -> None:
     main(["--k", "19", "--json"])
     continuous = json.loads(capsys.readouterr().out)
-    main(["--k", "19", "--json", "--sampled"])
+    main(["--k", "19", "--json", "--sampled-analysis"])
     sampled = json.loads(capsys.readouterr().out)
     assert sampled["delay_margin_s"] < continuous["delay_margin_s"]
     assert continuous["delay_margin_s"] is not None
@@ -40,7 +40,7 @@ def test_stable_for_every_delay_reports_null_margin(capsys) -> None:
 
 
 def test_plots_are_written(tmp_path: Path) -> None:
-    assert main(["--k", "13", "--delay", "0.02", "--plot", str(tmp_path)]) == 0
+    assert main(["--k", "13", "--round-trip-delay", "0.02", "--plot", str(tmp_path)]) == 0
     for name in ("nyquist.png", "compensators_bode.png", "stability_map.png"):
         assert (tmp_path / name).stat().st_size > 10_000
 
@@ -54,7 +54,7 @@ def test_plots_are_written(tmp_path: Path) -> None:
          "force_ratio_ah2 = [[1,0],[0,1]]\n", "model.sample_period_s"),
         ("[model]\nsample_period_s = 0.001\nposition_ratio_ah1 = [[1,0],[0,1]]\n"
          "force_ratio_ah2 = [[1,0],[0,0]]\n", "model.force_ratio_ah2"),
-        ("[analysis]\nround_trip_delay_s = 0.0\n", "analysis.max_frequency_rad_s"),
+        ("[analysis]\nmax_frequency_rad_s = -1.0\n", "analysis.max_frequency_rad_s"),
         ("[model.x]\ncolour = 'red'\n", "model.x.colour"),
     ],
 )
@@ -71,6 +71,6 @@ def test_bad_config_is_one_line_and_exit_2(tmp_path: Path, text: str, key: str) 
 
 def test_negative_delay_is_refused(capsys) -> None:
     with pytest.raises(SystemExit) as caught:
-        main(["--delay", "-0.1"])
+        main(["--round-trip-delay", "-0.1"])
     assert caught.value.code == 2
-    assert "--delay" in capsys.readouterr().err
+    assert "--round-trip-delay" in capsys.readouterr().err

@@ -32,7 +32,7 @@ def test_defaults_master_listens_slave_connects():
 
 def test_flags_override_config_for_this_side_only():
     options = parse([
-        "--delay", "0.02", "--jitter", "0.005", "--jitter-distribution", "normal",
+        "--one-way-delay", "0.02", "--jitter", "0.005", "--jitter-distribution", "normal",
         "--loss", "0.1", "--burst-enter", "0.01", "--burst-exit", "0.2",
         "--connect", "tcp/10.0.0.1:7447", "--connect", "tcp/10.0.0.2:7447",
         "--key-prefix", "haptic/lab-3", "--duration", "5", "--json-summary", "out.json",
@@ -63,7 +63,7 @@ def test_client_mode_connects_to_the_router_only():
 @pytest.mark.parametrize(
     ("argv", "named"),
     [
-        (["--delay", "-0.1"], "--delay (link.slave.injection.delay_s)"),
+        (["--one-way-delay", "-0.1"], "--one-way-delay (link.slave.injection.delay_s)"),
         (["--loss", "1.5"], "--loss (link.slave.injection.loss_probability)"),
         (["--burst-exit", "0"], "--burst-exit"),
         (["--connect", "localhost"], "--connect (link.slave.endpoints.connect)"),
@@ -95,7 +95,7 @@ def test_config_file_link_table(tmp_path):
         "preserve_order = true\nloss_probability = 0.05\nburst_enter_probability = 0.0\n"
         "burst_exit_probability = 1.0\nburst_loss_probability = 1.0\nseed = 3\n"
     )
-    link = parse(["--delay", "0.03"], "slave", config_file=path).link
+    link = parse(["--one-way-delay", "0.03"], "slave", config_file=path).link
     assert link.connect == ("tcp/192.168.1.10:7447",)
     assert link.injection.loss_probability == 0.05
     assert link.injection.delay_s == 0.03  # the flag wins over the file
@@ -118,3 +118,42 @@ def test_link_config_checks_itself():
         LinkConfig(side="slave", mode="client")
     config = load_config()
     assert link_config_from(config, "slave", seed=9).seed == 9
+
+
+def _parsers():
+    from haptic.common import analyze_cli, session
+    from haptic.lockstep import cli as lockstep_cli
+    from haptic.master import cli as master_cli
+    from haptic.slave_sim import program as slave_program
+
+    return {
+        "haptic-analyze": (analyze_cli.build_parser, []),
+        "haptic-sim run": (lockstep_cli.build_parser, ["run"]),
+        "haptic-master": (master_cli.build_parser, []),
+        "haptic-slave": (slave_program.build_parser, []),
+        "haptic-session": (session.build_parser, []),
+    }
+
+
+@pytest.mark.parametrize("program", ["haptic-analyze", "haptic-sim run", "haptic-master",
+                                     "haptic-slave", "haptic-session"])
+def test_a_bare_delay_is_refused_naming_both_delays(program: str, capsys) -> None:
+    build, prefix = _parsers()[program]
+    with pytest.raises(SystemExit) as caught:
+        build().parse_args([*prefix, "--delay", "0.01"])
+    assert caught.value.code == 2
+    error = capsys.readouterr().err
+    assert "--one-way-delay" in error and "--round-trip-delay" in error
+
+
+@pytest.mark.parametrize(("program", "flag", "dest"), [
+    ("haptic-analyze", "--round-trip-delay", "delay"),
+    ("haptic-sim run", "--round-trip-delay", "delay"),
+    ("haptic-master", "--one-way-delay", "delay"),
+    ("haptic-slave", "--one-way-delay", "delay"),
+    ("haptic-session", "--one-way-delay", "delay"),
+])
+def test_each_program_names_the_delay_it_takes(program: str, flag: str, dest: str) -> None:
+    build, prefix = _parsers()[program]
+    args = build().parse_args([*prefix, flag, "0.004"])
+    assert getattr(args, dest) == 0.004

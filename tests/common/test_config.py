@@ -38,7 +38,11 @@ def test_a_sub_table_alone_keeps_the_parent_defaults(tmp_path: Path) -> None:
     [
         ("[model.ch1]\ngain_k = 3.0\nnum = [1.0]\nden = [1.0, 10.0, 0.0]\nextra = 1\n",
          "model.ch1.extra", "unknown key"),
-        ("[model.ch1]\ngain_k = 3.0\nnum = [1.0]\n", "model.ch1.den", "missing key"),
+        ("[model.ch1]\ngain_k = 3.0\nnum = [1.0]\n", "model.ch1.den",
+         "missing key (set together with model.ch1.num)"),
+        ("[model.x]\ntool_compliance_st_den = [1.0, 2.0]\n", "model.x.tool_compliance_st_num",
+         "missing key (set together with model.x.tool_compliance_st_den)"),
+        ("[runner]\nspin_seconds = 0.0001\n", "runner.spin_seconds", "unknown key"),
         ("[nonsense]\n", "nonsense", "unknown key"),
         ("[model]\nsample_period_s = -0.001\nposition_ratio_ah1 = [[1,0],[0,1]]\n"
          "force_ratio_ah2 = [[1,0],[0,1]]\n", "model.sample_period_s", "must be > 0"),
@@ -62,6 +66,37 @@ def test_bad_files_name_the_key(tmp_path: Path, text: str, key: str, message: st
         load_config(write(tmp_path, text))
     assert caught.value.key == key
     assert message in str(caught.value)
+
+
+def test_a_file_sets_any_subset_of_a_tables_keys(tmp_path: Path, paper_config: dict) -> None:
+    config = load_config(write(tmp_path, "[runner]\nspin_s = 0.0002\n\n[model.ch1]\n"
+                                         "gain_k = 13.0\n\n[link.watchdog]\n"
+                                         "max_message_age_s = 0.05\n"))
+    assert config["runner"]["spin_s"] == 0.0002
+    assert config["model"]["ch1"]["gain_k"] == 13.0
+    assert config["link"]["watchdog"]["max_message_age_s"] == 0.05
+    # every other key keeps its default, in the same tables and elsewhere
+    for table, key in (("runner", "spin_s"), ("model", "ch1"), ("link", "watchdog")):
+        changed = dict(config[table])
+        default = dict(paper_config[table])
+        changed.pop(key)
+        default.pop(key)
+        assert changed == default
+    assert config["model"]["ch1"]["num"] == paper_config["model"]["ch1"]["num"]
+    assert config["link"]["watchdog"]["resync_messages"] == \
+        paper_config["link"]["watchdog"]["resync_messages"]
+    assert config["slave"] == paper_config["slave"]
+
+
+def test_print_config_shows_the_merged_configuration(tmp_path: Path, capsys) -> None:
+    from haptic.common.analyze_cli import main
+
+    path = write(tmp_path, "[model.ch1]\ngain_k = 7.5\n")
+    assert main(["--config", str(path), "--print-config"]) == 0
+    printed = capsys.readouterr().out
+    again = write(tmp_path, printed)
+    assert load_config(again) == load_config(path)
+    assert load_config(again)["model"]["ch1"]["gain_k"] == 7.5
 
 
 def test_improper_ch1_is_refused_naming_the_key(tmp_path: Path) -> None:

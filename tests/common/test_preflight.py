@@ -65,12 +65,12 @@ def test_sampled_analysis_is_selectable() -> None:
 def test_peer_delay_replaces_the_other_sides_configured_delay() -> None:
     config = override(load_config(), "link.master.injection.delay_s", 0.004)
     config = override(config, "link.slave.injection.delay_s", 0.01)
-    # the slave's program: its own 10 ms plus the master's, given as --peer-delay 10 ms
+    # the slave's program: its own 10 ms plus the master's, given as --peer-one-way-delay 10 ms
     assert round_trip_delay_s(config, 0.0, "slave", 0.01) == pytest.approx(0.02)
     assert round_trip_delay_s(config, 0.0, "master", 0.01) == pytest.approx(0.014)
     assert round_trip_delay_s(config, 0.0) == pytest.approx(0.014)
     config = override(config, "model.ch1.gain_k", 13.0)
-    _, status = run_preflight(config, _args("--peer-delay", "0.01"), "prog", io.StringIO(),
+    _, status = run_preflight(config, _args("--peer-one-way-delay", "0.01"), "prog", io.StringIO(),
                               side="slave")
     assert status == EXIT_UNSTABLE  # 21 ms round trip against a 17.9 ms margin at k = 13
 
@@ -79,8 +79,9 @@ def test_bad_preflight_flags_are_config_errors() -> None:
     from haptic.common.config import ConfigError
 
     with pytest.raises(ConfigError) as caught:
-        run_preflight(load_config(), _args("--peer-delay", "-1"), "prog", io.StringIO(), "slave")
-    assert caught.value.key == "--peer-delay"
+        run_preflight(load_config(), _args("--peer-one-way-delay", "-1"), "prog",
+                      io.StringIO(), "slave")
+    assert caught.value.key == "--peer-one-way-delay"
 
 
 def test_the_clay_environment_changes_the_verdict() -> None:

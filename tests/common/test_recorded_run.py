@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from haptic.common import replay
 from haptic.common.recording import read_recording
+from haptic.view import replay_cli as replay
 
 WAIT_S = 60.0
 

@@ -116,7 +116,8 @@ def drain(link: Link, seconds: float) -> list:
 def test_router_tls_and_access_control_on_one_host(certs):
     endpoint = f"tls/localhost:{free_port()}"
     router = subprocess.Popen(
-        [sys.executable, "-m", "haptic.common.router", "--config", str(ZENOH / "router.json5"),
+        [sys.executable, "-m", "haptic.common.router", "--zenoh-config",
+         str(ZENOH / "router.json5"),
          "--listen", endpoint, *[a for k, v in certs.tls_overrides("router")
                                  for a in ("--zenoh-set", f"{k}={v}")]],
         stderr=subprocess.PIPE, text=True,
@@ -219,9 +220,10 @@ def test_router_cli_rejects_a_bad_override_and_the_old_wrapper_runs(tmp_path):
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "KEY=VALUE" in bad.stderr
     missing = subprocess.run(
-        [sys.executable, "-m", "haptic.common.router", "--config", str(tmp_path / "no.json5")],
+        [sys.executable, "-m", "haptic.common.router", "--zenoh-config",
+         str(tmp_path / "no.json5")],
         capture_output=True, text=True, timeout=60)
     assert missing.returncode == 2 and missing.stderr.startswith("haptic-router:")
     wrapper = subprocess.run([sys.executable, str(DEPLOY / "zenoh_router.py"), "--help"],
                              capture_output=True, text=True, timeout=60)
-    assert wrapper.returncode == 0 and "--config" in wrapper.stdout
+    assert wrapper.returncode == 0 and "--zenoh-config" in wrapper.stdout

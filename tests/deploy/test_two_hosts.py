@@ -228,7 +228,7 @@ def test_session_and_access_control_through_the_router(network, certs, tmp_path)
     try:
         router = processes.start(
             "router",
-            ["-m", "haptic.common.router", "--config", str(ZENOH / "router.json5"),
+            ["-m", "haptic.common.router", "--zenoh-config", str(ZENOH / "router.json5"),
              *[arg for host in ("rig", "remote") for arg in ("--listen", ROUTER_FOR[host])],
              *zenoh_set(certs.tls_overrides("router"))],
             stderr=subprocess.PIPE,

@@ -13,7 +13,8 @@ from haptic.lockstep.cli import _floats, main
 def test_run_writes_traces_and_plot(tmp_path, capsys) -> None:
     out = tmp_path / "run"
     assert main(["run", "--scenario", "constant-rate", "--environment", "linear",
-                 "--duration", "0.2", "--delay", "0.005", "--out", str(out), "--json"]) == 0
+                 "--duration", "0.2", "--round-trip-delay", "0.005", "--out", str(out),
+                 "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["round_trip_delay_s"] == pytest.approx(9 * 0.00054)
     traces = np.load(out / "traces.npz")
@@ -32,7 +33,7 @@ def test_quick_sweep_agrees_with_the_analysis(tmp_path, capsys) -> None:
     assert (tmp_path / "sweep.png").stat().st_size > 0
 
 
-@pytest.mark.parametrize("argv", [["run", "--delay", "-1"], ["run", "--loss", "2"],
+@pytest.mark.parametrize("argv", [["run", "--round-trip-delay", "-1"], ["run", "--loss", "2"],
                                   ["run", "--operator", "dance:fx=1"],
                                   ["sweep", "--gains", "0,3"]])
 def test_bad_arguments_exit_2_with_one_line(argv, capsys) -> None:

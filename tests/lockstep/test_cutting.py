@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from haptic.common.config.scenario import load_scenario
 from haptic.common.cutting import cutting_steadiness, steady_cut_fields
 from haptic.lockstep.simulator import TRANSPARENT_SAFETY, LockstepSimulator
 from haptic.master.operator import parse_operator_spec
 from haptic.slave_sim.clay import make_clay
-from haptic.slave_sim.scenario import load_scenario
 
 
 def _cut(paper_config, paper_model, coupling: dict | None = None):

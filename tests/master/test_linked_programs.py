@@ -125,7 +125,7 @@ def test_two_processes_exchange_forces_and_positions(pair, tmp_path) -> None:
     trace = tmp_path / "master_trace.npz"
     out = tmp_path / "slave_out"
     slave = pair.slave(3.5, tmp_path / "slave.json", "--out", str(out))
-    master = pair.master(3.0, tmp_path / "master.json", "--trace", str(trace))
+    master = pair.master(3.0, tmp_path / "master.json", "--out", str(trace.parent))
     master_status, master_log = _wait(master)
     slave_status, slave_log = _wait(slave)
     assert master_status == 0, master_log
@@ -208,8 +208,9 @@ def test_killed_slave_trips_the_master_and_a_new_slave_resumes(pair, tmp_path) -
 
 @pytest.mark.parametrize("program", ["haptic.slave_sim.program", "haptic.master.cli"])
 def test_the_analysis_refuses_an_unstable_loop(program) -> None:
-    args = [sys.executable, "-m", program, "--k", "19", "--delay", "0.02", "--duration", "1",
-            "--no-status", "--peer-wait", "1", "--key-prefix", f"test/{uuid.uuid4().hex[:8]}"]
+    args = [sys.executable, "-m", program, "--k", "19", "--one-way-delay", "0.02",
+            "--duration", "1", "--no-status", "--peer-wait", "1", "--key-prefix",
+            f"test/{uuid.uuid4().hex[:8]}"]
     process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         out, err = process.communicate(timeout=WAIT_S)

@@ -56,3 +56,23 @@ def test_model_backend_lifecycle_and_bad_commands() -> None:
     hardware.deactivate()
     hardware.cleanup()
     assert hardware.lifecycle_state is LifecycleState.UNCONFIGURED
+
+
+def test_the_simulated_operator_waits_for_the_ready_lamp() -> None:
+    """Before the master's forces come on, the operator's script does not run (a pushing
+    operator would keep the node's small-force gate shut); its clock starts at the lamp."""
+    config = _config()
+    config["master"]["sim"]["operator"] = "constant:fx=3,onset=0.01"
+    config["master"]["sim"]["force_noise_std_N"] = 0.0
+    hardware = create_hardware("model", config)
+    hardware.configure()
+    hardware.activate()
+    idle = [hardware.read().force_N[0] for _ in range(200)]  # 108 ms: ten onsets
+    assert max(abs(f) for f in idle) < 0.05
+    hardware.present_forces_enabled(True)
+    pushed = [hardware.read().force_N[0] for _ in range(200)]
+    onset_cycles = int(0.01 / 0.00054)
+    assert max(abs(f) for f in pushed[:onset_cycles - 1]) < 0.05
+    assert pushed[-1] > 2.0
+    hardware.deactivate()
+    hardware.cleanup()

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from haptic.common.config import ConfigError
-from haptic.master.operator import check_operator_spec, parse_operator_spec
+from haptic.common.config.operator_spec import check_operator_spec
+from haptic.master.operator import parse_operator_spec
 
 TS = 0.00054
 

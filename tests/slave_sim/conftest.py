@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptic.slave_sim.scenario import Scenario, load_scenario
+from haptic.common.config.scenario import Scenario, load_scenario
 
 SAMPLE_PERIOD_S = 0.00054
 

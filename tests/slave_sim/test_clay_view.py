@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from haptic.common.config.scenario import load_scenario
 from haptic.common.display import decode_clay, encode_clay
-from haptic.slave_sim.clay_view import (
+from haptic.common.heightmap_codec import (
     downsample_heights,
     heights_from_bytes,
     heights_to_bytes,
     reduction_factors,
-    workpiece_layout,
 )
-from haptic.slave_sim.scenario import load_scenario
+from haptic.slave_sim.clay_view import workpiece_layout
 from haptic.slave_sim.workpiece import build_workpiece
 
 

@@ -41,7 +41,9 @@ def test_a_file_giving_the_slave_table_keeps_the_default_lock(tmp_path):
                     'clay_impl = "numpy"\ndevice = "cpu"\n')
     assert load_config(path)["slave"]["phase_lock"] == {"enabled": True, "margin_s": 3e-05}
     path.write_text("[slave.phase_lock]\nenabled = false\n")
-    with pytest.raises(ConfigError, match="slave.phase_lock.margin_s: missing key"):
+    assert load_config(path)["slave"]["phase_lock"] == {"enabled": False, "margin_s": 3e-05}
+    path.write_text("[slave.phase_lock]\nmargin = 0.0001\n")
+    with pytest.raises(ConfigError, match="slave.phase_lock.margin: unknown key"):
         load_config(path)
 
 

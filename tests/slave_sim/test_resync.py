@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from haptic.common.config.scenario import load_scenario
 from haptic.common.model import model_from_config
 from haptic.slave_sim.node import SlaveNode
 from haptic.slave_sim.resync import RESYNC_SPEED_M_S, ToolResync
-from haptic.slave_sim.scenario import load_scenario
 
 SYNC_TOLERANCE_M = 0.001  # haptic-slave's default --sync-tolerance
 HANDLE_AHEAD_M = 0.02  # the handle ran 2 cm ahead during the outage (issue 15's bridge)

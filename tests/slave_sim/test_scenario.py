@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from haptic.common.config import ConfigError, load_config, override
-from haptic.slave_sim.scenario import SCENARIO_NAMES, load_scenario
+from haptic.common.config.scenario import SCENARIO_NAMES, load_scenario
 from haptic.slave_sim.workpiece import build_workpiece
 
 GOOD = """

@@ -2,7 +2,7 @@
 environment, read from TOML files and validated with the configuration machinery.
 
 A scenario file has these tables (units in the key names; see the shipped files in
-``slave_sim/scenarios/``)::
+``common/config/scenarios/``)::
 
     [scenario]   name, description, environment ("clay" or "linear")
     [grid]       x_range_m, y_range_m, cells_x, cells_y
@@ -325,7 +325,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     text: str
     source = str(name_or_path)
     if isinstance(name_or_path, str) and name_or_path in SCENARIO_NAMES:
-        text = resources.files("haptic.slave_sim").joinpath(
+        text = resources.files("haptic.common.config").joinpath(
             f"scenarios/{name_or_path}.toml").read_text()
     else:
         path = Path(name_or_path)
@@ -337,3 +337,9 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         except OSError as error:
             raise ConfigError("", f"cannot read scenario file {path}: {error.strerror}") from None
     return scenario_from_table(parse_toml(text, source), source)
+
+
+def max_block_damping(scenario: Any) -> float | None:
+    """The largest block damping of a scenario, N s/m (``None`` without blocks)."""
+    values = [block.damping_N_s_per_m for block in scenario.blocks]
+    return max(values) if values else None

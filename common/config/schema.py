@@ -7,12 +7,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from haptic.common.config import Field, Schema
+from haptic.common.config.loader import Field, Schema
+from haptic.common.config.lockstep_schema import LOCKSTEP_SCHEMA
+from haptic.common.config.master_schema import MASTER_SCHEMA
+from haptic.common.config.slave_schema import SLAVE_SCHEMA
 from haptic.common.link_config import LINK_SCHEMA
 from haptic.common.runner_config import RUNNER_SCHEMA
-from haptic.lockstep.schema import LOCKSTEP_SCHEMA
-from haptic.master.schema import MASTER_SCHEMA
-from haptic.slave_sim.schema import SLAVE_SCHEMA
 
 
 def _leading_nonzero(coefficients: list[float]) -> str | None:
@@ -46,30 +46,35 @@ def _zero_or_meaningful(value: float) -> str | None:
     return None
 
 
-def _polynomial(doc: str) -> Field:
-    return Field("float_list", doc, check=_leading_nonzero)
+def _polynomial(doc: str, together: tuple[str, ...] = ()) -> Field:
+    return Field("float_list", doc, check=_leading_nonzero, together=together)
 
 
-def _denominator(doc: str) -> Field:
-    return Field("float_list", doc, check=_nonzero_polynomial)
+def _denominator(doc: str, together: tuple[str, ...] = ()) -> Field:
+    return Field("float_list", doc, check=_nonzero_polynomial, together=together)
 
 
 AXIS_SCHEMA: Schema = {
     "handle_actuator_gh_num": _polynomial(
         "Gh numerator in s: handle actuator with operator, position command (m) to handle "
-        "position (m), dimensionless (paper eqs 31, 32)."
-    ),
-    "handle_actuator_gh_den": _denominator("Gh denominator in s."),
+        "position (m), dimensionless (paper eqs 31, 32).",
+        together=("handle_actuator_gh_den",)),
+    "handle_actuator_gh_den": _denominator("Gh denominator in s.",
+        together=("handle_actuator_gh_num",)),
     "operator_impedance_th": _polynomial(
         "Th, operator arm impedance polynomial in s, N/m: [kg, N s/m, N/m] (eq 33)."
     ),
     "environment_impedance_tt": _polynomial(
         "Tt, environment impedance polynomial in s, N/m (eq 33)."
     ),
-    "handle_compliance_sh_num": _polynomial("Sh numerator, handle compliance, m/N."),
-    "handle_compliance_sh_den": _denominator("Sh denominator."),
-    "tool_compliance_st_num": _polynomial("St numerator, tool compliance, m/N."),
-    "tool_compliance_st_den": _denominator("St denominator."),
+    "handle_compliance_sh_num": _polynomial("Sh numerator, handle compliance, m/N.",
+        together=("handle_compliance_sh_den",)),
+    "handle_compliance_sh_den": _denominator("Sh denominator.",
+        together=("handle_compliance_sh_num",)),
+    "tool_compliance_st_num": _polynomial("St numerator, tool compliance, m/N.",
+        together=("tool_compliance_st_den",)),
+    "tool_compliance_st_den": _denominator("St denominator.",
+        together=("tool_compliance_st_num",)),
     "tool_mass_kg": Field("float", "Mt, virtual tool mass, kg (eq 5).", minimum=0.0,
                           check=_zero_or_meaningful),
     "tool_damping_N_s_per_m": Field(
@@ -95,8 +100,8 @@ MODEL_SCHEMA: Schema = {
     "ch1": {
         "gain_k": Field("float", "k in Ch1 = k num/den, m/N per unit of num/den.", minimum=0.0,
                         exclusive_minimum=True),
-        "num": _polynomial("Ch1 numerator in s (before the gain k)."),
-        "den": _denominator("Ch1 denominator in s."),
+        "num": _polynomial("Ch1 numerator in s (before the gain k).", together=("den",)),
+        "den": _denominator("Ch1 denominator in s.", together=("num",)),
     },
     "x": AXIS_SCHEMA,
     "y": AXIS_SCHEMA,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 
-from haptic.common.config import Field, Schema
+from haptic.common.config.loader import Field, Schema
 
 
 def _device(value: str) -> str | None:

@@ -72,7 +72,7 @@ def summarize(recording: Recording) -> dict[str, Any]:
                 if values.size:
                     summary[f"max_abs_{name}"] = float(np.abs(values).max())
     if side == "slave" and state:
-        from haptic.slave_sim.program import cutting_figures
+        from haptic.common.cutting_metrics import cutting_figures
 
         trace = dict(state)
         trace["forces_enabled"] = state["running"]

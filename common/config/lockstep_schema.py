@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from haptic.common.config import Field, Schema
-from haptic.master.operator import check_operator_spec
+from haptic.common.config.loader import Field, Schema
+from haptic.common.config.operator_spec import check_operator_spec
 
 LOCKSTEP_SCHEMA: Schema = {
     "gain_experiment_loop_delay_s": Field(

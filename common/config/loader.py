@@ -3,9 +3,9 @@
 Rules, the same for every program:
 
 - The shipped defaults (``defaults/paper.toml``) are the paper's values.
-- A user file replaces whole tables: a table that sets any plain key must set all of them
-  (a missing key is an error); tables it leaves out, or mentions only as the parent of a
-  sub-table, keep their defaults.
+- A user file is merged over the defaults key by key: it may set any subset of the keys of
+  any table, and every key it leaves out keeps its default. Keys that only mean something
+  together (a polynomial's numerator and denominator) are set together or not at all.
 - Unknown tables or keys, wrong types and out-of-range values are errors.
 - Every error is a :class:`ConfigError` whose message names the dotted key; programs print it
   on one line and exit with status 2 (see :func:`exit_on_config_error`).
@@ -44,6 +44,8 @@ class Field:
     ``minimum``/``maximum`` bound numbers (``float``, ``int``) and every element of lists;
     ``exclusive_minimum`` makes the lower bound strict. ``choices`` restricts ``str`` values.
     ``check`` is an extra validator returning an error message or ``None``.
+    ``together`` names sibling keys that a file must set whenever it sets this one (a
+    numerator and its denominator).
     """
 
     kind: str
@@ -53,6 +55,7 @@ class Field:
     exclusive_minimum: bool = False
     choices: tuple[str, ...] | None = None
     check: Callable[[Any], str | None] | None = None
+    together: tuple[str, ...] = ()
 
 
 Schema = Mapping[str, "Field | Schema"]
@@ -137,15 +140,16 @@ def validate_table(
         if name not in schema:
             raise ConfigError(_join(prefix, name), "unknown key")
     result: dict[str, Any] = {}
-    # A table that gives none of its own plain keys (only sub-tables, as [model.ch1] alone
-    # implies [model]) keeps the default plain keys; one that gives any must give them all.
-    gives_plain_keys = any(isinstance(schema[name], Field) for name in table)
     for name, spec in schema.items():
         key = _join(prefix, name)
         if isinstance(spec, Field):
             if name in table:
+                for partner in spec.together:
+                    if partner not in table:
+                        raise ConfigError(_join(prefix, partner),
+                                          f"missing key (set together with {key})")
                 result[name] = _validate_field(key, spec, table[name])
-            elif not gives_plain_keys and name in defaults:
+            elif name in defaults:
                 result[name] = defaults[name]
             else:
                 raise ConfigError(key, "missing key")
@@ -160,7 +164,7 @@ def validate_table(
 
 def default_config_text() -> str:
     """The shipped defaults (the paper's values) as TOML text."""
-    return resources.files("haptic.common").joinpath("defaults/paper.toml").read_text()
+    return resources.files("haptic.common.config").joinpath("defaults/paper.toml").read_text()
 
 
 def parse_toml(text: str, source: str) -> dict[str, Any]:
@@ -176,7 +180,7 @@ def load_config(path: str | Path | None = None) -> dict[str, Any]:
 
     Raises :class:`ConfigError` for an unreadable file or an invalid key or value.
     """
-    from haptic.common.schema import SCHEMA
+    from haptic.common.config.schema import SCHEMA
 
     defaults = validate_table(parse_toml(default_config_text(), "defaults"), SCHEMA, {})
     if path is None:
@@ -190,7 +194,7 @@ def load_config(path: str | Path | None = None) -> dict[str, Any]:
 
 def override(config: dict[str, Any], dotted_key: str, value: Any) -> dict[str, Any]:
     """Return a copy of ``config`` with one key replaced (a CLI flag), validated."""
-    from haptic.common.schema import SCHEMA
+    from haptic.common.config.schema import SCHEMA
 
     parts = dotted_key.split(".")
     spec: Any = SCHEMA

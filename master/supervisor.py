@@ -1,0 +1,121 @@
+"""The master's supervisor: a pure state machine that decides, each tick, whether the
+master node may apply forces, from the time, the slave's newest message and the handle's
+reading. It holds no clock, no link and no node; the program feeds it and acts on what it
+returns (docs/architecture.md, "one tick").
+
+Inputs per tick: the time (s), the fresh ``ToolState`` (or ``None``), the handle position (m),
+the hardware's faults, the link's silence (s) and the slave's liveliness. Decisions:
+
+- the watchdog (``common/watchdog.py``): forces only in ``ok``; leaving ``ok`` is a trip;
+- ``in_sync`` for the resync: the slave reports its forces enabled and |yt - Ah1 yh| is below
+  the tolerance on both axes;
+- a hardware fault, or a trip of the node's safety layer (:meth:`note_node_fault`), latches
+  the safe state for the rest of the run;
+- the safe state holds the handle where it was when forces went off (or at the start).
+
+:meth:`update` returns a :class:`Transition`: ``ACTIVATE`` the first time forces come on (the
+node's own small-force gate applies), ``RESUME`` when they come back after a safe state,
+``HOLD`` when they go off, ``NONE`` otherwise; :attr:`enabled` and :attr:`hold_m` say what
+to do this tick.
+"""
+
+from __future__ import annotations
+
+import enum
+from typing import Any
+
+import numpy as np
+
+from haptic.common.messages import Flags, ToolState
+from haptic.common.watchdog import PeerWatchdog, WatchdogState
+
+
+class Transition(enum.Enum):
+    """What changed this tick (the program acts on it)."""
+
+    NONE = "none"
+    ACTIVATE = "activate"  # forces on for the first time: MasterNode.activate
+    RESUME = "resume"  # forces on again after a safe state: MasterNode.resume
+    HOLD = "hold"  # forces off: hold the handle at hold_m
+
+
+class MasterSupervisor:
+    """Watchdog, resync check and fault latch of the master (see the module docstring).
+
+    ``position_ratio``: Ah1 per axis (x, y), dimensionless; ``sync_tolerance_m``: the resync
+    position tolerance per axis, m; ``max_message_age_s``/``resync_messages``: the watchdog's.
+    """
+
+    def __init__(self, position_ratio: tuple[float, float], sync_tolerance_m: float,
+                 max_message_age_s: float, resync_messages: int) -> None:
+        if not sync_tolerance_m > 0.0:
+            raise ValueError(f"sync_tolerance_m must be > 0 (got {sync_tolerance_m})")
+        self.ratio_x, self.ratio_y = (float(v) for v in position_ratio)
+        self.sync_tolerance_m = float(sync_tolerance_m)
+        self.watchdog = PeerWatchdog(max_message_age_s, resync_messages)
+        self.tool: ToolState | None = None
+        self.enabled = False
+        self.ever_enabled = False
+        self.faulted = False
+        self.hold_m = np.zeros(2)
+        self.hardware_faults: list[str] = []
+        self.events: list[dict[str, Any]] = []
+
+    def start(self, position_m: Any) -> None:
+        """Hold the handle where it is at the start (m; non-finite values read as 0)."""
+        self.hold_m = np.nan_to_num(np.asarray(position_m, dtype=float)).copy()
+
+    def in_sync(self, handle_x_m: float, handle_y_m: float) -> bool:
+        """The slave reports its forces enabled and its tool is at Ah1 yh within the
+        tolerance on both axes."""
+        tool = self.tool
+        if tool is None or Flags.FORCES_ENABLED not in tool.flags:
+            return False
+        tool_x_m, tool_y_m = tool.tool_position_m
+        tolerance = self.sync_tolerance_m
+        return (abs(tool_x_m - self.ratio_x * handle_x_m) < tolerance
+                and abs(tool_y_m - self.ratio_y * handle_y_m) < tolerance)
+
+    def update(self, now_s: float, message: ToolState | None, handle_position_m: Any,
+               faults: tuple[str, ...] | list[str] = (), cycle: int = 0,
+               silence_s: float = 0.0, peer_alive: bool = True) -> Transition:
+        """One tick; returns what changed (see :class:`Transition`)."""
+        if message is not None:
+            self.tool = message
+        handle_x_m, handle_y_m = (float(v) for v in handle_position_m)
+        state = self.watchdog.update(now_s, message is not None, silence_s,
+                                     self.in_sync(handle_x_m, handle_y_m), peer_alive)
+        if faults:
+            self.hardware_faults.extend(f"cycle {cycle}: {fault}" for fault in faults)
+            if not self.faulted:
+                self._latch(now_s, "hardware: " + "; ".join(faults))
+        enabled = state is WatchdogState.OK and not self.faulted
+        if enabled == self.enabled:
+            return Transition.NONE
+        self.enabled = enabled
+        if enabled:
+            transition = Transition.RESUME if self.ever_enabled else Transition.ACTIVATE
+            self.ever_enabled = True
+            return transition
+        position = np.array([handle_x_m, handle_y_m])
+        self.hold_m = np.where(np.isfinite(position), position, 0.0)
+        return Transition.HOLD
+
+    def note_node_fault(self) -> None:
+        """The node's safety layer tripped: the safe state latches (the node reported the
+        event itself); forces go off at the next :meth:`update`."""
+        self.faulted = True
+
+    def _latch(self, now_s: float, reason: str) -> None:
+        self.faulted = True
+        self.events.append({"time_s": now_s, "kind": "node_trip", "reason": reason})
+
+    @property
+    def trips(self) -> int:
+        """Watchdog trips so far."""
+        return self.watchdog.trips
+
+    def state_name(self) -> str:
+        """The watchdog's state, for the status line and the summary."""
+        return self.watchdog.state.value
+

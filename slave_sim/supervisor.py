@@ -1,0 +1,113 @@
+"""The slave's supervisor: a pure state machine that decides, each tick, whether the tool
+runs, follows the handle or stops, from the time, the master's newest message and the tool's
+position. It holds no clock, no link and no node; the program feeds it and acts on what it
+returns (docs/architecture.md, "one tick").
+
+Per tick, in two steps (the tool may be moved to the handle between them):
+
+1. :meth:`follows_handle` (fresh message?): while the tool is not running and not stopped by
+   the work-area guard, every fresh message re-places it at the handle (``SlaveNode.resync``);
+2. :meth:`update` (time, fresh?, the tool's position, the link's silence, the master's
+   liveliness): the watchdog (``common/watchdog.py``) with ``in_sync`` = |yt - Ah1 yh| below
+   the tolerance on both axes; the tool runs only with the watchdog ``ok`` and the master's
+   forces enabled; the work-area guard stops the tool (until the next resync cycle) when it
+   gets more than the margin outside the work area. Returns a :class:`Transition` (``RESUME``:
+   ``SlaveNode.resume``; ``STOP``: ``SlaveNode.safe_stop``), with :attr:`running` and
+   :attr:`ready` (this side's FORCES_ENABLED flag) for the tick.
+"""
+
+from __future__ import annotations
+
+import enum
+from typing import Any
+
+from haptic.common.messages import Flags, HandleState
+from haptic.common.watchdog import PeerWatchdog, WatchdogState
+
+
+class Transition(enum.Enum):
+    """What changed this tick (the program acts on it)."""
+
+    NONE = "none"
+    RESUME = "resume"  # the tool runs again: SlaveNode.resume
+    STOP = "stop"  # the tool stops: SlaveNode.safe_stop
+
+
+class SlaveSupervisor:
+    """Watchdog, resync and work-area guard of the slave (see the module docstring).
+
+    ``position_ratio``: Ah1 per axis (x, y), dimensionless; ``sync_tolerance_m``: resync
+    tolerance per axis, m; ``work_area_m``: (x_low, x_high, y_low, y_high), the tool's work
+    area including its margin, m; ``max_message_age_s``/``resync_messages``: the watchdog's.
+    """
+
+    def __init__(self, position_ratio: tuple[float, float], sync_tolerance_m: float,
+                 work_area_m: tuple[float, float, float, float], max_message_age_s: float,
+                 resync_messages: int) -> None:
+        if not sync_tolerance_m > 0.0:
+            raise ValueError(f"sync_tolerance_m must be > 0 (got {sync_tolerance_m})")
+        self.ratio_x, self.ratio_y = (float(v) for v in position_ratio)
+        self.sync_tolerance_m = float(sync_tolerance_m)
+        self.x_low_m, self.x_high_m, self.y_low_m, self.y_high_m = (float(v)
+                                                                    for v in work_area_m)
+        self.watchdog = PeerWatchdog(max_message_age_s, resync_messages)
+        self.handle_position_m = (0.0, 0.0)
+        self.master_enabled = False
+        self.running = False
+        self.ready = False
+        self.outside = False
+        self.events: list[dict[str, Any]] = []
+
+    def receive(self, message: HandleState | None) -> bool:
+        """Take the tick's fresh message (or ``None``); returns whether the tool should be
+        re-placed at the handle now (it is not running and not stopped by the guard)."""
+        if message is not None:
+            self.handle_position_m = tuple(message.handle_position_m)  # type: ignore[assignment]
+            self.master_enabled = Flags.FORCES_ENABLED in message.flags
+        return message is not None and not self.running and not self.outside
+
+    def in_sync(self, tool_x_m: float, tool_y_m: float) -> bool:
+        """|yt - Ah1 yh| below the tolerance on both axes."""
+        handle_x_m, handle_y_m = self.handle_position_m
+        tolerance = self.sync_tolerance_m
+        return (abs(tool_x_m - self.ratio_x * handle_x_m) < tolerance
+                and abs(tool_y_m - self.ratio_y * handle_y_m) < tolerance)
+
+    def update(self, now_s: float, fresh: bool, tool_position_m: tuple[float, float],
+               silence_s: float = 0.0, peer_alive: bool = True) -> Transition:
+        """One tick, after :meth:`receive` (and the resync it asked for); returns what
+        changed (see :class:`Transition`)."""
+        tool_x_m, tool_y_m = tool_position_m
+        state = self.watchdog.update(now_s, fresh, silence_s, self.in_sync(tool_x_m, tool_y_m),
+                                     peer_alive)
+        watchdog_ok = state is WatchdogState.OK
+        if not (watchdog_ok and self.master_enabled):
+            self.outside = False  # a resync cycle ends the work-area stop
+        elif not self.outside and not (self.x_low_m <= tool_x_m <= self.x_high_m
+                                       and self.y_low_m <= tool_y_m <= self.y_high_m):
+            # the work area's guard: the tool stops at its edge until a resync
+            self.outside = True
+            self.events.append({"time_s": now_s, "kind": "tool_stopped",
+                                "reason": f"tool left the work area at ({tool_x_m:.4f}, "
+                                f"{tool_y_m:.4f}) m"})
+        running = watchdog_ok and self.master_enabled and not self.outside
+        self.ready = watchdog_ok and not self.outside
+        transition = Transition.NONE
+        if running and not self.running:
+            transition = Transition.RESUME
+            self.events.append({"time_s": now_s, "kind": "tool_resumed",
+                                "reason": "positions in sync and the master's forces enabled"})
+        elif self.running and not running:
+            transition = Transition.STOP
+            if not self.outside:
+                reason = (f"watchdog {state.value}" if not watchdog_ok
+                          else "the master is in its safe state")
+                self.events.append({"time_s": now_s, "kind": "tool_stopped",
+                                    "reason": f"{reason}: the tool stops"})
+        self.running = running
+        return transition
+
+    @property
+    def trips(self) -> int:
+        """Watchdog trips so far."""
+        return self.watchdog.trips

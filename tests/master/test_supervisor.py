@@ -1,0 +1,113 @@
+"""The master's supervisor as a pure block: forces only after the watchdog's resync with the
+tool at Ah1 yh; a trip holds the handle where it was; faults latch."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from haptic.common.messages import Flags, ToolState
+from haptic.master.supervisor import MasterSupervisor, Transition
+
+PERIOD_S = 0.00054
+MAX_AGE_S = 0.03
+RESYNC = 5
+RATIO = (2.0, 0.5)
+
+
+def tool(x_m: float, y_m: float, enabled: bool = True, seq: int = 0) -> ToolState:
+    flags = Flags.FORCES_ENABLED if enabled else Flags.SAFE_STATE
+    return ToolState(1, seq, 0, flags, (0.0, 0.0), (x_m, y_m), (0.0, 0.0), 0.0, 0.0)
+
+
+def make() -> MasterSupervisor:
+    supervisor = MasterSupervisor(RATIO, 0.001, MAX_AGE_S, RESYNC)
+    supervisor.start((0.01, 0.02))
+    return supervisor
+
+
+def run_in_sync(supervisor: MasterSupervisor, ticks: int, start: int = 0) -> list[Transition]:
+    handle = (0.01, 0.02)
+    return [supervisor.update((start + i) * PERIOD_S,
+                              tool(RATIO[0] * handle[0], RATIO[1] * handle[1], seq=start + i),
+                              handle) for i in range(ticks)]
+
+
+def test_forces_come_on_after_the_resync_messages_in_sync() -> None:
+    supervisor = make()
+    transitions = run_in_sync(supervisor, RESYNC)
+    assert transitions[:-1] == [Transition.NONE] * (RESYNC - 1)
+    assert transitions[-1] is Transition.ACTIVATE
+    assert supervisor.enabled and supervisor.ever_enabled
+
+
+@pytest.mark.parametrize(("offset_m", "enabled_flag", "expected"), [
+    ((0.0009, 0.0), True, True),   # just inside the tolerance on x
+    ((0.0011, 0.0), True, False),  # just outside on x
+    ((0.0, -0.0011), True, False),  # just outside on y
+    ((0.0, 0.0), False, False),    # in place, but the slave's forces are off
+])
+def test_in_sync_needs_the_tool_at_ah1_yh_and_the_slaves_forces(offset_m, enabled_flag,
+                                                                 expected) -> None:
+    supervisor = make()
+    handle = (0.01, 0.02)
+    for i in range(2 * RESYNC):
+        supervisor.update(i * PERIOD_S, tool(RATIO[0] * handle[0] + offset_m[0],
+                                             RATIO[1] * handle[1] + offset_m[1],
+                                             enabled_flag, seq=i), handle)
+    assert supervisor.enabled is expected
+
+
+def test_silence_holds_the_handle_where_it_was_and_forces_resume_after_resync() -> None:
+    supervisor = make()
+    run_in_sync(supervisor, RESYNC)
+    now_s = RESYNC * PERIOD_S
+    moved = (0.013, 0.021)
+    # silence just under the limit: still enabled
+    assert supervisor.update(now_s, None, moved, silence_s=MAX_AGE_S * 0.99) is Transition.NONE
+    assert supervisor.enabled
+    # just over: forces off, the handle held where it is now
+    assert supervisor.update(now_s, None, moved, silence_s=MAX_AGE_S * 1.01) is Transition.HOLD
+    assert not supervisor.enabled
+    assert np.allclose(supervisor.hold_m, moved)
+    assert supervisor.trips == 1
+    # the slave is back: forces come on again only through a full resync, as RESUME
+    handle = (0.01, 0.02)
+    transitions = [supervisor.update(now_s + (i + 1) * PERIOD_S,
+                                     tool(RATIO[0] * handle[0], RATIO[1] * handle[1], seq=i),
+                                     handle) for i in range(RESYNC + 1)]
+    assert Transition.RESUME in transitions and Transition.ACTIVATE not in transitions
+    assert supervisor.enabled
+
+
+def test_a_lost_liveliness_token_trips_at_once() -> None:
+    supervisor = make()
+    run_in_sync(supervisor, RESYNC)
+    assert supervisor.update(1.0, None, (0.0, 0.0), peer_alive=False) is Transition.HOLD
+
+
+def test_a_hardware_fault_latches_the_safe_state_for_the_rest_of_the_run() -> None:
+    supervisor = make()
+    run_in_sync(supervisor, RESYNC)
+    assert supervisor.update(0.1, None, (0.01, 0.02), faults=("x: following error",),
+                             cycle=7) is Transition.HOLD
+    assert supervisor.faulted
+    assert supervisor.hardware_faults == ["cycle 7: x: following error"]
+    assert [e["kind"] for e in supervisor.events] == ["node_trip"]
+    assert not any(t is not Transition.NONE for t in run_in_sync(supervisor, 3 * RESYNC, 200))
+    assert not supervisor.enabled
+
+
+def test_a_node_trip_turns_forces_off_at_the_next_tick() -> None:
+    supervisor = make()
+    run_in_sync(supervisor, RESYNC)
+    supervisor.note_node_fault()
+    assert run_in_sync(supervisor, 1, RESYNC)[0] is Transition.HOLD
+    assert not supervisor.enabled
+
+
+def test_a_non_finite_handle_position_is_never_held() -> None:
+    supervisor = make()
+    run_in_sync(supervisor, RESYNC)
+    supervisor.update(1.0, None, (float("nan"), float("inf")), silence_s=1.0)
+    assert np.all(np.isfinite(supervisor.hold_m))

@@ -1,0 +1,82 @@
+"""The slave's supervisor as a pure block: the tool follows the handle while halted, runs
+only with the watchdog ok and the master's forces on, and the work-area guard stops it."""
+
+from __future__ import annotations
+
+from haptic.common.messages import Flags, HandleState
+from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
+
+PERIOD_S = 0.00054
+MAX_AGE_S = 0.03
+RESYNC = 4
+RATIO = (1.0, 1.0)
+AREA = (-0.01, 0.2, -0.01, 0.05)
+
+
+def handle(x_m: float, y_m: float = 0.0, enabled: bool = True, seq: int = 0) -> HandleState:
+    flags = Flags.FORCES_ENABLED if enabled else Flags.SAFE_STATE
+    return HandleState(1, seq, 0, flags, (0.0, 0.0), (x_m, y_m))
+
+
+def make() -> SlaveSupervisor:
+    return SlaveSupervisor(RATIO, 0.001, AREA, MAX_AGE_S, RESYNC)
+
+
+def start(supervisor: SlaveSupervisor, x_m: float = 0.05) -> list[Transition]:
+    transitions = []
+    for i in range(RESYNC):
+        follow = supervisor.receive(handle(x_m, seq=i))
+        assert follow  # halted: every fresh message re-places the tool at the handle
+        transitions.append(supervisor.update(i * PERIOD_S, True, (x_m, 0.0)))
+    return transitions
+
+
+def test_the_tool_runs_after_the_resync_with_the_masters_forces_on() -> None:
+    supervisor = make()
+    transitions = start(supervisor)
+    assert transitions[-1] is Transition.RESUME and supervisor.running and supervisor.ready
+    # running: fresh messages no longer re-place the tool
+    assert not supervisor.receive(handle(0.06, seq=9))
+
+
+def test_the_master_in_its_safe_state_stops_the_tool_but_this_side_stays_ready() -> None:
+    supervisor = make()
+    start(supervisor)
+    supervisor.receive(handle(0.05, enabled=False, seq=10))
+    assert supervisor.update(0.1, True, (0.05, 0.0)) is Transition.STOP
+    assert not supervisor.running and supervisor.ready
+    assert supervisor.events[-1]["reason"].startswith("the master is in its safe state")
+
+
+def test_silence_over_the_limit_stops_the_tool_and_under_it_does_not() -> None:
+    supervisor = make()
+    start(supervisor)
+    assert supervisor.update(0.1, False, (0.05, 0.0), silence_s=MAX_AGE_S * 0.99) \
+        is Transition.NONE
+    assert supervisor.update(0.1, False, (0.05, 0.0), silence_s=MAX_AGE_S * 1.01) \
+        is Transition.STOP
+    assert not supervisor.ready and supervisor.trips == 1
+
+
+def test_the_work_area_guard_stops_the_tool_until_a_resync_cycle() -> None:
+    supervisor = make()
+    start(supervisor)
+    assert supervisor.update(0.1, True, (0.2 + 1e-4, 0.0)) is Transition.STOP
+    assert supervisor.outside and not supervisor.ready
+    assert supervisor.events[-1]["kind"] == "tool_stopped"
+    # stopped by the guard: the tool does not follow the handle ...
+    assert not supervisor.receive(handle(0.05, seq=20))
+    assert supervisor.update(0.11, True, (0.2 + 1e-4, 0.0)) is Transition.NONE
+    # ... until the master goes to its safe state, which ends the guard's stop
+    supervisor.receive(handle(0.05, enabled=False, seq=21))
+    supervisor.update(0.12, True, (0.2 + 1e-4, 0.0))
+    assert not supervisor.outside
+    assert supervisor.receive(handle(0.05, seq=22))
+
+
+def test_out_of_sync_never_runs() -> None:
+    supervisor = make()
+    for i in range(3 * RESYNC):
+        supervisor.receive(handle(0.05, seq=i))
+        supervisor.update(i * PERIOD_S, True, (0.05 + 0.0011, 0.0))
+    assert not supervisor.running and not supervisor.ready
