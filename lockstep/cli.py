@@ -178,8 +178,10 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 for row in repro.rows:
                     paper = "-" if row.paper is None else f"{row.paper:g}"
+                    verdict = ("-" if row.within_tolerance is None
+                               else "ok" if row.within_tolerance else "OUT")
                     print(f"{row.name:36s} paper {paper:>8s}  ours {row.ours:10.4g} {row.unit:4s}"
-                          f" {'ok' if row.within_tolerance else 'OUT'} ({row.tolerance})")
+                          f" {verdict} ({row.tolerance}) [{row.basis}]")
                 print(f"wrote {args.out / 'report.md'}", file=sys.stderr)
             return 0
         return command_sweep(args, config)

@@ -28,12 +28,24 @@ from typing import Any
 import numpy as np
 
 from haptic.common.config.scenario import Scenario
-from haptic.slave_sim.clay_numpy import GeometryConstants, cut_numpy, window_starts
+from haptic.slave_sim.clay_numpy import (
+    ContactConstants,
+    GeometryConstants,
+    cut_numpy,
+    proxy_numpy,
+    window_starts,
+    yield_numpy,
+)
 from haptic.slave_sim.workpiece import NO_BLOCK, Workpiece, build_workpiece
 
 CLAY_IMPLEMENTATIONS = ("warp", "numpy")
 #: Displacement (m) under which a step counts as no motion for the engagement.
 MIN_DISPLACEMENT_M = 1e-12
+#: Coupling between the tool and its proxy in the clay (docs/clay.md, "The contact"): a
+#: spring of this stiffness (N/m) ...
+COUPLING_STIFFNESS_N_PER_M = 2000.0
+#: ... in parallel with a damper of this damping (N s/m).
+COUPLING_DAMPING_N_S_PER_M = 50.0
 
 
 def resolve_device(device: str) -> str:
@@ -53,7 +65,8 @@ class ClayStepResult:
     ``force_N`` (lanes, 2): force the tool applies to the clay (the clay pushes back with
     -force_N); ``cutting`` (lanes,): the tool removed material this step; ``engagement``
     (lanes,): fraction 0..1 of the reference cut; ``removed_volume_m3`` (lanes,): volume
-    removed this step; ``damping_N_s_per_m`` (lanes,): removal-weighted damping of the cut.
+    removed this step; ``damping_N_s_per_m`` (lanes,): removal-weighted damping of the cut;
+    ``proxy_position_m`` (lanes, 2): the proxy after the step (the clay's; None otherwise).
     """
 
     force_N: np.ndarray
@@ -61,6 +74,7 @@ class ClayStepResult:
     engagement: np.ndarray
     removed_volume_m3: np.ndarray
     damping_N_s_per_m: np.ndarray
+    proxy_position_m: np.ndarray | None = None
 
 
 def geometry_for(scenario: Scenario, sample_period_s: float) -> GeometryConstants:
@@ -104,6 +118,11 @@ class ClayState:
     damping: Any
     removed_total_m3: np.ndarray
     initial_volume_m3: np.ndarray
+    proxy: Any = None
+    proxy_prev: Any = None
+    resistance: Any = None
+    direction: Any = None
+    contact_ready: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     runtime: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -126,6 +145,30 @@ class ClayState:
     def block_damping_N_s_per_m(self) -> np.ndarray:
         """The lanes' block dampings (lanes, n_blocks), N s/m (a copy)."""
         return np.array(self.damping.numpy() if hasattr(self.damping, "numpy") else self.damping)
+
+    def proxy_position_m(self) -> np.ndarray:
+        """Each lane's proxy, the tool's contact point in the clay (lanes, 2), m (a copy)."""
+        return np.array(_host(self.proxy))
+
+    def resistance_N_s_per_m(self) -> np.ndarray:
+        """Each lane's clay resistance c = B_eff e for the next step (lanes,), N s/m."""
+        return np.array(_host(self.resistance))
+
+    def place_proxy(self, position_m: np.ndarray, lanes: np.ndarray | slice | None = None
+                    ) -> None:
+        """Put the proxy of ``lanes`` (default all) at ``position_m`` ((lanes, 2) or (2,),
+        m) with no resistance: the next step starts a fresh contact there (no sweep)."""
+        index = slice(None) if lanes is None else lanes
+        target = np.broadcast_to(np.asarray(position_m, float), (self.lanes, 2))
+        for name, values in (("proxy", target), ("proxy_prev", target)):
+            array = getattr(self, name)
+            host = np.array(_host(array))
+            host[index] = values[index]
+            _assign(array, host)
+        resistance = np.array(_host(self.resistance))
+        resistance[index] = 0.0
+        _assign(self.resistance, resistance)
+        self.contact_ready[index] = True
 
     def heights_m(self) -> np.ndarray:
         """The height field as numpy (lanes, cells_y, cells_x), m (a copy)."""
@@ -162,12 +205,30 @@ class ClayState:
         render_workpiece(path, self.workpiece, self.heights_m()[lane], tool_path_xy, title)
 
 
+def _host(array: Any) -> np.ndarray:
+    """A numpy view (CPU Warp array, numpy) or copy (CUDA Warp array) of ``array``."""
+    return array.numpy() if hasattr(array, "numpy") else array
+
+
+def _assign(array: Any, values: np.ndarray) -> None:
+    """Write ``values`` into ``array`` (numpy or Warp, any device)."""
+    if hasattr(array, "assign"):
+        array.assign(np.ascontiguousarray(values))
+    else:
+        array[...] = values
+
+
 class _ClayBase:
     """What both implementations share: construction from a scenario and the force law."""
 
     impl = ""
 
-    def __init__(self, scenario: Scenario, sample_period_s: float) -> None:
+    def __init__(self, scenario: Scenario, sample_period_s: float,
+                 coupling_stiffness_N_per_m: float = COUPLING_STIFFNESS_N_PER_M,
+                 coupling_damping_N_s_per_m: float = COUPLING_DAMPING_N_S_PER_M) -> None:
+        if coupling_stiffness_N_per_m <= 0.0 or coupling_damping_N_s_per_m < 0.0:
+            raise ValueError("the tool-proxy coupling needs a stiffness > 0 N/m and a "
+                             "damping >= 0 N s/m")
         self.scenario = scenario
         self.sample_period_s = float(sample_period_s)
         self.workpiece = build_workpiece(scenario)
@@ -175,13 +236,44 @@ class _ClayBase:
         tool = scenario.tool
         #: Cross-section (m^2) of the reference cut: tool diameter x reference depth.
         self.reference_area_m2 = 2.0 * tool.radius_m * tool.reference_depth_m
+        self.coupling_stiffness_N_per_m = float(coupling_stiffness_N_per_m)
+        self.coupling_damping_N_s_per_m = float(coupling_damping_N_s_per_m)
+        self.contact = ContactConstants(
+            stiffness=self.coupling_stiffness_N_per_m, damping=self.coupling_damping_N_s_per_m,
+            period=self.sample_period_s, reference_area=self.reference_area_m2,
+            min_step=MIN_DISPLACEMENT_M)
+
+    def passivity_margin_N_s_per_m(self, tool_damping_N_s_per_m: float) -> float:
+        """Colgate and Brown's bound for the coupling rendered on a device of physical
+        damping ``tool_damping_N_s_per_m``: ``Bt - (K Ts / 2 + b)``, N s/m; > 0 is passive."""
+        return float(tool_damping_N_s_per_m - (0.5 * self.coupling_stiffness_N_per_m
+                                               * self.sample_period_s
+                                               + self.coupling_damping_N_s_per_m))
 
     def _new_state(self, lanes: int, heights: Any, damping: Any) -> ClayState:
         volume = np.full(lanes, self.workpiece.heights_m.sum() * self.workpiece.cell_area_m2)
-        return ClayState(self.workpiece, heights, damping, np.zeros(lanes), volume)
+        state = ClayState(self.workpiece, heights, damping, np.zeros(lanes), volume)
+        state.contact_ready = np.zeros(lanes, bool)
+        return state
+
+    def step(self, state: ClayState, previous_xy: np.ndarray, position_xy: np.ndarray,
+             velocity_xy: np.ndarray) -> ClayStepResult:
+        """One step: the tool moved from ``previous_xy`` to ``position_xy`` (lanes, 2), m,
+        with velocity ``velocity_xy`` (lanes, 2), m/s at the new position. The proxy
+        advances by the implicit contact law and cuts the clay on its way; a lane's first
+        step places its proxy at ``previous_xy``."""
+        if not state.contact_ready.all():
+            state.place_proxy(previous_xy, ~state.contact_ready)
+        sums, force, before, after = self._advance(state, np.asarray(position_xy, float),
+                                                   np.asarray(velocity_xy, float))
+        return self._result(state, sums, before, after, force)
+
+    def _advance(self, state: ClayState, position_xy: np.ndarray, velocity_xy: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        raise NotImplementedError
 
     def _result(self, state: ClayState, sums: np.ndarray, previous_xy: np.ndarray,
-                position_xy: np.ndarray, velocity_xy: np.ndarray) -> ClayStepResult:
+                position_xy: np.ndarray, force: np.ndarray) -> ClayStepResult:
         removed = sums[:, 0].copy()
         state.removed_total_m3 += removed
         step = position_xy - previous_xy
@@ -192,8 +284,8 @@ class _ClayBase:
             engagement = np.where(displacement > MIN_DISPLACEMENT_M, np.minimum(ratio, 1.0),
                                   cutting.astype(float))
             damping = np.where(cutting, sums[:, 1] / removed, 0.0)
-        force = (damping * engagement)[:, None] * velocity_xy
-        return ClayStepResult(force, cutting, engagement, removed, damping)
+        return ClayStepResult(np.array(force), cutting, engagement, removed, damping,
+                              np.array(position_xy))
 
     def footprint_windows(self, position_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """First column and row of each lane's footprint window (for tests and plots)."""
@@ -215,30 +307,43 @@ class NumpyClay(_ClayBase):
         """Fresh workpieces for ``lanes`` lanes."""
         heights = np.repeat(self.workpiece.heights_m[None], lanes, axis=0)
         damping = np.repeat(self.workpiece.block_damping_N_s_per_m[None], lanes, axis=0)
-        return self._new_state(lanes, heights, damping)
+        state = self._new_state(lanes, heights, damping)
+        state.proxy = np.zeros((lanes, 2))
+        state.proxy_prev = np.zeros((lanes, 2))
+        state.resistance = np.zeros(lanes)
+        state.direction = np.zeros((lanes, 2))
+        return state
 
-    def step(self, state: ClayState, previous_xy: np.ndarray, position_xy: np.ndarray,
-             velocity_xy: np.ndarray) -> ClayStepResult:
-        """Cut along the move ``previous_xy`` -> ``position_xy`` (lanes, 2) m, tool velocity
-        ``velocity_xy`` (lanes, 2) m/s at the new position."""
-        sums = cut_numpy(state.heights, self.workpiece.block_id, state.damping,
-                         np.asarray(position_xy, float), self.geometry)
-        return self._result(state, sums, previous_xy, position_xy, velocity_xy)
+    def _advance(self, state: ClayState, position_xy: np.ndarray, velocity_xy: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        force = np.zeros((state.lanes, 2))
+        proxy_numpy(position_xy, velocity_xy, state.proxy, state.proxy_prev, state.resistance,
+                    state.direction, force, self.contact)
+        sums = cut_numpy(state.heights, self.workpiece.block_id, state.damping, state.proxy,
+                         self.geometry)
+        yield_numpy(state.proxy, state.proxy_prev, sums, state.resistance, state.direction,
+                    self.contact)
+        return sums, force, state.proxy_prev.copy(), state.proxy.copy()
 
 
 class WarpClay(_ClayBase):
-    """The clay step as one NVIDIA Warp kernel launch over every lane's footprint window.
+    """The clay step as three recorded NVIDIA Warp launches: the proxy's implicit step (one
+    thread per lane), the cut at the proxy over every lane's footprint window, and the clay's
+    resistance for the next step (one thread per lane).
 
-    On the CPU device the tool position and the sums are zero-copy numpy views of the Warp
-    arrays and the launch is recorded once (``record_cmd=True``) and replayed each step. On
-    CUDA the step copies the tool positions in, zeroes the sums, replays the recorded launch
-    and copies the sums back (pinned host buffers).
+    On the CPU device the tool's position and velocity, the force and the sums are zero-copy
+    numpy views of the Warp arrays and the launches are recorded once (``record_cmd=True``)
+    and replayed each step. On CUDA the step copies the tool's state in and the force, sums
+    and proxy positions out (pinned host buffers).
     """
 
     impl = "warp"
 
-    def __init__(self, scenario: Scenario, sample_period_s: float, device: str = "auto") -> None:
-        super().__init__(scenario, sample_period_s)
+    def __init__(self, scenario: Scenario, sample_period_s: float, device: str = "auto",
+                 coupling_stiffness_N_per_m: float = COUPLING_STIFFNESS_N_PER_M,
+                 coupling_damping_N_s_per_m: float = COUPLING_DAMPING_N_S_PER_M) -> None:
+        super().__init__(scenario, sample_period_s, coupling_stiffness_N_per_m,
+                         coupling_damping_N_s_per_m)
         import warp as wp
 
         from haptic.slave_sim import clay_kernels
@@ -257,66 +362,86 @@ class WarpClay(_ClayBase):
         for name in ("cells_x", "cells_y", "window_x", "window_y"):
             setattr(geo, name, int(getattr(g, name)))
         self._geo = geo
+        cc = clay_kernels.ContactConstants()
+        for name in ("stiffness", "damping", "period", "reference_area", "min_step"):
+            setattr(cc, name, wp.float64(getattr(self.contact, name)))
+        self._cc = cc
+
+    #: Arrays copied in (CUDA) before the launches, and out after them.
+    _INPUTS = ("tool", "velocity")
+    _OUTPUTS = ("force", "sums", "proxy", "proxy_prev")
 
     def initial_state(self, lanes: int = 1) -> ClayState:
-        """Fresh workpieces for ``lanes`` lanes, and the recorded launch that cuts them."""
+        """Fresh workpieces for ``lanes`` lanes, and the recorded launches that cut them."""
         wp = self._wp
+        dev = self.device
         heights = wp.array(np.repeat(self.workpiece.heights_m[None], lanes, axis=0),
-                           dtype=wp.float64, device=self.device)
+                           dtype=wp.float64, device=dev)
         damping = wp.array(np.repeat(self.workpiece.block_damping_N_s_per_m[None], lanes, axis=0),
-                           dtype=wp.float64, device=self.device)
-        tool = wp.zeros((lanes, 2), dtype=wp.float64, device=self.device)
-        sums = wp.zeros((lanes, 2), dtype=wp.float64, device=self.device)
+                           dtype=wp.float64, device=dev)
+        arrays = {name: wp.zeros((lanes, 2), dtype=wp.float64, device=dev)
+                  for name in ("tool", "velocity", "force", "sums", "proxy", "proxy_prev",
+                               "direction")}
+        resistance = wp.zeros(lanes, dtype=wp.float64, device=dev)
         state = self._new_state(lanes, heights, damping)
-        g = self.geometry
-        launch = wp.launch(
-            self._kernels.cut_kernel,
-            dim=(lanes, g.window_y),
-            inputs=[heights, self._block_id, damping, tool, self._geo, sums],
-            device=self.device,
-            record_cmd=True,
-        )
-        runtime: dict[str, Any] = {"launch": launch, "tool": tool, "sums": sums}
-        if self.device == "cpu":
-            runtime["tool_host"] = tool.numpy()  # zero-copy views on the CPU device
-            runtime["sums_host"] = sums.numpy()
+        state.proxy, state.proxy_prev = arrays["proxy"], arrays["proxy_prev"]
+        state.resistance, state.direction = resistance, arrays["direction"]
+        k = self._kernels
+        a = arrays
+        launches = [
+            wp.launch(k.proxy_kernel, dim=lanes,
+                      inputs=[a["tool"], a["velocity"], a["proxy"], a["proxy_prev"], resistance,
+                              a["direction"], a["force"], a["sums"], self._cc],
+                      device=dev, record_cmd=True),
+            wp.launch(k.cut_kernel, dim=(lanes, self.geometry.window_y),
+                      inputs=[heights, self._block_id, damping, a["proxy"], self._geo,
+                              a["sums"]],
+                      device=dev, record_cmd=True),
+            wp.launch(k.yield_kernel, dim=lanes,
+                      inputs=[a["proxy"], a["proxy_prev"], a["sums"], resistance,
+                              a["direction"], self._cc],
+                      device=dev, record_cmd=True),
+        ]
+        runtime: dict[str, Any] = {"launches": launches, "arrays": arrays}
+        if dev == "cpu":  # zero-copy views on the CPU device
+            runtime["host"] = {name: arrays[name].numpy() for name in self._INPUTS + self._OUTPUTS}
         else:
-            runtime["tool_host"] = wp.zeros((lanes, 2), dtype=wp.float64, device="cpu",
-                                            pinned=True)
-            runtime["sums_host"] = wp.zeros((lanes, 2), dtype=wp.float64, device="cpu",
-                                            pinned=True)
+            runtime["pinned"] = {name: wp.zeros((lanes, 2), dtype=wp.float64, device="cpu",
+                                                pinned=True)
+                                 for name in self._INPUTS + self._OUTPUTS}
+            runtime["host"] = {name: array.numpy() for name, array in runtime["pinned"].items()}
         state.runtime = runtime
         return state
 
-    def step(self, state: ClayState, previous_xy: np.ndarray, position_xy: np.ndarray,
-             velocity_xy: np.ndarray) -> ClayStepResult:
-        """Cut along the move ``previous_xy`` -> ``position_xy`` (lanes, 2) m, tool velocity
-        ``velocity_xy`` (lanes, 2) m/s at the new position."""
+    def _advance(self, state: ClayState, position_xy: np.ndarray, velocity_xy: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         rt = state.runtime
+        host = rt["host"]
+        host["tool"][...] = position_xy
+        host["velocity"][...] = velocity_xy
         if self.device == "cpu":
-            rt["tool_host"][...] = position_xy
-            sums = rt["sums_host"]
-            sums[...] = 0.0
-            rt["launch"].launch()
+            for launch in rt["launches"]:
+                launch.launch()
         else:
             wp = self._wp
-            rt["tool_host"].numpy()[...] = position_xy
-            wp.copy(rt["tool"], rt["tool_host"])
-            rt["sums"].zero_()
-            rt["launch"].launch()
-            wp.copy(rt["sums_host"], rt["sums"])
+            for name in self._INPUTS:
+                wp.copy(rt["arrays"][name], rt["pinned"][name])
+            for launch in rt["launches"]:
+                launch.launch()
+            for name in self._OUTPUTS:
+                wp.copy(rt["pinned"][name], rt["arrays"][name])
             wp.synchronize_device(self.device)
-            sums = rt["sums_host"].numpy()
-        return self._result(state, sums, previous_xy, position_xy, velocity_xy)
+        return host["sums"], host["force"], host["proxy_prev"].copy(), host["proxy"].copy()
 
 
 def make_clay(scenario: Scenario, sample_period_s: float, impl: str = "warp",
-              device: str = "auto") -> WarpClay | NumpyClay:
-    """The clay model named ``impl`` ("warp" or "numpy") for ``scenario``."""
+              device: str = "auto", **coupling: float) -> WarpClay | NumpyClay:
+    """The clay model named ``impl`` ("warp" or "numpy") for ``scenario``; ``coupling``:
+    ``coupling_stiffness_N_per_m`` and ``coupling_damping_N_s_per_m`` (module defaults)."""
     if impl == "warp":
-        return WarpClay(scenario, sample_period_s, device)
+        return WarpClay(scenario, sample_period_s, device, **coupling)
     if impl == "numpy":
-        return NumpyClay(scenario, sample_period_s)
+        return NumpyClay(scenario, sample_period_s, **coupling)
     raise ValueError(f"clay implementation must be one of {CLAY_IMPLEMENTATIONS} (got {impl!r})")
 
 

@@ -90,3 +90,83 @@ def cut_kernel(
     if volume_sum > zero:
         wp.atomic_add(accumulators, lane, 0, volume_sum)
         wp.atomic_add(accumulators, lane, 1, weighted_sum)
+
+
+@wp.struct
+class ContactConstants:
+    """The proxy contact's constants: coupling stiffness (N/m) and damping (N s/m), sample
+    period (s), reference cut cross-section (m^2), still-proxy step (m)."""
+
+    stiffness: wp.float64
+    damping: wp.float64
+    period: wp.float64
+    reference_area: wp.float64
+    min_step: wp.float64
+
+
+@wp.kernel
+def proxy_kernel(
+    tool_xy: wp.array2d(dtype=wp.float64),
+    tool_v: wp.array2d(dtype=wp.float64),
+    proxy: wp.array2d(dtype=wp.float64),
+    proxy_prev: wp.array2d(dtype=wp.float64),
+    resistance: wp.array1d(dtype=wp.float64),
+    direction: wp.array2d(dtype=wp.float64),
+    force: wp.array2d(dtype=wp.float64),
+    accumulators: wp.array2d(dtype=wp.float64),
+    cc: ContactConstants,
+):
+    """One implicit step of each lane's proxy (one thread per lane): the coupling
+    f = K (x - p) + b (v - dp/dt) against the clay's yield law f = c dp/dt, solved at the
+    step's end; no clay or a tool pulling back: the proxy is the tool, no force. Also zeroes
+    the lane's accumulators for the cut that follows."""
+    lane = wp.tid()
+    zero = wp.float64(0.0)
+    px = proxy[lane, 0]
+    py = proxy[lane, 1]
+    proxy_prev[lane, 0] = px
+    proxy_prev[lane, 1] = py
+    accumulators[lane, 0] = zero
+    accumulators[lane, 1] = zero
+    ux = cc.stiffness * (tool_xy[lane, 0] - px) + cc.damping * tool_v[lane, 0]
+    uy = cc.stiffness * (tool_xy[lane, 1] - py) + cc.damping * tool_v[lane, 1]
+    push = ux * direction[lane, 0] + uy * direction[lane, 1]
+    c = resistance[lane]
+    if c > zero and push > zero:
+        gain = wp.float64(1.0) / (c + cc.stiffness * cc.period + cc.damping)
+        force[lane, 0] = c * ux * gain
+        force[lane, 1] = c * uy * gain
+        proxy[lane, 0] = px + cc.period * ux * gain
+        proxy[lane, 1] = py + cc.period * uy * gain
+    else:
+        force[lane, 0] = zero
+        force[lane, 1] = zero
+        proxy[lane, 0] = tool_xy[lane, 0]
+        proxy[lane, 1] = tool_xy[lane, 1]
+
+
+@wp.kernel
+def yield_kernel(
+    proxy: wp.array2d(dtype=wp.float64),
+    proxy_prev: wp.array2d(dtype=wp.float64),
+    accumulators: wp.array2d(dtype=wp.float64),
+    resistance: wp.array1d(dtype=wp.float64),
+    direction: wp.array2d(dtype=wp.float64),
+    cc: ContactConstants,
+):
+    """Each lane's clay resistance for the next step from this step's cut: c = B_eff e with
+    e = min(1, dV / (A |dp|)); the move's direction is where the clay lies. No removal: no
+    resistance; a proxy that did not move keeps both."""
+    lane = wp.tid()
+    dx = proxy[lane, 0] - proxy_prev[lane, 0]
+    dy = proxy[lane, 1] - proxy_prev[lane, 1]
+    step = wp.sqrt(dx * dx + dy * dy)
+    if step > cc.min_step:
+        removed = accumulators[lane, 0]
+        if removed > wp.float64(0.0):
+            engagement = wp.min(removed / (cc.reference_area * step), wp.float64(1.0))
+            resistance[lane] = accumulators[lane, 1] / removed * engagement
+            direction[lane, 0] = dx / step
+            direction[lane, 1] = dy / step
+        else:
+            resistance[lane] = wp.float64(0.0)

@@ -77,3 +77,61 @@ def cut_numpy(
     result[:, 0] = volume.reshape(lanes, -1).sum(axis=1)
     result[:, 1] = (volume.reshape(lanes, -1) * weights).sum(axis=1)
     return result
+
+
+@dataclass(frozen=True)
+class ContactConstants:
+    """The proxy contact's constants (mirrors ``clay_kernels.ContactConstants``):
+    coupling stiffness (N/m) and damping (N s/m) between tool and proxy, the sample period
+    (s), the reference cut's cross-section (m^2) and the step (m) under which the proxy
+    counts as still."""
+
+    stiffness: float
+    damping: float
+    period: float
+    reference_area: float
+    min_step: float
+
+
+def proxy_numpy(tool_xy: np.ndarray, tool_v: np.ndarray, proxy: np.ndarray,
+                proxy_prev: np.ndarray, resistance: np.ndarray, direction: np.ndarray,
+                force: np.ndarray, cc: ContactConstants) -> None:
+    """Advance every lane's proxy by one implicit (backward Euler) step, in place.
+
+    The coupling force ``f = K (x - p) + b (v - dp/dt)`` and the clay's viscous yield law
+    ``f = c dp/dt`` (``c`` the lane's resistance, N s/m, from the last cut) solved for the
+    step's end: ``f = c u / (c + K T + b)`` with ``u = K (x - p_prev) + b v``. The clay only
+    resists the proxy moving on into it (``u . direction > 0``); otherwise, or with no clay
+    (``c = 0``), the proxy is the tool's position and the force is zero."""
+    proxy_prev[...] = proxy
+    ux = cc.stiffness * (tool_xy[:, 0] - proxy[:, 0]) + cc.damping * tool_v[:, 0]
+    uy = cc.stiffness * (tool_xy[:, 1] - proxy[:, 1]) + cc.damping * tool_v[:, 1]
+    push = ux * direction[:, 0] + uy * direction[:, 1]
+    engaged = (resistance > 0.0) & (push > 0.0)
+    gain = np.where(engaged, 1.0 / (resistance + cc.stiffness * cc.period + cc.damping), 0.0)
+    force[:, 0] = resistance * ux * gain
+    force[:, 1] = resistance * uy * gain
+    proxy[:, 0] = np.where(engaged, proxy[:, 0] + cc.period * ux * gain, tool_xy[:, 0])
+    proxy[:, 1] = np.where(engaged, proxy[:, 1] + cc.period * uy * gain, tool_xy[:, 1])
+
+
+def yield_numpy(proxy: np.ndarray, proxy_prev: np.ndarray, sums: np.ndarray,
+                resistance: np.ndarray, direction: np.ndarray, cc: ContactConstants) -> None:
+    """The clay's resistance for the next step from this step's cut, in place.
+
+    ``c = B_eff e`` with the engagement ``e = min(1, dV / (A |dp|))`` of the proxy's move dp
+    and ``B_eff`` the removal-weighted damping; the direction of the move is where the clay
+    now lies. A move that removed nothing leaves no resistance; a proxy that did not move
+    keeps both."""
+    dx = proxy[:, 0] - proxy_prev[:, 0]
+    dy = proxy[:, 1] - proxy_prev[:, 1]
+    step = np.sqrt(dx * dx + dy * dy)
+    moved = step > cc.min_step
+    removed = sums[:, 0]
+    cut = moved & (removed > 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        engagement = np.minimum(removed / (cc.reference_area * step), 1.0)
+        value = sums[:, 1] / removed * engagement
+        resistance[...] = np.where(cut, value, np.where(moved, 0.0, resistance))
+        direction[:, 0] = np.where(cut, dx / step, direction[:, 0])
+        direction[:, 1] = np.where(cut, dy / step, direction[:, 1])

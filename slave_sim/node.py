@@ -217,9 +217,11 @@ class SlaveNode:
                lanes: np.ndarray | slice | None = None) -> None:
         """Re-synchronise halted ``lanes`` to the received handle position (lanes, 2), m: the
         tool is placed at ``Ah1 yh`` at rest, compensators cleared, no force sent back, so
-        that ``yt = Ah1 yh`` when the lanes resume. The tool's previous position becomes the
-        new one, so the clay sees no sweep between the old and new places (a plunge into clay
-        there is spread over steps by the clay's per-step cut cap)."""
+        that ``yt = Ah1 yh`` when the lanes resume. The clay's proxy is placed there too, so
+        the clay sees no sweep between the old and new places (a plunge into clay there is
+        spread over steps by the clay's per-step cut cap): this carries the tool through any
+        clay in between, which is why a running program resyncs with
+        :class:`haptic.slave_sim.resync.ToolResync` (through the clay at a bounded speed)."""
         index = slice(None) if lanes is None else lanes
         target = self._position_ratio * np.asarray(handle_position_m, float)
         state.tool[index, 0] = target[index, 0] if target.ndim == 2 else target[0]
@@ -232,6 +234,9 @@ class SlaveNode:
         state.tool_force_N[index] = 0.0
         state.handle_position_m = np.array(np.broadcast_to(handle_position_m,
                                                            state.handle_position_m.shape))
+        place_proxy = getattr(state.environment, "place_proxy", None)
+        if place_proxy is not None:  # the clay's contact starts afresh where the tool is now
+            place_proxy(state.tool[:, POSITION_COLUMNS], index)
 
     @property
     def position_ratio(self) -> np.ndarray:

@@ -7,9 +7,9 @@ One tick at Ts (docs/programs.md):
    the master's compensator used, the handle position, the master's flags);
 2. the watchdog (fresh? silence? master alive?). In its safe states (``waiting`` at start,
    ``tripped``, ``resyncing``) the node is halted (``SlaveNode.safe_stop``: the tool stops, no
-   force goes back) and, on every fresh message, re-synchronised to the received handle
-   position (``SlaveNode.resync``: tool at Ah1 yh at rest); ``in_sync`` is then
-   |yt - Ah1 yh| below the tolerance. Back to ``ok``: ``SlaveNode.resume``;
+   force goes back) and, on every fresh message, brought towards the received handle
+   position (``ToolResync.step``: through the clay at a bounded speed, cutting); ``in_sync``
+   is then |yt - Ah1 yh| below the tolerance. Back to ``ok``: ``SlaveNode.resume``;
 3. ``node.step(fh_recv, yh_recv)``: the tool moves and cuts the clay;
 4. ``link.send_tool(ft, yt, vt, engagement, removed volume, flags)``.
 
@@ -37,7 +37,7 @@ import zenoh
 from haptic.common.cli_options import add_run_options, run_options_from_args
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.config.scenario import load_scenario, max_block_damping
-from haptic.common.cutting_metrics import cutting_figures
+from haptic.common.cutting import cutting_figures, steady_cut_fields
 from haptic.common.display import DisplayPublisher, EventCursor
 from haptic.common.failures import exit_on_link_error
 from haptic.common.inert import InertMonitor
@@ -53,6 +53,7 @@ from haptic.common.summary import format_summary, make_summary, write_json_summa
 from haptic.common.trace import TraceRecorder
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from haptic.slave_sim.node import SlaveNode
+from haptic.slave_sim.resync import ToolResync
 from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
 from haptic.slave_sim.tool_path import ToolPath
 
@@ -259,6 +260,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     trace = TraceRecorder(SLAVE_TRACE_COLUMNS, args.trace_every)
     state = node.initial_state(1)
     node.safe_stop(state)
+    resync = ToolResync(node)  # to the handle through the clay at a bounded speed
     stages = StageTimes(TICK_STAGES)
     zero_force = np.zeros((1, 2))
     path_every = max(1, args.trace_every)
@@ -319,7 +321,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 fh_row[0] = guard.force_N  # bounded
                 yh_row[0] = guard.position_m
             if supervisor.receive(message):
-                node.resync(state, yh)  # follow the (held) handle while not running
+                resync.step(state, yh)  # follow the (held) handle, cutting (resync.py)
             tool_row = state.tool[0]
             transition = supervisor.update(now_s, fresh, (tool_row[0], tool_row[2]),
                                            link.silence_s(), link.peer_alive, guard.faulted)
@@ -433,7 +435,9 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     )
     if display is not None:
         summary.update(display.figures)
-    summary.update(cutting_figures(trace.arrays()))
+    traced = trace.arrays()
+    summary.update(cutting_figures(traced))
+    summary.update(steady_cut_fields(traced))
     if args.out is not None:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)

@@ -1,0 +1,81 @@
+"""Re-synchronising the halted tool with the handle without carrying it through clay.
+
+After a watchdog trip (or at start-up) the slave waits, halted, until the tool is back at
+``Ah1 yh`` (the position ratio of the paper's design, eq 12). Placing the tool there at once
+carries it through whatever clay lies between where it stopped and the handle: a loaded run
+left a 2 cm uncut bridge in the middle of its groove that way (issue 15).
+
+The policy here: **the tool goes to the handle through the clay at a bounded speed, cutting
+as it goes.** Each tick of the safe state :meth:`ToolResync.step` moves the halted tool
+along the straight line towards ``Ah1 yh`` by at most ``speed_m_s * Ts`` and steps the
+environment with that move, so the proxy (docs/clay.md) cuts every cell on the way and the
+removed volume stays the swept volume. The tool is moved kinematically (its velocity state
+stays zero: the node resumes it at rest) and no force goes back while halted. The handle is
+held by the master in its safe state, so the tool arrives; the watchdog's ``in_sync`` test
+(|yt - Ah1 yh| below its tolerance) then ends the resync as before.
+
+Why this and not moving the handle's reference to the tool: the paper's loop keeps the
+position ratio ``yt = Ah1 yh`` without any position feedback (the compensators act on forces
+alone), so a reference offset would stay for the rest of the session and every later check of
+the ratio would have to carry it; moving the tool keeps the relation, and the slow approach
+through the clay costs about ``distance / speed`` (0.1 s for 2 mm at 0.02 m/s).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from haptic.slave_sim.node import SlaveNode, SlaveState
+from haptic.slave_sim.tool import POSITION_COLUMNS, VELOCITY_COLUMNS
+
+#: Speed at which a halted tool is brought to the handle through the clay, m/s: below the
+#: paper's cutting speeds (0.03-0.15 m/s), so the clay's push when the tool resumes is at most
+#: B_max times this (2 N for 100 N s/m).
+RESYNC_SPEED_M_S = 0.02
+
+
+class ToolResync:
+    """Brings ``node``'s halted tool to ``Ah1 yh`` at ``speed_m_s`` at most, cutting."""
+
+    def __init__(self, node: SlaveNode, speed_m_s: float = RESYNC_SPEED_M_S) -> None:
+        if not speed_m_s > 0.0:
+            raise ValueError(f"the resync speed must be > 0 m/s (got {speed_m_s})")
+        self.node = node
+        self.speed_m_s = float(speed_m_s)
+        self._max_step_m = self.speed_m_s * node.sample_period_s
+
+    def target_m(self, handle_position_m: np.ndarray) -> np.ndarray:
+        """``Ah1 yh`` for received handle positions (lanes, 2) or (2,), m."""
+        return self.node.position_ratio * np.asarray(handle_position_m, float)
+
+    def step(self, state: SlaveState, handle_position_m: np.ndarray) -> np.ndarray:
+        """One tick of the safe state: every lane (all must be halted) moves towards
+        ``Ah1 yh`` by at most ``speed_m_s * Ts`` and the environment cuts along the move;
+        returns the distance (m) left per lane."""
+        if not state.halted.all():
+            raise ValueError("ToolResync.step moves halted tools only (call safe_stop first)")
+        node = self.node
+        lanes = state.lanes
+        target = np.broadcast_to(self.target_m(handle_position_m), (lanes, 2))
+        previous = state.tool[:, POSITION_COLUMNS]
+        offset = target - previous
+        distance = np.sqrt((offset * offset).sum(axis=1))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scale = np.where(distance > self._max_step_m, self._max_step_m / distance, 1.0)
+        move = offset * scale[:, None]
+        position = previous + move
+        velocity = move / node.sample_period_s
+        node.environment.step(state.environment, previous, position, velocity,
+                              np.zeros((lanes, 2)))
+        state.tool[:, POSITION_COLUMNS] = position
+        state.tool[:, VELOCITY_COLUMNS] = 0.0
+        state.compensator[...] = 0.0
+        state.actuator_force_N = np.zeros_like(state.actuator_force_N)
+        state.tool_force_N = np.zeros_like(state.tool_force_N)
+        state.handle_position_m = np.array(np.broadcast_to(handle_position_m,
+                                                           state.handle_position_m.shape))
+        left = target - position
+        return np.sqrt((left * left).sum(axis=1))
+
+
+__all__ = ["RESYNC_SPEED_M_S", "ToolResync"]

@@ -1,0 +1,110 @@
+"""A resync never carries the tool through clay: a forced outage in the middle of a cut."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from haptic.common.config.scenario import load_scenario
+from haptic.common.model import model_from_config
+from haptic.slave_sim.node import SlaveNode
+from haptic.slave_sim.resync import RESYNC_SPEED_M_S, ToolResync
+
+SYNC_TOLERANCE_M = 0.001  # haptic-slave's default --sync-tolerance
+HANDLE_AHEAD_M = 0.02  # the handle ran 2 cm ahead during the outage (issue 15's bridge)
+
+
+def _cut_with_outage(paper_config, policy: str):
+    """Cut the constant-rate block with a steady 3.6 N; after 0.6 s the link fails, the tool
+    stops, and when the link is back the handle is 2 cm ahead. ``policy``: "through" (the
+    program's ToolResync) or "teleport" (placing the tool at the handle)."""
+    model = model_from_config(paper_config)
+    node = SlaveNode(model, load_scenario("constant-rate").with_grid(512, 128),
+                     device="cpu")
+    state = node.initial_state(1, start_position_m=np.array([0.03, 0.0]))
+    force = np.array([[3.6, 0.0]])
+    ticks = 0
+
+    def cut(seconds: float) -> None:
+        nonlocal ticks
+        for _ in range(int(round(seconds / model.sample_period_s))):
+            node.step(state, force, state.tool_position_m())
+            ticks += 1
+
+    cut(0.6)
+    node.safe_stop(state)  # the watchdog trips: the tool stops where it is
+    stopped_at = state.tool_position_m()[0].copy()
+    handle = (stopped_at + [HANDLE_AHEAD_M, 0.0])[None]
+    distances = []
+    if policy == "through":
+        resync = ToolResync(node)
+        distance = np.inf
+        while distance > SYNC_TOLERANCE_M:
+            distance = float(resync.step(state, handle)[0])
+            distances.append(distance)
+            assert len(distances) < 10 * HANDLE_AHEAD_M / (RESYNC_SPEED_M_S
+                                                             * model.sample_period_s)
+    else:
+        node.resync(state, handle)
+    node.resume(state)
+    cut(0.4)
+    return node, state, stopped_at, np.array(distances)
+
+
+@pytest.fixture(scope="module")
+def through(paper_config):
+    return _cut_with_outage(paper_config, "through")
+
+
+def test_resync_brings_the_tool_through_the_clay_at_a_bounded_speed(through) -> None:
+    node, state, stopped_at, distances = through
+    step = RESYNC_SPEED_M_S * node.sample_period_s
+    travelled = -np.diff(np.concatenate([[HANDLE_AHEAD_M], distances]))
+    assert (travelled <= step * (1 + 1e-9)).all()
+    assert distances[-1] <= SYNC_TOLERANCE_M
+    # about (2 cm - 1 mm) / 0.02 m/s of resync, and the tool cut on after it
+    assert distances.size * node.sample_period_s == pytest.approx(
+        (HANDLE_AHEAD_M - SYNC_TOLERANCE_M) / RESYNC_SPEED_M_S, rel=0.01)
+    assert state.tool_position_m()[0, 0] > stopped_at[0] + HANDLE_AHEAD_M
+
+
+def test_no_uncut_bridge_after_an_outage_mid_cut(through) -> None:
+    """Along the groove's centre line every cell from where the cut started to where the
+    proxy is now is cut to the tool's bottom: the resync cut its way to the handle."""
+    node, state, _, _ = through
+    clay = node.environment.clay
+    heights = state.environment.heights_m()[0]
+    xs, ys = clay.workpiece.cell_centers_m()
+    row = int(np.argmin(np.abs(ys)))
+    radius = clay.scenario.tool.radius_m
+    end = state.environment.proxy_position_m()[0, 0]
+    span = (xs > 0.03 + radius) & (xs < end - radius)
+    assert span.sum() > 100
+    bottom = clay.scenario.tool.bottom_height_m
+    assert heights[row, span].max() == pytest.approx(bottom, abs=1e-12)
+    conservation = state.environment.conservation_error_m3()[0]
+    assert abs(conservation) < 1e-12 * state.environment.removed_total_m3[0]
+
+
+def test_placing_the_tool_at_the_handle_leaves_a_bridge(paper_config) -> None:
+    """The former policy (the tool placed at the handle) skips the clay in between: the
+    test above would fail for it."""
+    node, state, stopped_at, _ = _cut_with_outage(paper_config, "teleport")
+    clay = node.environment.clay
+    heights = state.environment.heights_m()[0]
+    xs, ys = clay.workpiece.cell_centers_m()
+    row = int(np.argmin(np.abs(ys)))
+    radius = clay.scenario.tool.radius_m
+    bridge = (xs > stopped_at[0] + radius + 0.001) & (xs < stopped_at[0] + HANDLE_AHEAD_M
+                                                      - radius - 0.001)
+    assert heights[row, bridge].min() == pytest.approx(clay.scenario.blocks[0].height_m)
+
+
+def test_resync_moves_halted_tools_only(paper_config) -> None:
+    model = model_from_config(paper_config)
+    node = SlaveNode(model, load_scenario("constant-rate").with_grid(256, 64), device="cpu")
+    state = node.initial_state(1)
+    with pytest.raises(ValueError, match="halted"):
+        ToolResync(node).step(state, np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="speed"):
+        ToolResync(node, 0.0)
