@@ -63,6 +63,8 @@ class SlaveSupervisor:
         self.ready = False
         self.outside = False
         self.input_fault = False
+        self.rejoining = False
+        """After a work-area stop: the tool goes back to the handle before it runs again."""
         self.grid_m = None if grid_m is None else tuple(float(v) for v in grid_m)
         self.events: list[dict[str, Any]] = []
 
@@ -88,11 +90,13 @@ class SlaveSupervisor:
         changed (see :class:`Transition`). ``input_fault``: the input guard holds a fault."""
         self.input_fault = input_fault
         tool_x_m, tool_y_m = tool_position_m
-        state = self.watchdog.update(now_s, fresh, silence_s, self.in_sync(tool_x_m, tool_y_m),
-                                     peer_alive)
+        synced = self.in_sync(tool_x_m, tool_y_m)
+        state = self.watchdog.update(now_s, fresh, silence_s, synced, peer_alive)
+        if self.rejoining and synced:
+            self.rejoining = False  # the tool is back at the handle
         watchdog_ok = state is WatchdogState.OK
         if not (watchdog_ok and self.master_enabled):
-            self.outside = False  # a resync cycle ends the work-area stop
+            self.outside = self.rejoining = False  # a resync cycle ends the work-area stop
         elif not self.outside and not (self.x_low_m <= tool_x_m <= self.x_high_m
                                        and self.y_low_m <= tool_y_m <= self.y_high_m):
             # the work area's guard: the tool stops at its edge until a resync
@@ -106,14 +110,15 @@ class SlaveSupervisor:
             if (x_low <= self.ratio_x * handle_x_m <= x_high
                     and y_low <= self.ratio_y * handle_y_m <= y_high):
                 # resync policy: the handle is back over the work area; the tool rejoins it
-                # there on the next tick (receive() re-places it) and runs once in sync
+                # there (receive() re-places it from the next tick) and runs once in sync
                 self.outside = False
+                self.rejoining = True
                 self.events.append({"time_s": now_s, "kind": "tool_resync",
                                     "reason": "the handle is back over the work area: the "
                                     "tool rejoins it"})
-        running = (watchdog_ok and self.master_enabled and not self.outside
-                   and not input_fault)
-        self.ready = watchdog_ok and not self.outside and not input_fault
+        halted = self.outside or self.rejoining or input_fault
+        running = watchdog_ok and self.master_enabled and not halted
+        self.ready = watchdog_ok and not halted
         transition = Transition.NONE
         if running and not self.running:
             transition = Transition.RESUME
@@ -121,7 +126,7 @@ class SlaveSupervisor:
                                 "reason": "positions in sync and the master's forces enabled"})
         elif self.running and not running:
             transition = Transition.STOP
-            if not self.outside:
+            if not (self.outside or self.rejoining):
                 reason = (f"watchdog {state.value}" if not watchdog_ok
                           else "input fault" if input_fault
                           else "the master is in its safe state")
@@ -134,6 +139,8 @@ class SlaveSupervisor:
         """Why the tool is not running now (for the inert monitor, common/inert.py)."""
         if self.outside:
             return "the tool is stopped by the work-area guard"
+        if self.rejoining:
+            return "the tool rejoins the handle after a work-area stop"
         if self.input_fault:
             return "input fault"
         state = self.watchdog.state
