@@ -97,8 +97,9 @@ class SlaveSupervisor:
         watchdog_ok = state is WatchdogState.OK
         if not (watchdog_ok and self.master_enabled):
             self.outside = self.rejoining = False  # a resync cycle ends the work-area stop
-        elif not self.outside and not (self.x_low_m <= tool_x_m <= self.x_high_m
-                                       and self.y_low_m <= tool_y_m <= self.y_high_m):
+        elif not (self.outside or self.rejoining) and not (
+                self.x_low_m <= tool_x_m <= self.x_high_m
+                and self.y_low_m <= tool_y_m <= self.y_high_m):
             # the work area's guard: the tool stops at its edge until a resync
             self.outside = True
             self.events.append({"time_s": now_s, "kind": "tool_stopped",

@@ -55,7 +55,12 @@ def test_the_tool_rejoins_the_handle_back_over_the_grid() -> None:
     assert not supervisor.outside and not supervisor.running and not supervisor.ready
     assert supervisor.events[-1]["kind"] == "tool_resync"
     assert "rejoins" in supervisor.stop_reason()
-    assert supervisor.receive(handle(0.10, 13))  # re-place the tool (resync)
+    # on its way back (still outside the area) the guard does not stop it again
+    assert supervisor.receive(handle(0.10, 13))
+    supervisor.update(t + 2.5 * PERIOD_S, True, (0.22, 0.01))
+    assert not supervisor.outside and supervisor.rejoining
+    assert [e["kind"] for e in supervisor.events].count("tool_stopped") == 1
+    assert supervisor.receive(handle(0.10, 14))  # re-place the tool (resync)
     assert supervisor.update(t + 3 * PERIOD_S, True, (0.10, 0.01)) is Transition.RESUME
 
 
