@@ -50,7 +50,7 @@ def run(rate_hz: float, flood_s: float, max_samples: int, lead_s: float = 6.0) -
             master = subprocess.Popen(
                 [sys.executable, "-m", "haptic.master.cli", *common, "--listen", endpoint,
                  "--rig", "model", "--json-summary", str(tmp / "master.json"),
-                 "--trace", str(tmp / "master_trace.npz"), "--trace-every", "10"],
+                 "--out", str(tmp), "--trace-every", "10"],
                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
             processes.append(master)
             slave = subprocess.Popen(
