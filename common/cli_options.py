@@ -57,6 +57,7 @@ _LINK_FLAGS = {
     "mode": ("--mode", "transport.mode"),
     "key_prefix": ("--key-prefix", "transport.key_prefix"),
     "max_message_age": ("--max-message-age", "watchdog.max_message_age_s"),
+    "session_key": ("--session-key", "security.session_key_file"),
 }
 
 
@@ -144,6 +145,9 @@ def add_connection_options(parser: argparse.ArgumentParser) -> None:
         "link.<side>.endpoints.listen)",
     )
     group.add_argument("--key-prefix", metavar="PREFIX", help="key prefix, e.g. haptic/rig-1")
+    group.add_argument("--session-key", metavar="FILE",
+                       help="authenticate the session with the pre-shared key in FILE (64 hex "
+                       "digits, mode 600; link.security.session_key_file)")
     group.add_argument(
         "--zenoh-config", metavar="FILE", help="a Zenoh json5 configuration file, loaded first"
     )

@@ -19,6 +19,7 @@ Injection, ordering and the counters live in :class:`haptic.common.receive.Recei
 
 from __future__ import annotations
 
+import secrets
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -26,10 +27,22 @@ from dataclasses import dataclass, replace
 import numpy as np
 import zenoh
 
+from haptic.common.auth import (
+    HELLO_PERIOD_S,
+    NONCE_BYTES,
+    Hello,
+    HelloError,
+    SessionAuth,
+    decode_hello,
+    encode_hello,
+)
+from haptic.common.failures import LinkOpenError, one_line
 from haptic.common.link_config import LinkConfig
 from haptic.common.messages import (
     KIND_HANDLE,
     KIND_TOOL,
+    SCHEMA_VERSION,
+    DropReason,
     Flags,
     HandleState,
     Message,
@@ -40,6 +53,9 @@ from haptic.common.messages import (
 from haptic.common.receive import LinkStats, ReceivePath
 
 NO_FLAGS = Flags(0)
+#: A mismatched peer (another schema version, authentication on one side) seen this long
+#: without a pairing stops the start, s.
+MISMATCH_GRACE_S = 1.0
 _CONGESTION = {"drop": zenoh.CongestionControl.DROP, "block": zenoh.CongestionControl.BLOCK}
 
 
@@ -120,15 +136,41 @@ class Link:
         """Time of the latest :meth:`poll` on the link's clock, ns."""
         self.sent = 0
         self.send_errors = 0
+        self.capped_polls = 0
+        """Polls that took ``max_samples_per_poll`` samples and left the rest for the next."""
+        # pairing (common/auth.py): hellos on <prefix>/pair/<side>, tags with a session key
+        self._psk = config.session_key
+        self.auth = SessionAuth(self._psk, config.side, self.epoch) if self._psk else None
+        self._nonce = self.auth.nonce if self.auth else secrets.token_bytes(NONCE_BYTES)
+        self._hello_publisher: zenoh.Publisher | None = None
+        self._hello_subscriber: zenoh.Subscriber | None = None
+        self._next_hello_ns = 0
+        self.peer_hello: Hello | None = None
+        """The peer's latest valid hello (its run's epoch; None before the first)."""
+        self.peer_mismatch: str | None = None
+        """Why the peer cannot be paired with (another schema version, authentication on one
+        side only), or None."""
+        self.unpaired_sends = 0
+        self._mismatch_since: float | None = None
+        """Messages not sent because this authenticated side was not paired yet."""
 
     # -- lifecycle ---------------------------------------------------------------------------
 
     def open(self) -> Link:
-        """Open the session and declare the publisher, subscribers and liveliness token."""
+        """Open the session and declare the publisher, subscribers and liveliness token.
+        Raises :class:`~haptic.common.failures.LinkOpenError` (one line) when Zenoh cannot
+        open the session."""
         if self._session is not None:
             return self
         c = self.config
-        self._session = zenoh.open(zenoh_config(c))
+        try:
+            self._session = zenoh.open(zenoh_config(c))
+        except zenoh.ZError as error:  # a port in use, an unreachable router, a bad file
+            raise LinkOpenError(
+                f"cannot open the Zenoh session (mode {c.mode}, listen "
+                f"{(c.mode != 'client' and ','.join(c.listen)) or '-'}, connect "
+                f"{','.join(c.connect) or '-'}): "
+                f"{one_line(error)}") from None
         try:
             self._publisher = self._session.declare_publisher(
                 c.publish_key,
@@ -144,6 +186,10 @@ class Link:
                 c.liveliness_key(c.peer_side), zenoh.handlers.FifoChannel(64), history=True
             )
             self._token = liveliness.declare_token(c.liveliness_key(c.side))
+            self._hello_publisher = self._session.declare_publisher(
+                c.key(f"pair/{c.side}"), congestion_control=zenoh.CongestionControl.BLOCK)
+            self._hello_subscriber = self._session.declare_subscriber(
+                c.key(f"pair/{c.peer_side}"), zenoh.handlers.FifoChannel(16))
         except BaseException:
             self.close()
             raise
@@ -152,7 +198,8 @@ class Link:
     def close(self) -> None:
         """Undeclare everything and close the session (idempotent)."""
         session, self._session = self._session, None
-        for name in ("_token", "_presence", "_subscriber", "_publisher"):
+        for name in ("_token", "_presence", "_subscriber", "_publisher", "_hello_subscriber",
+                     "_hello_publisher"):
             entity = getattr(self, name)
             setattr(self, name, None)
             if entity is not None and session is not None:
@@ -200,6 +247,12 @@ class Link:
             raise RuntimeError("link is not open")
         send_ns = self._clock_ns()
         payload = before + send_time_bytes(send_ns) + after
+        auth = self.auth
+        if auth is not None:
+            if not auth.paired:  # nothing leaves before the pairing: the peer would drop it
+                self.unpaired_sends += 1
+                return replace(message, send_time_ns=send_ns)
+            payload += auth.tag(payload)
         try:
             if self._instrumentation is not None:
                 publisher.put(payload, timestamp_instrumentation=self._instrumentation)
@@ -252,9 +305,11 @@ class Link:
         return now_ns
 
     def poll(self, now_ns: int | None = None) -> Message | None:
-        """Drain everything received since the last poll into the receive path and return the
-        newest message whose delivery time has come (``None`` if there is none). Also updates
-        ``peer_alive`` from the liveliness subscriber. Never blocks."""
+        """Drain what was received since the last poll (at most ``max_samples_per_poll``
+        samples: the rest wait for the next poll; ``capped_polls`` counts polls that reached
+        the bound) into the receive path and return the newest message whose delivery time has
+        come (``None`` if none). Also updates ``peer_alive`` from the liveliness subscriber.
+        Never blocks."""
         subscriber = self._subscriber
         if subscriber is None:
             raise RuntimeError("link is not open")
@@ -262,10 +317,26 @@ class Link:
             now_ns = self._clock_ns()
         self.last_poll_ns = now_ns
         receive = self.receive
+        budget = self.config.max_samples_per_poll  # flood bound: the rest wait in the ring
         sample = subscriber.try_recv()
+        auth = self.auth
         while sample is not None:
-            receive.accept(sample.payload.to_bytes(), self._arrival_ns(sample, now_ns))
+            payload = sample.payload.to_bytes()
+            if receive.rejects_at_once(payload):  # junk costs no stamp, no decode
+                pass
+            elif auth is None:
+                receive.accept(payload, self._arrival_ns(sample, now_ns))
+            elif (body := auth.verify(payload)) is not None:
+                receive.accept(body, self._arrival_ns(sample, now_ns))
+            else:
+                receive.drop(DropReason.UNAUTHENTICATED if auth.paired
+                             else DropReason.UNPAIRED)
+            budget -= 1
+            if budget == 0:
+                self.capped_polls += 1
+                break
             sample = subscriber.try_recv()
+        self._pair(now_ns)
         presence = self._presence
         if presence is not None:
             change = presence.try_recv()
@@ -274,8 +345,85 @@ class Link:
                 if alive != self.peer_alive:
                     self.peer_alive = alive
                     self.presence_events.append(PresenceEvent(now_ns, alive))
+                    if alive:
+                        self._next_hello_ns = 0  # its session is there: pair without waiting
                 change = presence.try_recv()
         return receive.release(now_ns)
+
+    def _pair(self, now_ns: int) -> None:
+        """Take the peer's hellos (at most 8 per poll), pair on a new authenticated one, and
+        publish this side's hello every HELLO_PERIOD_S (at once after a new pairing)."""
+        subscriber = self._hello_subscriber
+        if subscriber is None:
+            return
+        auth = self.auth
+        for _ in range(8):
+            sample = subscriber.try_recv()
+            if sample is None:
+                break
+            try:
+                hello = decode_hello(sample.payload.to_bytes(), self._psk)
+            except HelloError:
+                if auth is not None:
+                    auth.rejected_hellos += 1
+                continue
+            if hello.version != SCHEMA_VERSION:
+                self.peer_mismatch = (
+                    f"the {self.config.peer_side} speaks wire schema version {hello.version}, "
+                    f"this program {SCHEMA_VERSION}: run the same haptic-teleop on both sides")
+                continue
+            if hello.authenticated != (auth is not None):
+                self.peer_mismatch = (
+                    f"the {self.config.peer_side} "
+                    f"{'authenticates' if hello.authenticated else 'does not authenticate'} "
+                    f"its messages and this side "
+                    f"{'does' if auth is not None else 'does not'}: give both sides the same "
+                    "[link.security] session_key_file (--session-key), or neither")
+                continue
+            if auth is None:
+                if hello.side == self.config.peer_side:
+                    known = self.peer_hello
+                    if known is None or (known.epoch, known.nonce) != (hello.epoch, hello.nonce):
+                        self._next_hello_ns = 0  # a new peer run: answer at once
+                    self.peer_hello = hello
+            elif auth.accept_hello(hello, now_ns):
+                self.peer_hello = hello
+                self.receive.pin_epoch(hello.epoch)
+                self._next_hello_ns = 0  # answer at once, so the peer pairs too
+        publisher = self._hello_publisher
+        if publisher is not None and now_ns >= self._next_hello_ns:
+            self._next_hello_ns = now_ns + int(HELLO_PERIOD_S * 1e9)
+            payload = (auth.hello(now_ns) if auth is not None else
+                       encode_hello(self.config.side, self.epoch, self._nonce, now_ns, None))
+            try:
+                publisher.put(payload)
+            except Exception:  # noqa: BLE001 - a lost hello is sent again
+                self.send_errors += 1
+
+    @property
+    def paired(self) -> bool:
+        """The peer's hello came (and, authenticated, the session key is derived)."""
+        if self.auth is not None:
+            return self.auth.paired
+        return self.peer_hello is not None
+
+    def _check_peer(self) -> None:
+        """Raise :class:`LinkOpenError` when, unpaired, a mismatched peer has been seen for
+        :data:`MISMATCH_GRACE_S` (a stranger's single mismatched hello does not stop a start
+        that pairs with the real peer meanwhile)."""
+        version = self.receive.last_unknown_version
+        if self.peer_mismatch is None and version is not None:
+            self.peer_mismatch = (
+                f"the {self.config.peer_side} speaks wire schema version {version}, this "
+                f"program {SCHEMA_VERSION}: run the same haptic-teleop on both sides")
+        if self.peer_mismatch is None or self.paired:
+            self._mismatch_since = None
+            return
+        now = time.monotonic()
+        if self._mismatch_since is None:
+            self._mismatch_since = now
+        if now - self._mismatch_since >= MISMATCH_GRACE_S:
+            raise LinkOpenError(self.peer_mismatch)
 
     @property
     def last_delivery_measured(self) -> bool:
@@ -292,17 +440,20 @@ class Link:
         should_stop: Callable[[], bool] | None = None,
         poll_interval_s: float = 0.001,
     ) -> bool:
-        """Poll until the peer's liveliness token is seen (True), or ``timeout_s`` passes
-        (``None``: no limit) or ``should_stop()`` says so (False). Messages that arrive
-        meanwhile go through the receive path as usual."""
+        """Poll until the peer's liveliness token is seen and the peer paired (its hello came
+        and, authenticated, verified) (True), or ``timeout_s`` passes (``None``: no limit) or
+        ``should_stop()`` says so (False). Messages that arrive meanwhile go through the
+        receive path as usual. Raises :class:`LinkOpenError` for a peer that cannot be paired
+        with (another wire schema version, authentication on one side only)."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
-        while not self.peer_alive:
+        while not (self.peer_alive and self.paired):
+            self._check_peer()
             if should_stop is not None and should_stop():
                 return False
             if deadline is not None and time.monotonic() > deadline:
                 return False
             self.poll()
-            if not self.peer_alive:
+            if not (self.peer_alive and self.paired):
                 time.sleep(poll_interval_s)
         return True
 
@@ -339,5 +490,11 @@ class Link:
         result = self.stats().as_summary()
         result["link_sent"] = self.sent
         result["link_send_errors"] = self.send_errors
+        result["link_capped_polls"] = self.capped_polls
+        result["link_authenticated"] = self.auth is not None
+        result["link_pairings"] = self.auth.pairings if self.auth is not None else None
+        result["link_rejected_hellos"] = (self.auth.rejected_hellos if self.auth is not None
+                                          else None)
+        result["link_unpaired_sends"] = self.unpaired_sends
         result["link_peer_alive"] = self.peer_alive
         return result

@@ -134,11 +134,25 @@ WATCHDOG_SCHEMA: Schema = {
     ),
 }
 
+SECURITY_SCHEMA: Schema = {
+    "session_key_file": Field(
+        "str", "Authenticated sessions (common/auth.py): a file with the pre-shared key (64 "
+        "hex digits, mode 600); both sides must have the same. Empty: no authentication "
+        "(one trusted host only).",
+    ),
+    "max_samples_per_poll": Field(
+        "int", "Flood bound: samples one poll takes from the receive ring at most; the rest "
+        "wait for the next tick (a flood costs the loop a bounded time per tick).",
+        minimum=1, maximum=1_000_000,
+    ),
+}
+
 # Only tables at this level and in the side tables: a file may override one of them (say
 # [link.slave.endpoints]) without repeating the others (see haptic.common.config's rules).
 LINK_SCHEMA: Schema = {
     "transport": TRANSPORT_SCHEMA,
     "watchdog": WATCHDOG_SCHEMA,
+    "security": SECURITY_SCHEMA,
     "master": _side_schema("master"),
     "slave": _side_schema("slave"),
 }
@@ -166,6 +180,9 @@ class LinkConfig:
     max_message_age_s: float = 0.03
     stale_after_s: float = 0.05
     resync_messages: int = 20
+    max_samples_per_poll: int = 64
+    session_key: bytes | None = field(default=None, repr=False)
+    """The pre-shared key of an authenticated link (32 bytes), or None."""
     seed: int = 0
     injection: InjectionConfig = field(default_factory=InjectionConfig)
     zenoh_config_file: str | None = None
@@ -250,6 +267,12 @@ def link_config_from(config: dict[str, Any], side: str, **changes: Any) -> LinkC
         "seed": own["injection"]["seed"],
         **transport,
         **watchdog,
+        **{k: v for k, v in link["security"].items() if k != "session_key_file"},
     }
+    key_file = link["security"]["session_key_file"]
+    if key_file:
+        from haptic.common.auth import load_key_file
+
+        values["session_key"] = load_key_file(key_file)
     values.update(changes)
     return LinkConfig(**values)

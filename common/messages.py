@@ -5,7 +5,10 @@ Every message is a msgpack array (compact: no field names on the wire)::
     [version, kind, epoch, seq, send_time_ns, flags, *payload]
 
 ``version``
-    :data:`SCHEMA_VERSION`; a receiver drops any other value (``unknown_version``).
+    :data:`SCHEMA_VERSION`; a receiver drops any other value (``unknown_version``), and a
+    peer of another version is refused at start (common/link.py). Version 2 (issue 17) adds
+    the pairing hello (common/auth.py) and, on an authenticated link, a 16-byte tag after
+    the msgpack body.
 ``kind``
     :data:`KIND_HANDLE` (master to slave, :class:`HandleState`) or :data:`KIND_TOOL` (slave to
     master, :class:`ToolState`).
@@ -39,7 +42,7 @@ from typing import Any
 
 import msgpack
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 KIND_HANDLE = 1
 KIND_TOOL = 2
 
@@ -74,14 +77,20 @@ class DropReason(enum.StrEnum):
     STALE = "stale"
     OUT_OF_ORDER = "out_of_order"
     INJECTED_LOSS = "injected_loss"
+    UNAUTHENTICATED = "unauthenticated"
+    """Authenticated link: the tag does not verify under the session key (common/auth.py)."""
+    UNPAIRED = "unpaired"
+    """Authenticated link: no pairing yet, or an epoch other than the paired peer's."""
 
 
 class DecodeError(ValueError):
     """A payload that is not a valid message of the expected kind."""
 
-    def __init__(self, reason: DropReason, detail: str) -> None:
+    def __init__(self, reason: DropReason, detail: str, version: int | None = None) -> None:
         super().__init__(f"{reason.value}: {detail}")
         self.reason = reason
+        self.version = version
+        """``unknown_version``: the message's version."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -225,7 +234,7 @@ def decode(payload: bytes, expected_kind: int) -> Message:
     if not _is_int(version):
         raise DecodeError(DropReason.MALFORMED, f"version {version!r} is not an integer")
     if version != SCHEMA_VERSION:
-        raise DecodeError(DropReason.UNKNOWN_VERSION, f"version {version}")
+        raise DecodeError(DropReason.UNKNOWN_VERSION, f"version {version}", version)
     if not _is_int(kind):
         raise DecodeError(DropReason.MALFORMED, f"kind {kind!r} is not an integer")
     if kind != expected_kind:

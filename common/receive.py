@@ -36,6 +36,8 @@ from haptic.common.injection import Impairment, InjectionConfig
 from haptic.common.messages import DecodeError, DropReason, Message, decode
 
 _CLOCK_SKEW_TOLERANCE_NS = 1_000_000
+_MAX_PAYLOAD_BYTES = 1024
+_MALFORMED = DropReason.MALFORMED.value
 
 
 @dataclass(frozen=True)
@@ -137,9 +139,44 @@ class ReceivePath:
         self._age = LogHistogram()
         self.last_delivered: Message | None = None
         self.last_delivery_ns: int | None = None
+        self._pinned_epoch: int | None = None
+        self._epochs_pinned = False
+        self.last_unknown_version: int | None = None
+        """The version of the latest message dropped ``unknown_version`` (a mismatched peer)."""
 
     def _drop(self, reason: DropReason) -> None:
         self._n.dropped[reason.value] += 1
+
+    def pin_epoch(self, epoch: int) -> None:
+        """Authenticated link: accept messages of ``epoch`` only, from now on; a new epoch
+        comes only from here (an authenticated re-pairing), never from a newer send time.
+        Pinning another epoch than the current one is a peer restart."""
+        self._epochs_pinned = True
+        if self._pinned_epoch == epoch:
+            return
+        self._pinned_epoch = epoch
+        seq_state = self._seq
+        if seq_state is not None and seq_state.epoch != epoch:
+            self._n.peer_restarts += 1
+            self._n.expected_closed += seq_state.highest_seq - seq_state.first_seq + 1
+            self._pending.clear()
+            self._seq = None
+
+    def drop(self, reason: DropReason) -> None:
+        """Count one received payload dropped before :meth:`accept` (its tag, its pairing)."""
+        self._n.received += 1
+        self._drop(reason)
+
+    def rejects_at_once(self, payload: bytes) -> bool:
+        """The flood filter, before anything costly (the arrival stamp, msgpack): a payload
+        that cannot be a message (every message is a msgpack fixarray of 6 to 15 items, at
+        most 1024 bytes) is counted (received, ``malformed``) and True is returned; False:
+        hand it to :meth:`accept`."""
+        if payload and 0x96 <= payload[0] <= 0x9F and len(payload) <= _MAX_PAYLOAD_BYTES:
+            return False
+        self._n.received += 1
+        self._n.dropped[_MALFORMED] += 1
+        return True
 
     def accept(self, payload: bytes, arrival_ns: int) -> None:
         """Take one received payload that arrived at ``arrival_ns``. Never raises."""
@@ -149,8 +186,13 @@ class ReceivePath:
             message = decode(payload, self.expected_kind)
         except DecodeError as error:
             self._drop(error.reason)
+            if error.reason is DropReason.UNKNOWN_VERSION:
+                self.last_unknown_version = error.version
             return
         send_ns = message.send_time_ns
+        if self._epochs_pinned and message.epoch != self._pinned_epoch:
+            self._drop(DropReason.UNPAIRED)  # a new epoch only through an explicit pairing
+            return
         seq_state = self._seq
         if seq_state is None or message.epoch != seq_state.epoch:
             if seq_state is not None and send_ns <= seq_state.highest_send_ns:

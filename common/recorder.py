@@ -29,30 +29,57 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from mcap.writer import CompressionType, Writer
+from mcap.data_stream import RecordBuilder
+from mcap.records import Footer
+from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 
 #: Default queue capacity, messages (about 35 s of one 1850 Hz channel).
 DEFAULT_QUEUE_SIZE = 65536
-#: Default chunk size, bytes (a chunk every fraction of a second at the loops' rates).
-DEFAULT_CHUNK_SIZE = 64 * 1024
+#: Default chunk size, bytes (a chunk about every 0.3 s at the loops' rates: what a SIGKILL
+#: may lose; larger than 64 kB because the MCAP writer keeps one chunk index per chunk in
+#: memory until the file closes, about 140 B each: 256 kB makes that ~0.5 kB/s, 2 MB/h).
+DEFAULT_CHUNK_SIZE = 256 * 1024
+
+
+def _provisional_trailer() -> bytes:
+    """A Footer without a summary (summary_start 0) and the closing magic: what a reader that
+    seeks to the end (``mcap.reader.make_reader(...).iter_messages()``, Foxglove) needs to
+    fall back to reading the records in order."""
+    builder = RecordBuilder()
+    Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
+    return builder.end() + MCAP0_MAGIC
 
 
 class _UnbufferedFile:
-    """A write-only file whose every ``write`` reaches the kernel before it returns (what a
-    SIGKILL leaves behind is every completed chunk); not an ``io.RawIOBase``, so the MCAP
-    writer does not wrap it in a buffer."""
+    """A write-only file whose every ``write`` reaches the kernel before it returns, followed
+    by a provisional trailer (:func:`_provisional_trailer`) in the same ``pwrite``: the MCAP
+    writer writes whole records per call, so at every instant the file is complete records
+    plus a valid footer, and what a SIGKILL leaves behind opens with the standard readers up
+    to its last completed chunk. The next write starts over the trailer; :meth:`final` stops
+    the trailers before the writer's own summary and footer. Not an ``io.RawIOBase``, so the
+    MCAP writer does not wrap it in a buffer."""
+
+    _TRAILER = _provisional_trailer()
 
     def __init__(self, path: Path) -> None:
         self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         self._position = 0
+        self._trailer = self._TRAILER
 
     def write(self, data: bytes) -> int:
-        view = memoryview(data)
+        length = len(data)
+        view = memoryview(bytes(data) + self._trailer)  # one syscall: data and trailer
+        offset = self._position
         while view:
-            written = os.write(self._fd, view)
+            written = os.pwrite(self._fd, view, offset)
             view = view[written:]
-        self._position += len(data)
-        return len(data)
+            offset += written
+        self._position += length
+        return length
+
+    def final(self) -> None:
+        """From now on the writer closes the file itself: no more provisional trailers."""
+        self._trailer = b""
 
     def tell(self) -> int:
         return self._position
@@ -61,6 +88,7 @@ class _UnbufferedFile:
         pass
 
     def close(self) -> None:
+        os.ftruncate(self._fd, self._position)  # nothing after the writer's own magic
         os.close(self._fd)
 
 
@@ -164,6 +192,7 @@ class McapRecorder:
                 "max_queue_depth": str(self.max_queue_depth)}
         meta.update(metadata or {})
         writer.add_metadata("recorder", meta)
+        self._file.final()
         writer.finish()
         self._file.close()
 

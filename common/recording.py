@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 from mcap.exceptions import McapError
-from mcap.records import Channel, DataEnd, Footer, Message, Metadata, Schema
+from mcap.records import Channel, DataEnd, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 
@@ -23,7 +23,8 @@ from mcap.stream_reader import StreamReader
 class Recording:
     """A decoded recording: ``messages[topic]`` is a list of ``(log_time_ns, dict)`` in file
     order; ``schemas[topic]`` the channel's JSON schema; ``metadata[name]`` the metadata
-    records; ``complete``: the file ended with its footer (closed properly)."""
+    records; ``complete``: the file ended with its data-end record and footer (closed
+    properly)."""
 
     path: Path
     messages: dict[str, list[tuple[int, dict[str, Any]]]] = field(default_factory=dict)
@@ -55,15 +56,20 @@ class Recording:
 
 
 def read_recording(path: str | Path) -> Recording:
-    """Decode the MCAP file at ``path`` (see the module docstring)."""
+    """Decode the MCAP file at ``path`` (see the module docstring). Raises ``ValueError`` for a
+    file that does not start as MCAP (no magic or no header record) and ``OSError`` for one
+    that cannot be opened."""
     recording = Recording(Path(path))
     channels: dict[int, Channel] = {}
     schemas: dict[int, Schema] = {}
+    header = data_end = False
     with open(path, "rb") as stream:
         reader = StreamReader(stream, skip_magic=False)
         try:
             for record in reader.records:
-                if isinstance(record, Schema):
+                if isinstance(record, Header):
+                    header = True
+                elif isinstance(record, Schema):
                     schemas[record.id] = record
                 elif isinstance(record, Channel):
                     if record.id not in channels:
@@ -81,12 +87,16 @@ def read_recording(path: str | Path) -> Recording:
                 elif isinstance(record, Metadata):
                     recording.metadata[record.name] = dict(record.metadata)
                 elif isinstance(record, Footer):
-                    recording.complete = True
+                    # closed properly: DataEnd, then the footer; a killed recorder's file ends
+                    # in a provisional footer without DataEnd (common/recorder.py)
+                    recording.complete = data_end
                     break
                 elif isinstance(record, DataEnd):
-                    continue
+                    data_end = True
         except (McapError, EOFError, ValueError, RuntimeError, struct.error) as error:
             recording.error = f"{type(error).__name__}: {error}"
+    if not header:
+        raise ValueError(f"not an MCAP recording ({recording.error or 'no header record'})")
     for items in recording.messages.values():
         items.sort(key=lambda item: item[0])
     return recording

@@ -21,19 +21,23 @@ summaries; otherwise 1 (or the first non-zero child status, e.g. 3 for the analy
 from __future__ import annotations
 
 import argparse
+import atexit
 import json
 import math
 import shlex
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 import uuid
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from haptic.common.auth import write_key_file
 from haptic.common.cli_options import add_retired_delay_option
 
 DEFAULT_OPERATOR = "regulate:fx=3.6,onset=0.2,max=5"
@@ -84,12 +88,21 @@ def _end(process: subprocess.Popen) -> None:
     process.wait()
 
 
+def _session_key() -> Path:
+    """A fresh pre-shared key for this session's two programs (common/auth.py), in a private
+    directory removed when the session ends: no other process can join the pair."""
+    directory = tempfile.mkdtemp(prefix="haptic-session-")
+    atexit.register(shutil.rmtree, directory, True)
+    return write_key_file(Path(directory) / "session.key")
+
+
 def run_session(args: argparse.Namespace) -> int:
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     prefix = f"haptic/session-{uuid.uuid4().hex[:8]}"
-    common = ["--key-prefix", prefix, "--no-status", "--peer-wait", "30"]
+    common = ["--key-prefix", prefix, "--no-status", "--peer-wait", "30",
+              "--session-key", str(_session_key())]
     if args.config:
         common += ["--config", args.config]
     if args.k is not None:
@@ -151,12 +164,21 @@ def run_session(args: argparse.Namespace) -> int:
             print(f"haptic-session: {side} wrote no summary", file=sys.stderr)
             return 1
         summaries[side] = json.loads(path.read_text())
-    text = combined_summary(summaries["master"], summaries["slave"])
+    text = combined_summary(summaries["master"], summaries["slave"]) + inert_flag(summaries)
     print(text)
     plot = _plot(out)
     _report(out, args, text, summaries, plot)
     print(f"haptic-session: report in {out}/report.md")
     return 0
+
+
+def inert_flag(summaries: dict[str, dict[str, Any]]) -> str:
+    """The report's flag for a session that was inert (common/inert.py): a side whose peer
+    was there but whose forces stayed off; empty when neither was."""
+    lines = [f"\n  INERT SESSION: {side} forces off {summary.get('inert_time_s', 0.0):.1f} s "
+             f"with the peer present ({summary.get('inert_reason')})"
+             for side, summary in summaries.items() if summary.get("inert")]
+    return "".join(lines)
 
 
 def _us(value: Any) -> str:

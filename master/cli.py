@@ -18,6 +18,7 @@ import zenoh
 
 from haptic.common.cli_options import add_run_options, run_options_from_args
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
+from haptic.common.failures import exit_on_link_error
 from haptic.common.model import model_from_config
 from haptic.common.preflight import add_preflight_options, run_preflight
 from haptic.master.hardware import HardwareError, create_hardware
@@ -86,7 +87,8 @@ def _config(args: argparse.Namespace) -> dict:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit status: 0; 1 for a hardware error or a run that ended
     with the node latched in its safe state by a fault; 2 for a configuration error (one
-    line); 3 when the stability analysis refuses the loop (see ``--allow-unstable``)."""
+    line); 3 when the stability analysis refuses the loop (see ``--allow-unstable``); 4 when the
+    link cannot open (a port in use, an unreachable router; one line)."""
     args = build_parser().parse_args(argv)
     if args.no_link:
         return _main_alone(args)
@@ -125,8 +127,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         trace_path=None if args.out is None else str(Path(args.out) / "master_trace.npz"),
         record_path=args.record, record_every=args.record_every, display=args.display,
     )
-    return run_linked_master(options, model, node, hardware, loop_options,
-                             {"rig": settings.rig, "analysis": analysis.as_dict()})
+    with exit_on_link_error("haptic-master"):
+        return run_linked_master(options, model, node, hardware, loop_options,
+                                 {"rig": settings.rig, "analysis": analysis.as_dict()})
 
 
 def _main_alone(args: argparse.Namespace) -> int:

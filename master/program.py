@@ -35,6 +35,7 @@ import numpy as np
 
 from haptic.common.cli_options import RunOptions
 from haptic.common.display import DisplayPublisher, EventCursor
+from haptic.common.inert import InertMonitor
 from haptic.common.link import Link
 from haptic.common.messages import Flags
 from haptic.common.model import TeleopModel
@@ -197,6 +198,12 @@ def _run_linked_master(
                 view_every = display.state_every(period_s) if display is not None else 1
 
                 clock = time.perf_counter_ns
+                inert = InertMonitor(options.config["supervision"]["inert_after_s"],
+                                     events=loop.node_events)
+                max_age_s = link_config.max_message_age_s
+                gate_reason = (f"the start-up gate waits for |fh| < "
+                               f"{node.safety.ramp_small_force_N:g} N "
+                               f"({node.safety.ramp_small_samples} samples): the operator pushes")
                 zero_force = (0.0, 0.0)
 
                 def step(tick: int, now_ns: int) -> None:
@@ -258,6 +265,11 @@ def _run_linked_master(
                     link.send_handle(sent, (yhx, yhy), flags)
                     send_ns = clock()
                     # telemetry: summary figures, trace, recording, display
+                    inert.update(now_s, link.peer_alive and link.silence_s() < max_age_s,
+                                 enabled and bool(loop.node_state.forces_enabled[0]),
+                                 gate_reason if enabled else "node faulted" if supervisor.faulted
+                                 else f"watchdog {supervisor.watchdog.state.value}: the resync "
+                                 "does not complete")
                     magnitude = math.hypot(felt[0], felt[1])
                     if magnitude > loop.max_force_N:
                         loop.max_force_N = magnitude
@@ -304,7 +316,8 @@ def _run_linked_master(
                     stats = link.stats()
                     return (f"link p50 {stats.one_way_delay_p50_s * 1e3:.3f} ms  loss "
                             f"{stats.loss_ratio * 100:.2f} %  {watchdog.state.value}  fh "
-                            f"{loop.last_fh[0]:+.2f} N  ft {loop.last_ft[0]:+.2f} N")
+                            f"{loop.last_fh[0]:+.2f} N  ft {loop.last_ft[0]:+.2f} N"
+                            f"{inert.status()}")
 
                 runner = RealTimeRunner(
                     period_s, step, duration_s=options.duration_s,
@@ -330,6 +343,7 @@ def _run_linked_master(
                         display.stop()
                 link_summary = link.summary()
                 presence = [e.as_dict() for e in link.presence_events]
+                inert_summary = inert.summary(run.elapsed_s)
         except HardwareError as error:
             print(f"haptic-master: hardware error: {error}", file=sys.stderr)
             status_code = 1
@@ -354,6 +368,7 @@ def _run_linked_master(
         watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
         hardware_faults=supervisor.hardware_faults[:50],
         node_faulted=supervisor.faulted, stages=stages.summary(), **zenoh_threads,
+        **inert_summary,
         **(extra_summary or {}),
     )
     if display is not None:

@@ -39,8 +39,10 @@ from haptic.common.config import ConfigError, exit_on_config_error, load_config,
 from haptic.common.config.scenario import load_scenario, max_block_damping
 from haptic.common.cutting import cutting_figures, steady_cut_fields
 from haptic.common.display import DisplayPublisher, EventCursor
+from haptic.common.failures import exit_on_link_error
+from haptic.common.inert import InertMonitor
 from haptic.common.link import Link
-from haptic.common.messages import Flags, HandleState
+from haptic.common.messages import Flags
 from haptic.common.phase_lock import PhaseLock, PhaseLockSettings
 from haptic.common.preflight import add_preflight_options, run_preflight
 from haptic.common.run_recording import RunRecording
@@ -49,9 +51,11 @@ from haptic.common.runner_config import place_other_threads, prioritise_zenoh_th
 from haptic.common.stage_times import StageTimes
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
+from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from haptic.slave_sim.node import SlaveNode
 from haptic.slave_sim.resync import ToolResync
 from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
+from haptic.slave_sim.tool_path import ToolPath
 
 #: The stages of one tick, in order (the summary's ``stages``).
 TICK_STAGES = ("poll", "supervise", "node", "send", "telemetry")
@@ -103,7 +107,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit status: 0; 1 when no master came within --peer-wait;
-    2 for a configuration error (one line); 3 when the stability analysis refuses the loop."""
+    2 for a configuration error (one line); 3 when the stability analysis refuses the loop;
+    4 when the link cannot open (a port in use, an unreachable router; one line)."""
     args = build_parser().parse_args(argv)
     zenoh.init_log_from_env_or("error")
     with exit_on_config_error():
@@ -125,6 +130,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ConfigError("--record-every", f"must be >= 1 (got {args.record_every})")
         scenario = load_scenario(options.config["slave"]["scenario"])
         phase_lock_from(options.config, options.config["model"]["sample_period_s"])
+        InputGuardSettings.from_config(options.config)  # [slave.safety]'s cross-key checks
     # before Warp's, the recorder's and Zenoh's threads start: they inherit these CPUs
     placement = place_other_threads(options.runner)
     with exit_on_config_error():
@@ -138,8 +144,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     warp.config.quiet = True
     with exit_on_config_error():
         node = SlaveNode.from_config(options.config, scenario)
-    return run_slave(node, options, args, {"scenario": scenario.name,
-                                           "analysis": analysis.as_dict(), **placement})
+    with exit_on_link_error("haptic-slave"):
+        return run_slave(node, options, args, {"scenario": scenario.name,
+                                               "analysis": analysis.as_dict(), **placement})
 
 
 def phase_lock_from(config: dict[str, Any], period_s: float) -> PhaseLock | None:
@@ -242,8 +249,14 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         (float(ratio[0]), float(ratio[1])), args.sync_tolerance,
         (grid.x_range_m[0] - margin, grid.x_range_m[1] + margin,
          grid.y_range_m[0] - margin, grid.y_range_m[1] + margin),
-        link_config.max_message_age_s, link_config.resync_messages)
+        link_config.max_message_age_s, link_config.resync_messages,
+        grid_m=(grid.x_range_m[0], grid.x_range_m[1], grid.y_range_m[0], grid.y_range_m[1]))
     watchdog = supervisor.watchdog
+    guard = InputGuard(InputGuardSettings.from_config(options.config), period_s,
+                       events=supervisor.events)
+    inert = InertMonitor(options.config["supervision"]["inert_after_s"],
+                         events=supervisor.events)
+    max_age_s = link_config.max_message_age_s
     trace = TraceRecorder(SLAVE_TRACE_COLUMNS, args.trace_every)
     state = node.initial_state(1)
     node.safe_stop(state)
@@ -251,7 +264,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     stages = StageTimes(TICK_STAGES)
     zero_force = np.zeros((1, 2))
     path_every = max(1, args.trace_every)
-    tool_path: list[tuple[float, float]] = []
+    tool_path = ToolPath()  # bounded memory (slave_sim/tool_path.py)
     fh = np.zeros((1, 2))
     yh = state.handle_position_m.copy()
     flags_box = {"max_force": 0.0, "ft": np.zeros(2), "engagement": 0.0, "removed": 0.0}
@@ -293,8 +306,11 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             # poll: the newest handle message whose delivery time has come
             message = link.poll()
             poll_ns = clock()
-            # supervise: phase lock, watchdog, resync, work-area guard (slave_sim/supervisor.py)
-            fresh = message is not None
+            # supervise: input bounds (slave_sim/input_guard.py), phase lock, watchdog, resync,
+            # work-area guard (slave_sim/supervisor.py)
+            fresh = message is not None and guard.admit(message, now_s)
+            if not fresh:
+                message = None  # a fault is not an input
             if fresh and phase_lock is not None:
                 if link.last_delivery_measured:
                     runner.shift_schedule(phase_lock.update(link.receive.last_delivery_ns,
@@ -302,19 +318,20 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 else:
                     phase_lock.skip_unmeasured()
             if fresh:
-                handle: HandleState = message
-                fh_row[0] = handle.handle_force_N
-                yh_row[0] = handle.handle_position_m
+                fh_row[0] = guard.force_N  # bounded
+                yh_row[0] = guard.position_m
             if supervisor.receive(message):
                 resync.step(state, yh)  # follow the (held) handle, cutting (resync.py)
             tool_row = state.tool[0]
             transition = supervisor.update(now_s, fresh, (tool_row[0], tool_row[2]),
-                                           link.silence_s(), link.peer_alive)
+                                           link.silence_s(), link.peer_alive, guard.faulted)
             if transition is Transition.RESUME:
                 node.resume(state)
             elif transition is Transition.STOP:
                 node.safe_stop(state)
             running = supervisor.running
+            inert.update(now_s, link.peer_alive and link.silence_s() < max_age_s, running,
+                         supervisor.stop_reason())
             supervise_ns = clock()
             # node: Ch2/Ct2, the tool and the clay
             out = node.step(state, fh if running else zero_force, yh)
@@ -342,7 +359,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             flags_box["engagement"] = engagement
             flags_box["removed"] = removed
             if tick % path_every == 0:
-                tool_path.append((float(position[0]), float(position[1])))
+                tool_path.add(float(position[0]), float(position[1]))
             if trace.due():
                 trace.record((now_s, fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], position[0],
                               position[1], velocity[0], velocity[1], ft[0], ft[1], engagement,
@@ -380,7 +397,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             stats = link.stats()
             return (f"link p50 {stats.one_way_delay_p50_s * 1e3:.3f} ms  loss "
                     f"{stats.loss_ratio * 100:.2f} %  {watchdog.state.value}  ft "
-                    f"{flags_box['ft'][0]:+.2f} N  engagement {flags_box['engagement']:.2f}")
+                    f"{flags_box['ft'][0]:+.2f} N  engagement {flags_box['engagement']:.2f}"
+                    f"{inert.status()}")
 
         runner = RealTimeRunner(
             period_s, step, duration_s=options.duration_s, spin_s=options.runner.spin_s,
@@ -399,6 +417,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 display.stop()
         link_summary = link.summary()
         presence = [e.as_dict() for e in link.presence_events]
+        guard_summary = {**guard.summary(), **inert.summary(run.elapsed_s)}
     for event in presence:
         event["time_s"] = event["time_s"] - realtime_start_ns * 1e-9
     all_events = [e.as_dict() for e in watchdog.events] + supervisor.events + presence
@@ -410,7 +429,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
         removed_volume_m3=flags_box["removed"],
         final_tool_position_m=[float(final[0]), float(final[1])], stages=stages.summary(),
-        **zenoh_threads,
+        **zenoh_threads, **guard_summary,
         **(phase_lock.summary() if phase_lock is not None else {"phase_lock_enabled": False}),
         **extra_summary,
     )
@@ -426,7 +445,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         summary["trace"] = str(out / "slave_trace.npz")
         if node.environment_kind == "clay":
             state.environment.save_npz(out / "clay.npz")
-            path = np.array(tool_path) if tool_path else None
+            path = tool_path.array()
             state.environment.render_png(
                 out / "clay.png", path,
                 title=f"{node.scenario.name}: networked run, {run.elapsed_s:.1f} s")

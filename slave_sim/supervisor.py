@@ -11,8 +11,11 @@ Per tick, in two steps (the tool may be moved to the handle between them):
    liveliness): the watchdog (``common/watchdog.py``) with ``in_sync`` = |yt - Ah1 yh| below
    the tolerance on both axes; the tool runs only with the watchdog ``ok`` and the master's
    forces enabled; the work-area guard stops the tool (until the next resync cycle) when it
-   gets more than the margin outside the work area. Returns a :class:`Transition` (``RESUME``:
-   ``SlaveNode.resume``; ``STOP``: ``SlaveNode.safe_stop``), with :attr:`running` and
+   gets more than the margin outside the work area; with ``grid_m`` given, once the handle is
+   back over that area (no margin) the stop ends and the tool rejoins the handle (the resync
+   policy); an input fault (slave_sim/input_guard.py) stops the tool too. Returns a
+   :class:`Transition` (``RESUME``: ``SlaveNode.resume``; ``STOP``: ``SlaveNode.safe_stop``),
+   with :attr:`running` and
    :attr:`ready` (this side's FORCES_ENABLED flag) for the tick.
 """
 
@@ -38,12 +41,15 @@ class SlaveSupervisor:
 
     ``position_ratio``: Ah1 per axis (x, y), dimensionless; ``sync_tolerance_m``: resync
     tolerance per axis, m; ``work_area_m``: (x_low, x_high, y_low, y_high), the tool's work
-    area including its margin, m; ``max_message_age_s``/``resync_messages``: the watchdog's.
+    area including its margin, m; ``max_message_age_s``/``resync_messages``: the watchdog's;
+    ``grid_m``: (x_low, x_high, y_low, y_high) the handle (times Ah1) must be back over to end
+    a work-area stop, m (None: only a resync cycle ends it).
     """
 
     def __init__(self, position_ratio: tuple[float, float], sync_tolerance_m: float,
                  work_area_m: tuple[float, float, float, float], max_message_age_s: float,
-                 resync_messages: int) -> None:
+                 resync_messages: int,
+                 grid_m: tuple[float, float, float, float] | None = None) -> None:
         if not sync_tolerance_m > 0.0:
             raise ValueError(f"sync_tolerance_m must be > 0 (got {sync_tolerance_m})")
         self.ratio_x, self.ratio_y = (float(v) for v in position_ratio)
@@ -56,6 +62,8 @@ class SlaveSupervisor:
         self.running = False
         self.ready = False
         self.outside = False
+        self.input_fault = False
+        self.grid_m = None if grid_m is None else tuple(float(v) for v in grid_m)
         self.events: list[dict[str, Any]] = []
 
     def receive(self, message: HandleState | None) -> bool:
@@ -74,9 +82,11 @@ class SlaveSupervisor:
                 and abs(tool_y_m - self.ratio_y * handle_y_m) < tolerance)
 
     def update(self, now_s: float, fresh: bool, tool_position_m: tuple[float, float],
-               silence_s: float = 0.0, peer_alive: bool = True) -> Transition:
+               silence_s: float = 0.0, peer_alive: bool = True,
+               input_fault: bool = False) -> Transition:
         """One tick, after :meth:`receive` (and the resync it asked for); returns what
-        changed (see :class:`Transition`)."""
+        changed (see :class:`Transition`). ``input_fault``: the input guard holds a fault."""
+        self.input_fault = input_fault
         tool_x_m, tool_y_m = tool_position_m
         state = self.watchdog.update(now_s, fresh, silence_s, self.in_sync(tool_x_m, tool_y_m),
                                      peer_alive)
@@ -90,8 +100,20 @@ class SlaveSupervisor:
             self.events.append({"time_s": now_s, "kind": "tool_stopped",
                                 "reason": f"tool left the work area at ({tool_x_m:.4f}, "
                                 f"{tool_y_m:.4f}) m"})
-        running = watchdog_ok and self.master_enabled and not self.outside
-        self.ready = watchdog_ok and not self.outside
+        elif self.outside and fresh and self.grid_m is not None:
+            x_low, x_high, y_low, y_high = self.grid_m
+            handle_x_m, handle_y_m = self.handle_position_m
+            if (x_low <= self.ratio_x * handle_x_m <= x_high
+                    and y_low <= self.ratio_y * handle_y_m <= y_high):
+                # resync policy: the handle is back over the work area; the tool rejoins it
+                # there on the next tick (receive() re-places it) and runs once in sync
+                self.outside = False
+                self.events.append({"time_s": now_s, "kind": "tool_resync",
+                                    "reason": "the handle is back over the work area: the "
+                                    "tool rejoins it"})
+        running = (watchdog_ok and self.master_enabled and not self.outside
+                   and not input_fault)
+        self.ready = watchdog_ok and not self.outside and not input_fault
         transition = Transition.NONE
         if running and not self.running:
             transition = Transition.RESUME
@@ -101,11 +123,23 @@ class SlaveSupervisor:
             transition = Transition.STOP
             if not self.outside:
                 reason = (f"watchdog {state.value}" if not watchdog_ok
+                          else "input fault" if input_fault
                           else "the master is in its safe state")
                 self.events.append({"time_s": now_s, "kind": "tool_stopped",
                                     "reason": f"{reason}: the tool stops"})
         self.running = running
         return transition
+
+    def stop_reason(self) -> str:
+        """Why the tool is not running now (for the inert monitor, common/inert.py)."""
+        if self.outside:
+            return "the tool is stopped by the work-area guard"
+        if self.input_fault:
+            return "input fault"
+        state = self.watchdog.state
+        if state is not WatchdogState.OK:
+            return f"watchdog {state.value}"
+        return "the master's forces are off"
 
     @property
     def trips(self) -> int:

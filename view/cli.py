@@ -15,6 +15,7 @@ from collections.abc import Sequence
 import zenoh
 
 from haptic.common.config import exit_on_config_error, load_config, override
+from haptic.common.failures import LinkOpenError, exit_on_link_error
 from haptic.common.link import zenoh_config
 from haptic.common.link_config import link_config_from, split_endpoints
 from haptic.common.runner import StopSignals
@@ -48,8 +49,17 @@ def view_zenoh_config(config: dict, connect: Sequence[str] | None) -> zenoh.Conf
     return zenoh_config(link_config_from(config, "slave", **changes))
 
 
+def _view_server(state: ViewState, port: int, rate_hz: float) -> ViewServer:
+    """The HTTP server; a port in use is a :class:`LinkOpenError` (one line, exit 4)."""
+    try:
+        return ViewServer(state, port, max_rate_hz=rate_hz)
+    except OSError as error:
+        raise LinkOpenError(f"cannot serve HTTP on port {port}: {error.strerror}") from None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point: 0 after SIGINT/SIGTERM; 2 for a configuration error."""
+    """Entry point: 0 after SIGINT/SIGTERM; 2 for a configuration error; 4 when the Zenoh
+    session or the HTTP port cannot be opened (one line)."""
     args = build_parser().parse_args(argv)
     zenoh.init_log_from_env_or("error")
     with exit_on_config_error():
@@ -63,8 +73,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         zconf = view_zenoh_config(config, args.connect)
     prefix = config["link"]["transport"]["key_prefix"]
     state = ViewState()
-    with StopSignals() as signals, ZenohSource(zconf, prefix, state, args.rate), \
-            ViewServer(state, args.port, max_rate_hz=args.rate) as server:
+    with exit_on_link_error("haptic-view"), StopSignals() as signals, \
+            ZenohSource(zconf, prefix, state, args.rate), \
+            _view_server(state, args.port, args.rate) as server:
         print(f"haptic-view: {server.url} (keys {prefix}/...)", file=sys.stderr, flush=True)
         while not signals.requested:
             time.sleep(0.2)

@@ -19,6 +19,7 @@ from typing import Any
 import zenoh
 
 from haptic.common.display import decode_clay
+from haptic.common.failures import LinkOpenError, one_line
 from haptic.view.state import ViewState
 
 
@@ -40,7 +41,10 @@ class ZenohSource:
         self.decode_errors = 0
 
     def __enter__(self) -> ZenohSource:
-        self._session = zenoh.open(self._config)
+        try:
+            self._session = zenoh.open(self._config)
+        except zenoh.ZError as error:
+            raise LinkOpenError(f"cannot open the Zenoh session: {one_line(error)}") from None
         ring = zenoh.handlers.RingChannel
         p = self._prefix
         for name, key, capacity in (("handle", f"{p}/view/master", 1),

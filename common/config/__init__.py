@@ -17,6 +17,7 @@ from haptic.common.config.loader import (
     load_config,
     override,
     parse_toml,
+    read_config_text,
     to_toml,
     validate_table,
 )
@@ -31,6 +32,7 @@ __all__ = [
     "load_config",
     "override",
     "parse_toml",
+    "read_config_text",
     "to_toml",
     "validate_table",
 ]

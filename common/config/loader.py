@@ -175,6 +175,18 @@ def parse_toml(text: str, source: str) -> dict[str, Any]:
         raise ConfigError("", f"{source}: not valid TOML: {error}") from None
 
 
+def read_config_text(path: str | Path, what: str) -> str:
+    """The UTF-8 text of a configuration file; an unreadable or undecodable (binary) file is a
+    :class:`ConfigError` naming it."""
+    try:
+        return Path(path).read_bytes().decode("utf-8")
+    except OSError as error:
+        raise ConfigError("", f"cannot read {what} {path}: {error.strerror}") from None
+    except UnicodeDecodeError as error:
+        raise ConfigError("", f"{what} {path} is not UTF-8 text (byte {error.start}): "
+                          "not a TOML file") from None
+
+
 def load_config(path: str | Path | None = None) -> dict[str, Any]:
     """Load the configuration: the shipped defaults, with ``path`` (if given) on top.
 
@@ -185,10 +197,7 @@ def load_config(path: str | Path | None = None) -> dict[str, Any]:
     defaults = validate_table(parse_toml(default_config_text(), "defaults"), SCHEMA, {})
     if path is None:
         return defaults
-    try:
-        text = Path(path).read_text()
-    except OSError as error:
-        raise ConfigError("", f"cannot read config file {path}: {error.strerror}") from None
+    text = read_config_text(path, "config file")
     return validate_table(parse_toml(text, str(path)), SCHEMA, defaults)
 
 

@@ -25,7 +25,14 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from haptic.common.config import ConfigError, Field, Schema, parse_toml, validate_table
+from haptic.common.config import (
+    ConfigError,
+    Field,
+    Schema,
+    parse_toml,
+    read_config_text,
+    validate_table,
+)
 
 ENVIRONMENT_KINDS = ("clay", "linear")
 BLOCK_SHAPES = ("box", "disc")
@@ -332,10 +339,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         if not path.suffix and not path.exists():
             raise ConfigError("slave.scenario", f"unknown scenario {source!r}; shipped ones: "
                               f"{', '.join(SCENARIO_NAMES)}, or give a .toml path")
-        try:
-            text = path.read_text()
-        except OSError as error:
-            raise ConfigError("", f"cannot read scenario file {path}: {error.strerror}") from None
+        text = read_config_text(path, "scenario file")
     return scenario_from_table(parse_toml(text, source), source)
 
 

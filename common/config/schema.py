@@ -124,6 +124,15 @@ ANALYSIS_SCHEMA: Schema = {
     ),
 }
 
+#: [supervision]: no silent inert sessions (common/inert.py).
+SUPERVISION_SCHEMA: Schema = {
+    "inert_after_s": Field(
+        "float", "A side whose peer is present but whose forces are off this long says so "
+        "(status line, summary, session report), s.", minimum=0.0, exclusive_minimum=True,
+        maximum=3600.0),
+}
+
+
 SCHEMA: Schema = {
     "model": MODEL_SCHEMA,
     "analysis": ANALYSIS_SCHEMA,
@@ -132,4 +141,5 @@ SCHEMA: Schema = {
     "link": LINK_SCHEMA,
     "lockstep": LOCKSTEP_SCHEMA,
     "runner": RUNNER_SCHEMA,
+    "supervision": SUPERVISION_SCHEMA,
 }

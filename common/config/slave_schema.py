@@ -13,6 +13,31 @@ def _device(value: str) -> str | None:
     return f"must be auto, cpu, cuda or cuda:N (got {value!r})"
 
 
+#: [slave.safety]: the slave's bounds on received handle messages (slave_sim/input_guard.py).
+SAFETY_SCHEMA: Schema = {
+    "force_limit_N": Field(
+        "float", "The received handle force saturates here per axis, N.", minimum=0.0,
+        exclusive_minimum=True),
+    "force_trip_N": Field(
+        "float", "A received handle force beyond this on an axis is a fault, N.", minimum=0.0,
+        exclusive_minimum=True),
+    "force_rate_limit_N_per_s": Field(
+        "float", "The received handle force changes at most this fast per axis, N/s.",
+        minimum=0.0, exclusive_minimum=True),
+    "position_min_m": Field("float_list", "Lowest plausible handle position (x, y), m.",
+                            check=lambda v: None if len(v) == 2 else "must have 2 values"),
+    "position_max_m": Field("float_list", "Highest plausible handle position (x, y), m.",
+                            check=lambda v: None if len(v) == 2 else "must have 2 values"),
+    "velocity_trip_m_per_s": Field(
+        "float", "A handle position that moved faster than this between two messages is a "
+        "fault, m/s.", minimum=0.0, exclusive_minimum=True),
+    "jump_margin_m": Field(
+        "float", "Allowance on top of the speed bound for a position jump, m.", minimum=0.0),
+    "clear_after_messages": Field(
+        "int", "Plausible messages in a row that clear an input fault.", minimum=1),
+}
+
+
 SLAVE_SCHEMA: Schema = {
     "scenario": Field(
         "str", "Slave scenario: a shipped name (constant-rate, variable-rate, arbitrary) or the "
@@ -27,6 +52,7 @@ SLAVE_SCHEMA: Schema = {
                        choices=("warp", "numpy")),
     "device": Field("str", "Warp device: auto (cuda when present, else cpu), cpu, cuda, cuda:N.",
                     check=_device),
+    "safety": SAFETY_SCHEMA,
     "phase_lock": {
         "enabled": Field(
             "bool", "Keep the slave's ticks a set lag after the master's messages arrive "

@@ -68,7 +68,7 @@ def _valid_tool_fields() -> list:
 @pytest.mark.parametrize(
     ("change", "reason"),
     [
-        (lambda f: f.__setitem__(0, 2), DropReason.UNKNOWN_VERSION),
+        (lambda f: f.__setitem__(0, SCHEMA_VERSION + 1), DropReason.UNKNOWN_VERSION),
         (lambda f: f.__setitem__(0, "1"), DropReason.MALFORMED),
         (lambda f: f.__setitem__(1, KIND_HANDLE), DropReason.WRONG_KIND),
         (lambda f: f.__setitem__(3, -1), DropReason.MALFORMED),

@@ -61,7 +61,8 @@ def bad_payload(draw, seq: int):
         cut = draw(st.integers(0, len(fields) - 1))
         return msgpack.packb(fields[:cut]), DropReason.MALFORMED
     if kind == "version":
-        fields[0] = draw(st.integers(2, 2**31) | st.integers(-(2**31), 0))
+        fields[0] = draw(st.integers(SCHEMA_VERSION + 1, 2**31)
+                         | st.integers(-(2**31), SCHEMA_VERSION - 1))
         return msgpack.packb(fields), DropReason.UNKNOWN_VERSION
     if kind == "kind":
         fields[1] = draw(st.sampled_from([KIND_TOOL, 0, 3, 99]))

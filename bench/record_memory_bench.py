@@ -1,0 +1,127 @@
+"""Memory of a long recorded run (issue 17): ``haptic-master --rig model`` and
+``haptic-slave`` on loopback, both with ``--record``, for ``--duration`` s (default 600: the
+issue's 10 minutes); each process's RSS sampled every second from /proc. Reports the RSS at
+the start and the end of the measured span and the growth rate (least squares over the run
+after ``--settle`` s), kB/s. Before issue 17 the slave grew about 25 kB/s. Figures only.
+
+Usage: ``python bench/record_memory_bench.py [--duration S] [--settle S] [--linear] [--json]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from pathlib import Path
+
+import numpy as np
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _rss_kb(pid: int) -> float | None:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return float(line.split()[1])
+    except OSError:
+        return None
+    return None
+
+
+def run(duration_s: float, settle_s: float, linear: bool) -> dict:
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    prefix = f"bench/{uuid.uuid4().hex[:8]}"
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        common = ["--key-prefix", prefix, "--no-status", "--peer-wait", "60", "--duration",
+                  str(duration_s), "--no-display"]
+        if linear:
+            config = tmp / "linear.toml"
+            config.write_text('[slave]\nscenario = "constant-rate"\nenvironment = "linear"\n'
+                              'clay_impl = "numpy"\ndevice = "cpu"\n')
+            common += ["--config", str(config)]
+        processes = {}
+        samples: dict[str, list[tuple[float, float]]] = {"master": [], "slave": []}
+        try:
+            processes["master"] = subprocess.Popen(
+                [sys.executable, "-m", "haptic.master.cli", *common, "--listen", endpoint,
+                 "--rig", "model", "--record", str(tmp / "master.mcap"),
+                 "--json-summary", str(tmp / "master.json")],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            processes["slave"] = subprocess.Popen(
+                [sys.executable, "-m", "haptic.slave_sim.program", *common, "--connect",
+                 endpoint, "--record", str(tmp / "slave.mcap"),
+                 "--json-summary", str(tmp / "slave.json")],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            start = time.monotonic()
+            while any(p.poll() is None for p in processes.values()):
+                now = time.monotonic() - start
+                for side, process in processes.items():
+                    rss = _rss_kb(process.pid) if process.poll() is None else None
+                    if rss is not None:
+                        samples[side].append((now, rss))
+                time.sleep(1.0)
+                if now > duration_s + 120:
+                    break
+        finally:
+            for process in processes.values():
+                if process.poll() is None:
+                    process.kill()
+                process.wait(timeout=10)
+        sizes = {side: (tmp / f"{side}.mcap").stat().st_size
+                 for side in processes if (tmp / f"{side}.mcap").exists()}
+        recorder = {}
+        for side in processes:
+            path = tmp / f"{side}.json"
+            if path.exists():
+                summary = json.loads(path.read_text())
+                recorder[side] = {k: summary.get(k) for k in (
+                    "record_max_queue_depth", "record_dropped", "rate_hz")}
+    result: dict = {"duration_s": duration_s, "settle_s": settle_s, "linear": linear}
+    for side, points in samples.items():
+        data = np.array(points)
+        if data.size == 0:
+            continue
+        # the run's own span: from settle_s after the first sample to 5 s before the last
+        keep = (data[:, 0] >= data[0, 0] + settle_s) & (data[:, 0] <= data[-1, 0] - 5.0)
+        span = data[keep]
+        if len(span) >= 3:
+            slope = float(np.polyfit(span[:, 0], span[:, 1], 1)[0])
+            result[f"{side}_rss_start_kB"] = float(span[0, 1])
+            result[f"{side}_rss_end_kB"] = float(span[-1, 1])
+            result[f"{side}_rss_growth_kB_per_s"] = slope
+        result[f"{side}_record_bytes"] = sizes.get(side)
+        result[f"{side}_recorder"] = recorder.get(side)
+    return result
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=600.0)
+    parser.add_argument("--settle", type=float, default=30.0,
+                        help="seconds after the start not in the fit (start-up, allocations)")
+    parser.add_argument("--linear", action="store_true",
+                        help="the slave with the linear environment (no Warp clay)")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    result = run(args.duration, args.settle, args.linear)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for key, value in result.items():
+            print(f"{key:32s} {value}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

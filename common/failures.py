@@ -1,0 +1,48 @@
+"""Clean failures: the errors a program cannot run past, as one line and a documented status.
+
+Exit statuses shared by every program (docs/programs.md):
+
+- 2 (:data:`haptic.common.config.CONFIG_ERROR_EXIT_STATUS`): a configuration error, including a
+  config file that cannot be read or decoded;
+- :data:`LINK_ERROR_EXIT_STATUS` (4): the link cannot be opened: a listen port in use, a
+  router or peer that cannot be reached in client mode, a Zenoh configuration Zenoh refuses,
+  an HTTP port in use (``haptic-view``), a session key that cannot be read.
+
+Zenoh's messages carry the Rust source positions (``at /root/.cargo/...rs:61.``) and may span
+lines; :func:`one_line` keeps the part a user can act on.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+LINK_ERROR_EXIT_STATUS = 4
+
+_RUST_POSITION = re.compile(r"\s*at\s+\S+\.rs:\d+\.?")
+_MAX_LINE_CHARACTERS = 300
+
+
+class LinkOpenError(RuntimeError):
+    """The link (a Zenoh session, a port, a key file) could not be opened; the message is one
+    line."""
+
+
+def one_line(error: BaseException | str, limit: int = _MAX_LINE_CHARACTERS) -> str:
+    """``error``'s text on one line, without Rust source positions, at most ``limit`` chars."""
+    text = _RUST_POSITION.sub("", str(error))
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+@contextmanager
+def exit_on_link_error(program: str) -> Iterator[None]:
+    """Turn a :class:`LinkOpenError` into ``PROGRAM: link error: ...`` on stderr and exit
+    status :data:`LINK_ERROR_EXIT_STATUS`."""
+    try:
+        yield
+    except LinkOpenError as error:
+        print(f"{program}: link error: {one_line(error)}", file=sys.stderr, flush=True)
+        raise SystemExit(LINK_ERROR_EXIT_STATUS) from None

@@ -1,0 +1,70 @@
+"""The issue's row: ``haptic-master`` SIGKILLed while recording. Its file opens with the
+``mcap`` package's standard reader (``make_reader(...).iter_messages()``) up to its last
+complete chunk, and ``haptic-replay`` reads it as cut short."""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from haptic.common.recording import read_recording
+
+WAIT_S = 60.0
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_sigkilled_master_recording_opens_with_make_reader(tmp_path: Path) -> None:
+    config = tmp_path / "linear.toml"
+    config.write_text('[slave]\nscenario = "constant-rate"\nenvironment = "linear"\n'
+                      'clay_impl = "numpy"\ndevice = "cpu"\n')
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    common = ["--config", str(config), "--key-prefix", f"test/{uuid.uuid4().hex[:8]}",
+              "--no-status", "--peer-wait", "30"]
+    record = tmp_path / "master.mcap"
+    master = subprocess.Popen(
+        [sys.executable, "-m", "haptic.master.cli", *common, "--listen", endpoint, "--rig",
+         "model", "--record", str(record)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    slave = subprocess.Popen(
+        [sys.executable, "-m", "haptic.slave_sim.program", *common, "--connect", endpoint,
+         "--duration", "30"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + WAIT_S
+        while time.monotonic() < deadline:
+            if record.exists() and record.stat().st_size > 60_000:
+                break
+            assert master.poll() is None and slave.poll() is None
+            time.sleep(0.1)
+        master.send_signal(signal.SIGKILL)
+        master.wait(timeout=10)
+    finally:
+        for process in (master, slave):
+            if process.poll() is None:
+                process.kill()
+            process.wait(timeout=10)
+    with open(record, "rb") as stream:
+        messages = [(channel.topic, message) for _, channel, message
+                    in make_reader(stream).iter_messages(log_time_order=False)]
+    states = [json.loads(m.data) for topic, m in messages if topic == "/master/state"]
+    assert len(states) > 100
+    times = [s["time_s"] for s in states]
+    assert times == sorted(times)
+    assert any(topic == "/master/config" for topic, _ in messages)
+    recording = read_recording(record)
+    assert not recording.complete
+    assert recording.counts()["/master/state"] == len(states)

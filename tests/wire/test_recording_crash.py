@@ -1,0 +1,79 @@
+"""Recordings readable after a crash by the standard tools (issue 17): a SIGKILLed recorder's
+file opens with the ``mcap`` package's own ``make_reader(...).iter_messages()`` up to its last
+complete chunk, at every instant of the run, and a closed file still has its summary."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+from mcap.reader import make_reader
+
+from haptic.common.recorder import McapRecorder
+from haptic.common.recording import read_recording
+
+WRITER = textwrap.dedent("""
+    import sys, time
+    from haptic.common.recorder import McapRecorder
+    recorder = McapRecorder(sys.argv[1], "master", chunk_size=4096).open()
+    recorder.add_channel("/master/state", ("time_s", "handle_force_x_N"))
+    i = 0
+    while True:
+        recorder.record("/master/state", time.time_ns(), (i * 1e-3, 1.0))
+        i += 1
+        if i % 100 == 0:
+            time.sleep(0.002)
+""")
+
+
+def _standard_read(path: Path) -> list[float]:
+    with open(path, "rb") as stream:
+        return [json.loads(message.data)["time_s"]
+                for _, _, message in make_reader(stream).iter_messages(log_time_order=False)]
+
+
+def test_sigkilled_recording_opens_with_make_reader(tmp_path: Path) -> None:
+    path = tmp_path / "killed.mcap"
+    process = subprocess.Popen([sys.executable, "-c", WRITER, str(path)])
+    live_reads = []
+    try:
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline:
+            if path.exists() and path.stat().st_size > 2_000:
+                live_reads.append(len(_standard_read(path)))  # readable while it is written
+            if path.exists() and path.stat().st_size > 40_000:
+                break
+            time.sleep(0.05)
+        process.send_signal(signal.SIGKILL)
+    finally:
+        if process.poll() is None:
+            process.kill()
+        process.wait(timeout=10)
+    values = _standard_read(path)
+    assert len(values) > 100
+    # every message up to the last complete chunk, in order, none missing
+    assert values[:3] == [0.0, 0.001, 0.002]
+    assert all(abs(b - a - 1e-3) < 1e-9 for a, b in zip(values, values[1:], strict=False))
+    assert live_reads and live_reads == sorted(live_reads)
+    recording = read_recording(path)
+    assert not recording.complete and recording.counts()["/master/state"] == len(values)
+
+
+def test_closed_recording_keeps_its_summary_and_no_provisional_footer(tmp_path: Path) -> None:
+    path = tmp_path / "closed.mcap"
+    with McapRecorder(path, "slave", chunk_size=1024) as recorder:
+        recorder.add_channel("/slave/state", ("time_s",))
+        for i in range(2000):
+            recorder.record("/slave/state", 1_000 + i, (i * 1e-3,))
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        assert summary is not None and len(summary.chunk_indexes) > 1
+        assert sum(1 for _ in reader.iter_messages()) == 2000
+    recording = read_recording(path)
+    assert recording.complete and recording.metadata["recorder"]["written"] == "2000"
