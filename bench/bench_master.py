@@ -103,6 +103,7 @@ def _run_cycles(hardware: HandleHardware, node: MasterNode, cycles: int, pace: b
     period_s = node.period_s
     reading = hardware.read()
     state = node.activate(reading.position_m[None])
+    hardware.present_forces_enabled(True)  # the master alone: forces on from the start
     zero = np.zeros((1, 2))
     reads = np.empty(cycles)
     totals = np.empty(cycles)

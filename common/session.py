@@ -249,6 +249,15 @@ def combined_summary(master: dict[str, Any], slave: dict[str, Any]) -> str:
             f"    while removing clay: |ft| {slave['cutting_mean_force_N']:.2f} N, speed "
             f"{slave['cutting_mean_speed_m_s'] * 1e3:.1f} mm/s"
         )
+        ripple = slave.get("cutting_force_ripple_ratio")
+        if ripple is not None:
+            lines.append(
+                f"    steady part ({slave['steady_cut_start_s']:.2f}-"
+                f"{slave['steady_cut_end_s']:.2f} s): |ft| {slave['steady_cut_force_N']:.2f} N, "
+                f"speed {slave['steady_cut_speed_m_s'] * 1e3:.1f} mm/s, force ripple "
+                f"{ripple * 100:.1f} % (std/mean), velocity reversals "
+                f"{slave['cutting_velocity_reversals']}"
+            )
     else:
         lines.append("  the tool did not cut clay")
     m_during, m_end = _trips(master)

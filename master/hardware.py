@@ -45,13 +45,15 @@ class HandleReading:
     ``force_N``: the operator's force on the sensor, N; ``position_m``: the handle position
     from the encoders, m. A value the cycle did not deliver is NaN. ``faults`` lists what
     went wrong this cycle (a missing PDO, a drive fault, an EMCY); empty when healthy.
-    ``cycle`` counts SYNCs since configure.
+    ``cycle`` counts SYNCs since configure. ``events`` lists what changed without being a
+    fault (a drive's statusword warning bits, once per change).
     """
 
     force_N: np.ndarray
     position_m: np.ndarray
     cycle: int
     faults: tuple[str, ...] = ()
+    events: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:

@@ -82,7 +82,8 @@ class ModelRigHardware(HandleHardware):
             raise HardwareError("read before configure")
         if not self._operator_grasped:
             # the operator waits for the ready lamp: the script's clock has not started
-            state.operator.time_s[0] = 0.0
+            # (one period before its start: no intent yet, even with onset 0)
+            state.operator.time_s[0] = -self.model.period_s
             state.operator.integral_N_s[0] = 0.0
         sample = self.model.step_inputs(state)
         target = state.target_m

@@ -212,6 +212,9 @@ def _run_linked_master(
                     poll_ns = clock()
                     # supervise: watchdog, resync check, fault latch (master/supervisor.py)
                     now_s = (now_ns - perf_start_ns) * 1e-9
+                    if reading.events:  # e.g. a drive's statusword warning bits
+                        loop.node_events.extend({"time_s": now_s, "kind": "hardware_event",
+                                                 "reason": text} for text in reading.events)
                     transition = supervisor.update(now_s, message, (yhx, yhy), reading.faults,
                                                    reading.cycle, link.silence_s(),
                                                    link.peer_alive)

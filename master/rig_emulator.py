@@ -51,6 +51,7 @@ from haptic.master.hardware import (
 from haptic.master.settings import master_settings
 from haptic.master.sim_rig import (
     OPERATOR_DISPLAY_ID,
+    OPERATOR_READY_ID,
     SimulatedCanRig,
     encode_operator_display,
 )
@@ -252,7 +253,8 @@ class EmulatedRigHardware(HandleHardware):
             self.bus_options = self._private_bus()
             self._start_emulator(self.bus_options)
             self.driver = CanHandleDriver(self.settings.can, self.bus_options,
-                                          self.settings.sim.pdo_timeout_s)
+                                          self.settings.sim.pdo_timeout_s,
+                                          self.config["model"]["sample_period_s"])
             self.driver.configure()
         except BaseException:
             self.driver = None
@@ -279,7 +281,8 @@ class EmulatedRigHardware(HandleHardware):
         try:
             command = [sys.executable, "-m", "haptic.master.rig_sim_cli", "--config",
                        config_path, "--can-interface", bus_options["interface"],
-                       "--can-channel", bus_options["channel"], "--parent-pid", str(os.getpid())]
+                       "--can-channel", bus_options["channel"], "--parent-pid", str(os.getpid()),
+                       "--operator-waits-for-lamp"]
             if "port" in bus_options:
                 command += ["--can-port", str(bus_options["port"])]
             try:
@@ -360,6 +363,13 @@ class EmulatedRigHardware(HandleHardware):
         """Send the tool force (N) to the emulated operator: the operator display frame goes
         out after this cycle's RPDOs (or before the next SYNC, whichever comes first)."""
         self._display = encode_operator_display(tool_force_N)
+
+    def present_forces_enabled(self, enabled: bool) -> None:
+        """The master's ready lamp to the emulated operator (sent at once; transitions only)."""
+        if self.driver is None or self.driver.lifecycle_state is LifecycleState.UNCONFIGURED:
+            return
+        self.driver.send_frame(OPERATOR_READY_ID, b"\x01" if enabled else b"\x00",
+                               extended=True)
 
     def _send_display(self) -> None:
         if self._display is None or self.driver is None:

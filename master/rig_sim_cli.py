@@ -62,6 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--operator", metavar="SPEC",
                         help="simulated operator ([master.sim] operator), e.g. "
                         "regulate:fx=3.6,onset=0.2")
+    parser.add_argument("--operator-waits-for-lamp", action="store_true",
+                        help="start the operator's script at the master's first ready-lamp "
+                        "frame (the sim backend passes it) instead of the first SYNC")
     parser.add_argument("--duration", metavar="S", type=float,
                         help="serve for S seconds (default: until SIGINT or SIGTERM)")
     parser.add_argument("--parent-pid", metavar="PID", type=int,
@@ -100,7 +103,8 @@ def _configure(args: argparse.Namespace) -> tuple[SimulatedCanRig, dict[str, Any
     if args.parent_pid is not None and args.parent_pid < 1:
         raise ConfigError("--parent-pid", f"must be a process id >= 1 (got {args.parent_pid})")
     try:
-        rig = SimulatedCanRig.from_config(config, emulator.channel)
+        rig = SimulatedCanRig.from_config(config, emulator.channel,
+                                          operator_waits_for_lamp=args.operator_waits_for_lamp)
     except ValueError as error:  # ConfigError names its key; the rig model's name the axis
         if isinstance(error, ConfigError):
             raise

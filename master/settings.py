@@ -28,6 +28,21 @@ class CanSettings:
     encoder_counts_per_rev: int
     force_scale_N_per_count: tuple[float, float]
     force_offset_count: tuple[float, float]
+    x_eds_file: str = ""
+    y_eds_file: str = ""
+    master_node_id: int = 127
+    heartbeat_period_s: float = 0.1
+    heartbeat_timeout_s: float = 0.3
+    rpdo_timeout_s: float = 0.1
+    following_error_window_m: float = 0.01
+    bus_load_limit: float = 0.7
+    fd: bool = True
+    data_bitrate: int = 5_000_000
+
+    @property
+    def eds_files(self) -> tuple[str, str]:
+        """EDS/DCF files of the x and y drives (empty: the packaged emulated drive's)."""
+        return (self.x_eds_file, self.y_eds_file)
 
     @property
     def node_ids(self) -> tuple[int, int]:
@@ -157,6 +172,10 @@ def master_settings(config: dict[str, Any]) -> MasterSettings:
     can = CanSettings(**can_table)
     if can.x_node_id == can.y_node_id:
         raise ConfigError("master.can.y_node_id", "must differ from x_node_id")
+    if can.master_node_id in can.node_ids:
+        raise ConfigError("master.can.master_node_id", "must differ from the drives' node ids")
+    if not can.heartbeat_timeout_s > can.heartbeat_period_s:
+        raise ConfigError("master.can.heartbeat_timeout_s", "must exceed heartbeat_period_s")
     if any(scale == 0.0 for scale in can.force_scale_N_per_count):
         raise ConfigError("master.can.force_scale_N_per_count", "must not be zero")
     sim_table = dict(section["sim"])

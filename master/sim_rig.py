@@ -1,8 +1,12 @@
 """The simulated rig: two CiA 402 drives and the force sensor as CAN frame logic.
 
 :class:`SimulatedCanRig` runs the pure :class:`~haptic.master.rig_model.RigModel` and speaks
-the real frames (NMT, SDO, RPDO1/TPDO1, SYNC, EMCY, the sensor's DBC frame), so the CAN
-driver (:class:`~haptic.master.can_driver.CanHandleDriver`) runs unchanged against it. The
+the real frames (NMT, SDO, RPDO1/TPDO1, SYNC, EMCY, heartbeat, the sensor's DBC frame), so the
+CAN driver (:class:`~haptic.master.can_driver.CanHandleDriver`) runs unchanged against it.
+Each drive is a conformant CiA 301/402 device (:mod:`haptic.master.drive_device`: canopen's
+``LocalNode`` with the object dictionary of its EDS, PDOs as configured by SDO, heartbeat
+producer and consumer, RPDO deadline, following error window, quick stop); the driver
+configures it from scratch as it would a real drive. The
 devices are stepped by the driver's SYNC frames, one model step per SYNC, so a run is
 deterministic whatever the thread or process timing: RPDOs are synchronous (transmission
 type 1), a controlword or target received in cycle k is applied at SYNC k+1, then the model
@@ -31,6 +35,7 @@ from __future__ import annotations
 import copy
 import struct
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -42,6 +47,15 @@ from haptic.common.model import model_from_config
 from haptic.master import cia402
 from haptic.master.can_driver import CanHandleDriver
 from haptic.master.cia402 import DriveState
+from haptic.master.drive_device import (
+    EMCY_FOLLOWING_ERROR,
+    EMCY_HEARTBEAT,
+    EMCY_RPDO_TIMEOUT,
+    SW_FOLLOWING_ERROR,
+    SW_WARNING,
+    DriveObjects,
+    DriveRuntime,
+)
 from haptic.master.force_sensor import (
     STATUS_OK,
     STATUS_OVERLOAD,
@@ -60,6 +74,10 @@ from haptic.master.settings import CanSettings, master_settings
 #: little-endian IEEE float32, N.
 OPERATOR_DISPLAY_ID = 0x1FFFF000
 _DISPLAY_PAYLOAD = struct.Struct("<ff")
+#: COB-ID of the emulator-only ready-lamp frame (29-bit, like the display frame): one byte,
+#: 1 when the master's forces are enabled. The simulated operator grasps the handle, and the
+#: clock of its script starts, at the first 1 (a real operator waits for the lamp too).
+OPERATOR_READY_ID = 0x1FFFF001
 
 
 def encode_operator_display(tool_force_N: np.ndarray) -> bytes:
@@ -83,27 +101,13 @@ NMT_STOPPED_STATE = "stopped"
 
 
 @dataclass
-class _Drive:
-    node_id: int
-    nmt_state: str = NMT_PRE_OPERATIONAL_STATE
-    state: DriveState = DriveState.SWITCH_ON_DISABLED
-    mode: int = 0
-    controlword: int = 0
-    received_controlword: int | None = None
-    received_target: int | None = None
-    target_counts: int = 0
-    pending_fault_code: int = 0
-    drop_tpdo: int = 0
-
-
-@dataclass
 class _SyncAnswer:
     """What the devices do at one SYNC: the drives after it, the sample, the frames to send
     and the sensor's counters. The model has already stepped; ``undo`` holds the rig state's
     arrays (and ``rng_undo`` the noise generator's state) from before the step, so a prepared
     answer can be taken back (both empty for an answer committed at once)."""
 
-    drives: list[_Drive]
+    drives: list[DriveRuntime]
     sample: RigSample
     messages: list[can.Message]
     sensor_counter: int
@@ -148,9 +152,26 @@ class SimulatedCanRig:
                                       load_database(settings.dbc_file or None))
         self.state = model.initial_state(np.asarray([initial_position_m], float), rng)
         self._state_arrays = _state_arrays(self.state)
-        self.drives = [_Drive(node) for node in settings.node_ids]
         self.tool_force_N = np.zeros((1, 2))
+        #: whether the operator has grasped the handle (the ready lamp has been on)
+        self.operator_grasped = False
         self.last_sample: RigSample | None = None
+        self.drives = [DriveRuntime(node) for node in settings.node_ids]
+        #: Each drive's object dictionary (its EDS) and communication objects.
+        self.devices = [
+            DriveObjects(node, eds, self._send, drive,
+                         lambda axis=axis: self._position_counts(axis))
+            for axis, (node, eds, drive) in enumerate(zip(settings.node_ids, settings.eds_files,
+                                                          self.drives, strict=True))]
+        for axis, drive in enumerate(self.drives):
+            drive.position_counts = self._position_counts(axis)
+        #: When each drive last heard the heartbeat it consumes (monotonic s; None: not yet).
+        self._heartbeat_heard: list[float | None] = [None, None]
+        self._heartbeat_due = [0.0, 0.0]
+        #: When the serving loop next looks at the heartbeat timers (0: at once), s.
+        self._timers_due_s = 0.0
+        #: SYNCs received as CAN FD frames: the cyclic answers go out as FD frames too.
+        self._sync_fd = False
         self.sync_count = 0
         #: SYNCs answered with an answer prepared on the operator display frame.
         self.prepared_syncs = 0
@@ -166,15 +187,21 @@ class SimulatedCanRig:
         self._thread: threading.Thread | None = None
 
     @classmethod
-    def from_config(cls, config: dict[str, Any], channel: str) -> SimulatedCanRig:
+    def from_config(cls, config: dict[str, Any], channel: str,
+                    operator_waits_for_lamp: bool = False) -> SimulatedCanRig:
         """The devices of a validated configuration: ``[model]`` (Ts, Gh, Th), ``[master.can]``
-        (node ids, conversions, DBC) and ``[master.sim]`` (operator, noise, seed, start)."""
+        (node ids, conversions, DBC) and ``[master.sim]`` (operator, noise, seed, start).
+        ``operator_waits_for_lamp``: the operator's script starts at the first ready-lamp
+        frame (:data:`OPERATOR_READY_ID`, sent by the simulated backends); otherwise at the
+        first SYNC (a rig driven by the ``can`` backend, which sends no emulator frames)."""
         settings = master_settings(config)
         sim = settings.sim
         rig_model = RigModel.from_model(model_from_config(config), sim.operator,
                                         sim.force_noise_std_N)
-        return cls(rig_model, settings.can, channel, sim.initial_position_m,
-                   np.random.default_rng(sim.seed))
+        rig = cls(rig_model, settings.can, channel, sim.initial_position_m,
+                  np.random.default_rng(sim.seed))
+        rig.operator_grasped = not operator_waits_for_lamp
+        return rig
 
     # --- lifecycle -------------------------------------------------------------------
 
@@ -209,13 +236,18 @@ class SimulatedCanRig:
     def serve(self, should_stop: Callable[[], bool], poll_s: float = 0.05,
               on_error: Callable[[str], None] | None = None) -> None:
         """Block on the bus and answer each frame until ``should_stop()`` is true (checked
-        after each frame and at least every ``poll_s`` s). A frame that raises is recorded
-        in :attr:`errors` (and passed to ``on_error``) and serving goes on."""
+        after each frame and at least every ``poll_s`` s). Between frames the drives'
+        heartbeats go out and their heartbeat consumers are checked (:meth:`poll_timers`). A
+        frame that raises is recorded in :attr:`errors` (and passed to ``on_error``) and
+        serving goes on."""
         while not should_stop():
             bus = self._bus
             if bus is None:
                 return
-            message = bus.recv(timeout=poll_s)
+            now_s = time.monotonic()
+            if now_s >= self._timers_due_s:  # only when a heartbeat or a check is due
+                self._timers_due_s = now_s + max(0.0, self.poll_timers(now_s))
+            message = bus.recv(timeout=min(poll_s, max(0.0, self._timers_due_s - now_s)))
             if message is None:
                 continue
             error = self.handle_message(message)
@@ -228,19 +260,65 @@ class SimulatedCanRig:
         try:
             with self._lock:
                 self._handle(message.arbitration_id, bytes(message.data),
-                             message.is_extended_id)
+                             message.is_extended_id, message.is_fd)
         except Exception as error:  # keep serving; the test or user sees .errors
             text = f"{type(error).__name__}: {error}"
             self.errors.append(text)
             return text
         return None
 
+    def poll_timers(self, now_s: float) -> float:
+        """Send the drives' heartbeats that are due and trip a drive whose heartbeat consumer
+        timed out (EMCY 0x8130, then its 0x6007 reaction); returns the time to the next
+        heartbeat, s (thread-safe)."""
+        next_s = 1.0
+        with self._lock:
+            for axis, (drive, device) in enumerate(zip(self.drives, self.devices, strict=True)):
+                period_s = device.heartbeat_producer_ms * 1e-3
+                if period_s > 0.0:
+                    if now_s >= self._heartbeat_due[axis]:
+                        self._send(0x700 + drive.node_id, device.heartbeat_payload())
+                        self._heartbeat_due[axis] = max(self._heartbeat_due[axis] + period_s,
+                                                        now_s)
+                    next_s = min(next_s, self._heartbeat_due[axis] - now_s)
+                heard = self._heartbeat_heard[axis]
+                timeout_s = device.heartbeat_consumer_ms * 1e-3
+                if heard is not None and timeout_s > 0.0:
+                    if now_s - heard > timeout_s:
+                        self._heartbeat_heard[axis] = None  # one trip per loss
+                        self._connection_lost(axis, EMCY_HEARTBEAT)
+                    else:
+                        next_s = min(next_s, heard + timeout_s - now_s)
+        return next_s
+
+    def _connection_lost(self, axis: int, emcy_code: int) -> None:
+        """The drive lost its master (heartbeat or RPDO deadline): EMCY, then the abort
+        connection reaction of 0x6007 (1 fault, 2 disable voltage, 3 quick stop) when it is
+        enabled (under the lock)."""
+        self._discard_prepared()
+        drive, device = self.drives[axis], self.devices[axis]
+        self._send(cia402.EMCY_BASE + drive.node_id, cia402.emcy_frame(emcy_code))
+        if drive.state is not DriveState.OPERATION_ENABLED:
+            return
+        option = device.abort_connection_option
+        if option == 1:
+            drive.state, drive.error_code = DriveState.FAULT, emcy_code
+        elif option == 2:
+            drive.state = DriveState.SWITCH_ON_DISABLED
+        elif option == 3:
+            drive.state = DriveState.QUICK_STOP_ACTIVE
+        drive.target_counts = drive.position_counts  # stop where it is
+
     # --- fault injection (thread-safe; acts at the next SYNC) -------------------------
 
-    def inject_drive_fault(self, axis: int, error_code: int = 0x2310) -> None:
-        """The drive of ``axis`` (0 x, 1 y) faults: EMCY ``error_code`` and statusword Fault."""
+    def inject_drive_fault(self, axis: int, error_code: int = 0x2310,
+                           persistent: bool = False) -> None:
+        """The drive of ``axis`` (0 x, 1 y) faults: EMCY ``error_code`` and statusword Fault;
+        ``persistent``: the cause stays, so it faults again after every fault reset."""
         with self._lock:
             self.drives[axis].pending_fault_code = error_code
+            if persistent:
+                self.drives[axis].persistent_fault_code = error_code
             self._discard_prepared()
 
     def drop_tpdo(self, axis: int, count: int = 1) -> None:
@@ -268,21 +346,36 @@ class SimulatedCanRig:
             self.tool_force_N = np.asarray(tool_force_N, float).reshape(1, 2).copy()
             self._discard_prepared()
 
+    def set_operator_ready(self, enabled: bool) -> None:
+        """The master's ready lamp: the operator grasps the handle the first time it is on."""
+        with self._lock:
+            if enabled and not self.operator_grasped:
+                self.operator_grasped = True
+                self._discard_prepared()
+
     # --- frame handling (under the lock) ----------------------------------------------
 
     def _send(self, frame_id: int, data: bytes) -> None:
         if self._bus is not None:
             self._bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False))
 
-    def _handle(self, frame_id: int, data: bytes, extended: bool = False) -> None:
+    def _handle(self, frame_id: int, data: bytes, extended: bool = False,
+                fd: bool = False) -> None:
         if extended:  # CANopen is 11-bit: the only 29-bit frame here is the display frame
             if frame_id == OPERATOR_DISPLAY_ID:
                 tool_force_N = decode_operator_display(data).reshape(1, 2)
                 self._discard_prepared()
                 self.tool_force_N = tool_force_N
                 self._prepared = self._prepare_sync(undoable=True)
+            elif frame_id == OPERATOR_READY_ID and data[:1] == b"\x01":
+                if not self.operator_grasped:
+                    self.operator_grasped = True
+                    self._discard_prepared()
             return
         if frame_id == cia402.SYNC_COB_ID:
+            if fd != self._sync_fd:
+                self._discard_prepared()
+                self._sync_fd = fd
             answer, self._prepared = self._prepared, None
             if answer is None:
                 answer = self._prepare_sync(undoable=False)
@@ -294,17 +387,30 @@ class SimulatedCanRig:
             self._discard_prepared()
             self._on_nmt(data[0], data[1])
             return
-        for drive in self.drives:
-            if frame_id == cia402.RPDO1_BASE + drive.node_id:
+        for axis, (drive, device) in enumerate(zip(self.drives, self.devices, strict=True)):
+            if 0x700 <= frame_id <= 0x77F and frame_id == 0x700 + device.heartbeat_consumer_node:
+                if self._heartbeat_heard[axis] is None:
+                    self._timers_due_s = 0.0  # its consumer starts now
+                self._heartbeat_heard[axis] = time.monotonic()  # changes no input
+                continue
+            if frame_id == device.rpdo.cob_id and device.rpdo.enabled:
                 if drive.nmt_state == NMT_OPERATIONAL_STATE:
                     self._discard_prepared()
-                    controlword, target = cia402.decode_pdo(cia402.RPDO1_MAPPING, data)
-                    drive.received_controlword, drive.received_target = controlword, target
-                return
+                    values = device.decode_rpdo(data)
+                    if isinstance(values, int):  # a length error: not processed
+                        self._send(cia402.EMCY_BASE + drive.node_id,
+                                   cia402.emcy_frame(values))
+                        continue
+                    drive.received_controlword = values.get(0x6040, drive.received_controlword)
+                    drive.received_target = values.get(0x607A, drive.received_target)
+                    drive.syncs_without_rpdo = 0
+                continue
             if frame_id == cia402.SDO_RX_BASE + drive.node_id:
                 if drive.nmt_state != NMT_STOPPED_STATE:
                     self._discard_prepared()
-                    self._send(cia402.SDO_TX_BASE + drive.node_id, self._on_sdo(drive, data))
+                    device.on_sdo_request(data)
+                    if device.refresh_if_changed():
+                        self._timers_due_s = 0.0  # a heartbeat time may have changed
                 return
         # Anything else (another node's frames, this bus's own frames coming back) is not ours.
 
@@ -319,41 +425,20 @@ class SimulatedCanRig:
             elif command == cia402.NMT_PRE_OPERATIONAL:
                 drive.nmt_state = NMT_PRE_OPERATIONAL_STATE
             elif command in (cia402.NMT_RESET_NODE, cia402.NMT_RESET_COMMUNICATION):
+                # Back to the power-on values: the communication objects (0x1000-0x1FFF),
+                # and on a node reset the application's too.
+                device = self.devices[self.drives.index(drive)]
+                store = device.node.data_store
+                for index in list(store):
+                    if command == cia402.NMT_RESET_NODE or index < 0x2000:
+                        del store[index]
+                device.refresh()
+                if command == cia402.NMT_RESET_NODE:
+                    drive.state, drive.mode, drive.error_code = (
+                        DriveState.SWITCH_ON_DISABLED, 0, 0)
                 drive.nmt_state = NMT_PRE_OPERATIONAL_STATE
+                self._heartbeat_heard[self.drives.index(drive)] = None
                 self._send(0x700 + drive.node_id, b"\x00")
-
-    def _on_sdo(self, drive: _Drive, data: bytes) -> bytes:
-        request = cia402.decode_sdo(data)
-        index, subindex = request.index, request.subindex
-        if subindex != 0 or index not in cia402.OBJECT_DICTIONARY:
-            return cia402.sdo_abort(index, subindex, cia402.SDO_ABORT_NO_OBJECT)
-        variable = cia402.OBJECT_DICTIONARY[index]
-        axis = self.drives.index(drive)
-        if request.command == 0x40:  # upload
-            values = {
-                0x6040: drive.controlword, 0x6041: self._statusword(drive),
-                0x6060: drive.mode, 0x6061: drive.mode, 0x607A: drive.target_counts,
-                0x6064: self._position_counts(axis),
-            }
-            return cia402.sdo_upload_response(variable, values[index])
-        size = cia402.sdo_download_size(request.command)
-        if size is None:
-            return cia402.sdo_abort(index, subindex, cia402.SDO_ABORT_COMMAND)
-        if not variable.writable:
-            return cia402.sdo_abort(index, subindex, cia402.SDO_ABORT_READ_ONLY)
-        value = int(variable.decode_raw(request.data[:size]))
-        if index == 0x6060:
-            if value != cia402.MODE_CYCLIC_SYNC_POSITION:
-                return cia402.sdo_abort(index, subindex, cia402.SDO_ABORT_VALUE_RANGE)
-            drive.mode = value
-        elif index == 0x6040:
-            drive.received_controlword = value
-        elif index == 0x607A:
-            drive.received_target = value
-        return cia402.sdo_download_response(index, subindex)
-
-    def _statusword(self, drive: _Drive) -> int:
-        return cia402.statusword_for(drive.state, following_target=True)
 
     def _position_counts(self, axis: int, sample: RigSample | None = None) -> int:
         """Encoder counts of ``axis`` in ``sample`` (default: the last SYNC's)."""
@@ -364,33 +449,61 @@ class SimulatedCanRig:
 
     def _prepare_sync(self, undoable: bool) -> _SyncAnswer:
         """The devices' answer to the next SYNC: each drive applies the controlword and
-        target it latched (a pending fault first, with its EMCY), the model advances one
-        period with the enabled drives' targets, then each operational drive's TPDO1 and the
-        sensor frame sampled at this SYNC. Only the model's state changes here (``undoable``:
+        target it latched (a pending fault first, with its EMCY; CiA 402 transitions, quick
+        stop holding the position), the model advances one period with the enabled drives'
+        targets, the drives check their following error window and RPDO deadline, then each
+        operational drive sends TPDO1 as mapped (per its transmission type) and the sensor
+        its frame sampled at this SYNC. Only the model's state changes here (``undoable``:
         keep what :meth:`_discard_prepared` needs to restore it); the rest at the commit."""
         drives = [copy.copy(drive) for drive in self.drives]
         frames: list[tuple[int, bytes]] = []
         targets = np.full((1, 2), np.nan)
-        for axis, drive in enumerate(drives):
+        for axis, (drive, device) in enumerate(zip(drives, self.devices, strict=True)):
+            if device.sync_cob_id != cia402.SYNC_COB_ID:
+                continue  # this drive listens for SYNC elsewhere
+            if drive.persistent_fault_code and drive.state is not DriveState.FAULT:
+                drive.pending_fault_code = drive.persistent_fault_code
             if drive.pending_fault_code:
-                drive.state = DriveState.FAULT
+                drive.state, drive.error_code = DriveState.FAULT, drive.pending_fault_code
                 frames.append((cia402.EMCY_BASE + drive.node_id,
                                cia402.emcy_frame(drive.pending_fault_code)))
                 drive.pending_fault_code = 0
+            if drive.state is DriveState.QUICK_STOP_ACTIVE and device.quick_stop_option <= 4:
+                drive.state = DriveState.SWITCH_ON_DISABLED  # stopped: the power goes off
+            received_rpdo = drive.received_controlword is not None or (
+                drive.received_target is not None)
             if drive.received_controlword is not None:
                 previous = drive.controlword
                 drive.controlword = drive.received_controlword
-                enabled_before = drive.state is DriveState.OPERATION_ENABLED
-                if drive.mode == cia402.MODE_CYCLIC_SYNC_POSITION:
+                before = drive.state
+                if drive.mode == cia402.MODE_CYCLIC_SYNC_POSITION:  # no mode: no power
                     drive.state = cia402.next_drive_state(drive.state, drive.controlword,
                                                           previous)
-                if drive.state is DriveState.OPERATION_ENABLED and not enabled_before:
-                    drive.target_counts = self._position_counts(axis)  # no jump on enable
-            if drive.received_target is not None and drive.state is DriveState.OPERATION_ENABLED:
+                if drive.state is DriveState.SWITCH_ON_DISABLED and before is not drive.state:
+                    drive.error_code, drive.status_extra = 0, 0
+                if drive.state is DriveState.QUICK_STOP_ACTIVE and (
+                        before is not DriveState.QUICK_STOP_ACTIVE):
+                    drive.target_counts = drive.position_counts  # stop where it is
+            enabled = drive.state is DriveState.OPERATION_ENABLED and (
+                drive.mode == cia402.MODE_CYCLIC_SYNC_POSITION)
+            if drive.received_target is not None and enabled:
                 drive.target_counts = drive.received_target
             drive.received_controlword = drive.received_target = None
-            if drive.state is DriveState.OPERATION_ENABLED:
+            if enabled or drive.state is DriveState.QUICK_STOP_ACTIVE:
                 targets[0, axis] = self.settings.metres_from_counts(drive.target_counts)
+            # RPDO deadline (0x1400:05) in SYNC time (interpolation periods).
+            timer_s = device.rpdo.event_timer_ms * 1e-3
+            if enabled and timer_s > 0.0 and not received_rpdo:
+                drive.syncs_without_rpdo += 1
+                if drive.syncs_without_rpdo * device.interpolation_period_s > timer_s:
+                    drive.syncs_without_rpdo = 0
+                    frames.append((cia402.EMCY_BASE + drive.node_id,
+                                   cia402.emcy_frame(EMCY_RPDO_TIMEOUT)))
+                    drive.state, drive.error_code = DriveState.FAULT, EMCY_RPDO_TIMEOUT
+                    drive.target_counts = drive.position_counts
+                    targets[0, axis] = self.settings.metres_from_counts(drive.position_counts)
+            elif received_rpdo:
+                drive.syncs_without_rpdo = 0
         undo: list[tuple[Any, str, np.ndarray]] = []
         rng_undo = None
         if undoable:
@@ -398,17 +511,32 @@ class SimulatedCanRig:
                     for holder, name in self._state_arrays]
             if self.model.force_noise_std_N > 0.0:
                 rng_undo = self.state.rng.bit_generator.state
+        if not self.operator_grasped:
+            # the operator waits for the ready lamp: the script's clock has not started
+            # (one period before its start: no intent yet, even with onset 0)
+            self.state.operator.time_s[0] = -self.model.period_s
+            self.state.operator.integral_N_s[0] = 0.0
         # Disabled or faulted drives keep the command they applied (brake, lead screw).
         sample = self.model.step(self.state, targets, self.tool_force_N)
-        for axis, drive in enumerate(drives):
-            if drive.nmt_state != NMT_OPERATIONAL_STATE:
+        for axis, (drive, device) in enumerate(zip(drives, self.devices, strict=True)):
+            drive.position_counts = self._position_counts(axis, sample)
+            drive.sync_count += 1
+            self._check_following_error(drive, device, frames)
+            if drive.nmt_state != NMT_OPERATIONAL_STATE or not device.tpdo.enabled or (
+                    device.sync_cob_id != cia402.SYNC_COB_ID):
                 continue
             if drive.drop_tpdo > 0:
                 drive.drop_tpdo -= 1
                 continue
-            frames.append((cia402.TPDO1_BASE + drive.node_id, cia402.encode_pdo(
-                cia402.TPDO1_MAPPING,
-                (self._statusword(drive), self._position_counts(axis, sample)))))
+            payload = device.encode_tpdo(drive, drive.position_counts)
+            kind = device.tpdo.transmission_type
+            if 1 <= kind <= 240:
+                due = drive.sync_count % kind == 0
+            else:  # 0 acyclic synchronous, 254/255 event-driven: on a change
+                due = payload != drive.last_tpdo
+            if due:
+                drive.last_tpdo = payload
+                frames.append((device.tpdo.cob_id, payload))
         counter = self._sensor_counter
         drop_sensor, status_cycles = self._drop_sensor, self._sensor_status_cycles
         if drop_sensor > 0:
@@ -421,10 +549,36 @@ class SimulatedCanRig:
                 status_cycles -= 1
             frames.append((self.codec.frame_id,
                            self.codec.encode(ForceSample(raw_x, raw_y, counter, status))))
-        messages = [can.Message(arbitration_id=frame_id, data=data, is_extended_id=False)
+        fd = self._sync_fd
+        emcy_ids = {cia402.EMCY_BASE + drive.node_id for drive in drives}
+        messages = [can.Message(arbitration_id=frame_id, data=data, is_extended_id=False,
+                                is_fd=(fd or len(data) > 8) and frame_id not in emcy_ids,
+                                bitrate_switch=(fd or len(data) > 8) and frame_id not in emcy_ids)
                     for frame_id, data in frames]
         return _SyncAnswer(drives, sample, messages, (counter + 1) % 256, drop_sensor,
                            status_cycles, undo, rng_undo)
+
+    def _check_following_error(self, drive: DriveRuntime, device: DriveObjects,
+                               frames: list[tuple[int, bytes]]) -> None:
+        """Following error (0x6065 window, 0x6066 time out): statusword bit 7 (warning) while
+        beyond the window, then bit 13, Fault and EMCY 0x8611 once it lasted the time out."""
+        if drive.state is not DriveState.OPERATION_ENABLED:
+            drive.following_error_syncs = 0
+            drive.status_extra &= ~SW_WARNING
+            return
+        error = abs(drive.target_counts - drive.position_counts)
+        if error <= device.following_error_window_counts:
+            drive.following_error_syncs = 0
+            drive.status_extra &= ~(SW_WARNING | SW_FOLLOWING_ERROR)
+            return
+        drive.following_error_syncs += 1
+        drive.status_extra |= SW_WARNING
+        if drive.following_error_syncs * device.interpolation_period_s > (
+                device.following_error_timeout_s):
+            drive.status_extra |= SW_FOLLOWING_ERROR
+            drive.state, drive.error_code = DriveState.FAULT, EMCY_FOLLOWING_ERROR
+            frames.append((cia402.EMCY_BASE + drive.node_id,
+                           cia402.emcy_frame(EMCY_FOLLOWING_ERROR)))
 
     def _discard_prepared(self) -> None:
         """Take back a prepared answer (an input changed after it): the model's state as it
@@ -496,6 +650,9 @@ class SimulatedRigHardware(HandleHardware):
     def present_tool_force(self, tool_force_N: np.ndarray) -> None:
         self.rig.set_tool_force(tool_force_N)
 
+    def present_forces_enabled(self, enabled: bool) -> None:
+        self.rig.set_operator_ready(enabled)
+
 
 @register_hardware("sim-inproc")
 def simulated_rig_hardware(config: dict[str, Any]) -> SimulatedRigHardware:
@@ -503,7 +660,7 @@ def simulated_rig_hardware(config: dict[str, Any]) -> SimulatedRigHardware:
     ``[master.can]`` for node ids and conversions, ``[master.sim]``; the virtual bus
     ``[master.sim] channel``)."""
     sim = master_settings(config).sim
-    rig = SimulatedCanRig.from_config(config, sim.channel)
+    rig = SimulatedCanRig.from_config(config, sim.channel, operator_waits_for_lamp=True)
     driver = CanHandleDriver(rig.settings, {"interface": "virtual", "channel": sim.channel},
-                             sim.pdo_timeout_s)
+                             sim.pdo_timeout_s, config["model"]["sample_period_s"])
     return SimulatedRigHardware(rig, driver)

@@ -37,7 +37,7 @@ import zenoh
 from haptic.common.cli_options import add_run_options, run_options_from_args
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.config.scenario import load_scenario, max_block_damping
-from haptic.common.cutting_metrics import cutting_figures
+from haptic.common.cutting import cutting_figures, steady_cut_fields
 from haptic.common.display import DisplayPublisher, EventCursor
 from haptic.common.link import Link
 from haptic.common.messages import Flags, HandleState
@@ -416,7 +416,9 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     )
     if display is not None:
         summary.update(display.figures)
-    summary.update(cutting_figures(trace.arrays()))
+    traced = trace.arrays()
+    summary.update(cutting_figures(traced))
+    summary.update(steady_cut_fields(traced))
     if args.out is not None:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)

@@ -72,11 +72,12 @@ def summarize(recording: Recording) -> dict[str, Any]:
                 if values.size:
                     summary[f"max_abs_{name}"] = float(np.abs(values).max())
     if side == "slave" and state:
-        from haptic.common.cutting_metrics import cutting_figures
+        from haptic.common.cutting import cutting_figures, steady_cut_fields
 
         trace = dict(state)
         trace["forces_enabled"] = state["running"]
         summary.update(cutting_figures(trace))
+        summary.update(steady_cut_fields(trace))
     run_summary = recording.last(f"/{side}/summary")
     if run_summary:
         summary["run"] = {k: run_summary.get(k) for k in (

@@ -43,6 +43,28 @@ CAN_SCHEMA: Schema = {
                                      "count.", check=_pair),
     "force_offset_count": Field("float_list", "Sensor offset per channel (x, y), counts.",
                                 check=_pair),
+    "x_eds_file": Field("str", "EDS or DCF file of the x drive (configure() maps its PDOs "
+                        "from it); empty for the packaged master/eds/haptic_cia402_drive.eds."),
+    "y_eds_file": Field("str", "EDS or DCF file of the y drive; empty for the packaged one."),
+    "master_node_id": Field("int", "Node id of the master's heartbeat (the drives consume "
+                            "it).", minimum=1, maximum=127),
+    "heartbeat_period_s": Field("float", "Heartbeat producer period of the master and the "
+                                "drives, s (0x1017 in ms).", minimum=0.001, maximum=65.0),
+    "heartbeat_timeout_s": Field("float", "Heartbeat consumer time on both sides, s: a drive "
+                                 "stops (0x6007 reaction) when the master's heartbeat is "
+                                 "older, the master reports a drive's.", minimum=0.001,
+                                 maximum=65.0),
+    "rpdo_timeout_s": Field("float", "RPDO deadline on the drives (0x1400:05), s in SYNC "
+                            "time; 0 off.", minimum=0.0, maximum=65.0),
+    "following_error_window_m": Field("float", "Following error window of the drives "
+                                      "(0x6065), m.", minimum=0.0, exclusive_minimum=True),
+    "bus_load_limit": Field("float", "configure() refuses a cycle whose frames need more "
+                            "than this fraction of Ts (worst-case bit stuffing).",
+                            minimum=0.0, exclusive_minimum=True, maximum=1.0),
+    "fd": Field("bool", "CAN FD: the cyclic frames (SYNC, PDOs, sensor) as FD frames with "
+                "bit-rate switch; NMT, SDO, EMCY and heartbeat stay classical."),
+    "data_bitrate": Field("int", "CAN FD data-phase bitrate, bit/s.", minimum=1_000_000,
+                          maximum=12_000_000),
 }
 
 def _emulator_interface(name: Any) -> str | None:

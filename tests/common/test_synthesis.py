@@ -3,6 +3,7 @@ design that cannot be realised is refused, never returned silently."""
 
 from __future__ import annotations
 
+import control
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -117,38 +118,111 @@ def stable_polynomial(roots: list[float], gain: float) -> list[float]:
     return list(gain * np.real(np.poly([-abs(r) - 0.01 for r in roots])))
 
 
-@st.composite
-def designs(draw):
-    gh_poles = draw(st.lists(st.floats(0.1, 200.0), min_size=1, max_size=4))
-    gh_zeros = draw(st.lists(st.floats(0.05, 50.0), min_size=0, max_size=len(gh_poles)))
-    ch1_poles = draw(st.lists(st.floats(0.0, 50.0), min_size=0, max_size=3))
-    ch1_zeros = draw(st.lists(st.floats(0.05, 50.0), min_size=0, max_size=3))
-    ch1_den = list(np.real(np.poly([-p for p in ch1_poles]))) if ch1_poles else [1.0]
-    ch1 = tf(stable_polynomial(ch1_zeros, draw(st.floats(0.1, 50.0))) if ch1_zeros
-             else [draw(st.floats(0.1, 50.0))], ch1_den)
-    gh = (stable_polynomial(gh_zeros, 1.0) if gh_zeros else [1.0], stable_polynomial(gh_poles, 1.0))
-    sh = draw(st.sampled_from(COMPLIANCES))
-    st_ = draw(st.sampled_from(COMPLIANCES))
+#: The ways a random design is spoilt on purpose (None: left as drawn, meant to be valid).
+FLAWS = (None,) * 6 + ("too few Ch1 poles", "unstable Ch1", "non-minimum-phase Gh")
+
+
+def random_design(rng: np.random.Generator):
+    """A random axis and Ch1, built to be realisable (Ch1 rolls off fast enough for Gt, Sh
+    no faster than Gh), then, one time in three, spoilt by one flaw (:data:`FLAWS`). Returns
+    (axis, ch1, flaw)."""
+
     def tool_parameter(upper: float) -> float:
         # what the schema accepts: 0, or a meaningful value (at least 1e-9 in SI units)
-        return draw(st.one_of(st.just(0.0), st.floats(1e-3, upper)))
+        return 0.0 if rng.random() < 0.25 else float(rng.uniform(1e-3, upper))
 
     tool = (tool_parameter(5.0), tool_parameter(200.0), tool_parameter(100.0))
     if tool == (0.0, 0.0, 0.0):
         tool = (1.0, 0.0, 0.0)
-    ratios = (draw(st.sampled_from([-2.0, 0.5, 1.0, 3.0])), draw(st.sampled_from([0.5, 1.0, 2.0])))
-    return custom_axis(ratios[0], ratios[1], sh, st_, gh, tool), ch1
+    gt_order = 2 if tool[0] > 0 else 1 if tool[1] > 0 else 0  # degree of 1/Gt
+    sh = COMPLIANCES[rng.integers(2)]
+    st_ = COMPLIANCES[rng.integers(2)]
+    gh_poles = list(rng.uniform(0.1, 200.0, rng.integers(1, 5)))
+    # With Sh (relative degree 2) Ct1 = (Gh Ch1 + Sh) / (Gh Ah2) needs Gh to roll off no
+    # faster than Sh: at most two more poles than zeros.
+    fewest_zeros = max(0, len(gh_poles) - 2) if sh is COMPLIANCES[1] else 0
+    gh_zeros = list(rng.uniform(0.05, 50.0, rng.integers(fewest_zeros, len(gh_poles) + 1)))
+    ch1_zeros = list(rng.uniform(0.05, 50.0, rng.integers(0, 3)))
+    # Ch2 = -Ah1 (Gh Ch1 + Sh) / Gt needs Gh Ch1 to roll off as fast as 1/Gt grows.
+    gh_roll_off = len(gh_poles) - len(gh_zeros)
+    ch1_pole_count = len(ch1_zeros) + max(0, gt_order - gh_roll_off) + int(rng.integers(0, 2))
+    ch1_poles = [0.0 if rng.random() < 0.3 else float(rng.uniform(0.05, 50.0))
+                 for _ in range(ch1_pole_count)]
+    flaw = FLAWS[rng.integers(len(FLAWS))]
+    if flaw == "too few Ch1 poles" and ch1_poles:
+        del ch1_poles[: 1 + int(rng.integers(0, len(ch1_poles)))]
+    elif flaw == "unstable Ch1":
+        ch1_poles.append(-float(rng.uniform(0.5, 50.0)))  # a pole at +p
+    elif flaw == "non-minimum-phase Gh":
+        if not gh_zeros:
+            gh_zeros.append(float(rng.uniform(0.5, 50.0)))
+        sh = COMPLIANCES[1]  # with Sh, Ct1 divides by Gh's zeros
+    gh_num = np.real(np.poly([-abs(z) - 0.01 for z in gh_zeros])) if gh_zeros else [1.0]
+    if flaw == "non-minimum-phase Gh":
+        gh_num = np.real(np.poly([abs(gh_zeros[0]) + 0.5] + [-abs(z) - 0.01
+                                                              for z in gh_zeros[1:]]))
+    gh = (list(gh_num), stable_polynomial(gh_poles, 1.0))
+    gain = float(rng.uniform(0.1, 50.0))
+    ch1_den = list(np.real(np.poly([-p for p in ch1_poles]))) if ch1_poles else [1.0]
+    ch1 = tf(stable_polynomial(ch1_zeros, gain) if ch1_zeros else [gain], ch1_den)
+    ratios = (float(rng.choice([-2.0, 0.5, 1.0, 3.0])), float(rng.choice([0.5, 1.0, 2.0])))
+    return custom_axis(ratios[0], ratios[1], sh, st_, gh, tool), ch1, flaw
+
+
+def _degrees(system) -> tuple[int, int]:
+    num, den = tf_coefficients(system)
+    return polynomial_degree(num), polynomial_degree(den)
+
+
+def _has_rhp(values: np.ndarray) -> bool:
+    return bool(np.any(np.real(values) > 1e-6))
+
+
+def expected_refusal(axis: AxisModel, ch1) -> str | None:
+    """What the synthesis must say about a design, worked out independently of its code:
+    from the parts' poles and zeros (python-control) and the relative degrees of eqs 21-23.
+    ``None`` when the design is realisable, else the start of the refusal ("Ch1 is not
+    realisable", "Ct1 is improper", ...), in the order the synthesis checks."""
+    gh, gt = axis.handle_actuator_gh, axis.tool_actuator_gt
+    sh, st_ = axis.handle_compliance_sh, axis.tool_compliance_st
+    for name, part in (("Ch1", ch1), ("Gh", gh), ("Sh", sh), ("St", st_), ("Gt", gt)):
+        if _has_rhp(control.poles(part)):
+            return f"{name} is not realisable"
+
+    def roll_off(system) -> float:  # relative degree; the zero function rolls off at once
+        num_degree, den_degree = _degrees(system)
+        return np.inf if num_degree < 0 else den_degree - num_degree
+
+    # Leading coefficients of Gh Ch1 and Sh are positive here: no cancellation at infinity.
+    u11 = min(roll_off(gh) + roll_off(ch1), roll_off(sh))
+    gt_growth = _degrees(gt)[1]  # 1/Gt is a polynomial of this degree
+    with_sh = _degrees(sh)[0] >= 0
+    if u11 - roll_off(gh) < 0:
+        return "Ct1 is improper"
+    if with_sh and _has_rhp(control.zeros(gh)):
+        return "Ct1 is not realisable"  # Ct1 = (Gh Ch1 + Sh)/(Gh Ah2): Sh != 0 at Gh's zero
+    if u11 - gt_growth < 0:
+        return "Ch2 is improper"
+    if min(u11, roll_off(st_)) - gt_growth < 0:
+        return "Ct2 is improper"
+    return None
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(designs())
-def test_synthesis_never_returns_an_improper_or_unstable_block(design) -> None:
-    axis, ch1 = design
+@given(st.integers(0, 2**32 - 1))
+def test_synthesis_refuses_exactly_the_improper_or_unstable_designs(seed) -> None:
+    """Every refusal is checked to be right (the design really is improper or unstable, and
+    the message names the compensator that is), every acceptance too (the design is
+    realisable, the blocks are proper and stable, and they satisfy eqs 10', 11 and 21)."""
+    axis, ch1, _ = random_design(np.random.default_rng(seed))
+    expected = expected_refusal(axis, ch1)
     try:
         compensators = synthesize_axis(axis, ch1)
     except SynthesisError as error:
-        assert "improper" in str(error) or "not realisable" in str(error)
+        assert expected is not None, f"a realisable design was refused: {error}"
+        assert f"axis x: {expected}" in str(error), (expected, str(error))
         return
+    assert expected is None, f"accepted, but {expected}"
     for system in compensators.as_dict().values():
         num, den = tf_coefficients(system)
         assert polynomial_degree(num) <= polynomial_degree(den)
@@ -173,3 +247,26 @@ def test_synthesis_never_returns_an_improper_or_unstable_block(design) -> None:
         scale = np.maximum(np.abs(left), np.abs(right)) + np.abs(st_) + np.abs(sh)
         relative = np.max(np.abs(left - right) / scale)
         assert relative <= 1e-5, relative
+
+
+def test_the_generator_makes_mostly_realisable_designs_and_every_kind_of_refusal() -> None:
+    verdicts = []
+    for seed in range(300):
+        axis, ch1, _ = random_design(np.random.default_rng(seed))
+        verdicts.append(expected_refusal(axis, ch1))
+    valid = verdicts.count(None) / len(verdicts)
+    assert valid >= 0.6, valid
+    for kind in ("Ch1 is not realisable", "Ct1 is not realisable", "Ct1 is improper",
+                 "Ch2 is improper"):
+        assert kind in verdicts, kind
+
+
+def test_the_independent_verdict_knows_the_refusals_above() -> None:
+    """The checker agrees with the hand-made refusals (so it is not vacuous)."""
+    assert expected_refusal(custom_axis(gh=([1.0], [1.0])), tf([3.0], [1.0])) == (
+        "Ch2 is improper")
+    assert expected_refusal(custom_axis(sh=([1e-3], [1.0, 3.0]),
+                                        gh=([-1.0, 1.0], [1.0, 2.0, 1.0])),
+                            tf([1.0], [1.0, 10.0, 0.0])) == "Ct1 is not realisable"
+    assert expected_refusal(custom_axis(), tf([1.0], [1.0, -10.0])) == "Ch1 is not realisable"
+    assert expected_refusal(custom_axis(), tf([1.0], [1.0, 10.0, 0.0])) is None

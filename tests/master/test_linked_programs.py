@@ -7,6 +7,7 @@ are not asserted, except the watchdog reacting to a killed peer well within a ge
 from __future__ import annotations
 
 import json
+import re
 import signal
 import socket
 import subprocess
@@ -119,6 +120,20 @@ def _wait_for_file(path: Path, timeout: float = WAIT_S) -> None:
 
 def _events(summary: dict, kind: str) -> list[dict]:
     return [e for e in summary["events"] if e["kind"] == kind]
+
+
+#: The shipped watchdog age (link.watchdog.max_message_age_s), ms.
+SHIPPED_AGE_MS = 30.0
+
+
+def _assert_message_age_trips(trips: list[dict]) -> None:
+    """Every trip was the message age's, beyond the shipped 30 ms and reported against it."""
+    for trip in trips:
+        found = re.fullmatch(r"no fresh message for ([0-9.]+) ms \(max ([0-9.]+) ms\)",
+                             trip["reason"])
+        assert found, trip
+        assert float(found.group(2)) == SHIPPED_AGE_MS, trip
+        assert float(found.group(1)) > SHIPPED_AGE_MS, trip
 
 
 def test_two_processes_exchange_forces_and_positions(pair, tmp_path) -> None:
@@ -316,6 +331,7 @@ def test_a_master_side_outage_resyncs_both_sides(pair, tmp_path) -> None:
     assert summary["link_dropped"]["injected_loss"] > 0
     trips = _events(summary, "trip")
     assert trips, "no burst long enough to trip the watchdog"
+    _assert_message_age_trips(trips)
     end = summary["duration_s"]
     for trip in trips:
         if trip["time_s"] > end - 0.3:
@@ -328,3 +344,38 @@ def test_a_master_side_outage_resyncs_both_sides(pair, tmp_path) -> None:
     assert stops
     resumed = [e for e in slave_summary["events"] if e["kind"] == "tool_resumed"]
     assert len(resumed) >= len(stops)  # one at the start, one after each master-side outage
+
+
+def test_a_slave_side_outage_trips_only_the_slaves_watchdog(pair, tmp_path) -> None:
+    """Bursts of loss on the master-to-slave direction only: the slave's watchdog trips on the
+    message age (30 ms, as shipped) and stops the tool; after each outage it resyncs and the
+    tool resumes. The other direction is untouched. Nothing here depends on the machine's
+    speed: a slower machine only makes the outages longer."""
+    slave = pair.slave(None, tmp_path / "slave.json", "--burst-enter", "0.001",
+                       "--burst-exit", "0.01", "--burst-loss", "1", "--seed", "3")
+    master = pair.master(3.0, tmp_path / "master.json", "--rig", "model")
+    status, log = _wait(master)
+    assert status == 0, log
+    slave.send_signal(signal.SIGTERM)
+    slave_status, slave_log = _wait(slave, 10.0)
+    assert slave_status == 0, slave_log
+    slave_summary = json.loads((tmp_path / "slave.json").read_text())
+    master_summary = json.loads((tmp_path / "master.json").read_text())
+    assert slave_summary["link_dropped"]["injected_loss"] > 0
+    assert master_summary["link_dropped"]["injected_loss"] == 0  # one direction cut alone
+    trips = _events(slave_summary, "trip")
+    assert slave_summary["watchdog_trips"] == len(trips)
+    if trips and trips[-1]["reason"] == "peer liveliness token gone":
+        trips = trips[:-1]  # the master's end, after its 3 s
+    assert trips, "no burst long enough to trip the slave's watchdog"
+    _assert_message_age_trips(trips)
+    stops = [e for e in slave_summary["events"] if e["kind"] == "tool_stopped"
+             and e["reason"] == "watchdog tripped: the tool stops"]
+    assert stops
+    end = slave_summary["duration_s"]
+    for trip in trips:
+        if trip["time_s"] > end - 0.3:
+            continue
+        later = [e["kind"] for e in slave_summary["events"] if e["time_s"] > trip["time_s"]]
+        assert "peer_returned" in later and "forces_enabled" in later
+        assert "tool_resumed" in later

@@ -62,7 +62,7 @@ def test_the_simulated_operator_waits_for_the_ready_lamp() -> None:
     """Before the master's forces come on, the operator's script does not run (a pushing
     operator would keep the node's small-force gate shut); its clock starts at the lamp."""
     config = _config()
-    config["master"]["sim"]["operator"] = "constant:fx=3,onset=0.01"
+    config["master"]["sim"]["operator"] = "constant:fx=3,onset=0.01"  # and onset 0 below
     config["master"]["sim"]["force_noise_std_N"] = 0.0
     hardware = create_hardware("model", config)
     hardware.configure()
@@ -75,4 +75,12 @@ def test_the_simulated_operator_waits_for_the_ready_lamp() -> None:
     assert max(abs(f) for f in pushed[:onset_cycles - 1]) < 0.05
     assert pushed[-1] > 2.0
     hardware.deactivate()
+    hardware.cleanup()
+    config["master"]["sim"]["operator"] = "regulate:fx=3.6"  # pushes from t = 0
+    hardware = create_hardware("model", config)
+    hardware.configure()
+    hardware.activate()
+    assert max(abs(hardware.read().force_N[0]) for _ in range(50)) < 0.05
+    hardware.present_forces_enabled(True)
+    assert max(abs(hardware.read().force_N[0]) for _ in range(50)) > 3.0
     hardware.cleanup()

@@ -23,7 +23,9 @@ from haptic.common.config import load_config, override, to_toml
 from haptic.common.model import model_from_config
 from haptic.master import cia402
 from haptic.master.can_driver import CanHandleDriver
+from haptic.master.canopen_setup import configuration_steps
 from haptic.master.cia402 import DriveState
+from haptic.master.drive_device import load_drive_dictionary
 from haptic.master.hardware import HardwareError, LifecycleState, create_hardware
 from haptic.master.node import MasterNode
 from haptic.master.rig_emulator import READY_PREFIX, EmulatedRigHardware
@@ -91,9 +93,11 @@ def _enabled_rig(config: dict) -> tuple[SimulatedCanRig, _RecordingBus]:
     bus = _RecordingBus()
     rig.attach(bus)  # type: ignore[arg-type]
     rig.handle_message(_frame(cia402.NMT_COB_ID, bytes([cia402.NMT_START, 0])))
-    for node in rig.settings.node_ids:
-        rig.handle_message(_frame(cia402.SDO_RX_BASE + node, cia402.sdo_download_request(
-            cia402.MODES_OF_OPERATION, cia402.MODE_CYCLIC_SYNC_POSITION)))
+    for node in rig.settings.node_ids:  # the driver's configuration sequence, by SDO frames
+        for step in configuration_steps(load_drive_dictionary(None, node), node, 540e-6, 127,
+                                        0.1, 0.3, 0.0, 20000, "drive"):
+            rig.handle_message(_frame(cia402.SDO_RX_BASE + node, cia402.sdo_download_request(
+                step.variable, step.value)))
     for controlword in (cia402.CW_SHUTDOWN, cia402.CW_SWITCH_ON, cia402.CW_ENABLE_OPERATION):
         for node in rig.settings.node_ids:
             rig.handle_message(_rpdo(node, controlword, 0))
@@ -202,6 +206,8 @@ def test_the_emulated_operator_feels_the_presented_tool_force() -> None:
     config = _config("regulate:fx=2,fy=0,kp=0.5,ki=4,lag=0.02,max=10")
     with create_hardware("sim", config) as hardware:
         hardware.configure()
+        idle = hardware.read().force_N  # the operator waits for the ready lamp
+        hardware.present_forces_enabled(True)
         forces = []
         for tool_force in [2.0] * 300 + [0.5] * 200:
             hardware.present_tool_force(np.array([tool_force, 0.0]))
@@ -209,6 +215,7 @@ def test_the_emulated_operator_feels_the_presented_tool_force() -> None:
             assert reading.ok, reading.faults
             forces.append(reading.force_N)
     forces = np.array(forces)
+    assert abs(idle[0]) < 0.05
     steady = forces[299, 0]
     assert abs(forces[250, 0] - steady) < 0.02 and forces[299, 1] == 0.0
     assert forces[-1, 0] > steady + 1.0  # felt below the target: pushes harder

@@ -102,7 +102,8 @@ def test_configure_without_an_answering_drive_is_a_hardware_error() -> None:
     config = _config(master__can__enable_timeout_cycles=2, master__sim__pdo_timeout_s=0.02)
     settings = master_settings(config)
     driver = CanHandleDriver(settings.can, {"interface": "virtual",
-                                            "channel": settings.sim.channel}, 0.02)
+                                            "channel": settings.sim.channel}, 0.02,
+                             config["model"]["sample_period_s"])
     with pytest.raises(HardwareError, match="no SDO reply"):
         driver.configure()
     assert driver.lifecycle_state is LifecycleState.UNCONFIGURED
@@ -292,6 +293,10 @@ def test_regulating_operator_feels_the_tool_force_through_the_rig() -> None:
         assert isinstance(hardware, HandleHardware)
         hardware.configure()
         hardware.activate()
+        for _ in range(20):  # the operator waits for the master's ready lamp
+            hardware.read()
+        assert hardware.rig.last_sample.operator_intent_force_N[0, 0] == 0.0
+        hardware.present_forces_enabled(True)
         hardware.present_tool_force(np.array([1.5, 0.0]))
         hardware.read()
         np.testing.assert_array_equal(hardware.rig.tool_force_N, [[1.5, 0.0]])

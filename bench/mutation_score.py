@@ -1,0 +1,461 @@
+#!/usr/bin/env python3
+"""Mutation score of the safety-critical modules: how many small planted bugs the tests catch.
+
+Each mutant is one small change of one module's source (``<`` -> ``<=``, ``+`` -> ``-``, a
+number plus one, ``and`` -> ``or``, a condition negated, ...; cosmic-ray's operators, a curated
+one-replacement-per-site subset, see :data:`OPERATORS`). The module's tests (:data:`MODULES`)
+run against it; the mutant is *killed* when they fail (or crash, or exceed the time limit),
+*survived* when they pass. The score is killed / (killed + survived).
+
+Why not ``cosmic-ray exec`` or ``mutmut run`` (docs/testing.md): cosmic-ray's executor
+writes each mutant into the working tree and starts the test command afresh, paying about
+5 s of imports (Warp, SciPy, python-control, Zenoh) per mutant for some 3000 mutants of its
+full operator set; mutmut 3 copies the sources into ``mutants/`` with trampolines keyed by
+module names derived from the file paths (``master.node``, where the package-dir mapping
+makes it ``haptic.master.node``) and skips decorated functions, i.e. every Warp kernel.
+So this script uses cosmic-ray's operators to make the mutants and runs them itself: a parent
+process imports the heavy libraries once and forks one child per mutant; the child serves the
+mutated source for the one module (an import hook, plus linecache so that Warp compiles the
+mutated kernel source) and runs pytest on the module's tests. Nothing is written into the
+source tree. Warp kernels compile into a private cache that is deleted at the end.
+
+Usage::
+
+    python bench/mutation_score.py                  # every module, a table and the time taken
+    python bench/mutation_score.py --module common/watchdog.py --survivors
+    python bench/mutation_score.py --json           # {"modules": {path: {...}}, "total_score"}
+
+Adding a module is one line in :data:`MODULES`: its path and the tests that should catch its
+mutants. A line ending in ``# pragma: no mutate`` is never mutated (for code whose mutants
+are equivalent by construction; docs/testing.md lists each).
+"""
+
+from __future__ import annotations
+
+import argparse
+import difflib
+import json
+import os
+import shutil
+import signal
+import sys
+import tempfile
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+
+@dataclass(frozen=True)
+class Target:
+    """A module's tests (the fastest first: pytest stops at the first failure) and, for a
+    module whose mutants are slow (a Warp kernel recompiles for each, about 2 s here), the
+    sampling: every ``every``-th mutant in source order unless ``--all``."""
+
+    tests: tuple[str, ...]
+    every: int = 1
+
+
+_NODE_TESTS = ("tests/master/test_node_limits.py", "tests/master/test_node.py",
+               "tests/master/test_node_kernel.py")
+#: The modules under mutation. Adding one is one line: its path and the tests that should
+#: catch its mutants.
+MODULES: dict[str, Target] = {
+    "common/watchdog.py": Target(("tests/common/test_watchdog.py",)),
+    "master/node.py": Target(_NODE_TESTS),
+    "master/node_kernels.py": Target(_NODE_TESTS, every=3),
+    "common/messages.py": Target(("tests/common/test_messages.py",
+                                  "tests/common/test_receive.py")),
+    "common/receive.py": Target(("tests/common/test_receive.py",
+                                 "tests/common/test_messages.py")),
+    "common/synthesis.py": Target(("tests/common/test_synthesis.py",)),
+}
+
+_BINARY = (("Add", "Sub"), ("Sub", "Add"), ("Mul", "Div"), ("Div", "Mul"), ("FloorDiv", "Div"),
+           ("Mod", "FloorDiv"), ("Pow", "Mul"), ("BitOr", "BitAnd"), ("BitAnd", "BitOr"),
+           ("BitXor", "BitOr"), ("LShift", "RShift"), ("RShift", "LShift"))
+_COMPARISON = (("Lt", "LtE"), ("LtE", "Lt"), ("Gt", "GtE"), ("GtE", "Gt"), ("Eq", "NotEq"),
+               ("NotEq", "Eq"), ("Is", "IsNot"), ("IsNot", "Is"))
+#: cosmic-ray operators used, one plausible replacement per site (its full set replaces each
+#: operator by every other one: five times the mutants, mostly trivially killed).
+OPERATORS: tuple[str, ...] = (
+    *(f"core/ReplaceBinaryOperator_{a}_{b}" for a, b in _BINARY),
+    *(f"core/ReplaceComparisonOperator_{a}_{b}" for a, b in _COMPARISON),
+    "core/NumberReplacer",  # +1 only (see _keep)
+    "core/ReplaceTrueWithFalse", "core/ReplaceFalseWithTrue",
+    "core/ReplaceAndWithOr", "core/ReplaceOrWithAnd", "core/AddNot",
+    "core/ReplaceUnaryOperator_Delete_Not", "core/ReplaceUnaryOperator_Delete_USub",
+    "core/ReplaceBreakWithContinue", "core/ReplaceContinueWithBreak",
+    "core/ZeroIterationForLoop", "core/ExceptionReplacer",
+)
+#: Imported once in the parent, before forking (a child pays none of it).
+PRELOAD = ("numpy", "scipy.linalg", "scipy.signal", "control", "msgpack", "zenoh", "warp",
+           "hypothesis", "pytest", "mcap", "can", "canopen", "cantools", "matplotlib")
+PRAGMA = "# pragma: no mutate"
+
+#: Mutants that cannot change behaviour, each with the reason: (module, line before, line
+#: after, why), the lines stripped. They are not run and not counted; docs/testing.md shows
+#: this table (``--equivalents``).
+EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
+)
+#: pytest plugins a mutant run does without (unraisableexception's gc.collect() alone costs
+#: 0.8 s per run over the preloaded libraries).
+PYTEST_PLUGINS_OFF = ("-p", "no:cacheprovider", "-p", "no:unraisableexception", "-p",
+                      "no:threadexception", "-p", "no:benchmark", "-p", "no:junitxml", "-p",
+                      "no:pastebin", "-p", "no:doctest")
+
+
+@dataclass
+class Mutant:
+    """One mutation of one module."""
+
+    path: str
+    operator: str
+    occurrence: int
+    line: int
+    source: str
+    before: str = ""  # the mutated line, stripped, before and after
+    after: str = ""
+
+    def diff(self, original: str) -> str:
+        lines = difflib.unified_diff(original.splitlines(True), self.source.splitlines(True),
+                                     f"a/{self.path}", f"b/{self.path}", n=0)
+        return "".join(lines)
+
+
+@dataclass
+class ModuleResult:
+    """The outcome for one module."""
+
+    killed: int = 0
+    survived: int = 0
+    timed_out: int = 0
+    equivalent: int = 0  # listed in EQUIVALENT, not run, not counted
+    generated: int = 0  # all mutants of the module, before sampling
+    seconds: float = 0.0
+    survivors: list[Mutant] = field(default_factory=list)
+
+    @property
+    def score(self) -> float:
+        total = self.killed + self.survived
+        return self.killed / total if total else 1.0
+
+    def as_dict(self) -> dict[str, float | int]:
+        return {"killed": self.killed, "survived": self.survived, "score": round(self.score, 4),
+                "timed_out": self.timed_out, "equivalent": self.equivalent,
+                "generated": self.generated, "seconds": round(self.seconds, 1)}
+
+
+def module_name(path: str) -> str:
+    """``master/node.py`` -> ``haptic.master.node``, by the package-dir mapping of
+    pyproject.toml."""
+    with open(ROOT / "pyproject.toml", "rb") as handle:
+        package_dir = tomllib.load(handle)["tool"]["setuptools"]["package-dir"]
+    folder, _, stem = path.rpartition("/")
+    for package, directory in package_dir.items():
+        if folder == directory or folder.startswith(directory + "/"):
+            rest = folder[len(directory):].strip("/").replace("/", ".")
+            return ".".join(part for part in (package, rest, stem.removesuffix(".py")) if part)
+    raise SystemExit(f"mutation_score: {path} is in no package of pyproject.toml")
+
+
+def _keep(operator: str, index_at_node: int) -> bool:
+    """One mutant per site: NumberReplacer offers +1 and -1, keep +1."""
+    return not (operator == "core/NumberReplacer" and index_at_node > 0)
+
+
+def mutants(path: str) -> list[Mutant]:
+    """Every mutant of ``path`` (relative to the repository), in source order."""
+    from cosmic_ray.ast import ast_nodes, get_ast
+    from cosmic_ray.mutating import MutationVisitor
+    from cosmic_ray.plugins import get_operator
+
+    source = (ROOT / path).read_text()
+    lines = source.splitlines()
+    found = []
+    for name in OPERATORS:
+        operator = get_operator(name)()
+        occurrence = 0
+        for node in ast_nodes(get_ast(source)):
+            for index, (start, _end) in enumerate(operator.mutation_positions(node)):
+                line = start[0]
+                if _keep(name, index) and not lines[line - 1].rstrip().endswith(PRAGMA):
+                    mutated = MutationVisitor.mutate_code(source, operator, occurrence)
+                    if mutated is not None and mutated != source:
+                        after = mutated.splitlines()[line - 1].strip()
+                        found.append(Mutant(path, name, occurrence, line, mutated,
+                                            lines[line - 1].strip(), after))
+                occurrence += 1
+    found.sort(key=lambda m: (m.line, m.operator, m.occurrence))
+    return found
+
+
+def _serve_mutant(name: str, path: Path, source: str) -> None:
+    """In the child: import ``name`` from ``source`` instead of the file (and let linecache,
+    which inspect and Warp read kernel source through, return it too)."""
+    import importlib.abc
+    import importlib.util
+    import linecache
+
+    filename = str(path)
+    linecache.cache[filename] = (len(source), None, source.splitlines(True), filename)
+
+    class Loader(importlib.abc.Loader):
+        def create_module(self, spec):  # noqa: ANN001, ANN202
+            return None
+
+        def exec_module(self, module):  # noqa: ANN001, ANN202
+            module.__file__ = filename
+            exec(compile(source, filename, "exec", dont_inherit=True), module.__dict__)
+
+        def get_source(self, fullname):  # noqa: ANN001, ANN202
+            return source
+
+    class Finder(importlib.abc.MetaPathFinder):
+        def find_spec(self, fullname, target_path=None, target=None):  # noqa: ANN001, ANN202
+            if fullname != name:
+                return None
+            return importlib.util.spec_from_loader(name, Loader(), origin=filename)
+
+    sys.meta_path.insert(0, Finder())
+
+
+def _child(tests: tuple[str, ...], timeout_s: float, mutant: Mutant | None,
+           verbose: bool) -> None:
+    """In a forked child: run ``tests`` (on ``mutant``) and exit 0 when they pass."""
+    status = 3
+    try:
+        os.chdir(ROOT)
+        if not verbose:
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, 1)
+            os.dup2(null, 2)
+        signal.signal(signal.SIGALRM, signal.SIG_DFL)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        signal.alarm(max(1, int(timeout_s)))
+        if mutant is not None:
+            _serve_mutant(module_name(mutant.path), ROOT / mutant.path, mutant.source)
+        import pytest
+
+        code = pytest.main(["-x", "-q", "--no-header", *PYTEST_PLUGINS_OFF,
+                            *(str(ROOT / t) for t in tests)])
+        status = 0 if code == 0 else 1
+    finally:
+        sys.stdout.flush()
+        os._exit(status)
+
+
+def _outcome(status: int) -> str:
+    if os.WIFSIGNALED(status):
+        return "timeout" if os.WTERMSIG(status) == signal.SIGALRM else "failed"
+    return "passed" if os.WEXITSTATUS(status) == 0 else "failed"
+
+
+#: Children running now (pid -> mutant), ended by the parent if it is stopped.
+_RUNNING: dict[int, Mutant | None] = {}
+
+
+def run_tests(tests: tuple[str, ...], timeout_s: float, mutant: Mutant | None = None,
+              verbose: bool = False) -> str:
+    """Run ``tests`` in a forked child (on ``mutant`` if given): ``passed``, ``failed`` or
+    ``timeout``."""
+    pid = os.fork()
+    if pid == 0:
+        _child(tests, timeout_s, mutant, verbose)
+    _RUNNING[pid] = mutant
+    _, status = os.waitpid(pid, 0)
+    del _RUNNING[pid]
+    return _outcome(status)
+
+
+def run_mutants(tests: tuple[str, ...], timeout_s: float, found: list[Mutant], jobs: int):
+    """Yield (mutant, outcome) for each of ``found``, ``jobs`` children at a time."""
+    pending = list(reversed(found))
+    while pending or _RUNNING:
+        while pending and len(_RUNNING) < jobs:
+            mutant = pending.pop()
+            pid = os.fork()
+            if pid == 0:
+                _child(tests, timeout_s, mutant, False)
+            _RUNNING[pid] = mutant
+        pid, status = os.wait()
+        mutant = _RUNNING.pop(pid, None)
+        if mutant is not None:
+            yield mutant, _outcome(status)
+
+
+def _end_children() -> None:
+    for pid in list(_RUNNING):
+        try:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        except (ProcessLookupError, ChildProcessError):
+            pass
+        _RUNNING.pop(pid, None)
+
+
+def equivalent_reason(mutant: Mutant) -> str | None:
+    """Why ``mutant`` is equivalent, if :data:`EQUIVALENT` lists it."""
+    for path, before, after, why in EQUIVALENT:
+        if (path, before, after) == (mutant.path, mutant.before, mutant.after):
+            return why
+    return None
+
+
+def score_module(path: str, progress: bool, jobs: int, everything: bool) -> ModuleResult:
+    """Baseline (the tests must pass unmutated; its time sets the limit), then the mutants
+    (every one, or the module's sample), less the listed equivalent ones."""
+    target = MODULES[path]
+    result = ModuleResult()
+    start = time.monotonic()
+    baseline = run_tests(target.tests, 600.0)
+    baseline_s = time.monotonic() - start
+    if baseline != "passed":
+        raise SystemExit(f"mutation_score: the tests of {path} fail unmutated ({baseline}); "
+                         f"run: pytest -x {' '.join(target.tests)}")
+    # A mutated Warp kernel compiles first (about 2 s here); a mutant much slower than the
+    # baseline is stuck (an endless loop, say) and counts as killed.
+    timeout_s = 3.0 * baseline_s + 20.0
+    found = mutants(path)
+    result.generated = len(found)
+    if not everything and target.every > 1:
+        found = found[::target.every]
+    runnable = []
+    for mutant in found:
+        if equivalent_reason(mutant) is None:
+            runnable.append(mutant)
+        else:
+            result.equivalent += 1
+    original = (ROOT / path).read_text()
+    mark = {"passed": "SURVIVED", "failed": "killed", "timeout": "killed (timeout)"}
+    for number, (mutant, outcome) in enumerate(run_mutants(target.tests, timeout_s, runnable,
+                                                           jobs), 1):
+        if outcome == "passed":
+            result.survived += 1
+            result.survivors.append(mutant)
+        else:
+            result.killed += 1
+            result.timed_out += outcome == "timeout"
+        if progress:
+            print(f"  [{number}/{len(runnable)}] {path}:{mutant.line} {mutant.operator}: "
+                  f"{mark[outcome]}", file=sys.stderr, flush=True)
+            if outcome == "passed":
+                print(mutant.diff(original), file=sys.stderr, flush=True)
+    result.survivors.sort(key=lambda m: m.line)
+    result.seconds = time.monotonic() - start
+    return result
+
+
+def _preload(cache_dir: str) -> None:
+    import importlib
+
+    for name in PRELOAD:
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            pass
+    import warp as wp
+
+    wp.config.log_level = wp.LOG_WARNING
+    wp.config.kernel_cache_dir = cache_dir
+    wp.config.enable_backward = False  # no kernel here is differentiated: half the compile
+    wp.init()
+    import gc
+
+    gc.collect()
+    gc.freeze()  # the children's collections skip the preloaded heap
+    loaded = [m for m in sys.modules if m == "haptic" or m.startswith("haptic.")]
+    if loaded:  # a child must import every haptic module afresh (the mutant among them)
+        raise SystemExit(f"mutation_score: preloading imported {loaded}")
+
+
+def _stop(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def equivalents_table() -> str:
+    """The :data:`EQUIVALENT` list as a Markdown table (docs/testing.md)."""
+    rows = ["| module | line | mutant | why it is equivalent |", "|---|---|---|---|"]
+    for path, before, after, why in EQUIVALENT:
+        rows.append(f"| `{path}` | `{before}` | `{after}` | {why} |")
+    return "\n".join(rows)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--module", action="append", metavar="PATH",
+                        help=f"a module to mutate (repeatable; default all: {', '.join(MODULES)})")
+    parser.add_argument("--json", action="store_true", help="print JSON on stdout")
+    parser.add_argument("--all", action="store_true",
+                        help="every mutant, also of the sampled modules (the kernel)")
+    parser.add_argument("--jobs", type=int, default=1, metavar="N",
+                        help="mutants tested at once (default 1; one per free core)")
+    parser.add_argument("--survivors", action="store_true",
+                        help="print each surviving mutant's diff (stderr)")
+    parser.add_argument("--count", action="store_true",
+                        help="only count the mutants per module, run nothing")
+    parser.add_argument("--equivalents", action="store_true",
+                        help="print the table of equivalent mutants (Markdown), run nothing")
+    parser.add_argument("--progress", action="store_true", help="one line per mutant on stderr")
+    args = parser.parse_args(argv)
+    paths = args.module or list(MODULES)
+    for path in paths:
+        if path not in MODULES:
+            parser.error(f"--module {path}: not configured (known: {', '.join(MODULES)})")
+    if args.jobs < 1:
+        parser.error("--jobs must be at least 1")
+    if args.equivalents:
+        print(equivalents_table())
+        return 0
+    if args.count:
+        counts = {path: len(mutants(path)) for path in paths}
+        print(json.dumps(counts) if args.json else "\n".join(f"{n:5d}  {p}"
+                                                             for p, n in counts.items()))
+        return 0
+    start = time.monotonic()
+    cache_dir = tempfile.mkdtemp(prefix="mutation-warp-cache-")
+    signal.signal(signal.SIGTERM, _stop)
+    try:
+        _preload(cache_dir)
+        results = {path: score_module(path, args.progress, args.jobs, args.all)
+                   for path in paths}
+    except KeyboardInterrupt:
+        print("mutation_score: stopped", file=sys.stderr)
+        return 130
+    finally:
+        _end_children()
+        shutil.rmtree(cache_dir, ignore_errors=True)
+    elapsed_s = time.monotonic() - start
+    killed = sum(r.killed for r in results.values())
+    total = killed + sum(r.survived for r in results.values())
+    total_score = killed / total if total else 1.0
+    if args.json:
+        print(json.dumps({"modules": {p: r.as_dict() for p, r in results.items()},
+                          "total_score": round(total_score, 4),
+                          "seconds": round(elapsed_s, 1), "jobs": args.jobs,
+                          "sampled": not args.all}, indent=2))
+    else:
+        print(f"{'module':26s} {'killed':>7s} {'survived':>9s} {'score':>7s} {'equiv.':>7s} "
+              f"{'of':>5s} {'time':>6s}")
+        for path, r in results.items():
+            print(f"{path:26s} {r.killed:7d} {r.survived:9d} {r.score * 100:6.1f}% "
+                  f"{r.equivalent:7d} {r.generated:5d} {r.seconds:5.0f}s")
+        print(f"{'total':26s} {killed:7d} {total - killed:9d} {total_score * 100:6.1f}% "
+              f"{'':13s} {elapsed_s:5.0f}s")
+    if args.survivors:
+        for path, r in results.items():
+            original = (ROOT / path).read_text()
+            for mutant in r.survivors:
+                print(f"--- survivor {path}:{mutant.line} {mutant.operator}", file=sys.stderr)
+                print(mutant.diff(original), file=sys.stderr)
+    print(f"mutation_score: {len(paths)} module(s), {total} mutants tested in "
+          f"{elapsed_s:.0f} s ({elapsed_s / 60:.1f} min, --jobs {args.jobs})", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
