@@ -15,6 +15,7 @@ encoder resolution, raw sensor counts -> N with the configured scale and offset.
 from __future__ import annotations
 
 import struct
+import sys
 import time
 from typing import Any
 
@@ -85,6 +86,8 @@ class CanHandleDriver(HandleHardware):
         #: The drives' identities read at configure (0x1000, 0x1018:1-4), per axis.
         self.identities: list[dict[str, int]] = []
         self._fd = bool(settings.fd)
+        #: Print the bus-load budget (one line, stderr) at configure: the real bus's backend.
+        self.announce_bus_load = False
         self._warnings = [0, 0]
         self._tripped = False
         self._heartbeat_period_s = settings.heartbeat_period_s
@@ -143,7 +146,9 @@ class CanHandleDriver(HandleHardware):
         bus is closed."""
         if self._state is not LifecycleState.UNCONFIGURED:
             return
-        self.check_bus_load()
+        budget = self.check_bus_load()
+        if self.announce_bus_load:
+            print(f"haptic-master: {budget.summary()}", file=sys.stderr, flush=True)
         plans = self._plans()  # before the bus: a bad EDS never touches a drive
         try:
             self._bus = can.Bus(**self.bus_options)
@@ -643,5 +648,7 @@ def _can_hardware(config: dict[str, Any]) -> HandleHardware:
                                "channel": can_settings.channel, "bitrate": can_settings.bitrate}
     if can_settings.fd:
         options.update(fd=True, data_bitrate=can_settings.data_bitrate)
-    return CanHandleDriver(can_settings, options, can_settings.pdo_timeout_s,
-                           config["model"]["sample_period_s"])
+    driver = CanHandleDriver(can_settings, options, can_settings.pdo_timeout_s,
+                             config["model"]["sample_period_s"])
+    driver.announce_bus_load = True
+    return driver
