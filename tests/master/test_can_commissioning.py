@@ -433,3 +433,14 @@ def test_the_emulated_drive_enforces_the_cia301_pdo_rules() -> None:
     assert device.decode_rpdo(bytes(4)) == {0x607A: 0}
     assert device.decode_rpdo(bytes(6)) == 0x8220  # too long: EMCY, not applied
     assert device.decode_rpdo(bytes(2)) == 0x8210
+
+
+def test_commissioning_keys_are_checked_at_start() -> None:
+    from haptic.common.config import ConfigError
+
+    with pytest.raises(ConfigError, match="master.can.master_node_id"):
+        master_settings(_config(master__can__master_node_id=1))
+    with pytest.raises(ConfigError, match="master.can.heartbeat_timeout_s"):
+        master_settings(_config(master__can__heartbeat_timeout_s=0.05))
+    with pytest.raises(ConfigError, match="master.can.bus_load_limit"):
+        _config(master__can__bus_load_limit=1.5)
