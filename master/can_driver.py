@@ -96,6 +96,11 @@ class CanHandleDriver(HandleHardware):
         self._heartbeat_seen_s = [0.0, 0.0]
         self._heartbeat_lost = [False, False]
         self._master_heartbeat = bytes([0x05])  # operational
+        #: the master's heartbeat while inactive (a python-can periodic task): configured and
+        #: waiting (e.g. for the slave), the loop does not run, but the node is alive and the
+        #: disabled drives must not fault; while active, read() sends it, so a stalled loop
+        #: stops the drives by their heartbeat consumer
+        self._idle_heartbeat: Any = None
         nodes = settings.node_ids
         #: frame id -> (kind, axis) of every frame read() acts on.
         self._dispatch: dict[int, tuple[int, int]] = {}
@@ -172,6 +177,7 @@ class CanHandleDriver(HandleHardware):
             if not np.all(np.isfinite(reading.position_m)):
                 raise HardwareError("no position from the drives after start: "
                                     + "; ".join(reading.faults))
+            self._start_idle_heartbeat()
         except BaseException:
             try:
                 for node in self.settings.node_ids:
@@ -240,6 +246,15 @@ class CanHandleDriver(HandleHardware):
         codes in the error."""
         if self._state is not LifecycleState.INACTIVE:
             raise HardwareError(f"activate needs the inactive state (now {self._state.value})")
+        self._stop_idle_heartbeat()  # from now on every read() sends it when due
+        try:
+            self._activate()
+        except BaseException:
+            if self._state is LifecycleState.INACTIVE:
+                self._start_idle_heartbeat()
+            raise
+
+    def _activate(self) -> None:
         reading = self.read()
         if not np.all(np.isfinite(reading.position_m)):
             raise HardwareError("cannot activate without positions: " + "; ".join(reading.faults))
@@ -314,6 +329,7 @@ class CanHandleDriver(HandleHardware):
         self.read()
         self._send_both(cia402.CW_SHUTDOWN)
         self.read()
+        self._start_idle_heartbeat()
 
     def quick_stop(self, reason: str) -> None:
         """Command quick stop on both drives (they stop where they are) and hold it until the
@@ -341,7 +357,20 @@ class CanHandleDriver(HandleHardware):
             self._close_bus()
             self._state = LifecycleState.UNCONFIGURED
 
+    def _start_idle_heartbeat(self) -> None:
+        if self._bus is None or self._idle_heartbeat is not None:
+            return
+        message = can.Message(arbitration_id=HEARTBEAT_BASE + self.settings.master_node_id,
+                              data=self._master_heartbeat, is_extended_id=False)
+        self._idle_heartbeat = self._bus.send_periodic(message, self._heartbeat_period_s)
+
+    def _stop_idle_heartbeat(self) -> None:
+        task, self._idle_heartbeat = self._idle_heartbeat, None
+        if task is not None:
+            task.stop()
+
     def _close_bus(self) -> None:
+        self._stop_idle_heartbeat()
         if self._bus is not None:
             self._bus.shutdown()
             self._bus = None
