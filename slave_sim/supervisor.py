@@ -62,6 +62,9 @@ class SlaveSupervisor:
         self.running = False
         self.ready = False
         self.outside = False
+        #: after a work-area stop, the tool is on its way back to the handle: it runs again
+        #: only once in sync (it moves through the clay at a bounded speed)
+        self.rejoining = False
         self.input_fault = False
         self.grid_m = None if grid_m is None else tuple(float(v) for v in grid_m)
         self.events: list[dict[str, Any]] = []
@@ -108,11 +111,14 @@ class SlaveSupervisor:
                 # resync policy: the handle is back over the work area; the tool rejoins it
                 # there on the next tick (receive() re-places it) and runs once in sync
                 self.outside = False
+                self.rejoining = True
                 self.events.append({"time_s": now_s, "kind": "tool_resync",
                                     "reason": "the handle is back over the work area: the "
                                     "tool rejoins it"})
+        if self.rejoining and (not watchdog_ok or self.in_sync(tool_x_m, tool_y_m)):
+            self.rejoining = False  # back at the handle (or a watchdog resync takes over)
         running = (watchdog_ok and self.master_enabled and not self.outside
-                   and not input_fault)
+                   and not self.rejoining and not input_fault)
         self.ready = watchdog_ok and not self.outside and not input_fault
         transition = Transition.NONE
         if running and not self.running:
