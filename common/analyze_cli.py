@@ -20,6 +20,8 @@ from haptic.common.synthesis import SynthesisError
 
 #: Cells per side of the stability map written by --plot.
 MAP_CELLS = 28
+#: What Tt is: the configuration's, or the clay of each block (--environment clay).
+ENVIRONMENTS = ("config", "clay")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -36,6 +38,11 @@ def build_parser() -> argparse.ArgumentParser:
     add_retired_delay_option(parser)
     parser.add_argument("--sampled-analysis", dest="sampled", action="store_true",
                         help="analyse the sampled loop at Ts (ZOH, one sample of compute delay)")
+    parser.add_argument("--environment", choices=ENVIRONMENTS, default="config",
+                        help="config: the model's Tt; clay: each block of the scenario's "
+                        "workpiece, the clay linearised about steady cutting (docs/clay.md)")
+    parser.add_argument("--scenario", metavar="NAME|PATH",
+                        help="the workpiece for --environment clay (default: [slave] scenario)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--plot", type=Path, metavar="DIR", help="write PNG plots into DIR")
     parser.add_argument("--print-config", action="store_true",
@@ -133,6 +140,10 @@ def main(argv: list[str] | None = None) -> int:
             raise ConfigError("--round-trip-delay",
                               f"must be a finite number >= 0 s (got {delay_s})")
         settings = _settings(config, model, args.sampled)
+        if args.environment == "clay":
+            return _clay(args, config, model, delay_s, settings)
+        if args.scenario is not None:
+            raise ConfigError("--scenario", "only with --environment clay")
         try:
             analysis = analyse(model, model.ch1_gain_k, delay_s, settings)
         except SynthesisError as error:
@@ -144,6 +155,55 @@ def main(argv: list[str] | None = None) -> int:
     if args.plot is not None:
         for path in write_plots(model, analysis, settings, args.plot):
             print(f"wrote {path}", file=sys.stderr)
+    return 0
+
+
+def _clay(args: argparse.Namespace, config: dict[str, Any], model: TeleopModel,
+          delay_s: float, settings: AnalysisSettings) -> int:
+    """--environment clay: the loop cutting each block of the workpiece."""
+    from haptic.common.analysis.clay import clay_block_stability, to_json, workpiece_bounds
+    from haptic.common.clay_contact import COUPLING_DAMPING_N_S_PER_M, COUPLING_STIFFNESS_N_PER_M
+    from haptic.common.config.scenario import load_scenario
+
+    if args.plot is not None:
+        raise ConfigError("--plot", "not with --environment clay")
+    scenario = load_scenario(args.scenario or config["slave"]["scenario"])
+    blocks = [(block.name, block.damping_N_s_per_m) for block in scenario.blocks]
+    try:
+        result = clay_block_stability(model, blocks, model.ch1_gain_k, delay_s, settings)
+    except SynthesisError as error:
+        raise ConfigError("model", str(error)) from None
+    bounds = workpiece_bounds(result)
+    if args.json:
+        print(json.dumps(json_safe({
+            "environment": "clay", "scenario": scenario.name, "k": model.ch1_gain_k,
+            "delay_s": delay_s, "sampled": settings.sample_period_s is not None,
+            "coupling_stiffness_N_per_m": COUPLING_STIFFNESS_N_PER_M,
+            "coupling_damping_N_s_per_m": COUPLING_DAMPING_N_S_PER_M,
+            "blocks": to_json(result), "workpiece": bounds})))
+        return 0
+    mode = (f"sampled at Ts = {model.sample_period_s * 1e3:.3g} ms"
+            if settings.sample_period_s is not None else "continuous, exact delay")
+    def k_max(value: float | None) -> str:
+        capped = value is not None and value >= settings.max_gain_k
+        return _gain(value) + ("+" if capped else "")
+
+    lines = [f"haptic-analyze: clay of {scenario.name!r}, each block linearised about steady "
+             f"cutting (Tt = B s (K + b s)/(K + (B + b) s), K = {COUPLING_STIFFNESS_N_PER_M:g} "
+             f"N/m, b = {COUPLING_DAMPING_N_S_PER_M:g} N s/m); k = {model.ch1_gain_k:g}, "
+             f"round-trip delay {delay_s * 1e3:.3f} ms ({mode})",
+             f"  {'block':>8} {'B N s/m':>8} {'here':>9} {'delay margin':>30} "
+             f"{'k_max here':>10} {'k_max all delays':>16}"]
+    for block in result:
+        lines.append(f"  {block.block:>8} {block.damping_N_s_per_m:8.1f} "
+                     f"{'stable' if block.stable else 'UNSTABLE':>9} "
+                     f"{_ms(block.delay_margin_s):>30} {k_max(block.k_max):>10} "
+                     f"{_gain(block.k_max_delay_independent):>16}")
+    lines.append(f"  workpiece: {'STABLE' if bounds['stable'] else 'UNSTABLE'} at this k and "
+                 f"delay; delay margin {_ms(bounds['delay_margin_s'])}; largest stable k here "
+                 f"{k_max(bounds['k_max'])}, for every delay "
+                 f"{_gain(bounds['k_max_delay_independent'])}")
+    print("\n".join(lines))
     return 0
 
 

@@ -14,7 +14,7 @@ Th and Tt are impedance polynomials in N/m.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import control
@@ -86,6 +86,9 @@ class AxisModel:
     tool_stiffness_N_per_m: float
     position_ratio_ah1: float  # yt = Ah1 yh, dimensionless
     force_ratio_ah2: float  # ft = Ah2 fh^e, dimensionless
+    #: Denominator of a rational Tt (polynomial in s; [1]: Tt is the polynomial above), e.g.
+    #: the clay's contact linearised about steady cutting (common/clay_contact.py).
+    environment_impedance_den: np.ndarray = field(default_factory=lambda: np.ones(1))
 
     @property
     def tool_actuator_gt(self) -> control.TransferFunction:
@@ -93,9 +96,13 @@ class AxisModel:
         return tf([1.0], [self.tool_mass_kg, self.tool_damping_N_s_per_m,
                           self.tool_stiffness_N_per_m])
 
-    def with_environment(self, impedance_N_per_m: np.ndarray) -> AxisModel:
-        """A copy with another environment impedance Tt (e.g. the clay as B s)."""
-        return replace(self, environment_impedance_tt_N_per_m=np.asarray(impedance_N_per_m, float))
+    def with_environment(self, impedance_N_per_m: np.ndarray,
+                         denominator: np.ndarray | None = None) -> AxisModel:
+        """A copy with another environment impedance Tt (e.g. the clay as B s): the
+        polynomial ``impedance_N_per_m`` over ``denominator`` (default 1)."""
+        return replace(self, environment_impedance_tt_N_per_m=np.asarray(impedance_N_per_m, float),
+                       environment_impedance_den=np.ones(1) if denominator is None
+                       else np.asarray(denominator, float))
 
 
 @dataclass(frozen=True)

@@ -57,6 +57,25 @@ def _strip(coefficients: np.ndarray) -> np.ndarray:
     return np.array([0.0]) if nonzero.size == 0 else coefficients[nonzero[0]:]
 
 
+def _add(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """``first + second`` (highest power first) with the coefficients that cancel set to
+    exactly zero: a sum below a few ulps of its terms' magnitudes is rounding, judged per
+    coefficient (scale-free, unlike a threshold relative to the largest coefficient, which
+    drops a legitimate leading 1 next to trailing coefficients of 1e14)."""
+    size = max(len(first), len(second))
+    a = np.concatenate([np.zeros(size - len(first)), np.asarray(first, float)])
+    b = np.concatenate([np.zeros(size - len(second)), np.asarray(second, float)])
+    total = a + b
+    total[np.abs(total) <= 64.0 * np.finfo(float).eps * (np.abs(a) + np.abs(b))] = 0.0
+    return total
+
+
+def _exact_tf(num: np.ndarray, den: np.ndarray) -> control.TransferFunction:
+    """A transfer function of coefficients already free of rounding (no relative cleaning:
+    see :func:`_add`)."""
+    return control.tf(_strip(np.asarray(num, float)), _strip(np.asarray(den, float)))
+
+
 def _trailing_zeros(polynomial: np.ndarray) -> int:
     nonzero = np.flatnonzero(polynomial)
     return 0 if nonzero.size == 0 else len(polynomial) - 1 - int(nonzero[-1])
@@ -124,19 +143,18 @@ def synthesize_axis(axis: AxisModel, ch1: control.TransferFunction) -> AxisCompe
         u11_num, u11_den = mul(gh_num, ch1_num), mul(gh_den, ch1_den)
         ct1 = (ch1_num, ah2 * ch1_den)
     else:  # U11 = Gh Ch1 + Sh = u11_num / (gh_den ch1_den sh_den)
-        u11_num = np.polyadd(mul(mul(gh_num, ch1_num), sh_den),
-                             mul(mul(sh_num, gh_den), ch1_den))
+        u11_num = _add(mul(mul(gh_num, ch1_num), sh_den), mul(mul(sh_num, gh_den), ch1_den))
         u11_den = mul(mul(gh_den, ch1_den), sh_den)
         ct1 = (u11_num, ah2 * mul(mul(ch1_den, sh_den), gh_num))
     if polynomial_degree(st_num) < 0:  # St = 0: Ct2 = -Ah1 Ah2^-1 U11 / Gt
         ct2 = (-ratio * mul(u11_num, gt_inverse), u11_den)
     else:
-        ct2_num = np.polyadd(-ratio * mul(u11_num, st_den), -1.0 * mul(st_num, u11_den))
+        ct2_num = _add(-ratio * mul(u11_num, st_den), -1.0 * mul(st_num, u11_den))
         ct2 = (mul(ct2_num, gt_inverse), mul(u11_den, st_den))
     compensators = {
-        "Ct1": tf(*cancel_common_roots(*ct1)),
-        "Ch2": tf(*cancel_common_roots(-ah1 * mul(u11_num, gt_inverse), u11_den)),
-        "Ct2": tf(*cancel_common_roots(*ct2)),
+        "Ct1": _exact_tf(*cancel_common_roots(*ct1)),
+        "Ch2": _exact_tf(*cancel_common_roots(-ah1 * mul(u11_num, gt_inverse), u11_den)),
+        "Ct2": _exact_tf(*cancel_common_roots(*ct2)),
     }
     origin = {
         "Ct1": "Ct1 = (Gh Ch1 + Sh)/(Gh Ah2) divides by Gh",

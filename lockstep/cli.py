@@ -73,7 +73,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="k values: a,b,c or start:stop:step")
     sweep.add_argument("--delays", type=_floats, default=None,
                        help="round-trip delays, s: a,b,c or start:stop:step (default 0:0.02:0.001)")
-    sweep.add_argument("--duration", type=float, default=3.0, metavar="SECONDS")
+    sweep.add_argument("--duration", type=float, default=None, metavar="SECONDS",
+                       help="run length, s (default 3; clay: 2.25, the tool still in the block)")
     sweep.add_argument("--jitter", type=float, default=0.0, metavar="SECONDS")
     sweep.add_argument("--loss", type=float, default=0.0)
     sweep.add_argument("--seed", type=int, default=0)
@@ -187,6 +188,11 @@ def main(argv: list[str] | None = None) -> int:
         return command_sweep(args, config)
 
 
+#: The clay sweep's run length, s: the last window must still cut the constant-rate block
+#: (a fast, oscillating k = 3 lane leaves it at about 2.4 s).
+CLAY_SWEEP_DURATION_S = 2.25
+
+
 def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
     """Run the sweep, write its files, print its figures; 1 when --check fails."""
     from haptic.lockstep.sweep import SweepSettings, plot_heatmap, run_sweep, write_csv
@@ -196,6 +202,8 @@ def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
         _check_seconds("--delays", value)
     if any(not (math.isfinite(g) and g > 0.0) for g in args.gains):
         raise ConfigError("--gains", "every k must be a finite number > 0")
+    if args.duration is None:
+        args.duration = CLAY_SWEEP_DURATION_S if args.mode == "clay" else 3.0
     if not args.duration >= 1.0:
         raise ConfigError("--duration", "must be >= 1 s (the verdict compares windows)")
     model = model_from_config(config)

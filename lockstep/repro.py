@@ -404,12 +404,14 @@ def report_markdown(repro: Reproduction) -> str:
               "- the paper's claim: k must not exceed 5, conservative against both bounds.", "",
               "## Where this reproduction departs from the paper", "",
               "- The gain experiment runs with the analysis's environment Tt (eq 33), not the "
-              "clay: the clay as a 100 N s/m damper makes the loop unstable without delay "
-              "from k = 1.25 (analysis of its linearisation), so k = 3 could not stay bounded.",
+              "clay: the clay, even through its contact, makes the loop unstable without "
+              "delay from k = 3.2 (sampled analysis of its linearisation, B = 100 N s/m), so "
+              "k = 13 and 19 would diverge at any delay (docs/lockstep.md).",
               "- The paper does not state its rig's loop delay. The assumed delay is fitted to "
               "one figure, k = 13 crossing 20 N at about 1.8 s; k = 3 and k = 19 are then "
               "predictions. k = 19 grows far faster than the paper's (44 N at 1.3 s): no single "
-              "delay reproduces both traces in this model.",
+              "delay reproduces both traces in this model (k = 19 reaches 44 N by 1.3 s near "
+              "10.5 ms, where k = 13 is stable; docs/lockstep.md has the scan).",
               f"- Constant rate: the cut is steady (issue 15): over the steady part "
               f"(0.3 s after contact to 0.3 s before the contact ends) the force ripple "
               f"(std |ft| / mean) is {repro.notes['cutting_force_ripple_ratio']:.3f} with "

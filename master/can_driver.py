@@ -15,6 +15,7 @@ encoder resolution, raw sensor counts -> N with the configured scale and offset.
 from __future__ import annotations
 
 import struct
+import sys
 import time
 from typing import Any
 
@@ -85,6 +86,8 @@ class CanHandleDriver(HandleHardware):
         #: The drives' identities read at configure (0x1000, 0x1018:1-4), per axis.
         self.identities: list[dict[str, int]] = []
         self._fd = bool(settings.fd)
+        #: Print the bus-load budget (one line, stderr) at configure: the real bus's backend.
+        self.announce_bus_load = False
         self._warnings = [0, 0]
         self._tripped = False
         self._heartbeat_period_s = settings.heartbeat_period_s
@@ -93,6 +96,11 @@ class CanHandleDriver(HandleHardware):
         self._heartbeat_seen_s = [0.0, 0.0]
         self._heartbeat_lost = [False, False]
         self._master_heartbeat = bytes([0x05])  # operational
+        #: the master's heartbeat while inactive (a python-can periodic task): configured and
+        #: waiting (e.g. for the slave), the loop does not run, but the node is alive and the
+        #: disabled drives must not fault; while active, read() sends it, so a stalled loop
+        #: stops the drives by their heartbeat consumer
+        self._idle_heartbeat: Any = None
         nodes = settings.node_ids
         #: frame id -> (kind, axis) of every frame read() acts on.
         self._dispatch: dict[int, tuple[int, int]] = {}
@@ -143,7 +151,9 @@ class CanHandleDriver(HandleHardware):
         bus is closed."""
         if self._state is not LifecycleState.UNCONFIGURED:
             return
-        self.check_bus_load()
+        budget = self.check_bus_load()
+        if self.announce_bus_load:
+            print(f"haptic-master: {budget.summary()}", file=sys.stderr, flush=True)
         plans = self._plans()  # before the bus: a bad EDS never touches a drive
         try:
             self._bus = can.Bus(**self.bus_options)
@@ -167,6 +177,7 @@ class CanHandleDriver(HandleHardware):
             if not np.all(np.isfinite(reading.position_m)):
                 raise HardwareError("no position from the drives after start: "
                                     + "; ".join(reading.faults))
+            self._start_idle_heartbeat()
         except BaseException:
             try:
                 for node in self.settings.node_ids:
@@ -235,6 +246,15 @@ class CanHandleDriver(HandleHardware):
         codes in the error."""
         if self._state is not LifecycleState.INACTIVE:
             raise HardwareError(f"activate needs the inactive state (now {self._state.value})")
+        self._stop_idle_heartbeat()  # from now on every read() sends it when due
+        try:
+            self._activate()
+        except BaseException:
+            if self._state is LifecycleState.INACTIVE:
+                self._start_idle_heartbeat()
+            raise
+
+    def _activate(self) -> None:
         reading = self.read()
         if not np.all(np.isfinite(reading.position_m)):
             raise HardwareError("cannot activate without positions: " + "; ".join(reading.faults))
@@ -309,6 +329,7 @@ class CanHandleDriver(HandleHardware):
         self.read()
         self._send_both(cia402.CW_SHUTDOWN)
         self.read()
+        self._start_idle_heartbeat()
 
     def quick_stop(self, reason: str) -> None:
         """Command quick stop on both drives (they stop where they are) and hold it until the
@@ -336,7 +357,20 @@ class CanHandleDriver(HandleHardware):
             self._close_bus()
             self._state = LifecycleState.UNCONFIGURED
 
+    def _start_idle_heartbeat(self) -> None:
+        if self._bus is None or self._idle_heartbeat is not None:
+            return
+        message = can.Message(arbitration_id=HEARTBEAT_BASE + self.settings.master_node_id,
+                              data=self._master_heartbeat, is_extended_id=False)
+        self._idle_heartbeat = self._bus.send_periodic(message, self._heartbeat_period_s)
+
+    def _stop_idle_heartbeat(self) -> None:
+        task, self._idle_heartbeat = self._idle_heartbeat, None
+        if task is not None:
+            task.stop()
+
     def _close_bus(self) -> None:
+        self._stop_idle_heartbeat()
         if self._bus is not None:
             self._bus.shutdown()
             self._bus = None
@@ -643,5 +677,7 @@ def _can_hardware(config: dict[str, Any]) -> HandleHardware:
                                "channel": can_settings.channel, "bitrate": can_settings.bitrate}
     if can_settings.fd:
         options.update(fd=True, data_bitrate=can_settings.data_bitrate)
-    return CanHandleDriver(can_settings, options, can_settings.pdo_timeout_s,
-                           config["model"]["sample_period_s"])
+    driver = CanHandleDriver(can_settings, options, can_settings.pdo_timeout_s,
+                             config["model"]["sample_period_s"])
+    driver.announce_bus_load = True
+    return driver

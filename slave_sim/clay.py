@@ -27,6 +27,11 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.clay_contact import (
+    COUPLING_DAMPING_N_S_PER_M,
+    COUPLING_STIFFNESS_N_PER_M,
+    passivity_margin_N_s_per_m,
+)
 from haptic.common.config.scenario import Scenario
 from haptic.slave_sim.clay_numpy import (
     ContactConstants,
@@ -41,11 +46,6 @@ from haptic.slave_sim.workpiece import NO_BLOCK, Workpiece, build_workpiece
 CLAY_IMPLEMENTATIONS = ("warp", "numpy")
 #: Displacement (m) under which a step counts as no motion for the engagement.
 MIN_DISPLACEMENT_M = 1e-12
-#: Coupling between the tool and its proxy in the clay (docs/clay.md, "The contact"): a
-#: spring of this stiffness (N/m) ...
-COUPLING_STIFFNESS_N_PER_M = 2000.0
-#: ... in parallel with a damper of this damping (N s/m).
-COUPLING_DAMPING_N_S_PER_M = 50.0
 
 
 def resolve_device(device: str) -> str:
@@ -246,9 +246,9 @@ class _ClayBase:
     def passivity_margin_N_s_per_m(self, tool_damping_N_s_per_m: float) -> float:
         """Colgate and Brown's bound for the coupling rendered on a device of physical
         damping ``tool_damping_N_s_per_m``: ``Bt - (K Ts / 2 + b)``, N s/m; > 0 is passive."""
-        return float(tool_damping_N_s_per_m - (0.5 * self.coupling_stiffness_N_per_m
-                                               * self.sample_period_s
-                                               + self.coupling_damping_N_s_per_m))
+        return passivity_margin_N_s_per_m(tool_damping_N_s_per_m, self.sample_period_s,
+                                          self.coupling_stiffness_N_per_m,
+                                          self.coupling_damping_N_s_per_m)
 
     def _new_state(self, lanes: int, heights: Any, damping: Any) -> ClayState:
         volume = np.full(lanes, self.workpiece.heights_m.sum() * self.workpiece.cell_area_m2)

@@ -321,7 +321,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 fh_row[0] = guard.force_N  # bounded
                 yh_row[0] = guard.position_m
             if supervisor.receive(message):
-                resync.step(state, yh)  # follow the (held) handle, cutting (resync.py)
+                resync.step(state, yh, now_s)  # to the held handle, cutting (resync.py)
             tool_row = state.tool[0]
             transition = supervisor.update(now_s, fresh, (tool_row[0], tool_row[2]),
                                            link.silence_s(), link.peer_alive, guard.faulted)

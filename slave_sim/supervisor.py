@@ -62,9 +62,10 @@ class SlaveSupervisor:
         self.running = False
         self.ready = False
         self.outside = False
-        self.input_fault = False
+        #: after a work-area stop, the tool is on its way back to the handle: it runs again
+        #: only once in sync (it moves through the clay at a bounded speed)
         self.rejoining = False
-        """After a work-area stop: the tool goes back to the handle before it runs again."""
+        self.input_fault = False
         self.grid_m = None if grid_m is None else tuple(float(v) for v in grid_m)
         self.events: list[dict[str, Any]] = []
 
@@ -92,8 +93,6 @@ class SlaveSupervisor:
         tool_x_m, tool_y_m = tool_position_m
         synced = self.in_sync(tool_x_m, tool_y_m)
         state = self.watchdog.update(now_s, fresh, silence_s, synced, peer_alive)
-        if self.rejoining and synced:
-            self.rejoining = False  # the tool is back at the handle
         watchdog_ok = state is WatchdogState.OK
         if not (watchdog_ok and self.master_enabled):
             self.outside = self.rejoining = False  # a resync cycle ends the work-area stop
@@ -117,9 +116,11 @@ class SlaveSupervisor:
                 self.events.append({"time_s": now_s, "kind": "tool_resync",
                                     "reason": "the handle is back over the work area: the "
                                     "tool rejoins it"})
-        halted = self.outside or self.rejoining or input_fault
-        running = watchdog_ok and self.master_enabled and not halted
-        self.ready = watchdog_ok and not halted
+        if self.rejoining and (not watchdog_ok or synced):
+            self.rejoining = False  # back at the handle (or a watchdog resync takes over)
+        running = (watchdog_ok and self.master_enabled and not self.outside
+                   and not self.rejoining and not input_fault)
+        self.ready = watchdog_ok and not self.outside and not input_fault
         transition = Transition.NONE
         if running and not self.running:
             transition = Transition.RESUME

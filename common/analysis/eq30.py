@@ -31,8 +31,9 @@ def eq30_ratio(
     """|Gh Ch1| / |Sh + (Ah1 Ah2^-1 Tt + Th)^-1| at each frequency."""
     s = 1j * np.asarray(omega_rad_s, float)
     ratio = axis.position_ratio_ah1 / axis.force_ratio_ah2
-    impedance = ratio * np.polyval(axis.environment_impedance_tt_N_per_m, s) + np.polyval(
-        axis.operator_impedance_th_N_per_m, s)
+    tt = (np.polyval(axis.environment_impedance_tt_N_per_m, s)
+          / np.polyval(axis.environment_impedance_den, s))
+    impedance = ratio * tt + np.polyval(axis.operator_impedance_th_N_per_m, s)
     lhs = np.abs(evaluate_tf(axis.handle_actuator_gh, s) * evaluate_tf(ch1, s))
     rhs = np.abs(evaluate_tf(axis.handle_compliance_sh, s) + 1.0 / impedance)
     return lhs / rhs

@@ -49,8 +49,9 @@ def handle_with_operator(axis: AxisModel) -> control.TransferFunction:
 
 
 def tool_with_environment(axis: AxisModel) -> control.TransferFunction:
-    """Pt = Tt Gt / (1 - Tt St): tool actuator force (N) -> force on the environment (N)."""
-    tt = _polynomial_tf(axis.environment_impedance_tt_N_per_m)
+    """Pt = Tt Gt / (1 - Tt St): tool actuator force (N) -> force on the environment (N); Tt
+    may be rational (``environment_impedance_den``)."""
+    tt = tf(axis.environment_impedance_tt_N_per_m, axis.environment_impedance_den)
     return minimal_tf(tt * axis.tool_actuator_gt / (1 - tt * axis.tool_compliance_st))
 
 

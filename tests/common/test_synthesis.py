@@ -270,3 +270,16 @@ def test_the_independent_verdict_knows_the_refusals_above() -> None:
                             tf([1.0], [1.0, 10.0, 0.0])) == "Ct1 is not realisable"
     assert expected_refusal(custom_axis(), tf([1.0], [1.0, -10.0])) == "Ch1 is not realisable"
     assert expected_refusal(custom_axis(), tf([1.0], [1.0, 10.0, 0.0])) is None
+
+
+@pytest.mark.parametrize("seed", [490, 1066, 1368, 2079, 2904])
+def test_large_trailing_coefficients_do_not_cost_a_leading_one(seed: int) -> None:
+    """Designs whose products have trailing coefficients near 1e14: a cleaning threshold
+    relative to the largest coefficient dropped the compensators' leading 1 and refused
+    them as improper (found by the property test above)."""
+    axis, ch1, _ = random_design(np.random.default_rng(seed))
+    assert expected_refusal(axis, ch1) is None
+    compensators = synthesize_axis(axis, ch1)
+    for system in compensators.as_dict().values():
+        num, den = tf_coefficients(system)
+        assert polynomial_degree(num) <= polynomial_degree(den)

@@ -200,3 +200,12 @@ def test_both_sides_watch_with_the_shipped_30_ms(paper_config, side):
     config = link_config_from(paper_config, side)
     assert config.max_message_age_s == 0.03
     assert config.resync_messages == 20
+
+
+def test_events_are_immutable_records():
+    import dataclasses
+
+    wd = PeerWatchdog(AGE, resync_messages=1)
+    wd.update(0.0, True, 0.0)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        wd.events[0].kind = "trip"

@@ -212,6 +212,25 @@ def test_a_stalled_master_stops_the_drives_by_their_heartbeat_consumer() -> None
         hardware.cleanup()
 
 
+def test_a_master_waiting_configured_keeps_its_heartbeat_and_activates_cleanly() -> None:
+    """Configured and waiting (for the slave, say) longer than the drives' heartbeat
+    consumer time: the master's heartbeat goes on from a periodic task, the disabled drives
+    do not fault, and the enable sequence sees no EMCY; once active, the loop sends it."""
+    hardware = _hardware(_config())
+    try:
+        hardware.configure()
+        time.sleep(0.7)  # > heartbeat_timeout_s = 0.3 s without a read()
+        assert [d.error_code for d in hardware.rig.drives] == [0, 0]
+        hardware.activate()
+        assert hardware.driver.lifecycle_state is LifecycleState.ACTIVE
+        assert hardware.driver._idle_heartbeat is None
+        hardware.deactivate()
+        assert hardware.driver._idle_heartbeat is not None
+    finally:
+        hardware.cleanup()
+    assert hardware.driver._idle_heartbeat is None
+
+
 def test_a_silent_drive_is_reported_by_the_masters_heartbeat_consumer_and_stopped() -> None:
     hardware = _active(_config())
     try:
@@ -433,3 +452,14 @@ def test_the_emulated_drive_enforces_the_cia301_pdo_rules() -> None:
     assert device.decode_rpdo(bytes(4)) == {0x607A: 0}
     assert device.decode_rpdo(bytes(6)) == 0x8220  # too long: EMCY, not applied
     assert device.decode_rpdo(bytes(2)) == 0x8210
+
+
+def test_commissioning_keys_are_checked_at_start() -> None:
+    from haptic.common.config import ConfigError
+
+    with pytest.raises(ConfigError, match="master.can.master_node_id"):
+        master_settings(_config(master__can__master_node_id=1))
+    with pytest.raises(ConfigError, match="master.can.heartbeat_timeout_s"):
+        master_settings(_config(master__can__heartbeat_timeout_s=0.05))
+    with pytest.raises(ConfigError, match="master.can.bus_load_limit"):
+        _config(master__can__bus_load_limit=1.5)

@@ -8,7 +8,12 @@ import pytest
 from haptic.common.config.scenario import load_scenario
 from haptic.common.model import model_from_config
 from haptic.slave_sim.node import SlaveNode
-from haptic.slave_sim.resync import RESYNC_SPEED_M_S, ToolResync
+from haptic.slave_sim.resync import (
+    MAX_STEP_PERIODS,
+    RESYNC_FREE_SPEED_M_S,
+    RESYNC_SPEED_M_S,
+    ToolResync,
+)
 
 SYNC_TOLERANCE_M = 0.001  # haptic-slave's default --sync-tolerance
 HANDLE_AHEAD_M = 0.02  # the handle ran 2 cm ahead during the outage (issue 15's bridge)
@@ -100,6 +105,56 @@ def test_placing_the_tool_at_the_handle_leaves_a_bridge(paper_config) -> None:
     assert heights[row, bridge].min() == pytest.approx(clay.scenario.blocks[0].height_m)
 
 
+def test_back_along_its_own_groove_at_the_free_speed(through) -> None:
+    """A tool that ran ahead of the handle goes back through its cut groove. While the
+    coupling's spring is still compressed the proxy goes on cutting (the clay yields to it)
+    and the tool backs off at the cutting speed; then nothing is cut and it goes at the free
+    speed (the master's handle rate limit)."""
+    node, state, _, _ = through
+    node.safe_stop(state)
+    clay = state.environment
+    lag = state.tool_position_m()[0, 0] - clay.proxy_position_m()[0, 0]
+    assert 0.001 < lag < 0.003  # B v / K at the cut's speed
+    removed = clay.removed_total_m3[0]
+    handle = state.tool_position_m() - [0.01, 0.0]
+    resync = ToolResync(node)
+    distances = np.array([float(resync.step(state, handle)[0]) for _ in range(600)])
+    steps = -np.diff(np.concatenate([[0.01], distances]))
+    ts = node.sample_period_s
+    slow = np.isclose(steps, RESYNC_SPEED_M_S * ts)
+    fast = np.isclose(steps, RESYNC_FREE_SPEED_M_S * ts)
+    first_fast = int(np.argmax(fast))
+    assert slow[:first_fast].all() and first_fast > 10  # backing off the spring, cutting
+    assert first_fast * RESYNC_SPEED_M_S * ts < lag
+    # then free, but for a few single steps that meet clay the cut left (cut-cap residue)
+    later = slow[first_fast:] | fast[first_fast:]
+    assert fast[first_fast:].sum() > 0.75 * later.sum()
+    assert distances[-1] == 0.0
+    arrived = int(np.argmax(distances == 0.0))
+    assert arrived < first_fast + 1.2 * 0.01 / (RESYNC_FREE_SPEED_M_S * ts)
+    assert clay.removed_total_m3[0] - removed < node.environment.clay.reference_area_m2 * lag
+
+
+def test_resync_keeps_its_speed_when_the_loop_runs_late(paper_config) -> None:
+    """Given the caller's clock, a step covers the time since the last one (capped): a loop
+    that handles one message in five still resyncs at the set speed."""
+    model = model_from_config(paper_config)
+    node = SlaveNode(model, load_scenario("constant-rate").with_grid(256, 64), device="cpu")
+    ts = model.sample_period_s
+    state = node.initial_state(1)  # at x = 0, in free air
+    node.safe_stop(state)
+    resync = ToolResync(node)
+    handle = np.array([[0.01, 0.0]])
+    left = [float(resync.step(state, handle, now_s=k * 5 * ts)[0]) for k in range(4)]
+    # the first call has no previous time (one period), the others cover five each
+    assert left[0] == pytest.approx(0.01 - RESYNC_SPEED_M_S * ts)
+    assert left[1] == pytest.approx(left[0] - 5 * RESYNC_FREE_SPEED_M_S * ts)
+    assert left[2] == pytest.approx(left[1] - 5 * RESYNC_FREE_SPEED_M_S * ts)
+    # a stall longer than MAX_STEP_PERIODS counts as that many periods: no jump
+    stalled = float(resync.step(state, handle, now_s=1.0)[0])
+    assert stalled == pytest.approx(left[3] - MAX_STEP_PERIODS * RESYNC_FREE_SPEED_M_S * ts)
+
+
 def test_resync_moves_halted_tools_only(paper_config) -> None:
     model = model_from_config(paper_config)
     node = SlaveNode(model, load_scenario("constant-rate").with_grid(256, 64), device="cpu")
@@ -108,3 +163,5 @@ def test_resync_moves_halted_tools_only(paper_config) -> None:
         ToolResync(node).step(state, np.zeros((1, 2)))
     with pytest.raises(ValueError, match="speed"):
         ToolResync(node, 0.0)
+    with pytest.raises(ValueError, match="speed"):
+        ToolResync(node, 0.05, 0.01)

@@ -80,3 +80,25 @@ def test_out_of_sync_never_runs() -> None:
         supervisor.receive(handle(0.05, seq=i))
         supervisor.update(i * PERIOD_S, True, (0.05 + 0.0011, 0.0))
     assert not supervisor.running and not supervisor.ready
+
+
+def test_after_a_work_area_stop_the_tool_runs_again_only_once_back_at_the_handle() -> None:
+    """The handle back over the grid ends the guard's stop, but the tool (still outside,
+    moving back through the clay at a bounded speed) runs only once in sync: no
+    stop/resume cycle at the edge."""
+    grid = (0.0, 0.19, 0.0, 0.04)
+    supervisor = SlaveSupervisor(RATIO, 0.001, AREA, MAX_AGE_S, RESYNC, grid_m=grid)
+    start(supervisor)
+    assert supervisor.update(0.1, True, (0.2 + 1e-4, 0.0)) is Transition.STOP
+    transitions = []
+    tool_x_m = 0.2 + 1e-4
+    for i in range(40):  # the handle is back at 0.15 m; the tool closes in 2 mm a tick
+        follow = supervisor.receive(handle(0.15, seq=30 + i))
+        if follow:
+            tool_x_m = max(0.15, tool_x_m - 0.002)
+        transitions.append(supervisor.update(0.1 + (i + 1) * PERIOD_S, True, (tool_x_m, 0.0)))
+    assert transitions.count(Transition.STOP) == 0
+    assert transitions.count(Transition.RESUME) == 1
+    resumed = transitions.index(Transition.RESUME)
+    assert resumed >= 24  # 50 mm back at 2 mm a tick, then in sync
+    assert supervisor.running and abs(tool_x_m - 0.15) < 0.001

@@ -52,7 +52,7 @@ def test_the_tool_rejoins_the_handle_back_over_the_grid() -> None:
     assert not supervisor.receive(handle(0.10, 12))
     # the tool is still out there: it does not run (no flapping) until it is at the handle
     assert supervisor.update(t + 2 * PERIOD_S, True, (0.25, 0.01)) is Transition.NONE
-    assert not supervisor.outside and not supervisor.running and not supervisor.ready
+    assert not supervisor.outside and not supervisor.running
     assert supervisor.events[-1]["kind"] == "tool_resync"
     assert "rejoins" in supervisor.stop_reason()
     # on its way back (still outside the area) the guard does not stop it again
