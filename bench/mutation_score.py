@@ -33,6 +33,7 @@ are equivalent by construction; docs/testing.md lists each).
 from __future__ import annotations
 
 import argparse
+import ast
 import difflib
 import json
 import os
@@ -67,9 +68,11 @@ MODULES: dict[str, Target] = {
     "common/watchdog.py": Target(("tests/common/test_watchdog.py",)),
     "master/node.py": Target(_NODE_TESTS),
     "master/node_kernels.py": Target(_NODE_TESTS, every=3),
-    "common/messages.py": Target(("tests/common/test_messages.py",
+    "common/messages.py": Target(("tests/common/test_message_limits.py",
+                                  "tests/common/test_messages.py",
                                   "tests/common/test_receive.py")),
     "common/receive.py": Target(("tests/common/test_receive.py",
+                                 "tests/common/test_message_limits.py",
                                  "tests/common/test_messages.py")),
     "common/synthesis.py": Target(("tests/common/test_synthesis.py",)),
 }
@@ -99,7 +102,43 @@ PRAGMA = "# pragma: no mutate"
 #: Mutants that cannot change behaviour, each with the reason: (module, line before, line
 #: after, why), the lines stripped. They are not run and not counted; docs/testing.md shows
 #: this table (``--equivalents``).
+_REPR = "repr of a private field only: no behaviour reads a repr"
 EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
+    ("master/node.py", "@dataclass(eq=False)", "@dataclass(eq=True)",
+     "nothing compares or hashes node states (identity is what the programs keep)"),
+    *(("master/node.py", f"{name}: {kind} = field(default={default}, repr=False){tail}",
+       f"{name}: {kind} = field(default={default}, repr=True){tail}", _REPR)
+      for name, kind, default, tail in (
+          ("_kernel", "Any", "None", "  # the recorded launch over these buffers"),
+          ("_trip_code", "np.ndarray | None", "None", ""),
+          ("_event_bits", "np.ndarray | None", "None", ""),
+          ("_event_count", "np.ndarray | None", "None", ""),
+          ("_buffers", "tuple", "()", "  # keeps the Warp arrays alive"))),
+    ("master/node.py", "n = int(matrices[0].shape[1])", "n = int(matrices[ 1].shape[1])",
+     "B is (lanes, n, 4): its shape[1] is A's n too"),
+    ("master/node.py", "n = int(matrices[0].shape[1])", "n = int(matrices[0].shape[ 2])",
+     "A is (lanes, n, n): shape[2] is n too"),
+    ("master/node.py", "used = buffer((lanes, 4), f64)", "used = buffer((lanes, 5), f64)",
+     "a fifth column nobody writes or reads: the views take columns 0:2 and 2:4"),
+    ("master/node.py",
+     "handle_force_used_N=used_view[:, 0:2], tool_force_used_N=used_view[:, 2:4],",
+     "handle_force_used_N=used_view[:, 0:2], tool_force_used_N=used_view[:, 2: 5],",
+     "the buffer has 4 columns: 2:5 is 2:4"),
+    ("master/node.py", "event_count = buffer((1,), i32)", "event_count = buffer(( 2,), i32)",
+     "a second counter nobody uses"),
+    ("master/node.py", "inputs[:, 4:6] = tool_force_recv_N", "inputs[:, 4: 7] = tool_force_recv_N",
+     "the buffer has 6 columns: 4:7 is 4:6"),
+    ("master/node.py", "state._event_count[0] = 0", "state._event_count[0] = 1",
+     "the events are decoded from the per-step codes: a non-zero count only decodes a step "
+     "without events (time, not behaviour)"),
+    ("common/messages.py",
+     "fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=True)",
+     "fields = msgpack.unpackb(payload, use_list=True, raw=True, strict_map_key=True)",
+     "no valid message holds a string: as str or as bytes, it is refused as not a number"),
+    ("common/messages.py",
+     "fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=True)",
+     "fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=False)",
+     "no valid message holds a map: whatever its keys, it is refused"),
 )
 #: pytest plugins a mutant run does without (unraisableexception's gc.collect() alone costs
 #: 0.8 s per run over the preloaded libraries).
@@ -167,6 +206,22 @@ def _keep(operator: str, index_at_node: int) -> bool:
     return not (operator == "core/NumberReplacer" and index_at_node > 0)
 
 
+def _annotation_spans(source: str) -> list[tuple[tuple[int, int], tuple[int, int]]]:
+    """(start, end) positions (line, column) of every type annotation: with ``from __future__
+    import annotations`` they are never evaluated, so their mutants (``X | None`` ->
+    ``X & None``) are equivalent by construction and not made."""
+    spans = []
+    for node in ast.walk(ast.parse(source)):
+        found = []
+        if isinstance(node, ast.arg | ast.AnnAssign) and node.annotation is not None:
+            found.append(node.annotation)
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.returns:
+            found.append(node.returns)
+        spans.extend(((a.lineno, a.col_offset), (a.end_lineno, a.end_col_offset))
+                     for a in found)
+    return spans
+
+
 def mutants(path: str) -> list[Mutant]:
     """Every mutant of ``path`` (relative to the repository), in source order."""
     from cosmic_ray.ast import ast_nodes, get_ast
@@ -175,6 +230,7 @@ def mutants(path: str) -> list[Mutant]:
 
     source = (ROOT / path).read_text()
     lines = source.splitlines()
+    annotations = _annotation_spans(source)
     found = []
     for name in OPERATORS:
         operator = get_operator(name)()
@@ -182,7 +238,8 @@ def mutants(path: str) -> list[Mutant]:
         for node in ast_nodes(get_ast(source)):
             for index, (start, _end) in enumerate(operator.mutation_positions(node)):
                 line = start[0]
-                if _keep(name, index) and not lines[line - 1].rstrip().endswith(PRAGMA):
+                if (_keep(name, index) and not lines[line - 1].rstrip().endswith(PRAGMA)
+                        and not any(a <= start < b for a, b in annotations)):
                     mutated = MutationVisitor.mutate_code(source, operator, occurrence)
                     if mutated is not None and mutated != source:
                         after = mutated.splitlines()[line - 1].strip()
@@ -421,8 +478,12 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _stop)
     try:
         _preload(cache_dir)
-        results = {path: score_module(path, args.progress, args.jobs, args.all)
-                   for path in paths}
+        results = {}
+        for path in paths:
+            results[path] = result = score_module(path, args.progress, args.jobs, args.all)
+            print(f"mutation_score: {path}: {result.killed} killed, {result.survived} survived "
+                  f"({result.score * 100:.1f} %), {result.equivalent} equivalent, "
+                  f"{result.seconds:.0f} s", file=sys.stderr, flush=True)
     except KeyboardInterrupt:
         print("mutation_score: stopped", file=sys.stderr)
         return 130

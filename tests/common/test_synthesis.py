@@ -270,3 +270,11 @@ def test_the_independent_verdict_knows_the_refusals_above() -> None:
                             tf([1.0], [1.0, 10.0, 0.0])) == "Ct1 is not realisable"
     assert expected_refusal(custom_axis(), tf([1.0], [1.0, -10.0])) == "Ch1 is not realisable"
     assert expected_refusal(custom_axis(), tf([1.0], [1.0, 10.0, 0.0])) is None
+
+
+def test_compensators_are_immutable(paper_model) -> None:
+    import dataclasses
+
+    axis = synthesize(paper_model)[0]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        axis.ch1 = axis.ct1

@@ -261,3 +261,73 @@ def test_the_force_gate_needs_exactly_n_strictly_small_samples(block, samples) -
     assert [e.kind for e in state.events] == ["enable"]
     assert state.events[0].reason == f"forces enabled after {samples} small-force samples"
     np.testing.assert_array_equal(state.handle_force_used_N, small)  # ramp_time 0: at once
+
+
+# --- the node's bookkeeping: lanes, events' times and order, outside trips by index ---------
+
+
+def test_events_carry_step_and_time_and_are_frozen(block) -> None:
+    node = MasterNode(block, _safety())
+    state = _enabled(node)
+    for _ in range(4):
+        node.step(state, np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2)))
+    node.step(state, np.array([[0.0, 9.0]]), np.zeros((1, 2)), np.zeros((1, 2)))
+    event = state.events[-1]
+    assert (event.kind, event.step) == ("saturate", 7)
+    assert event.time_s == pytest.approx(7 * block.period_s, rel=1e-12)
+    node.trip(state, np.array([0]), "test: outside trip")  # indices, not a mask
+    assert state.faulted[0]
+    trip = state.events[-1]
+    assert (trip.kind, trip.step, trip.reason) == ("trip", 8, "test: outside trip")
+    assert trip.time_s == pytest.approx(8 * block.period_s, rel=1e-12)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        trip.kind = "enable"
+
+
+def test_resume_events_are_at_step_zero(block) -> None:
+    node = MasterNode(block, _safety())
+    state = node.resume(np.zeros((2, 2)))
+    assert state.lanes == 2
+    assert [(e.kind, e.step, e.time_s, e.lane) for e in state.events] == [
+        ("enable", 0, 0.0, 0), ("enable", 0, 0.0, 1)]
+
+
+def test_trips_in_one_step_are_ordered_by_reason_then_lane(block) -> None:
+    node = MasterNode(block, _safety())
+    state = node.activate(np.zeros((3, 2)))
+    position = np.zeros((3, 2))
+    position[0, 1] = np.nan  # lane 0: non-finite position, y (code 3)
+    position[1, 0] = np.nan  # lane 1: non-finite position, x (code 2)
+    tool = np.zeros((3, 2))
+    tool[2, 0] = np.inf  # lane 2: non-finite tool force, x (code 4)
+    node.step(state, np.zeros((3, 2)), position, tool)
+    assert [(e.lane, e.reason, e.axis) for e in state.events] == [
+        (0, "non-finite handle position", "y"), (1, "non-finite handle position", "x"),
+        (2, "non-finite tool force", "x")]
+    state = node.activate(np.zeros((2, 2)))
+    position = np.zeros((2, 2))
+    position[1, 1] = np.nan  # lane 1: position y (code 3), before lane 0's tool force
+    tool = np.zeros((2, 2))
+    tool[0, 0] = np.nan  # lane 0: tool force x (code 4)
+    node.step(state, np.zeros((2, 2)), position, tool)
+    assert [e.lane for e in state.events] == [1, 0]
+
+
+def test_a_compensator_with_other_inputs_or_outputs_is_refused(block) -> None:
+    import dataclasses as dc
+
+    for change in ({"output_names": ("vt_x", "vt_y")},
+                   {"input_names": ("a", "b", "c", "d")}):
+        with pytest.raises(ValueError, match="compensator must map"):
+            MasterNode(dc.replace(block, **change), _safety())
+
+
+def test_a_stacked_compensator_needs_one_lane_each(paper_model) -> None:
+    from haptic.lockstep.stacked import StackedLTI
+
+    stacked = StackedLTI.from_blocks([master_compensator(paper_model.with_gain(k))
+                                      for k in (1.0, 5.0, 13.0)])
+    node = MasterNode(stacked, _safety())
+    with pytest.raises(ValueError, match="compensator stacked for 3 lanes, activated with 2"):
+        node.activate(np.zeros((2, 2)))
+    assert node.activate(np.zeros((3, 2))).lanes == 3
