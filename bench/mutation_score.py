@@ -71,7 +71,8 @@ MODULES: dict[str, Target] = {
     "common/messages.py": Target(("tests/common/test_message_limits.py",
                                   "tests/common/test_messages.py",
                                   "tests/common/test_receive.py")),
-    "common/receive.py": Target(("tests/common/test_receive.py",
+    "common/receive.py": Target(("tests/common/test_receive_limits.py",
+                                 "tests/common/test_receive.py",
                                  "tests/common/test_message_limits.py",
                                  "tests/common/test_messages.py")),
     "common/synthesis.py": Target(("tests/common/test_synthesis.py",)),
@@ -131,6 +132,8 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
     ("master/node.py", "state._event_count[0] = 0", "state._event_count[0] = 1",
      "the events are decoded from the per-step codes: a non-zero count only decodes a step "
      "without events (time, not behaviour)"),
+    ("common/receive.py", "delivered_seq: int = -1", "delivered_seq: int = - 2",
+     "sequence numbers are >= 0: any negative start lies below all of them"),
     ("common/messages.py",
      "fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=True)",
      "fields = msgpack.unpackb(payload, use_list=True, raw=True, strict_map_key=True)",
