@@ -132,6 +132,17 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
     ("master/node.py", "state._event_count[0] = 0", "state._event_count[0] = 1",
      "the events are decoded from the per-step codes: a non-zero count only decodes a step "
      "without events (time, not behaviour)"),
+    ("master/node_kernels.py", "ENABLE_BIT = 8", "ENABLE_BIT = 9",
+     "any bit above the eight limit bits works: the kernel sets it, node.py reads it, both "
+     "through the constant"),
+    ("master/node_kernels.py", "COMPENSATOR_INPUT_COUNT = 4", "COMPENSATOR_INPUT_COUNT = 5",
+     "a documentation constant: no code reads it"),
+    ("master/node_kernels.py", "code = wp.int32(-1)", "code = wp.int32(- 2)",
+     "'no trip' is any negative code: every reader tests code >= 0"),
+    ("master/node_kernels.py", "code = TRIP_NON_FINITE_FORCE * 2",
+     "code = TRIP_NON_FINITE_FORCE * 3", "TRIP_NON_FINITE_FORCE is 0: 0 * 3 == 0 * 2"),
+    ("master/node_kernels.py", "code = TRIP_NON_FINITE_FORCE * 2",
+     "code = TRIP_NON_FINITE_FORCE / 2", "TRIP_NON_FINITE_FORCE is 0: 0 / 2 == 0 * 2"),
     ("common/receive.py", "delivered_seq: int = -1", "delivered_seq: int = - 2",
      "sequence numbers are >= 0: any negative start lies below all of them"),
     ("common/messages.py",
