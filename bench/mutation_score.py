@@ -451,8 +451,11 @@ def _stop(signum: int, _frame: object) -> None:
 def equivalents_table() -> str:
     """The :data:`EQUIVALENT` list as a Markdown table (docs/testing.md)."""
     rows = ["| module | line | mutant | why it is equivalent |", "|---|---|---|---|"]
+    def cell(text: str) -> str:
+        return text.replace("|", "\\|")
+
     for path, before, after, why in EQUIVALENT:
-        rows.append(f"| `{path}` | `{before}` | `{after}` | {why} |")
+        rows.append(f"| `{path}` | `{cell(before)}` | `{cell(after)}` | {cell(why)} |")
     return "\n".join(rows)
 
 
