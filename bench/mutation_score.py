@@ -118,6 +118,9 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
     ("master/node.py", "if per_lane and matrices[0].shape[0] != lanes:",
      "if per_lane and matrices[ 1].shape[0] != lanes:",
      "A and B are both (lanes, ., .): either's shape[0] is the lane count"),
+    ("master/node.py", 'raise ValueError(f"compensator stacked for {matrices[0].shape[0]} lanes, "',
+     'raise ValueError(f"compensator stacked for {matrices[ 1].shape[0]} lanes, "',
+     "A and B are both (lanes, ., .): the message names the same count"),
     ("master/node.py", "n = int(matrices[0].shape[1])", "n = int(matrices[ 1].shape[1])",
      "B is (lanes, n, 4): its shape[1] is A's n too"),
     ("master/node.py", "n = int(matrices[0].shape[1])", "n = int(matrices[0].shape[ 2])",
@@ -313,6 +316,15 @@ def _child(tests: tuple[str, ...], timeout_s: float, mutant: Mutant | None,
         signal.alarm(max(1, int(timeout_s)))
         if mutant is not None:
             _serve_mutant(module_name(mutant.path), ROOT / mutant.path, mutant.source)
+        from hypothesis import HealthCheck
+        from hypothesis import settings as hypothesis_settings
+
+        # The same examples for every mutant and the baseline, no shared example database,
+        # and no health check that a loaded machine fails (that would count as a kill).
+        hypothesis_settings.register_profile(
+            "mutation", derandomize=True, database=None, deadline=None,
+            suppress_health_check=list(HealthCheck))
+        hypothesis_settings.load_profile("mutation")
         import pytest
 
         code = pytest.main(["-x", "-q", "--no-header", *PYTEST_PLUGINS_OFF,
