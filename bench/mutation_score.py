@@ -149,6 +149,10 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
      "code = TRIP_NON_FINITE_FORCE * 3", "TRIP_NON_FINITE_FORCE is 0: 0 * 3 == 0 * 2"),
     ("master/node_kernels.py", "code = TRIP_NON_FINITE_FORCE * 2",
      "code = TRIP_NON_FINITE_FORCE / 2", "TRIP_NON_FINITE_FORCE is 0: 0 / 2 == 0 * 2"),
+    ("common/messages.py", "_packer = msgpack.Packer(use_bin_type=True, use_single_float=False)",
+     "_packer = msgpack.Packer(use_bin_type=False, use_single_float=False)",
+     "use_bin_type only changes how bytes objects pack: a message packs none (integers and "
+     "floats only)"),
     ("common/receive.py", "delivered_seq: int = -1", "delivered_seq: int = - 2",
      "sequence numbers are >= 0: any negative start lies below all of them"),
     ("common/messages.py",
