@@ -136,3 +136,51 @@ def test_stats_are_frozen() -> None:
     stats = path().stats()
     with pytest.raises(dataclasses.FrozenInstanceError):
         stats.delivered = 3
+
+
+def test_release_after_reordering_counts_each_late_one_and_goes_on_to_the_newest() -> None:
+    """Jitter without order preservation: a message due after a newer one was handed over
+    is dropped and counted once; the release still reaches the newest due message."""
+    receive = ReceivePath(KIND_HANDLE, InjectionConfig(jitter_s=0.01, preserve_order=False),
+                          np.random.default_rng(1), STALE_S)
+    for seq in range(300):
+        receive.accept(handle(seq, T0 + seq * 100_000), T0 + seq * 100_000)
+    last = None
+    for step in range(1200):
+        now_ns = T0 + step * 50_000
+        message = receive.release(now_ns)
+        last = message or last
+        assert receive.release(now_ns) is None  # everything due was handled at once
+    stats = receive.stats()
+    assert stats.reordered == stats.dropped["out_of_order"] > 0
+    assert receive.pending == 0 and stats.delivered + stats.reordered == 300
+    assert last is not None and last.seq == 299  # the newest of all was handed over last
+
+
+def test_a_stale_duplicate_changes_no_loss_count() -> None:
+    p = path()
+    p.accept(handle(0, T0), T0)
+    p.accept(handle(1, T0 + MS), T0 + MS)
+    p.accept(handle(1, T0 + MS), T0 + MS + 60 * MS)  # the same message again, now stale
+    stats = p.stats()
+    assert stats.network_lost == 0 and stats.dropped["stale"] == 1
+
+
+def test_a_single_stale_message_is_a_total_loss() -> None:
+    p = path()
+    p.accept(handle(0, T0), T0 + 60 * MS)
+    stats = p.stats()
+    assert stats.expected == 1 and stats.delivered == 0
+    assert stats.loss_ratio == 1.0 and stats.network_loss_ratio == 0.0
+
+
+def test_the_median_is_the_50th_percentile() -> None:
+    p = path(stale_s=1.0)
+    delays_ms = [1] * 50 + [20] * 50
+    for seq, delay in enumerate(delays_ms):
+        send = T0 + seq * 200 * MS
+        p.accept(handle(seq, send), send + delay * MS)
+        p.release(send + delay * MS)
+    stats = p.stats()
+    assert stats.one_way_delay_p50_s == pytest.approx(1e-3, rel=0.1)
+    assert stats.age_at_use_p50_s == pytest.approx(1e-3, rel=0.1)

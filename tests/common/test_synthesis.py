@@ -278,3 +278,23 @@ def test_compensators_are_immutable(paper_model) -> None:
     axis = synthesize(paper_model)[0]
     with pytest.raises(dataclasses.FrozenInstanceError):
         axis.ch1 = axis.ct1
+
+
+def test_cancel_common_roots_of_zero_and_of_shared_integrators() -> None:
+    from haptic.common.synthesis import cancel_common_roots
+
+    num, den = cancel_common_roots(np.array([0.0, 0.0]), np.array([2.0, 4.0]))
+    assert num.tolist() == [0.0] and den.tolist() == [1.0]
+    num, den = cancel_common_roots(np.array([3.0, 0.0]), np.array([2.0, 20.0, 0.0]))
+    assert num.tolist() == [1.5] and den.tolist() == [1.0, 10.0]  # s / (s (s + 10)), monic
+    num, den = cancel_common_roots(np.array([1.0, 0.0, 0.0]), np.array([1.0, 0.0]))
+    assert num.tolist() == [1.0, 0.0] and den.tolist() == [1.0]
+
+
+def test_a_pole_at_the_rhp_tolerance_is_marginal_not_unstable() -> None:
+    from haptic.common.synthesis import RHP_TOLERANCE, _rhp_poles
+
+    assert _rhp_poles(tf([1.0], [1.0, -RHP_TOLERANCE])).size == 0  # exactly at it: marginal
+    assert _rhp_poles(tf([1.0], [1.0, -2.0 * RHP_TOLERANCE])).size == 1
+    with pytest.raises(SynthesisError, match="Ch1 is not realisable"):
+        synthesize_axis(custom_axis(), tf([1.0], [1.0, -4.0 * RHP_TOLERANCE, 0.0]))
