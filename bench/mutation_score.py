@@ -153,7 +153,8 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
      "_packer = msgpack.Packer(use_bin_type=False, use_single_float=False)",
      "use_bin_type only changes how bytes objects pack: a message packs none (integers and "
      "floats only)"),
-    ("common/synthesis.py", "return 0 if nonzero.size == 0 else len(polynomial) - 1 - int(nonzero[-1])",
+    ("common/synthesis.py",
+     "return 0 if nonzero.size == 0 else len(polynomial) - 1 - int(nonzero[-1])",
      "return 1 if nonzero.size == 0 else len(polynomial) - 1 - int(nonzero[-1])",
      "only called on non-zero polynomials (the zero numerator returns earlier)"),
     ("common/receive.py",
