@@ -179,21 +179,40 @@ def test_handle_speed_trip_level(block, axis, sign, level, trips) -> None:
 @pytest.mark.parametrize("side", ["min", "max"])
 @pytest.mark.parametrize("axis", [0, 1])
 def test_workspace_trip_margin(block, axis, side, level, trips) -> None:
-    safety = _safety(workspace_trip_margin_m=0.01, velocity_trip_m_per_s=1e9)
+    """Walls and margin in binary fractions, so that "at" is exactly at the trip level."""
+    safety = _safety(workspace_min_m=(-0.5, -0.25), workspace_max_m=(0.25, 0.5),
+                     workspace_trip_margin_m=0.25, velocity_trip_m_per_s=1e9)
     node = MasterNode(block, safety)
     edge = (safety.workspace_min_m if side == "min" else safety.workspace_max_m)[axis]
     outward = -1.0 if side == "min" else 1.0
-    offset = {"under": 0.01 - 1e-7, "at": 0.01, "over": 0.01 + 1e-7}[level]
+    offset = {"under": 0.25 - 2.0**-20, "at": 0.25, "over": 0.25 + 2.0**-20}[level]
     position = np.zeros((1, 2))
     position[0, axis] = edge + outward * offset
     state = node.activate(np.zeros((1, 2)))
     node.step(state, np.zeros((1, 2)), position, np.zeros((1, 2)))
-    # "at" is decided by float rounding of edge + margin: only under and over are pinned
-    if level != "at":
-        assert bool(state.faulted[0]) is trips
+    assert bool(state.faulted[0]) is trips
     if trips:
         assert (state.events[-1].reason, state.events[-1].axis) == (
             "handle outside the workspace", "xy"[axis])
+
+
+@pytest.mark.parametrize("column", range(6))
+def test_each_non_finite_input_trips_with_its_reason_and_axis(block, column) -> None:
+    """NaN in any of the six inputs (fh x y, yh x y, ft x y): the lane trips at once, names
+    the input and the axis, holds the last finite position and keeps it as such."""
+    node = MasterNode(block, _safety())
+    start = np.array([[0.01, -0.02]])
+    state = _enabled(node, start)
+    inputs = np.array([[0.0, 0.0, 0.01, -0.02, 0.0, 0.0]])
+    inputs[0, column] = np.nan
+    command = node.step(state, inputs[:, 0:2], inputs[:, 2:4], inputs[:, 4:6])
+    assert state.faulted[0]
+    reason = ("handle force", "handle position", "tool force")[column // 2]
+    assert (state.events[-1].kind, state.events[-1].reason, state.events[-1].axis) == (
+        "trip", f"non-finite {reason}", "xy"[column % 2])
+    np.testing.assert_array_equal(command, start)
+    np.testing.assert_array_equal(state.last_position_m, start)
+    np.testing.assert_array_equal(state.hold_m, start)
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
