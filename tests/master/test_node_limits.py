@@ -203,16 +203,18 @@ def test_each_non_finite_input_trips_with_its_reason_and_axis(block, column) -> 
     node = MasterNode(block, _safety())
     start = np.array([[0.01, -0.02]])
     state = _enabled(node, start)
-    inputs = np.array([[0.0, 0.0, 0.01, -0.02, 0.0, 0.0]])
+    inputs = np.array([[0.0, 0.0, 0.01 + 1e-5, -0.02 - 1e-5, 0.0, 0.0]])  # the handle moved
     inputs[0, column] = np.nan
     command = node.step(state, inputs[:, 0:2], inputs[:, 2:4], inputs[:, 4:6])
     assert state.faulted[0]
     reason = ("handle force", "handle position", "tool force")[column // 2]
     assert (state.events[-1].kind, state.events[-1].reason, state.events[-1].axis) == (
         "trip", f"non-finite {reason}", "xy"[column % 2])
+    # it holds where it was before this sample, whichever input failed
     np.testing.assert_array_equal(command, start)
-    np.testing.assert_array_equal(state.last_position_m, start)
     np.testing.assert_array_equal(state.hold_m, start)
+    measured = np.where(np.isfinite(inputs[:, 2:4]), inputs[:, 2:4], start)
+    np.testing.assert_array_equal(state.last_position_m, measured)
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
