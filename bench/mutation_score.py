@@ -33,6 +33,7 @@ are equivalent by construction; docs/testing.md lists each).
 from __future__ import annotations
 
 import argparse
+import ast
 import difflib
 import json
 import os
@@ -67,9 +68,12 @@ MODULES: dict[str, Target] = {
     "common/watchdog.py": Target(("tests/common/test_watchdog.py",)),
     "master/node.py": Target(_NODE_TESTS),
     "master/node_kernels.py": Target(_NODE_TESTS, every=3),
-    "common/messages.py": Target(("tests/common/test_messages.py",
+    "common/messages.py": Target(("tests/common/test_message_limits.py",
+                                  "tests/common/test_messages.py",
                                   "tests/common/test_receive.py")),
-    "common/receive.py": Target(("tests/common/test_receive.py",
+    "common/receive.py": Target(("tests/common/test_receive_limits.py",
+                                 "tests/common/test_receive.py",
+                                 "tests/common/test_message_limits.py",
                                  "tests/common/test_messages.py")),
     "common/synthesis.py": Target(("tests/common/test_synthesis.py",)),
 }
@@ -99,7 +103,93 @@ PRAGMA = "# pragma: no mutate"
 #: Mutants that cannot change behaviour, each with the reason: (module, line before, line
 #: after, why), the lines stripped. They are not run and not counted; docs/testing.md shows
 #: this table (``--equivalents``).
+_REPR = "repr of a private field only: no behaviour reads a repr"
 EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
+    ("master/node.py", "@dataclass(eq=False)", "@dataclass(eq=True)",
+     "nothing compares or hashes node states (identity is what the programs keep)"),
+    *(("master/node.py", f"{name}: {kind} = field(default={default}, repr=False){tail}",
+       f"{name}: {kind} = field(default={default}, repr=True){tail}", _REPR)
+      for name, kind, default, tail in (
+          ("_kernel", "Any", "None", "  # the recorded launch over these buffers"),
+          ("_trip_code", "np.ndarray | None", "None", ""),
+          ("_event_bits", "np.ndarray | None", "None", ""),
+          ("_event_count", "np.ndarray | None", "None", ""),
+          ("_buffers", "tuple", "()", "  # keeps the Warp arrays alive"))),
+    ("master/node.py", "if per_lane and matrices[0].shape[0] != lanes:",
+     "if per_lane and matrices[ 1].shape[0] != lanes:",
+     "A and B are both (lanes, ., .): either's shape[0] is the lane count"),
+    ("master/node.py", 'raise ValueError(f"compensator stacked for {matrices[0].shape[0]} lanes, "',
+     'raise ValueError(f"compensator stacked for {matrices[ 1].shape[0]} lanes, "',
+     "A and B are both (lanes, ., .): the message names the same count"),
+    ("master/node.py", "n = int(matrices[0].shape[1])", "n = int(matrices[ 1].shape[1])",
+     "B is (lanes, n, 4): its shape[1] is A's n too"),
+    ("master/node.py", "n = int(matrices[0].shape[1])", "n = int(matrices[0].shape[ 2])",
+     "A is (lanes, n, n): shape[2] is n too"),
+    ("master/node.py", "used = buffer((lanes, 4), f64)", "used = buffer((lanes, 5), f64)",
+     "a fifth column nobody writes or reads: the views take columns 0:2 and 2:4"),
+    ("master/node.py",
+     "handle_force_used_N=used_view[:, 0:2], tool_force_used_N=used_view[:, 2:4],",
+     "handle_force_used_N=used_view[:, 0:2], tool_force_used_N=used_view[:, 2: 5],",
+     "the buffer has 4 columns: 2:5 is 2:4"),
+    ("master/node.py", "event_count = buffer((1,), i32)", "event_count = buffer(( 2,), i32)",
+     "a second counter nobody uses"),
+    ("master/node.py", "inputs[:, 4:6] = tool_force_recv_N", "inputs[:, 4: 7] = tool_force_recv_N",
+     "the buffer has 6 columns: 4:7 is 4:6"),
+    ("master/node.py", "state._event_count[0] = 0", "state._event_count[0] = 1",
+     "the events are decoded from the per-step codes: a non-zero count only decodes a step "
+     "without events (time, not behaviour)"),
+    ("master/node_kernels.py", "ENABLE_BIT = 8", "ENABLE_BIT = 9",
+     "any bit above the eight limit bits works: the kernel sets it, node.py reads it, both "
+     "through the constant"),
+    ("master/node_kernels.py", "COMPENSATOR_INPUT_COUNT = 4", "COMPENSATOR_INPUT_COUNT = 5",
+     "a documentation constant: no code reads it"),
+    ("master/node_kernels.py", "code = TRIP_WORKSPACE * 2 + 1\nif code >= 0:",
+     "if code > 0:",
+     "code 0 (a non-finite handle force, x) is set and acted on in the first block, which "
+     "skips this one; the codes set here are 6 and above"),
+    ("master/node_kernels.py", "code = wp.int32(-1)", "code = wp.int32(- 2)",
+     "'no trip' is any negative code: every reader tests code >= 0"),
+    ("master/node_kernels.py", "code = TRIP_NON_FINITE_FORCE * 2",
+     "code = TRIP_NON_FINITE_FORCE * 3", "TRIP_NON_FINITE_FORCE is 0: 0 * 3 == 0 * 2"),
+    ("master/node_kernels.py", "code = TRIP_NON_FINITE_FORCE * 2",
+     "code = TRIP_NON_FINITE_FORCE / 2", "TRIP_NON_FINITE_FORCE is 0: 0 / 2 == 0 * 2"),
+    ("common/messages.py", "_packer = msgpack.Packer(use_bin_type=True, use_single_float=False)",
+     "_packer = msgpack.Packer(use_bin_type=False, use_single_float=False)",
+     "use_bin_type only changes how bytes objects pack: a message packs none (integers and "
+     "floats only)"),
+    ("common/synthesis.py",
+     "return 0 if nonzero.size == 0 else len(polynomial) - 1 - int(nonzero[-1])",
+     "return 1 if nonzero.size == 0 else len(polynomial) - 1 - int(nonzero[-1])",
+     "only called on non-zero polynomials (the zero numerator returns earlier)"),
+    ("common/receive.py",
+     "seq_state = self._seq = _Sequence(message.epoch, message.seq, message.seq - 1, 0)",
+     "seq_state = self._seq = _Sequence(message.epoch, message.seq, message.seq - 1, 1)",
+     "the highest send time starts below any real one (ns since 1970) either way"),
+    ("common/receive.py", "delivery_ns = arrival_ns if arrival_ns > target_ns else target_ns",
+     "delivery_ns = arrival_ns if arrival_ns >= target_ns else target_ns",
+     "when they are equal both branches give the same time"),
+    ("common/receive.py", "if send_ns > seq_state.highest_send_ns:",
+     "if send_ns >= seq_state.highest_send_ns:", "when equal the assignment changes nothing"),
+    ("common/receive.py", "if not pending or pending[0][0] > now_ns:",
+     "if not pending or pending[0][ 1] > now_ns:",
+     "an early exit only: the loop below checks the delivery time itself and returns None "
+     "when nothing is due"),
+    ("common/receive.py", "newest_delivery_ns = 0", "newest_delivery_ns = 1",
+     "overwritten with the first message handed over; read only when there is one"),
+    ("common/receive.py", "if seq <= seq_state.delivered_seq:",
+     "if seq < seq_state.delivered_seq:",
+     "a sequence number is pending at most once (accept drops duplicates), so the one "
+     "delivered is never pending again"),
+    ("common/receive.py", "delivered_seq: int = -1", "delivered_seq: int = - 2",
+     "sequence numbers are >= 0: any negative start lies below all of them"),
+    ("common/messages.py",
+     "fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=True)",
+     "fields = msgpack.unpackb(payload, use_list=True, raw=True, strict_map_key=True)",
+     "no valid message holds a string: as str or as bytes, it is refused as not a number"),
+    ("common/messages.py",
+     "fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=True)",
+     "fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=False)",
+     "no valid message holds a map: whatever its keys, it is refused"),
 )
 #: pytest plugins a mutant run does without (unraisableexception's gc.collect() alone costs
 #: 0.8 s per run over the preloaded libraries).
@@ -119,6 +209,7 @@ class Mutant:
     source: str
     before: str = ""  # the mutated line, stripped, before and after
     after: str = ""
+    above: str = ""  # the non-blank line above it, stripped
 
     def diff(self, original: str) -> str:
         lines = difflib.unified_diff(original.splitlines(True), self.source.splitlines(True),
@@ -167,6 +258,22 @@ def _keep(operator: str, index_at_node: int) -> bool:
     return not (operator == "core/NumberReplacer" and index_at_node > 0)
 
 
+def _annotation_spans(source: str) -> list[tuple[tuple[int, int], tuple[int, int]]]:
+    """(start, end) positions (line, column) of every type annotation: with ``from __future__
+    import annotations`` they are never evaluated, so their mutants (``X | None`` ->
+    ``X & None``) are equivalent by construction and not made."""
+    spans = []
+    for node in ast.walk(ast.parse(source)):
+        found = []
+        if isinstance(node, ast.arg | ast.AnnAssign) and node.annotation is not None:
+            found.append(node.annotation)
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.returns:
+            found.append(node.returns)
+        spans.extend(((a.lineno, a.col_offset), (a.end_lineno, a.end_col_offset))
+                     for a in found)
+    return spans
+
+
 def mutants(path: str) -> list[Mutant]:
     """Every mutant of ``path`` (relative to the repository), in source order."""
     from cosmic_ray.ast import ast_nodes, get_ast
@@ -175,6 +282,7 @@ def mutants(path: str) -> list[Mutant]:
 
     source = (ROOT / path).read_text()
     lines = source.splitlines()
+    annotations = _annotation_spans(source)
     found = []
     for name in OPERATORS:
         operator = get_operator(name)()
@@ -182,12 +290,15 @@ def mutants(path: str) -> list[Mutant]:
         for node in ast_nodes(get_ast(source)):
             for index, (start, _end) in enumerate(operator.mutation_positions(node)):
                 line = start[0]
-                if _keep(name, index) and not lines[line - 1].rstrip().endswith(PRAGMA):
+                if (_keep(name, index) and not lines[line - 1].rstrip().endswith(PRAGMA)
+                        and not any(a <= start < b for a, b in annotations)):
                     mutated = MutationVisitor.mutate_code(source, operator, occurrence)
                     if mutated is not None and mutated != source:
                         after = mutated.splitlines()[line - 1].strip()
+                        above = next((text.strip() for text in reversed(lines[:line - 1])
+                                      if text.strip()), "")
                         found.append(Mutant(path, name, occurrence, line, mutated,
-                                            lines[line - 1].strip(), after))
+                                            lines[line - 1].strip(), after, above))
                 occurrence += 1
     found.sort(key=lambda m: (m.line, m.operator, m.occurrence))
     return found
@@ -239,6 +350,15 @@ def _child(tests: tuple[str, ...], timeout_s: float, mutant: Mutant | None,
         signal.alarm(max(1, int(timeout_s)))
         if mutant is not None:
             _serve_mutant(module_name(mutant.path), ROOT / mutant.path, mutant.source)
+        from hypothesis import HealthCheck
+        from hypothesis import settings as hypothesis_settings
+
+        # The same examples for every mutant and the baseline, no shared example database,
+        # and no health check that a loaded machine fails (that would count as a kill).
+        hypothesis_settings.register_profile(
+            "mutation", derandomize=True, database=None, deadline=None,
+            suppress_health_check=list(HealthCheck))
+        hypothesis_settings.load_profile("mutation")
         import pytest
 
         code = pytest.main(["-x", "-q", "--no-header", *PYTEST_PLUGINS_OFF,
@@ -299,9 +419,13 @@ def _end_children() -> None:
 
 
 def equivalent_reason(mutant: Mutant) -> str | None:
-    """Why ``mutant`` is equivalent, if :data:`EQUIVALENT` lists it."""
+    """Why ``mutant`` is equivalent, if :data:`EQUIVALENT` lists it (a line that occurs more
+    than once is told apart by the line above it: ``above\nline``)."""
     for path, before, after, why in EQUIVALENT:
-        if (path, before, after) == (mutant.path, mutant.before, mutant.after):
+        if (path, after) != (mutant.path, mutant.after):
+            continue
+        above, _, line = before.rpartition("\n")
+        if line == mutant.before and (not above or above == mutant.above):
             return why
     return None
 
@@ -380,8 +504,13 @@ def _stop(signum: int, _frame: object) -> None:
 def equivalents_table() -> str:
     """The :data:`EQUIVALENT` list as a Markdown table (docs/testing.md)."""
     rows = ["| module | line | mutant | why it is equivalent |", "|---|---|---|---|"]
+    def cell(text: str) -> str:
+        return text.replace("|", "\\|")
+
     for path, before, after, why in EQUIVALENT:
-        rows.append(f"| `{path}` | `{before}` | `{after}` | {why} |")
+        above, _, line = before.rpartition("\n")
+        where = f"`{cell(line)}` (after `{cell(above)}`)" if above else f"`{cell(line)}`"
+        rows.append(f"| `{path}` | {where} | `{cell(after)}` | {cell(why)} |")
     return "\n".join(rows)
 
 
@@ -421,8 +550,12 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _stop)
     try:
         _preload(cache_dir)
-        results = {path: score_module(path, args.progress, args.jobs, args.all)
-                   for path in paths}
+        results = {}
+        for path in paths:
+            results[path] = result = score_module(path, args.progress, args.jobs, args.all)
+            print(f"mutation_score: {path}: {result.killed} killed, {result.survived} survived "
+                  f"({result.score * 100:.1f} %), {result.equivalent} equivalent, "
+                  f"{result.seconds:.0f} s", file=sys.stderr, flush=True)
     except KeyboardInterrupt:
         print("mutation_score: stopped", file=sys.stderr)
         return 130

@@ -137,6 +137,8 @@ def random_design(rng: np.random.Generator):
     gt_order = 2 if tool[0] > 0 else 1 if tool[1] > 0 else 0  # degree of 1/Gt
     sh = COMPLIANCES[rng.integers(2)]
     st_ = COMPLIANCES[rng.integers(2)]
+    # Gh's poles up to 200 rad/s: the expanded polynomials then span up to ~1e17 (see
+    # test_a_realisable_design_with_a_wide_coefficient_spread_is_accepted).
     gh_poles = list(rng.uniform(0.1, 200.0, rng.integers(1, 5)))
     # With Sh (relative degree 2) Ct1 = (Gh Ch1 + Sh) / (Gh Ah2) needs Gh to roll off no
     # faster than Sh: at most two more poles than zeros.
@@ -272,14 +274,43 @@ def test_the_independent_verdict_knows_the_refusals_above() -> None:
     assert expected_refusal(custom_axis(), tf([1.0], [1.0, 10.0, 0.0])) is None
 
 
-@pytest.mark.parametrize("seed", [490, 1066, 1368, 2079, 2904])
-def test_large_trailing_coefficients_do_not_cost_a_leading_one(seed: int) -> None:
-    """Designs whose products have trailing coefficients near 1e14: a cleaning threshold
-    relative to the largest coefficient dropped the compensators' leading 1 and refused
-    them as improper (found by the property test above)."""
-    axis, ch1, _ = random_design(np.random.default_rng(seed))
+def test_compensators_are_immutable(paper_model) -> None:
+    import dataclasses
+
+    axis = synthesize(paper_model)[0]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        axis.ch1 = axis.ct1
+
+
+def test_cancel_common_roots_of_zero_and_of_shared_integrators() -> None:
+    from haptic.common.synthesis import cancel_common_roots
+
+    num, den = cancel_common_roots(np.array([0.0, 0.0]), np.array([2.0, 4.0]))
+    assert num.tolist() == [0.0] and den.tolist() == [1.0]
+    num, den = cancel_common_roots(np.array([3.0, 0.0]), np.array([2.0, 20.0, 0.0]))
+    assert num.tolist() == [1.5] and den.tolist() == [1.0, 10.0]  # s / (s (s + 10)), monic
+    num, den = cancel_common_roots(np.array([1.0, 0.0, 0.0]), np.array([1.0, 0.0]))
+    assert num.tolist() == [1.0, 0.0] and den.tolist() == [1.0]
+
+
+def test_a_pole_at_the_rhp_tolerance_is_marginal_not_unstable() -> None:
+    from haptic.common.synthesis import RHP_TOLERANCE, _rhp_poles
+
+    assert _rhp_poles(tf([1.0], [1.0, -RHP_TOLERANCE])).size == 0  # exactly at it: marginal
+    assert _rhp_poles(tf([1.0], [1.0, -2.0 * RHP_TOLERANCE])).size == 1
+    with pytest.raises(SynthesisError, match="Ch1 is not realisable"):
+        synthesize_axis(custom_axis(), tf([1.0], [1.0, -4.0 * RHP_TOLERANCE, 0.0]))
+
+
+def test_a_realisable_design_with_a_wide_coefficient_spread_is_accepted() -> None:
+    """A relative cleaning threshold once dropped the compensators' leading 1 here (the
+    synthesis now judges cancellations per coefficient: common/synthesis.py ``_add``)."""
+    # Gh with poles near 200 rad/s: its denominator's coefficients span 1 to 6.6e8, the
+    # compensators' about 1e17. Found by the property test (seed 490 of the wider generator).
+    gh = ([1.0, 103.6636, 3299.2811, 30688.0114, 3236.4419],
+          [1.0, 652.6701, 157973.686, 16771994.9, 657157410.0])
+    axis = custom_axis(0.5, 1.0, COMPLIANCES[1], COMPLIANCES[1], gh,
+                       (1.597, 38.3086, 17.3058))
+    ch1 = tf([22.9881, 733.8891], [1.0, 65.0493, 949.839, 3974.4837])
     assert expected_refusal(axis, ch1) is None
-    compensators = synthesize_axis(axis, ch1)
-    for system in compensators.as_dict().values():
-        num, den = tf_coefficients(system)
-        assert polynomial_degree(num) <= polynomial_degree(den)
+    synthesize_axis(axis, ch1)

@@ -179,21 +179,42 @@ def test_handle_speed_trip_level(block, axis, sign, level, trips) -> None:
 @pytest.mark.parametrize("side", ["min", "max"])
 @pytest.mark.parametrize("axis", [0, 1])
 def test_workspace_trip_margin(block, axis, side, level, trips) -> None:
-    safety = _safety(workspace_trip_margin_m=0.01, velocity_trip_m_per_s=1e9)
+    """Walls and margin in binary fractions, so that "at" is exactly at the trip level."""
+    safety = _safety(workspace_min_m=(-0.5, -0.25), workspace_max_m=(0.25, 0.5),
+                     workspace_trip_margin_m=0.25, velocity_trip_m_per_s=1e9)
     node = MasterNode(block, safety)
     edge = (safety.workspace_min_m if side == "min" else safety.workspace_max_m)[axis]
     outward = -1.0 if side == "min" else 1.0
-    offset = {"under": 0.01 - 1e-7, "at": 0.01, "over": 0.01 + 1e-7}[level]
+    offset = {"under": 0.25 - 2.0**-20, "at": 0.25, "over": 0.25 + 2.0**-20}[level]
     position = np.zeros((1, 2))
     position[0, axis] = edge + outward * offset
     state = node.activate(np.zeros((1, 2)))
     node.step(state, np.zeros((1, 2)), position, np.zeros((1, 2)))
-    # "at" is decided by float rounding of edge + margin: only under and over are pinned
-    if level != "at":
-        assert bool(state.faulted[0]) is trips
+    assert bool(state.faulted[0]) is trips
     if trips:
         assert (state.events[-1].reason, state.events[-1].axis) == (
             "handle outside the workspace", "xy"[axis])
+
+
+@pytest.mark.parametrize("column", range(6))
+def test_each_non_finite_input_trips_with_its_reason_and_axis(block, column) -> None:
+    """NaN in any of the six inputs (fh x y, yh x y, ft x y): the lane trips at once, names
+    the input and the axis, holds the last finite position and keeps it as such."""
+    node = MasterNode(block, _safety())
+    start = np.array([[0.01, -0.02]])
+    state = _enabled(node, start)
+    inputs = np.array([[0.0, 0.0, 0.01 + 1e-5, -0.02 - 1e-5, 0.0, 0.0]])  # the handle moved
+    inputs[0, column] = np.nan
+    command = node.step(state, inputs[:, 0:2], inputs[:, 2:4], inputs[:, 4:6])
+    assert state.faulted[0]
+    reason = ("handle force", "handle position", "tool force")[column // 2]
+    assert (state.events[-1].kind, state.events[-1].reason, state.events[-1].axis) == (
+        "trip", f"non-finite {reason}", "xy"[column % 2])
+    # it holds where it was before this sample, whichever input failed
+    np.testing.assert_array_equal(command, start)
+    np.testing.assert_array_equal(state.hold_m, start)
+    measured = np.where(np.isfinite(inputs[:, 2:4]), inputs[:, 2:4], start)
+    np.testing.assert_array_equal(state.last_position_m, measured)
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
@@ -247,10 +268,10 @@ def test_command_is_clamped_to_each_wall_of_the_workspace(block, axis, sign) -> 
 def test_the_force_gate_needs_exactly_n_strictly_small_samples(block, samples) -> None:
     node = MasterNode(block, _safety(ramp_small_samples=samples, ramp_small_force_N=0.5))
     state = node.activate(np.zeros((1, 2)))
-    at_threshold = np.array([[0.0, -0.5]])  # not small: |f| < 0.5 N is required
-    for _ in range(samples + 3):
-        node.step(state, at_threshold, np.zeros((1, 2)), np.zeros((1, 2)))
-    assert not state.forces_enabled[0] and state.small_force_count[0] == 0
+    for at_threshold in ([[0.0, -0.5]], [[0.5, 0.0]]):  # not small: |f| < 0.5 N is required
+        for _ in range(samples + 3):
+            node.step(state, np.array(at_threshold), np.zeros((1, 2)), np.zeros((1, 2)))
+        assert not state.forces_enabled[0] and state.small_force_count[0] == 0
     small = np.array([[0.5 - EPS, -(0.5 - EPS)]])
     for _ in range(samples - 1):
         node.step(state, small, np.zeros((1, 2)), np.zeros((1, 2)))
@@ -261,3 +282,94 @@ def test_the_force_gate_needs_exactly_n_strictly_small_samples(block, samples) -
     assert [e.kind for e in state.events] == ["enable"]
     assert state.events[0].reason == f"forces enabled after {samples} small-force samples"
     np.testing.assert_array_equal(state.handle_force_used_N, small)  # ramp_time 0: at once
+
+
+# --- the node's bookkeeping: lanes, events' times and order, outside trips by index ---------
+
+
+def test_events_carry_step_and_time_and_are_frozen(block) -> None:
+    node = MasterNode(block, _safety())
+    state = _enabled(node)
+    for _ in range(4):
+        node.step(state, np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2)))
+    node.step(state, np.array([[0.0, 9.0]]), np.zeros((1, 2)), np.zeros((1, 2)))
+    event = state.events[-1]
+    assert (event.kind, event.step) == ("saturate", 7)
+    assert event.time_s == pytest.approx(7 * block.period_s, rel=1e-12)
+    node.trip(state, np.array([0]), "test: outside trip")  # indices, not a mask
+    assert state.faulted[0]
+    trip = state.events[-1]
+    assert (trip.kind, trip.step, trip.reason) == ("trip", 8, "test: outside trip")
+    assert trip.time_s == pytest.approx(8 * block.period_s, rel=1e-12)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        trip.kind = "enable"
+
+
+def test_resume_events_are_at_step_zero(block) -> None:
+    node = MasterNode(block, _safety())
+    state = node.resume(np.zeros((2, 2)))
+    assert state.lanes == 2
+    assert [(e.kind, e.step, e.time_s, e.lane) for e in state.events] == [
+        ("enable", 0, 0.0, 0), ("enable", 0, 0.0, 1)]
+
+
+def test_trips_in_one_step_are_ordered_by_reason_then_lane(block) -> None:
+    node = MasterNode(block, _safety())
+    state = node.activate(np.zeros((3, 2)))
+    position = np.zeros((3, 2))
+    position[0, 1] = np.nan  # lane 0: non-finite position, y (code 3)
+    position[1, 0] = np.nan  # lane 1: non-finite position, x (code 2)
+    tool = np.zeros((3, 2))
+    tool[2, 0] = np.inf  # lane 2: non-finite tool force, x (code 4)
+    node.step(state, np.zeros((3, 2)), position, tool)
+    assert [(e.lane, e.reason, e.axis) for e in state.events] == [
+        (0, "non-finite handle position", "y"), (1, "non-finite handle position", "x"),
+        (2, "non-finite tool force", "x")]
+    state = node.activate(np.zeros((2, 2)))
+    position = np.zeros((2, 2))
+    position[1, 1] = np.nan  # lane 1: position y (code 3), before lane 0's tool force
+    tool = np.zeros((2, 2))
+    tool[0, 0] = np.nan  # lane 0: tool force x (code 4)
+    node.step(state, np.zeros((2, 2)), position, tool)
+    assert [e.lane for e in state.events] == [1, 0]
+
+
+def test_a_compensator_with_other_inputs_or_outputs_is_refused(block) -> None:
+    import dataclasses as dc
+
+    for change in ({"output_names": ("vt_x", "vt_y")},
+                   {"input_names": ("a", "b", "c", "d")}):
+        with pytest.raises(ValueError, match="compensator must map"):
+            MasterNode(dc.replace(block, **change), _safety())
+
+
+def test_a_stacked_compensator_needs_one_lane_each(paper_model) -> None:
+    from haptic.lockstep.stacked import StackedLTI
+
+    stacked = StackedLTI.from_blocks([master_compensator(paper_model.with_gain(k))
+                                      for k in (1.0, 5.0, 13.0)])
+    node = MasterNode(stacked, _safety())
+    with pytest.raises(ValueError, match="compensator stacked for 3 lanes, activated with 2"):
+        node.activate(np.zeros((2, 2)))
+    assert node.activate(np.zeros((3, 2))).lanes == 3
+
+
+def test_the_kernel_steps_a_general_coupled_block(block) -> None:
+    """Every entry of A, B, C and D counts (the paper's block is diagonal per axis, so its
+    cross terms are zero): a random stable coupled block gives its own exact response."""
+    from haptic.common.lti import DiscreteLTI
+
+    rng = np.random.default_rng(5)
+    n = 3
+    a = rng.normal(0.0, 0.2, (n, n))
+    coupled = DiscreteLTI(a, rng.normal(0.0, 1e-3, (n, 4)), rng.normal(0.0, 1e-2, (2, n)),
+                          rng.normal(0.0, 1e-4, (2, 4)), block.period_s, block.input_names,
+                          block.output_names)
+    node = MasterNode(coupled, _safety())
+    state = _enabled(node)
+    reference = coupled.initial_state(1)
+    for _ in range(20):
+        fh, ft = rng.uniform(-1.5, 1.5, (1, 2)), rng.uniform(-1.5, 1.5, (1, 2))
+        command = node.step(state, fh, np.zeros((1, 2)), ft)
+        expected = coupled.step(reference, np.concatenate([fh, ft], axis=1))
+        np.testing.assert_allclose(command, expected, rtol=1e-12, atol=1e-18)

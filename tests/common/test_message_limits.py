@@ -1,0 +1,123 @@
+"""The decoder's limits pinned at the value: each range check accepts its last valid value and
+refuses the next one, the flags keep their wire values, floats travel as float64."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import msgpack
+import pytest
+
+from haptic.common.messages import (
+    KIND_HANDLE,
+    KIND_TOOL,
+    SCHEMA_VERSION,
+    DecodeError,
+    DropReason,
+    Flags,
+    HandleState,
+    ToolState,
+    decode,
+    encode,
+)
+
+MAX_U32 = 2**32 - 1
+MAX_U63 = 2**63 - 1
+
+
+def _handle(epoch=1, seq=2, send=3, flags=2, floats=(0.5, -0.5, 0.01, 0.02)) -> bytes:
+    return msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, epoch, seq, send, flags, *floats])
+
+
+def _tool(engagement=0.5, volume=1e-9, flags=2) -> bytes:
+    return msgpack.packb([SCHEMA_VERSION, KIND_TOOL, 1, 2, 3, flags,
+                          1.0, 2.0, 0.1, 0.2, 0.0, 0.0, engagement, volume])
+
+
+def _refused(payload: bytes, kind: int = KIND_HANDLE) -> DecodeError:
+    with pytest.raises(DecodeError) as caught:
+        decode(payload, kind)
+    return caught.value
+
+
+def test_wire_values_of_the_kinds_and_flags() -> None:
+    assert (SCHEMA_VERSION, KIND_HANDLE, KIND_TOOL) == (1, 1, 2)
+    assert (int(Flags.SAFE_STATE), int(Flags.FORCES_ENABLED), int(Flags.IN_CONTACT)) == (
+        1, 2, 4)
+    wire = msgpack.unpackb(encode(ToolState(0, 0, 0, Flags.IN_CONTACT | Flags.SAFE_STATE,
+                                            (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)))
+    assert wire[1] == 2 and wire[5] == 5
+
+
+@pytest.mark.parametrize("flags", [0, 1, 2, 4, 3, 6, 7])
+def test_flag_properties_read_each_bit_alone(flags: int) -> None:
+    handle = decode(_handle(flags=flags), KIND_HANDLE)
+    tool = decode(_tool(flags=flags), KIND_TOOL)
+    for message in (handle, tool):
+        assert message.safe_state is bool(flags & 1)
+        assert message.forces_enabled is bool(flags & 2)
+    assert tool.in_contact is bool(flags & 4)
+
+
+def test_floats_travel_as_float64() -> None:
+    sent = HandleState(1, 2, 3, Flags.FORCES_ENABLED, (0.1, -1.0 / 3.0), (1e-7, 2.0 / 3.0))
+    assert decode(encode(sent), KIND_HANDLE) == sent
+    tool = ToolState(1, 2, 3, Flags(0), (0.1, 0.2), (0.3, 1e-7), (1.0 / 3.0, 0.7), 0.1, 1e-12)
+    assert decode(encode(tool), KIND_TOOL) == tool
+
+
+def test_messages_are_frozen_and_slotted() -> None:
+    message = decode(_handle(), KIND_HANDLE)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        message.seq = 5
+    tool = decode(_tool(), KIND_TOOL)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        tool.seq = 5
+    assert not hasattr(message, "__dict__") and not hasattr(tool, "__dict__")
+
+
+def test_payload_length_limit_is_1024_bytes() -> None:
+    at_limit = msgpack.packb("a" * 1021)  # str16: 3 header bytes + 1021
+    assert len(at_limit) == 1024
+    assert _refused(at_limit).args[0] != "1024 bytes is too long"
+    assert "not an array" in str(_refused(at_limit))
+    over = msgpack.packb("a" * 1022)
+    assert len(over) == 1025
+    assert "1025 bytes is too long" in str(_refused(over))
+
+
+def test_a_header_needs_six_fields() -> None:
+    header_only = msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, 1, 2, 3, 0])
+    assert "handle payload has 0 values" in str(_refused(header_only))
+    short = msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, 1, 2, 3])
+    assert "not an array with a header" in str(_refused(short))
+
+
+@pytest.mark.parametrize(("field", "last"), [("epoch", MAX_U32), ("seq", MAX_U63),
+                                             ("send", MAX_U63), ("flags", 0xFF)])
+def test_header_integers_accept_their_last_value_and_refuse_the_next(field, last) -> None:
+    decoded = decode(_handle(**{field: last}), KIND_HANDLE)
+    assert {"epoch": decoded.epoch, "seq": decoded.seq, "send": decoded.send_time_ns,
+            "flags": int(decoded.flags)}[field] == last
+    decode(_handle(**{field: 0}), KIND_HANDLE)
+    for bad in (last + 1, -1):
+        error = _refused(_handle(**{field: bad}))
+        assert error.reason is DropReason.MALFORMED
+
+
+@pytest.mark.parametrize("engagement", [0.0, 1.0])
+def test_engagement_accepts_both_ends_of_0_to_1(engagement: float) -> None:
+    assert decode(_tool(engagement=engagement), KIND_TOOL).clay_engagement == engagement
+
+
+@pytest.mark.parametrize("engagement", [-1e-12, 1.0 + 1e-12])
+def test_engagement_outside_0_to_1_is_refused(engagement: float) -> None:
+    error = _refused(_tool(engagement=engagement), KIND_TOOL)
+    assert error.reason is DropReason.MALFORMED
+    assert str(error) == f"malformed: clay_engagement {engagement} outside 0..1"
+
+
+def test_removed_volume_may_be_zero_never_negative() -> None:
+    assert decode(_tool(volume=0.0), KIND_TOOL).removed_volume_m3 == 0.0
+    error = _refused(_tool(volume=-1e-15), KIND_TOOL)
+    assert str(error) == "malformed: removed_volume_m3 -1e-15 is negative"

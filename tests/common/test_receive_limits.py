@@ -1,0 +1,186 @@
+"""The receive path's limits at the value: staleness and clock skew at their thresholds, ties
+in send time and sequence, the counts each drop adds, and the statistics' exact figures."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from haptic.common.injection import InjectionConfig
+from haptic.common.messages import KIND_HANDLE, Flags, HandleState, encode
+from haptic.common.receive import ReceivePath
+
+MS = 1_000_000
+T0 = 1_700_000_000_000_000_000
+STALE_S = 0.05
+
+
+def handle(seq: int, send_ns: int, epoch: int = 1) -> bytes:
+    return encode(HandleState(epoch, seq, send_ns, Flags(0), (1.0, -1.0), (0.01, 0.02)))
+
+
+def path(stale_s: float = STALE_S) -> ReceivePath:
+    return ReceivePath(KIND_HANDLE, InjectionConfig(), np.random.default_rng(0), stale_s)
+
+
+@pytest.mark.parametrize("stale_ms", [50, 1000])
+def test_a_message_exactly_stale_after_old_is_delivered_one_ns_more_is_dropped(stale_ms) -> None:
+    p = path(stale_ms / 1e3)
+    p.accept(handle(0, T0), T0 + stale_ms * MS)
+    assert p.release(T0 + stale_ms * MS) is not None
+    p.accept(handle(1, T0 + MS), T0 + MS + stale_ms * MS + 1)
+    assert p.release(T0 + 2 * stale_ms * MS) is None
+    stats = p.stats()
+    assert stats.dropped["stale"] == 1 and stats.delivered == 1
+    assert stats.network_lost == 0  # a stale message is sent, not lost
+
+
+def test_clock_skew_counts_beyond_one_ms_into_the_future() -> None:
+    p = path()
+    p.accept(handle(0, T0 + MS), T0)  # 1 ms early: tolerated
+    p.accept(handle(1, T0 + 2 * MS + 1), T0 + MS)  # 1 ms + 1 ns early: skew
+    p.accept(handle(2, T0 + 2 * MS), T0 + 3 * MS)  # late, as normal
+    stats = p.stats()
+    assert stats.clock_skew == 1
+    assert stats.dropped["stale"] == 0
+
+
+def test_a_duplicate_is_out_of_order_once_and_never_undoes_a_loss() -> None:
+    p = path()
+    p.accept(handle(0, T0), T0)
+    p.accept(handle(2, T0 + 2 * MS), T0 + 2 * MS)  # seq 1 missing: one lost
+    assert p.stats().network_lost == 1
+    p.accept(handle(2, T0 + 2 * MS), T0 + 2 * MS)  # a duplicate of the highest
+    stats = p.stats()
+    assert (stats.reordered, stats.dropped["out_of_order"], stats.network_lost) == (1, 1, 1)
+    p.accept(handle(1, T0 + MS), T0 + 3 * MS)  # the missing one, late: fills the gap
+    stats = p.stats()
+    assert (stats.reordered, stats.network_lost) == (2, 0)
+    p.accept(handle(1, T0 + MS), T0 + 3 * MS)  # once more: no loss left to undo
+    assert p.stats().network_lost == 0
+    assert p.stats().reordered == 3
+
+
+def test_a_new_epoch_at_the_same_send_time_is_a_late_message_of_the_old_one() -> None:
+    p = path()
+    p.accept(handle(5, T0 + 10 * MS, epoch=1), T0 + 10 * MS)
+    p.accept(handle(0, T0 + 10 * MS, epoch=2), T0 + 10 * MS)  # same send time: not newer
+    stats = p.stats()
+    assert (stats.peer_restarts, stats.reordered, stats.dropped["out_of_order"]) == (0, 1, 1)
+    p.accept(handle(0, T0 + 10 * MS + 1, epoch=2), T0 + 11 * MS)  # 1 ns later: a restart
+    stats = p.stats()
+    assert (stats.peer_restarts, stats.reordered) == (1, 1)
+    assert p.release(T0 + 12 * MS).epoch == 2  # the old epoch's pending one was cleared
+    # expected: the old epoch's one message (seq 5..5) and the new epoch's one (seq 0..0)
+    stats = p.stats()
+    assert (stats.expected, stats.delivered) == (2, 1)
+
+
+def test_expected_counts_each_epochs_span_of_sequence_numbers() -> None:
+    p = path()
+    for seq in (3, 4, 6):
+        p.accept(handle(seq, T0 + seq * MS, epoch=7), T0 + seq * MS)
+    p.release(T0 + 10 * MS)
+    stats = p.stats()
+    assert stats.expected == 4  # seq 3..6
+    assert stats.delivered == 3 and stats.network_lost == 1
+    assert stats.loss_ratio == pytest.approx(0.25, rel=1e-12)
+    assert stats.network_loss_ratio == pytest.approx(0.25, rel=1e-12)
+    for seq in (10, 11):
+        p.accept(handle(seq, T0 + (20 + seq) * MS, epoch=8), T0 + (20 + seq) * MS)
+    p.release(T0 + 40 * MS)
+    stats = p.stats()
+    assert stats.expected == 4 + 2 and stats.peer_restarts == 1
+
+
+def test_one_delivered_message_gives_finite_statistics() -> None:
+    p = path()
+    assert math.isnan(p.stats().loss_ratio) and p.stats().expected == 0
+    p.accept(handle(0, T0), T0 + 2 * MS)
+    assert p.release(T0 + 3 * MS) is not None
+    stats = p.stats()
+    assert stats.expected == 1 and stats.loss_ratio == 0.0 and stats.network_loss_ratio == 0.0
+    assert stats.one_way_delay_max_s == pytest.approx(2e-3, rel=0.05)
+    assert stats.age_at_use_p50_s == pytest.approx(3e-3, rel=0.05)
+
+
+def test_release_keeps_only_the_newest_and_counts_the_superseded() -> None:
+    p = path()
+    for seq in range(4):
+        p.accept(handle(seq, T0 + seq * MS), T0 + seq * MS)
+    assert p.release(T0 + 1 * MS).seq == 1
+    assert p.release(T0 + 10 * MS).seq == 3
+    stats = p.stats()
+    assert (stats.delivered, stats.superseded) == (4, 2)
+    assert p.last_delivery_ns == T0 + 3 * MS
+
+
+def test_delay_percentiles_are_the_50th_and_99th() -> None:
+    p = path(stale_s=1.0)
+    delays_ms = [1] * 90 + [20] * 9 + [100]
+    for seq, delay in enumerate(delays_ms):
+        send = T0 + seq * 200 * MS
+        p.accept(handle(seq, send), send + delay * MS)
+        p.release(send + delay * MS)
+    stats = p.stats()
+    assert stats.one_way_delay_p50_s == pytest.approx(1e-3, rel=0.1)
+    assert stats.one_way_delay_p99_s == pytest.approx(20e-3, rel=0.1)
+    assert stats.one_way_delay_max_s == pytest.approx(0.1, rel=0.1)
+    assert stats.age_at_use_p99_s == pytest.approx(20e-3, rel=0.1)
+
+
+def test_stats_are_frozen() -> None:
+    stats = path().stats()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        stats.delivered = 3
+
+
+def test_release_after_reordering_counts_each_late_one_and_goes_on_to_the_newest() -> None:
+    """Jitter without order preservation: a message due after a newer one was handed over
+    is dropped and counted once; the release still reaches the newest due message."""
+    receive = ReceivePath(KIND_HANDLE, InjectionConfig(jitter_s=0.01, preserve_order=False),
+                          np.random.default_rng(1), STALE_S)
+    for seq in range(300):
+        receive.accept(handle(seq, T0 + seq * 100_000), T0 + seq * 100_000)
+    last = None
+    for step in range(1200):
+        now_ns = T0 + step * 50_000
+        message = receive.release(now_ns)
+        last = message or last
+        assert receive.release(now_ns) is None  # everything due was handled at once
+    stats = receive.stats()
+    assert stats.reordered == stats.dropped["out_of_order"] > 0
+    assert receive.pending == 0 and stats.delivered + stats.reordered == 300
+    assert last is not None and last.seq == 299  # the newest of all was handed over last
+
+
+def test_a_stale_duplicate_changes_no_loss_count() -> None:
+    p = path()
+    p.accept(handle(0, T0), T0)
+    p.accept(handle(1, T0 + MS), T0 + MS)
+    p.accept(handle(1, T0 + MS), T0 + MS + 60 * MS)  # the same message again, now stale
+    stats = p.stats()
+    assert stats.network_lost == 0 and stats.dropped["stale"] == 1
+
+
+def test_a_single_stale_message_is_a_total_loss() -> None:
+    p = path()
+    p.accept(handle(0, T0), T0 + 60 * MS)
+    stats = p.stats()
+    assert stats.expected == 1 and stats.delivered == 0
+    assert stats.loss_ratio == 1.0 and stats.network_loss_ratio == 0.0
+
+
+def test_the_median_is_the_50th_percentile() -> None:
+    p = path(stale_s=1.0)
+    delays_ms = [1] * 50 + [20] * 50
+    for seq, delay in enumerate(delays_ms):
+        send = T0 + seq * 200 * MS
+        p.accept(handle(seq, send), send + delay * MS)
+        p.release(send + delay * MS)
+    stats = p.stats()
+    assert stats.one_way_delay_p50_s == pytest.approx(1e-3, rel=0.1)
+    assert stats.age_at_use_p50_s == pytest.approx(1e-3, rel=0.1)
