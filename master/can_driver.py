@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import struct
 import sys
+import threading
 import time
 from typing import Any
 
 import can
 import numpy as np
+from can.broadcastmanager import ThreadBasedCyclicSendTask
 
 from haptic.master import cia402
 from haptic.master.bus_load import BusLoad, bus_load
@@ -101,6 +103,8 @@ class CanHandleDriver(HandleHardware):
         #: disabled drives must not fault; while active, read() sends it, so a stalled loop
         #: stops the drives by their heartbeat consumer
         self._idle_heartbeat: Any = None
+        #: errors that stopped the idle heartbeat task (bus gone), for diagnosis
+        self.idle_heartbeat_errors: list[str] = []
         nodes = settings.node_ids
         #: frame id -> (kind, axis) of every frame read() acts on.
         self._dispatch: dict[int, tuple[int, int]] = {}
@@ -161,6 +165,9 @@ class CanHandleDriver(HandleHardware):
             options = ", ".join(f"{k}={v}" for k, v in self.bus_options.items())
             raise HardwareError(f"cannot open the CAN bus ({options}): {error}") from None
         try:
+            # the master's heartbeat from now on: a drive consumes it as soon as its 0x1016 is
+            # written, and configuring the other drive by SDO can take longer than its timeout
+            self._start_idle_heartbeat()
             for node in self.settings.node_ids:
                 self._nmt(cia402.NMT_PRE_OPERATIONAL, node)
             self.identities = []
@@ -362,7 +369,16 @@ class CanHandleDriver(HandleHardware):
             return
         message = can.Message(arbitration_id=HEARTBEAT_BASE + self.settings.master_node_id,
                               data=self._master_heartbeat, is_extended_id=False)
-        self._idle_heartbeat = self._bus.send_periodic(message, self._heartbeat_period_s)
+
+        def stop_on_error(error: Exception) -> bool:
+            # the bus went away (its peer ended, or it is closing): stop, and let the next
+            # read() report the bus; never an exception in a background thread
+            self.idle_heartbeat_errors.append(f"{type(error).__name__}: {error}")
+            return False
+
+        self._idle_heartbeat = ThreadBasedCyclicSendTask(
+            self._bus, threading.Lock(), message, self._heartbeat_period_s,
+            on_error=stop_on_error)
 
     def _stop_idle_heartbeat(self) -> None:
         task, self._idle_heartbeat = self._idle_heartbeat, None

@@ -183,7 +183,7 @@ def test_killed_slave_trips_the_master_and_a_new_slave_resumes(pair, tmp_path) -
     # The master waits for a slave once its simulated rig (a child process) answers.
     _read_until(master, "waiting for the slave")
     first = pair.slave(None, tmp_path / "slave1.json")
-    time.sleep(0.5)
+    _read_until(first, "waiting for the master")  # however long its start-up takes
     assert first.poll() is None and master.poll() is None
     # Let the loop run, then kill the slave by its own PID.
     time.sleep(2.5)
@@ -193,7 +193,10 @@ def test_killed_slave_trips_the_master_and_a_new_slave_resumes(pair, tmp_path) -
     time.sleep(1.0)
     second_json = tmp_path / "slave2.json"
     second = pair.slave(None, second_json)
-    time.sleep(3.5)
+    # its signal handlers are in place once it waits for the master (a SIGTERM during its
+    # start-up, on a loaded machine, would end it by the default action)
+    _read_until(second, "waiting for the master")
+    time.sleep(2.5)
     # SIGTERM to each program: both end cleanly with status 0 and write their summaries.
     for process in (second, master):
         sent = time.monotonic()
