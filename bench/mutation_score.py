@@ -76,6 +76,15 @@ MODULES: dict[str, Target] = {
                                  "tests/common/test_message_limits.py",
                                  "tests/common/test_messages.py")),
     "common/synthesis.py": Target(("tests/common/test_synthesis.py",)),
+    "master/supervisor.py": Target(("tests/master/test_supervisor.py",)),
+    "slave_sim/supervisor.py": Target(("tests/slave_sim/test_supervisor.py",
+                                       "tests/wire/test_supervisor_policy.py")),
+    "slave_sim/input_guard.py": Target(("tests/wire/test_input_guard.py",)),
+    "common/auth.py": Target(("tests/wire/test_auth.py",)),
+    "common/clay_contact.py": Target(("tests/slave_sim/test_clay.py",
+                                      "tests/lockstep/test_clay_analysis.py")),
+    "slave_sim/clay.py": Target(("tests/slave_sim/test_clay.py",)),
+    "slave_sim/clay_kernels.py": Target(("tests/slave_sim/test_clay.py",), every=3),
 }
 
 _BINARY = (("Add", "Sub"), ("Sub", "Add"), ("Mul", "Div"), ("Div", "Mul"), ("FloorDiv", "Div"),

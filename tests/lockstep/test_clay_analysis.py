@@ -35,6 +35,19 @@ def test_clay_impedance_is_b_s_at_low_frequency_and_softer_above() -> None:
     assert passivity_margin_N_s_per_m(100.0, 0.00054) == pytest.approx(100 - 0.54 - 50)
 
 
+@pytest.mark.parametrize("damping_N_s_per_m", [0.0, 1.0, 20.0])
+def test_clay_impedance_coefficients_and_no_clay(damping_N_s_per_m) -> None:
+    """No clay (B = 0) renders no force: the polynomial pair 0 / 1; any B > 0, even 1 N s/m,
+    is the series damper-spring-damper B s (K + b s) / (K + (B + b) s)."""
+    num, den = clay_impedance(damping_N_s_per_m, 2000.0, 50.0)
+    if damping_N_s_per_m == 0.0:
+        assert (num.tolist(), den.tolist()) == ([0.0], [1.0])
+        return
+    c = damping_N_s_per_m
+    assert num.tolist() == [c * 50.0, c * 2000.0, 0.0]
+    assert den.tolist() == [c + 50.0, 2000.0]
+
+
 def test_the_proxy_contact_stabilises_the_paper_loop_at_k_1(paper_model) -> None:
     """The plain damper B s has a 12 ms margin at k = 1 and no stable k above 1.25; the
     contact's linearisation is stable for every delay at k = 1."""

@@ -109,5 +109,37 @@ def test_a_node_trip_turns_forces_off_at_the_next_tick() -> None:
 def test_a_non_finite_handle_position_is_never_held() -> None:
     supervisor = make()
     run_in_sync(supervisor, RESYNC)
-    supervisor.update(1.0, None, (float("nan"), float("inf")), silence_s=1.0)
-    assert np.all(np.isfinite(supervisor.hold_m))
+    supervisor.update(1.0, None, (float("nan"), 0.03), silence_s=1.0)
+    np.testing.assert_array_equal(supervisor.hold_m, [0.0, 0.03])
+
+
+@pytest.mark.parametrize("tolerance_m", [0.0, -0.001, float("nan")])
+def test_a_tolerance_that_is_not_positive_is_refused(tolerance_m) -> None:
+    with pytest.raises(ValueError, match="sync_tolerance_m"):
+        MasterSupervisor(RATIO, tolerance_m, MAX_AGE_S, RESYNC)
+
+
+def test_before_start_the_hold_is_the_origin_of_both_axes() -> None:
+    supervisor = MasterSupervisor(RATIO, 0.001, MAX_AGE_S, RESYNC)
+    np.testing.assert_array_equal(supervisor.hold_m, [0.0, 0.0])
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_an_offset_of_exactly_the_tolerance_is_not_in_sync(axis) -> None:
+    """The band is open: |yt - Ah1 yh| < tolerance (0.25 m and 0.5 are exact binary)."""
+    supervisor = MasterSupervisor((1.0, 1.0), 0.25, MAX_AGE_S, RESYNC)
+    position = [0.0, 0.0]
+    position[axis] = 0.25
+    supervisor.tool = tool(*position)
+    assert not supervisor.in_sync(0.0, 0.0)
+    position[axis] = 0.2499
+    supervisor.tool = tool(*position)
+    assert supervisor.in_sync(0.0, 0.0)
+
+
+def test_a_fault_without_a_cycle_is_logged_at_cycle_0() -> None:
+    supervisor = make()
+    supervisor.update(0.0, None, (0.01, 0.02), faults=("drive x: EMCY 0x8130",))
+    supervisor.update(PERIOD_S, None, (0.01, 0.02), faults=("drive y: EMCY 0x8130",), cycle=7)
+    assert supervisor.hardware_faults == ["cycle 0: drive x: EMCY 0x8130",
+                                          "cycle 7: drive y: EMCY 0x8130"]

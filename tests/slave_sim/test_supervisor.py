@@ -102,3 +102,71 @@ def test_after_a_work_area_stop_the_tool_runs_again_only_once_back_at_the_handle
     resumed = transitions.index(Transition.RESUME)
     assert resumed >= 24  # 50 mm back at 2 mm a tick, then in sync
     assert supervisor.running and abs(tool_x_m - 0.15) < 0.001
+
+
+def test_a_tolerance_that_is_not_positive_is_refused() -> None:
+    for tolerance_m in (0.0, -0.001, float("nan")):
+        try:
+            SlaveSupervisor(RATIO, tolerance_m, AREA, MAX_AGE_S, RESYNC)
+        except ValueError as error:
+            assert "sync_tolerance_m" in str(error)
+        else:
+            raise AssertionError(f"tolerance {tolerance_m} accepted")
+
+
+def test_before_any_message_nothing_is_enabled_and_the_handle_is_at_the_origin() -> None:
+    supervisor = make()
+    assert supervisor.handle_position_m == (0.0, 0.0)
+    assert not (supervisor.master_enabled or supervisor.ready or supervisor.running
+                or supervisor.rejoining or supervisor.input_fault or supervisor.outside)
+    # the origin is what in_sync compares against before the first message
+    assert supervisor.in_sync(0.0, 0.0) and not supervisor.in_sync(0.0011, 0.0)
+    assert not supervisor.in_sync(0.0, 0.0011)
+
+
+def test_an_offset_of_exactly_the_tolerance_is_not_in_sync() -> None:
+    """The band is open on both axes (0.25 m is an exact binary fraction)."""
+    supervisor = SlaveSupervisor(RATIO, 0.25, AREA, MAX_AGE_S, RESYNC)
+    supervisor.receive(handle(0.0, 0.0))
+    assert not supervisor.in_sync(0.25, 0.0) and not supervisor.in_sync(0.0, -0.25)
+    assert supervisor.in_sync(0.2499, 0.0) and supervisor.in_sync(0.0, -0.2499)
+
+
+def test_the_work_area_edges_belong_to_the_work_area() -> None:
+    """A tool exactly on an edge of the work area keeps running; just beyond it stops."""
+    x_low, x_high, y_low, y_high = AREA
+    for edge in ((x_low, 0.0), (x_high, 0.0), (0.05, y_low), (0.05, y_high)):
+        supervisor = make()
+        start(supervisor)
+        supervisor.receive(handle(*edge, seq=20))
+        assert supervisor.update(0.1, True, edge) is Transition.NONE, edge
+        assert supervisor.running and not supervisor.outside, edge
+    supervisor = make()
+    start(supervisor)
+    assert supervisor.update(0.1, False, (x_high + 1e-9, 0.0)) is Transition.STOP
+    assert supervisor.outside
+
+
+def test_the_handle_exactly_on_the_grids_edge_is_back_over_it() -> None:
+    grid = (0.0, 0.125, -0.0625, 0.0625)  # exact binary fractions
+    for back in ((0.0, 0.0), (0.125, 0.0), (0.05, -0.0625), (0.05, 0.0625)):
+        supervisor = SlaveSupervisor(RATIO, 0.001, AREA, MAX_AGE_S, RESYNC, grid_m=grid)
+        start(supervisor)
+        supervisor.receive(handle(0.3, seq=20))
+        assert supervisor.update(0.1, True, (0.3, 0.0)) is Transition.STOP
+        supervisor.receive(handle(*back, seq=21))
+        supervisor.update(0.1 + PERIOD_S, True, (0.3, 0.0))
+        assert not supervisor.outside and supervisor.rejoining, back
+        assert supervisor.events[-1]["kind"] == "tool_resync"
+
+
+def test_stop_reasons_name_the_watchdog_or_the_master() -> None:
+    supervisor = make()
+    start(supervisor)
+    supervisor.receive(handle(0.05, enabled=False, seq=10))
+    supervisor.update(0.1, True, (0.05, 0.0))
+    assert supervisor.stop_reason() == "the master's forces are off"
+    supervisor.update(0.2, False, (0.05, 0.0), silence_s=1.0)
+    assert supervisor.stop_reason() == "watchdog tripped"
+    supervisor.update(0.3, False, (0.05, 0.0), silence_s=1.0, input_fault=True)
+    assert supervisor.stop_reason() == "input fault"
