@@ -81,7 +81,7 @@ MODULES: dict[str, Target] = {
                                        "tests/wire/test_supervisor_policy.py")),
     "slave_sim/input_guard.py": Target(("tests/slave_sim/test_input_guard_limits.py",
                                         "tests/wire/test_input_guard.py")),
-    "common/auth.py": Target(("tests/wire/test_auth.py",)),
+    "common/auth.py": Target(("tests/wire/test_auth_units.py", "tests/wire/test_auth.py")),
     "common/clay_contact.py": Target(("tests/slave_sim/test_clay.py",
                                       "tests/lockstep/test_clay_analysis.py")),
     "slave_sim/clay.py": Target(("tests/slave_sim/test_clay.py",)),
