@@ -25,13 +25,13 @@ MAX_U32 = 2**32 - 1
 MAX_U63 = 2**63 - 1
 
 
-def _handle(epoch=1, seq=2, send=3, flags=2, floats=(0.5, -0.5, 0.01, 0.02)) -> bytes:
+def _handle(epoch=1, seq=2, send=3, flags=2, floats=(0.5, -0.5, 0.01, 0.02, 13.0)) -> bytes:
     return msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, epoch, seq, send, flags, *floats])
 
 
-def _tool(engagement=0.5, volume=1e-9, flags=2) -> bytes:
+def _tool(engagement=0.5, volume=1e-9, flags=2, echo=0) -> bytes:
     return msgpack.packb([SCHEMA_VERSION, KIND_TOOL, 1, 2, 3, flags,
-                          1.0, 2.0, 0.1, 0.2, 0.0, 0.0, engagement, volume])
+                          1.0, 2.0, 0.1, 0.2, 0.0, 0.0, engagement, volume, echo])
 
 
 def _refused(payload: bytes, kind: int = KIND_HANDLE) -> DecodeError:
