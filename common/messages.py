@@ -8,7 +8,8 @@ Every message is a msgpack array (compact: no field names on the wire)::
     :data:`SCHEMA_VERSION`; a receiver drops any other value (``unknown_version``), and a
     peer of another version is refused at start (common/link.py). Version 2 (issue 17) adds
     the pairing hello (common/auth.py) and, on an authenticated link, a 16-byte tag after
-    the msgpack body.
+    the msgpack body; version 3 (issue 16) the handle's ``gain_k`` and the tool's
+    ``echo_send_time_ns``.
 ``kind``
     :data:`KIND_HANDLE` (master to slave, :class:`HandleState`) or :data:`KIND_TOOL` (slave to
     master, :class:`ToolState`).
@@ -46,7 +47,7 @@ from typing import Any
 
 import msgpack
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 KIND_HANDLE = 1
 KIND_TOOL = 2
 

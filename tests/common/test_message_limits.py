@@ -41,7 +41,7 @@ def _refused(payload: bytes, kind: int = KIND_HANDLE) -> DecodeError:
 
 
 def test_wire_values_of_the_kinds_and_flags() -> None:
-    assert (SCHEMA_VERSION, KIND_HANDLE, KIND_TOOL) == (2, 1, 2)  # 2: authenticated (#17)
+    assert (SCHEMA_VERSION, KIND_HANDLE, KIND_TOOL) == (3, 1, 2)  # 3: gain k and echo (#16)
     assert (int(Flags.SAFE_STATE), int(Flags.FORCES_ENABLED), int(Flags.IN_CONTACT)) == (
         1, 2, 4)
     wire = msgpack.unpackb(encode(ToolState(0, 0, 0, Flags.IN_CONTACT | Flags.SAFE_STATE,
