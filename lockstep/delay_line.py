@@ -6,8 +6,9 @@ force describes the end of its step, t_{j+1}; see docs/lockstep.md), ``d`` the l
 in whole samples and ``e_j`` the extra samples of the injected delay and jitter,
 ``ceil((delay_s + profile(j Ts) + jitter_j) / Ts)`` (``profile``: the injection's delay
 profile, :mod:`haptic.common.delay_profile`, with t = 0 at tick 0). The receiver at
-tick ``k`` reads the newest message it has (the largest ``j`` receivable by ``k``); a lost message is never receivable, so the
-receiver keeps the previous one; before the first message it reads the initial value.
+tick ``k`` reads the newest message it has (the largest ``j`` receivable by ``k``); a lost
+message is never receivable, so the receiver keeps the previous one; before the first
+message it reads the initial value.
 
 Jitter and loss follow :mod:`haptic.common.injection` (same distributions and bounds, the
 same Gilbert-Elliott chain, ``preserve_order`` as a running maximum of the targets); the

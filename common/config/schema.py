@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from haptic.common.config.loader import Field, Schema
 from haptic.common.config.governor_schema import GOVERNOR_SCHEMA
+from haptic.common.config.loader import Field, Schema
 from haptic.common.config.lockstep_schema import LOCKSTEP_SCHEMA
 from haptic.common.config.master_schema import MASTER_SCHEMA
 from haptic.common.config.slave_schema import SLAVE_SCHEMA
