@@ -37,8 +37,10 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
+from haptic.common.config import ConfigError
 from haptic.common.config.governor_schema import GOVERNOR_ACTIONS
-from haptic.common.margin_table import MarginTable
+from haptic.common.margin_table import MarginTable, build_margin_table, gain_scalable
+from haptic.common.model import TeleopModel
 
 #: Relative distance at which the lag snaps k onto its target.
 _SNAP = 1e-4
@@ -256,3 +258,18 @@ class MarginGovernor:
             "governor_beyond_margin": self.beyond_margin,
             "governor_table": self.table.as_dict(),
         }
+
+
+def governor_for(model: TeleopModel, config: dict[str, Any],
+                 tdpa_available: bool = False) -> MarginGovernor:
+    """The governor of a validated configuration for ``model`` (its k is the nominal one):
+    builds the tau*(k) table from the sampled analysis (a second or two). Raises
+    :class:`ConfigError` naming ``governor.action`` when k cannot be lowered on this model
+    (a compliance Sh or St makes the design non-linear in k)."""
+    settings = GovernorSettings.from_config(config)
+    if (settings.action == "lower_k" or not tdpa_available) and not gain_scalable(model):
+        raise ConfigError("governor.action", "lower_k needs compensators linear in k "
+                          "(Sh = St = 0 on both axes); this model has a compliance")
+    table = build_margin_table(model, config["analysis"], settings.min_gain_k,
+                               settings.step_ratio)
+    return MarginGovernor(settings, table, tdpa_available)
