@@ -35,6 +35,15 @@ def gain_scalable(model: TeleopModel) -> bool:
     return True
 
 
+def follow_gain(received_k: float, nominal_k: float, scalable: bool) -> float:
+    """The slave's input scale k/k0 for the gain ``received_k`` the master says it uses
+    (HandleState.gain_k): never above the slave's own ``nominal_k`` (a corrupt or mismatched
+    value cannot raise the gain), 1 when not said (0) or when the design is not linear in k."""
+    if not scalable or not 0.0 < received_k < float("inf"):
+        return 1.0
+    return min(received_k, nominal_k) / nominal_k
+
+
 @dataclass(frozen=True)
 class MarginEntry:
     """One gain: ``k`` and its round-trip delay margin (s; ``None``: no delay up to
