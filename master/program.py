@@ -328,6 +328,9 @@ def _run_linked_master(
                     stages.record(now_ns, (read_ns, poll_ns, supervise_ns, node_ns, write_ns,
                                            send_ns, clock()))
 
+                def gain_k_now() -> float:
+                    return governor.gain_k if governor is not None else nominal_k
+
                 def status() -> str:
                     stats = link.stats()
                     return (f"link p50 {stats.one_way_delay_p50_s * 1e3:.3f} ms  loss "
@@ -352,7 +355,7 @@ def _run_linked_master(
                         hardware.present_tool_force(np.zeros(2))
                         hardware.write(hold)
                         link.send_handle((0.0, 0.0), (float(hold[0]), float(hold[1])),
-                                         Flags.SAFE_STATE)
+                                         Flags.SAFE_STATE, gain_k_now())
                     except Exception as error:  # noqa: BLE001 - shutting down regardless
                         print(f"haptic-master: while stopping: {error}", file=sys.stderr)
                     _flush_node_events(loop)

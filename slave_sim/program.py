@@ -438,6 +438,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         removed_volume_m3=flags_box["removed"],
         final_tool_position_m=[float(final[0]), float(final[1])], stages=stages.summary(),
         **zenoh_threads, **guard_summary,
+        slave_gain_k=node.model.ch1_gain_k * float((state.gain_ratio if state.gain_ratio is
+                                                     not None else np.ones(1))[0]),
         **(phase_lock.summary() if phase_lock is not None else {"phase_lock_enabled": False}),
         **extra_summary,
     )
