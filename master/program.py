@@ -319,6 +319,9 @@ def _run_linked_master(
                         figures["watchdog_state"] = watchdog.state.value
                         figures["watchdog_trips"] = watchdog.trips
                         figures["forces_enabled"] = enabled
+                        if governor is not None:
+                            figures["governor_k"] = governor.gain_k
+                            figures["governor_round_trip_s"] = governor.rtt_s
                         new_events = cursor.new((watchdog.events, supervisor.events,
                                                  loop.node_events, governor_events))
                         if recording is not None:
