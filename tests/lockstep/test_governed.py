@@ -106,3 +106,26 @@ def test_scaled_inputs_are_the_design_at_the_lower_gain(paper_model) -> None:
                                 for u in inputs]))
     np.testing.assert_allclose(forces[0], forces[1], rtol=1e-9, atol=1e-12)
     assert np.abs(forces[1]).max() > 1e-3  # the comparison is not of zeros
+
+
+def test_on_a_ramp_the_governor_acts_before_the_margin(k13, table) -> None:
+    """A one-way delay rising 2 -> 40 ms over 3 s: k is lowered while the round trip is still
+    inside tau*(13), so the loop never runs beyond its margin and stays bounded."""
+    ts = k13.sample_period_s
+    governor = MarginGovernor(GovernorSettings(enabled=True, recover_after_s=0.0), table)
+    steps = int(round(4.0 / ts))
+    pulse = np.zeros((steps, 2))
+    pulse[:20] = 1.0
+    simulator = LockstepSimulator(k13, load_scenario("constant-rate"),
+                                  parse_operator_spec("constant:fx=0,fy=0"),
+                                  np.array([13.0]), "linear")
+    result = simulator.run(4.0, 0, to_slave=InjectionConfig(delay_s=0.002),
+                           to_master=InjectionConfig(delay_profile=parse_delay_profile(
+                               "linear 0:0.002 3:0.040")),
+                           excitation_N=pulse, governors=[governor])
+    first = result.governed.events[0]
+    round_trip_then = 0.002 + (0.002 + 0.038 * first["time_s"] / 3.0)
+    assert round_trip_then < table.margin_s(13.0)  # acted before the margin
+    assert round_trip_then == pytest.approx(0.7 * table.margin_s(13.0), abs=2 * ts)
+    assert not growth_verdict(result, 1.0).growing[0]
+    assert result.peak_handle_force_N.max() < 2.0
