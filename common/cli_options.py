@@ -43,6 +43,7 @@ _INJECTION_FLAGS = {
     "burst_exit": ("--burst-exit", "burst_exit_probability"),
     "burst_loss": ("--burst-loss", "burst_loss_probability"),
     "seed": ("--seed", "seed"),
+    "delay_profile": ("--delay-profile", "delay_profile"),
 }
 # flag dest -> key under [runner]
 _RUNNER_FLAGS = {
@@ -200,6 +201,12 @@ def add_injection_options(parser: argparse.ArgumentParser) -> None:
         "--burst-loss", metavar="P", type=float, help="bursty loss: loss probability in a burst"
     )
     group.add_argument("--seed", metavar="N", type=int, help="seed of the injected randomness")
+    group.add_argument(
+        "--delay-profile", metavar="PROFILE",
+        help="one-way delay over time added to --one-way-delay, e.g. 'step 0:0.002 3:0.040' "
+        "(2 ms, 40 ms from 3 s after the peer's first message) or 'linear 0:0.002 5:0.040' "
+        "(a ramp); docs/governor.md",
+    )
 
 
 def _set(config: dict[str, Any], flag: str, key: str, value: Any) -> dict[str, Any]:

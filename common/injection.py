@@ -23,6 +23,11 @@ message's fate and its target delivery time, relative to the message's send time
   ``burst_loss_probability``. Mean burst length is ``1 / burst_exit_probability`` messages. A
   message is lost when either mechanism loses it.
 
+- A delay profile (:mod:`haptic.common.delay_profile`, ``delay_profile``): a delay that
+  changes over the run (a step, a ramp) added to ``delay_s``; its time is the message's send
+  time minus the send time of the first message the link accepted (t = 0: the peer's first
+  message).
+
 Every random draw comes from the seeded :class:`numpy.random.Generator` given to the
 :class:`Impairment`.
 """
@@ -32,6 +37,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from haptic.common.delay_profile import DelayProfile
 
 JITTER_DISTRIBUTIONS = ("uniform", "normal", "exponential")
 
@@ -50,6 +57,8 @@ class InjectionConfig:
     burst_enter_probability: float = 0.0
     burst_exit_probability: float = 1.0
     burst_loss_probability: float = 1.0
+    delay_profile: DelayProfile | None = None
+    """A delay over time added to ``delay_s`` (None: constant)."""
 
     def __post_init__(self) -> None:
         if not self.delay_s >= 0.0:
@@ -75,6 +84,7 @@ class InjectionConfig:
         """Whether anything is injected at all."""
         return (
             self.delay_s > 0.0
+            or (self.delay_profile is not None and self.delay_profile.max_delay_s > 0.0)
             or self.jitter_s > 0.0
             or self.loss_probability > 0.0
             or (self.burst_enter_probability > 0.0 and self.burst_loss_probability > 0.0)
@@ -83,7 +93,8 @@ class InjectionConfig:
     @property
     def max_extra_delay_s(self) -> float:
         """The largest delay the injection can add, s."""
-        return self.delay_s + self.jitter_s
+        profile = 0.0 if self.delay_profile is None else self.delay_profile.max_delay_s
+        return self.delay_s + profile + self.jitter_s
 
 
 class Impairment:
@@ -102,6 +113,9 @@ class Impairment:
         self._delay_ns = round(config.delay_s * 1e9)
         self._jitter_ns = config.jitter_s * 1e9
         self._last_target_ns = 0
+        self._profile = config.delay_profile
+        self.profile_origin_ns: int | None = None
+        """t = 0 of the delay profile: the send time of the first message asked about."""
 
     def _uniform(self) -> float:
         if self._next >= len(self._uniforms):
@@ -141,6 +155,12 @@ class Impairment:
     def target_ns(self, send_time_ns: int) -> int:
         """The earliest delivery time of a message sent at ``send_time_ns``, ns (same clock)."""
         target = send_time_ns + self._delay_ns + self.jitter_ns()
+        profile = self._profile
+        if profile is not None:
+            origin = self.profile_origin_ns
+            if origin is None:
+                origin = self.profile_origin_ns = send_time_ns
+            target += round(profile.delay_s((send_time_ns - origin) * 1e-9) * 1e9)
         if self.config.preserve_order:
             if target < self._last_target_ns:
                 target = self._last_target_ns

@@ -268,10 +268,12 @@ class Link:
         handle_force_N: tuple[float, float],
         handle_position_m: tuple[float, float],
         flags: Flags = NO_FLAGS,
+        gain_k: float = 0.0,
     ) -> HandleState:
-        """Master: stamp and publish the handle's force (N) and position (m)."""
+        """Master: stamp and publish the handle's force (N), position (m) and the Ch1 gain k
+        its compensator uses (0: not said)."""
         message = HandleState(self.epoch, self.next_sequence(), 0, flags, handle_force_N,
-                              handle_position_m)
+                              handle_position_m, gain_k)
         return self.send(message)  # type: ignore[return-value]
 
     def send_tool(
@@ -282,12 +284,13 @@ class Link:
         clay_engagement: float,
         removed_volume_m3: float,
         flags: Flags = NO_FLAGS,
+        echo_send_time_ns: int = 0,
     ) -> ToolState:
-        """Slave: stamp and publish the tool's force (N), position (m), velocity (m/s) and the
-        clay's status."""
+        """Slave: stamp and publish the tool's force (N), position (m), velocity (m/s), the
+        clay's status and the echo of the newest handle message's send time (ns; 0: none)."""
         message = ToolState(
             self.epoch, self.next_sequence(), 0, flags, tool_force_N, tool_position_m,
-            tool_velocity_m_s, clay_engagement, removed_volume_m3,
+            tool_velocity_m_s, clay_engagement, removed_volume_m3, echo_send_time_ns,
         )
         return self.send(message)  # type: ignore[return-value]
 

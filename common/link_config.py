@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from haptic.common.config import ConfigError, Field, Schema
+from haptic.common.delay_profile import delay_profile_problem, parse_delay_profile
 from haptic.common.injection import JITTER_DISTRIBUTIONS, InjectionConfig
 
 SIDES = ("master", "slave")
@@ -79,6 +80,11 @@ INJECTION_SCHEMA: Schema = {
         "float", "Loss probability per message in the bad state.", minimum=0.0, maximum=1.0
     ),
     "seed": Field("int", "Seed of this side's injected jitter and loss.", minimum=0),
+    "delay_profile": Field(
+        "str", "One-way delay over time added to delay_s, e.g. 'step 0:0.002 3:0.040' or "
+        "'linear 0:0.002 5:0.040' (time since the peer's first message, s : delay, s); "
+        "empty: none.", check=delay_profile_problem,
+    ),
 }
 
 
@@ -247,7 +253,9 @@ class LinkConfig:
 def injection_from_table(table: dict[str, Any]) -> InjectionConfig:
     """An :class:`InjectionConfig` from a validated ``[link.<side>.injection]`` table (its
     ``seed`` goes to :class:`LinkConfig`)."""
-    return InjectionConfig(**{k: v for k, v in table.items() if k != "seed"})
+    values = {k: v for k, v in table.items() if k not in ("seed", "delay_profile")}
+    return InjectionConfig(**values,
+                           delay_profile=parse_delay_profile(table.get("delay_profile", "")))
 
 
 def link_config_from(config: dict[str, Any], side: str, **changes: Any) -> LinkConfig:

@@ -8,7 +8,8 @@ Every message is a msgpack array (compact: no field names on the wire)::
     :data:`SCHEMA_VERSION`; a receiver drops any other value (``unknown_version``), and a
     peer of another version is refused at start (common/link.py). Version 2 (issue 17) adds
     the pairing hello (common/auth.py) and, on an authenticated link, a 16-byte tag after
-    the msgpack body.
+    the msgpack body; version 3 (issue 16) the handle's ``gain_k`` and the tool's
+    ``echo_send_time_ns``.
 ``kind``
     :data:`KIND_HANDLE` (master to slave, :class:`HandleState`) or :data:`KIND_TOOL` (slave to
     master, :class:`ToolState`).
@@ -23,11 +24,15 @@ Every message is a msgpack array (compact: no field names on the wire)::
     encode everything else first and stamp the time last (:func:`encode_around_send_time`).
 ``flags``
     a bit field of :class:`Flags`.
-payload, :class:`HandleState` (4 floats)
-    ``handle_force_N`` x, y; ``handle_position_m`` x, y.
-payload, :class:`ToolState` (8 floats)
+payload, :class:`HandleState` (5 floats)
+    ``handle_force_N`` x, y; ``handle_position_m`` x, y; ``gain_k``, the Ch1 gain k the
+    master's compensator uses now (> 0; 0: not said, the slave uses its configured k): the
+    margin governor (master/margin_governor.py) lowers it and the slave follows.
+payload, :class:`ToolState` (8 floats and an integer)
     ``tool_force_N`` x, y; ``tool_position_m`` x, y; ``tool_velocity_m_s`` x, y;
-    ``clay_engagement`` (0..1); ``removed_volume_m3`` (>= 0).
+    ``clay_engagement`` (0..1); ``removed_volume_m3`` (>= 0); ``echo_send_time_ns``, the
+    ``send_time_ns`` of the newest handle message the slave had used when it sent this one
+    (0: none yet), so the master measures the loop's round trip on its own clock.
 
 :func:`decode` never lets an exception other than :class:`DecodeError` escape; the error's
 ``reason`` (a :class:`DropReason`) says which counter the receiver charges.
@@ -42,13 +47,14 @@ from typing import Any
 
 import msgpack
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 KIND_HANDLE = 1
 KIND_TOOL = 2
 
 _HEADER_LENGTH = 6
-_HANDLE_FLOATS = 4
+_HANDLE_FLOATS = 5
 _TOOL_FLOATS = 8
+_TOOL_VALUES = _TOOL_FLOATS + 1  # the floats and the echoed send time
 _MAX_U32 = 2**32 - 1
 _MAX_U63 = 2**63 - 1
 _MAX_FLAGS = 0xFF
@@ -106,6 +112,8 @@ class HandleState:
     flags: Flags
     handle_force_N: tuple[float, float]
     handle_position_m: tuple[float, float]
+    gain_k: float = 0.0
+    """The Ch1 gain k the master's compensator uses (0: not said)."""
 
     KIND = KIND_HANDLE
 
@@ -137,6 +145,8 @@ class ToolState:
     tool_velocity_m_s: tuple[float, float]
     clay_engagement: float
     removed_volume_m3: float
+    echo_send_time_ns: int = 0
+    """``send_time_ns`` of the newest handle message the slave had used (0: none)."""
 
     KIND = KIND_TOOL
 
@@ -163,8 +173,9 @@ def encode_around_send_time(message: Message) -> tuple[bytes, bytes]:
     ``before + send_time_bytes(t) + after`` for any send time ``t``. The sender stamps the
     time last, so the measured one-way delay starts when the message goes to Zenoh, not
     before its encoding. Raises ``ValueError`` for a non-finite value."""
+    tail: tuple[int, ...] = ()
     if isinstance(message, HandleState):
-        floats = (*message.handle_force_N, *message.handle_position_m)
+        floats = (*message.handle_force_N, *message.handle_position_m, message.gain_k)
     elif isinstance(message, ToolState):
         floats = (
             *message.tool_force_N,
@@ -173,6 +184,10 @@ def encode_around_send_time(message: Message) -> tuple[bytes, bytes]:
             message.clay_engagement,
             message.removed_volume_m3,
         )
+        echo = int(message.echo_send_time_ns)
+        if not 0 <= echo <= _MAX_U63:
+            raise ValueError(f"echo_send_time_ns {echo} out of range")
+        tail = (echo,)
     else:
         raise TypeError(f"not a message: {type(message).__name__}")
     values = [float(v) for v in floats]
@@ -180,13 +195,13 @@ def encode_around_send_time(message: Message) -> tuple[bytes, bytes]:
         raise ValueError(f"non-finite value in {type(message).__name__}: {values}")
     pack = _packer.pack
     before = b"".join((
-        _packer.pack_array_header(6 + len(values)),
+        _packer.pack_array_header(6 + len(values) + len(tail)),
         pack(SCHEMA_VERSION),
         pack(message.KIND),
         pack(int(message.epoch)),
         pack(int(message.seq)),
     ))
-    after = b"".join((pack(int(message.flags)), *map(pack, values)))
+    after = b"".join((pack(int(message.flags)), *map(pack, values), *map(pack, tail)))
     return before, after
 
 
@@ -252,17 +267,22 @@ def decode(payload: bytes, expected_kind: int) -> Message:
         if len(body) != _HANDLE_FLOATS:
             raise DecodeError(DropReason.MALFORMED, f"handle payload has {len(body)} values")
         v = _floats(body)
+        if v[4] < 0.0:
+            raise DecodeError(DropReason.MALFORMED, f"gain_k {v[4]} is negative")
         return HandleState(
-            epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3])
+            epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3]), v[4]
         )
-    if len(body) != _TOOL_FLOATS:
+    if len(body) != _TOOL_VALUES:
         raise DecodeError(DropReason.MALFORMED, f"tool payload has {len(body)} values")
-    v = _floats(body)
+    echo = body[_TOOL_FLOATS]
+    if not (_is_int(echo) and 0 <= echo <= _MAX_U63):
+        raise DecodeError(DropReason.MALFORMED, f"echo_send_time_ns {echo!r}")
+    v = _floats(body[:_TOOL_FLOATS])
     if not 0.0 <= v[6] <= 1.0:
         raise DecodeError(DropReason.MALFORMED, f"clay_engagement {v[6]} outside 0..1")
     if v[7] < 0.0:
         raise DecodeError(DropReason.MALFORMED, f"removed_volume_m3 {v[7]} is negative")
     return ToolState(
         epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3]), (v[4], v[5]),
-        v[6], v[7],
+        v[6], v[7], echo,
     )

@@ -31,6 +31,7 @@ from typing import Any, TextIO
 from haptic.common.analysis.report import AnalysisSettings, axis_loop
 from haptic.common.analysis.stability import delay_margin, is_stable
 from haptic.common.config import ConfigError, override
+from haptic.common.delay_profile import parse_delay_profile
 from haptic.common.model import model_from_config
 from haptic.common.synthesis import SynthesisError
 
@@ -98,6 +99,10 @@ def add_preflight_options(parser: argparse.ArgumentParser) -> None:
                        help="the one-way delay (plus jitter) the peer injects on this side's "
                        "messages, s, for the analysis (default: the peer's [link.<peer>."
                        "injection] in the configuration)")
+    group.add_argument("--governor", action=argparse.BooleanOptionalAction, default=None,
+                       help="the margin governor on the master ([governor] enabled; "
+                       "docs/governor.md): the analysis then takes a delay profile's start, "
+                       "the governor its peak")
     group.add_argument("--assumed-link-delay", metavar="S", type=float,
                        default=DEFAULT_ASSUMED_LINK_DELAY_S,
                        help="network one-way delay added to the injected delays, s "
@@ -105,10 +110,13 @@ def add_preflight_options(parser: argparse.ArgumentParser) -> None:
 
 
 def round_trip_delay_s(config: dict[str, Any], assumed_link_delay_s: float,
-                       side: str | None = None, peer_delay_s: float | None = None) -> float:
+                       side: str | None = None, peer_delay_s: float | None = None,
+                       profile: str = "max") -> float:
     """The injected delays (plus jitter bounds) of both directions plus twice the assumed
     network one-way delay, s. ``peer_delay_s`` (with ``side``, this program's side) replaces
-    the other side's configured delay plus jitter."""
+    the other side's configured delay plus jitter. A side's delay profile
+    (common/delay_profile.py) adds its largest delay (``profile="max"``) or its delay at the
+    start (``"initial"``: a governed run, whose governor answers for the rest)."""
     total = 2.0 * assumed_link_delay_s
     for name in ("master", "slave"):
         if peer_delay_s is not None and side is not None and name != side:
@@ -116,7 +124,16 @@ def round_trip_delay_s(config: dict[str, Any], assumed_link_delay_s: float,
             continue
         injection = config["link"][name]["injection"]
         total += injection["delay_s"] + injection["jitter_s"]
+        shape = parse_delay_profile(injection.get("delay_profile", ""))
+        if shape is not None:
+            total += shape.max_delay_s if profile == "max" else shape.initial_delay_s
     return total
+
+
+def governor_enabled(config: dict[str, Any], args: argparse.Namespace) -> bool:
+    """``--governor``/``--no-governor``, else ``[governor] enabled``."""
+    flag = getattr(args, "governor", None)
+    return bool(config["governor"]["enabled"] if flag is None else flag)
 
 
 def with_damper_environment(config: dict[str, Any], damping_N_s_per_m: float
@@ -176,7 +193,8 @@ def run_preflight(config: dict[str, Any], args: argparse.Namespace, program: str
     peer = getattr(args, "peer_delay", None)
     if peer is not None and not (math.isfinite(peer) and peer >= 0.0):
         raise ConfigError("--peer-one-way-delay", f"must be a finite number >= 0 s (got {peer})")
-    tau = round_trip_delay_s(config, assumed, side, peer)
+    tau = round_trip_delay_s(config, assumed, side, peer,
+                             "initial" if governor_enabled(config, args) else "max")
     analysed = config
     environment = ""
     if getattr(args, "analysis_environment", "config") == "clay":

@@ -72,6 +72,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_retired_delay_option(parser)
     parser.add_argument("--allow-unstable", action="store_true",
                         help="pass --allow-unstable to both programs")
+    parser.add_argument("--governor", action="store_true",
+                        help="the master's margin governor (docs/governor.md); delay profiles "
+                        "come from --config ([link.<side>.injection] delay_profile)")
     parser.add_argument("--master-args", default="", help="extra master arguments (one string)")
     parser.add_argument("--slave-args", default="", help="extra slave arguments (one string)")
     return parser
@@ -112,6 +115,8 @@ def run_session(args: argparse.Namespace) -> int:
         common += ["--one-way-delay", repr(args.delay), "--peer-one-way-delay", repr(args.delay)]
     if args.allow_unstable:
         common.append("--allow-unstable")
+    if args.governor:
+        common.append("--governor")
     files = {"master": out / "master.json", "slave": out / "slave.json"}
     for path in files.values():
         path.unlink(missing_ok=True)

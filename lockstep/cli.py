@@ -20,9 +20,11 @@ import numpy as np
 from haptic.common.cli_options import add_retired_delay_option
 from haptic.common.config import ConfigError, exit_on_config_error, load_config
 from haptic.common.config.scenario import load_scenario
+from haptic.common.delay_profile import DelayProfileError, parse_delay_profile
 from haptic.common.injection import InjectionConfig
 from haptic.common.model import model_from_config
 from haptic.lockstep.simulator import ENVIRONMENTS, TRANSPARENT_SAFETY, LockstepSimulator
+from haptic.master.margin_governor import governor_for
 from haptic.master.operator import parse_operator_spec
 from haptic.master.settings import master_settings
 
@@ -57,6 +59,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--jitter", type=float, default=0.0, metavar="SECONDS",
                      help="jitter bound on each line, s (uniform)")
     run.add_argument("--loss", type=float, default=0.0, help="loss probability per message")
+    run.add_argument("--delay-profile-to-slave", metavar="PROFILE", default="",
+                     help="one-way delay over time on the handle line, on top of the round "
+                     "trip, e.g. 'step 0:0.002 3:0.040' (docs/governor.md)")
+    run.add_argument("--delay-profile-to-master", metavar="PROFILE", default="",
+                     help="the same on the tool line")
+    run.add_argument("--governor", action=argparse.BooleanOptionalAction, default=None,
+                     help="run the margin governor (default: [governor] enabled)")
     run.add_argument("--duration", type=float, default=3.0, metavar="SECONDS")
     run.add_argument("--safety", choices=("config", "off"), default="config",
                      help="the master's safety limits from [master.safety], or off")
@@ -109,16 +118,29 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
     safety = master_settings(config).safety if args.safety == "config" else TRANSPARENT_SAFETY
     simulator = LockstepSimulator(model, scenario, operator, np.array([gain]), environment,
                                   safety, device="cpu")
-    injection = None
-    if args.jitter > 0.0 or args.loss > 0.0:
-        injection = InjectionConfig(jitter_s=args.jitter, loss_probability=args.loss)
+    lines = []
+    for flag, text in (("--delay-profile-to-slave", args.delay_profile_to_slave),
+                       ("--delay-profile-to-master", args.delay_profile_to_master)):
+        try:
+            profile = parse_delay_profile(text)
+        except DelayProfileError as error:
+            raise ConfigError(flag, str(error)) from None
+        injection = None
+        if args.jitter > 0.0 or args.loss > 0.0 or profile is not None:
+            injection = InjectionConfig(jitter_s=args.jitter, loss_probability=args.loss,
+                                        delay_profile=profile)
+        lines.append(injection)
+    governed = config["governor"]["enabled"] if args.governor is None else args.governor
+    governors = [governor_for(model, config)] if governed else None
     delay_samples = int(round(args.delay / model.sample_period_s))
-    result = simulator.run(args.duration, delay_samples, to_slave=injection,
-                           to_master=injection, seed=int(config["lockstep"]["seed"]),
-                           record_lanes=[0])
+    result = simulator.run(args.duration, delay_samples, to_slave=lines[0],
+                           to_master=lines[1], seed=int(config["lockstep"]["seed"]),
+                           record_lanes=[0], governors=governors)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     traces = {name: values[:, 0] for name, values in result.traces.items()}
+    if result.governed is not None:
+        traces["gain_k"] = result.governed.gains_k[:, 0]
     np.savez(out / "traces.npz", time_s=result.time_s, **traces)
     _plot_run(out / "traces.png", result.time_s, traces, f"{scenario.name}, k = {gain:g}, "
               f"delay {delay_samples * model.sample_period_s * 1e3:.2f} ms")
@@ -130,6 +152,8 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
         "peak_tool_force_N": result.peak_tool_force_N[0].tolist(),
         "position_error_rms_m": result.position_error_rms_m[0].tolist(),
         "safety_events": result.safety_events, "out": str(out),
+        **({} if governors is None else {**governors[0].summary(),
+                                          "governor_events": result.governed.events}),
     }
 
 

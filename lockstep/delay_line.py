@@ -4,9 +4,11 @@ A message sent at tick ``j`` becomes receivable at tick ``j + offset + d + e_j``
 is the line's structural sample (0 for the handle line, 1 for the tool line: the slave's
 force describes the end of its step, t_{j+1}; see docs/lockstep.md), ``d`` the lane's delay
 in whole samples and ``e_j`` the extra samples of the injected delay and jitter,
-``ceil((delay_s + jitter_j) / Ts)``. The receiver at tick ``k`` reads the newest message
-it has (the largest ``j`` receivable by ``k``); a lost message is never receivable, so the
-receiver keeps the previous one; before the first message it reads the initial value.
+``ceil((delay_s + profile(j Ts) + jitter_j) / Ts)`` (``profile``: the injection's delay
+profile, :mod:`haptic.common.delay_profile`, with t = 0 at tick 0). The receiver at
+tick ``k`` reads the newest message it has (the largest ``j`` receivable by ``k``); a lost
+message is never receivable, so the receiver keeps the previous one; before the first
+message it reads the initial value.
 
 Jitter and loss follow :mod:`haptic.common.injection` (same distributions and bounds, the
 same Gilbert-Elliott chain, ``preserve_order`` as a running maximum of the targets); the
@@ -71,6 +73,10 @@ def source_schedule(steps: int, delay_samples: np.ndarray, offset_samples: int,
         if rng is None:
             raise ValueError("injecting jitter or loss needs a seeded generator")
         extra_s = injection.delay_s + jitter_draws_s(injection, (steps, lanes), rng)
+        profile = injection.delay_profile
+        if profile is not None:
+            extra_s = extra_s + np.array([profile.delay_s(j * period_s)
+                                          for j in range(steps)])[:, None]
         target += np.ceil(extra_s / period_s - 1e-9).astype(np.int64)
         if injection.preserve_order:
             target = np.maximum.accumulate(target, axis=0)

@@ -24,6 +24,7 @@ reproducible.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -34,7 +35,9 @@ from haptic.common.injection import InjectionConfig
 from haptic.common.lti import DiscreteLTI
 from haptic.common.model import TeleopModel
 from haptic.lockstep.delay_line import DelayLine, source_schedule
+from haptic.lockstep.governed import GovernedLanes
 from haptic.lockstep.stacked import StackedLTI
+from haptic.master.margin_governor import MarginGovernor
 from haptic.master.node import MasterNode, master_compensator
 from haptic.master.operator import OperatorModel
 from haptic.master.rig_model import RigModel
@@ -118,6 +121,7 @@ class LockstepResult:
     recorded_lanes: np.ndarray
     traces: dict[str, np.ndarray] = field(default_factory=dict)
     safety_events: int = 0
+    governed: GovernedLanes | None = None
 
     @property
     def time_s(self) -> np.ndarray:
@@ -180,7 +184,8 @@ class LockstepSimulator:
     def run(self, duration_s: float, round_trip_delay_samples: np.ndarray | int, *,
             to_slave: InjectionConfig | None = None, to_master: InjectionConfig | None = None,
             seed: int = 0, excitation_N: np.ndarray | None = None, window_s: float = 0.25,
-            record_lanes: np.ndarray | None = None) -> LockstepResult:
+            record_lanes: np.ndarray | None = None,
+            governors: Sequence[MarginGovernor] | None = None) -> LockstepResult:
         """Run every lane for ``duration_s``.
 
         ``round_trip_delay_samples`` (scalar or (lanes,)): whole samples, split d1 = n // 2
@@ -188,6 +193,8 @@ class LockstepSimulator:
         injected delay, jitter and loss on each line (as the link's receiving side).
         ``excitation_N``: (steps, 2) added to the operator's intent (a test pulse).
         ``record_lanes``: lanes whose full traces are kept (default none).
+        ``governors``: one margin governor per lane (lockstep/governed.py): k follows it on
+        both sides; the result's ``governed`` holds the gains used and the events.
         """
         ts = self.period_s
         steps = int(round(duration_s / ts))
@@ -196,8 +203,11 @@ class LockstepSimulator:
         rng = np.random.default_rng(seed)
         line_rngs = rng.spawn(3)
         to_slave_d = delays // 2
+        governed = None if governors is None else GovernedLanes(governors, self.gains_k, steps)
         handle_line = DelayLine(source_schedule(steps, to_slave_d, 0, ts, to_slave,
-                                                line_rngs[0]), 4)
+                                                line_rngs[0]), 4 if governed is None else 5,
+                                None if governed is None else np.tile([0, 0, 0, 0, 1.0],
+                                                                      (lanes, 1)))
         tool_line = DelayLine(source_schedule(steps, delays - to_slave_d, 1, ts, to_master,
                                               line_rngs[1]), 2)
         start = np.broadcast_to(np.asarray(self.scenario.tool.start_position_m, float),
@@ -208,6 +218,8 @@ class LockstepSimulator:
         master_state = self.master.activate(handle_start)
         slave_state = self.slave.initial_state(lanes, start)
         command = master_state.last_command_m.copy()
+        if governed is not None:
+            slave_state.gain_ratio = np.ones(lanes)
 
         window = max(1, int(round(window_s / ts)))
         n_windows = -(-steps // window)
@@ -232,11 +244,17 @@ class LockstepSimulator:
                 if excitation is not None and k < excitation.shape[0]:
                     fh = fh + excitation[k]
                 yh = sample.handle_position_m
+                if governed is not None:  # k on the master now, on the slave with the message
+                    master_state.gain_ratio[:] = governed.update(
+                        k, ts, tool_line.schedule, handle_line.schedule)
                 command = self.master.step(master_state, fh, yh, ft_recv)
-                handle_line.send(k, np.concatenate((fh, yh), axis=1))
+                handle_line.send(k, np.concatenate((fh, yh), axis=1) if governed is None
+                                 else np.column_stack((fh, yh, master_state.gain_ratio)))
                 received = handle_line.receive(k)
+                if governed is not None:
+                    slave_state.gain_ratio = received[:, 4]
                 yt = slave_state.tool[:, [0, 2]]
-                out = self.slave.step(slave_state, received[:, :2], received[:, 2:])
+                out = self.slave.step(slave_state, received[:, :2], received[:, 2:4])
                 ft = out.tool_force_N
                 tool_line.send(k, ft)
 
@@ -267,5 +285,5 @@ class LockstepSimulator:
             peak_handle_force_N=peak_fh, peak_tool_force_N=peak_ft,
             position_error_rms_m=np.sqrt(error_sumsq / max(steps, 1)),
             diverged=~finite | master_state.faulted, recorded_lanes=recorded, traces=traces,
-            safety_events=len(master_state.events),
+            safety_events=len(master_state.events), governed=governed,
         )

@@ -21,6 +21,7 @@ from haptic.common.config import ConfigError, exit_on_config_error, load_config,
 from haptic.common.failures import exit_on_link_error
 from haptic.common.model import model_from_config
 from haptic.common.preflight import add_preflight_options, run_preflight
+from haptic.master.governor_setup import start_governor
 from haptic.master.hardware import HardwareError, create_hardware
 from haptic.master.node import MasterNode
 from haptic.master.program import DEFAULT_SYNC_TOLERANCE_M, MasterLoopOptions, run_linked_master
@@ -120,12 +121,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     if refused is not None:
         return refused
     with exit_on_config_error():
+        governor, refused = start_governor(options.config, args, model)
+    if refused is not None:
+        return refused
+    with exit_on_config_error():
         hardware = create_hardware(settings.rig, options.config)
     loop_options = MasterLoopOptions(
         peer_wait_s=args.peer_wait, sync_tolerance_m=args.sync_tolerance,
         trace_every=args.trace_every,
         trace_path=None if args.out is None else str(Path(args.out) / "master_trace.npz"),
         record_path=args.record, record_every=args.record_every, display=args.display,
+        governor=governor, allow_unstable=args.allow_unstable,
     )
     with exit_on_link_error("haptic-master"):
         return run_linked_master(options, model, node, hardware, loop_options,

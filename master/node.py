@@ -31,7 +31,8 @@ sweep, with the same code. The state's arrays are numpy views of the kernel's bu
 them in place (``state.faulted[lane] = True``), never rebind them. Each step also reports what
 the compensator used (``handle_force_used_N``, ``tool_force_used_N``: saturated and scaled by
 the ramp, zero in a faulted lane), which the master sends to the slave so that Ch2 there
-integrates exactly the force Ch1 integrated here.
+integrates exactly the force Ch1 integrated here. ``state.gain_ratio`` (k/k0, 1 at
+activation) scales the compensator's inputs: the margin governor's k (master/margin_governor.py).
 """
 
 from __future__ import annotations
@@ -82,6 +83,7 @@ class MasterNodeState:
     forces_enabled: np.ndarray  # (lanes,) bool
     ramp_elapsed_s: np.ndarray  # (lanes,)
     force_scale: np.ndarray  # (lanes,) ramp factor applied at the last step, 0..1
+    gain_ratio: np.ndarray  # (lanes,) k/k0 the compensator's inputs are scaled by (governor)
     faulted: np.ndarray  # (lanes,) bool
     limiting: np.ndarray  # (lanes, 4, 2) bool: which limit was active at the last step
     command_m: np.ndarray  # (lanes, 2) the last step's command
@@ -217,6 +219,7 @@ class MasterNode:
         small_count = buffer((lanes,), i32)
         enabled = buffer((lanes,), wp.bool)
         ramp_elapsed, force_scale = buffer((lanes,), f64), buffer((lanes,), f64)
+        gain_ratio = buffer((lanes,), f64, np.ones(lanes))
         faulted = buffer((lanes,), wp.bool)
         limiting = buffer((lanes, len(_LIMITS), 2), wp.bool)
         command = buffer((lanes, 2), f64, safe)
@@ -227,11 +230,13 @@ class MasterNode:
         event_count = buffer((1,), i32)
         buffers = (inputs, *matrices, compensator, scratch, origin, last_command,
                    last_position, hold, small_count, enabled, ramp_elapsed, force_scale,
-                   faulted, limiting, command, used, trip_code, event_bits, event_count)
+                   gain_ratio, faulted, limiting, command, used, trip_code, event_bits,
+                   event_count)
         launch = wp.launch(kernels.master_step_kernel, dim=lanes, device=DEVICE,
                            inputs=[inputs, *matrices, per_lane, compensator, scratch, origin,
                                    last_command, last_position, hold, small_count, enabled,
-                                   ramp_elapsed, force_scale, faulted, limiting, command, used,
+                                   ramp_elapsed, force_scale, gain_ratio, faulted, limiting,
+                                   command, used,
                                    trip_code, event_bits, event_count, limits],
                            record_cmd=True)
         used_view = used.numpy()
@@ -240,7 +245,8 @@ class MasterNode:
             last_command_m=last_command.numpy(), last_position_m=last_position.numpy(),
             hold_m=hold.numpy(), small_force_count=small_count.numpy(),
             forces_enabled=enabled.numpy(), ramp_elapsed_s=ramp_elapsed.numpy(),
-            force_scale=force_scale.numpy(), faulted=faulted.numpy(),
+            force_scale=force_scale.numpy(), gain_ratio=gain_ratio.numpy(),
+            faulted=faulted.numpy(),
             limiting=limiting.numpy(), command_m=command.numpy(),
             handle_force_used_N=used_view[:, 0:2], tool_force_used_N=used_view[:, 2:4],
             inputs=inputs.numpy(), _kernel=launch, _trip_code=trip_code.numpy(),

@@ -85,6 +85,7 @@ def master_step_kernel(
     forces_enabled: wp.array(dtype=wp.bool),
     ramp_elapsed: wp.array(dtype=wp.float64),
     force_scale: wp.array(dtype=wp.float64),
+    gain_ratio: wp.array(dtype=wp.float64),
     faulted: wp.array(dtype=wp.bool),
     limiting: wp.array3d(dtype=wp.bool),
     command: wp.array2d(dtype=wp.float64),
@@ -212,25 +213,32 @@ def master_step_kernel(
         scale = zero
     force_scale[lane] = scale
 
-    # The compensator: y = C x + D u, x' = A x + B u (frozen in faulted lanes).
+    # The compensator: y = C x + D u, x' = A x + B u (frozen in faulted lanes). Its inputs
+    # are scaled by the gain ratio k/k0 of the margin governor (the design is linear in k:
+    # common/margin_table.py); ``used`` reports the forces before that scale.
     u0 = scale * fhx
     u1 = scale * fhy
     u2 = scale * ftx
     u3 = scale * fty
+    g = gain_ratio[lane]
+    c0 = g * u0
+    c1 = g * u1
+    c2 = g * u2
+    c3 = g * u3
     m = lane * per_lane_matrices
     n = compensator.shape[1]
-    out_x = comp_d[m, 0, 0] * u0 + comp_d[m, 0, 1] * u1 + comp_d[m, 0, 2] * u2 + (
-        comp_d[m, 0, 3] * u3)
-    out_y = comp_d[m, 1, 0] * u0 + comp_d[m, 1, 1] * u1 + comp_d[m, 1, 2] * u2 + (
-        comp_d[m, 1, 3] * u3)
+    out_x = comp_d[m, 0, 0] * c0 + comp_d[m, 0, 1] * c1 + comp_d[m, 0, 2] * c2 + (
+        comp_d[m, 0, 3] * c3)
+    out_y = comp_d[m, 1, 0] * c0 + comp_d[m, 1, 1] * c1 + comp_d[m, 1, 2] * c2 + (
+        comp_d[m, 1, 3] * c3)
     for j in range(n):
         xj = compensator[lane, j]
         out_x += comp_c[m, 0, j] * xj
         out_y += comp_c[m, 1, j] * xj
     if healthy:
         for i in range(n):
-            acc = comp_b[m, i, 0] * u0 + comp_b[m, i, 1] * u1 + comp_b[m, i, 2] * u2 + (
-                comp_b[m, i, 3] * u3)
+            acc = comp_b[m, i, 0] * c0 + comp_b[m, i, 1] * c1 + comp_b[m, i, 2] * c2 + (
+                comp_b[m, i, 3] * c3)
             for j in range(n):
                 acc += comp_a[m, i, j] * compensator[lane, j]
             scratch[lane, i] = acc

@@ -45,7 +45,9 @@ from haptic.common.runner_config import place_other_threads, prioritise_zenoh_th
 from haptic.common.stage_times import StageTimes
 from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
+from haptic.master.governor_setup import governor_step
 from haptic.master.hardware import HandleHardware, HardwareError
+from haptic.master.margin_governor import MarginGovernor
 from haptic.master.node import MasterNode, MasterNodeState, SafetyEvent
 from haptic.master.supervisor import MasterSupervisor, Transition
 
@@ -82,6 +84,8 @@ class MasterLoopOptions:
     record_path: str | None = None  # MCAP file of the run (--record)
     record_every: int = 1
     display: bool = True  # publish status at display rates for haptic-view
+    governor: MarginGovernor | None = None  # the margin governor (master/margin_governor.py)
+    allow_unstable: bool = False  # governor beyond every margin: keep running (else trip)
 
 
 @dataclass
@@ -205,6 +209,9 @@ def _run_linked_master(
                                f"{node.safety.ramp_small_force_N:g} N "
                                f"({node.safety.ramp_small_samples} samples): the operator pushes")
                 zero_force = (0.0, 0.0)
+                governor = loop_options.governor
+                governor_events = governor.events if governor is not None else []
+                nominal_k = model.ch1_gain_k
 
                 def step(tick: int, now_ns: int) -> None:
                     nonlocal reading
@@ -236,6 +243,15 @@ def _run_linked_master(
                         loop.node_offset_s = now_s
                     enabled = supervisor.enabled
                     tool = supervisor.tool
+                    gain_k = nominal_k
+                    if governor is not None:  # k from the echoed round trip (governor.md)
+                        decision = governor_step(governor, link, now_s)
+                        gain_k = decision.gain_k
+                        if enabled:
+                            loop.node_state.gain_ratio[0] = gain_k / nominal_k
+                            if decision.beyond_margin and not loop_options.allow_unstable:
+                                node.trip(loop.node_state, [0], "governor: round trip beyond "
+                                          "the delay margin of every k")
                     supervise_ns = clock()
                     # node: vh = Ch1 fh - Ct1 ft behind the safety layer, or the safe state
                     if enabled:
@@ -262,7 +278,7 @@ def _run_linked_master(
                     hardware.write(command)
                     write_ns = clock()
                     # send: the force the compensator used and the handle position
-                    link.send_handle(sent, (yhx, yhy), flags)
+                    link.send_handle(sent, (yhx, yhy), flags, gain_k)
                     send_ns = clock()
                     # telemetry: summary figures, trace, recording, display
                     inert.update(now_s, link.peer_alive and link.silence_s() < max_age_s,
@@ -303,8 +319,11 @@ def _run_linked_master(
                         figures["watchdog_state"] = watchdog.state.value
                         figures["watchdog_trips"] = watchdog.trips
                         figures["forces_enabled"] = enabled
+                        if governor is not None:
+                            figures["governor_k"] = governor.gain_k
+                            figures["governor_round_trip_s"] = governor.rtt_s
                         new_events = cursor.new((watchdog.events, supervisor.events,
-                                                 loop.node_events))
+                                                 loop.node_events, governor_events))
                         if recording is not None:
                             recording.status(now_ns, figures, new_events)
                         if display is not None:
@@ -312,12 +331,16 @@ def _run_linked_master(
                     stages.record(now_ns, (read_ns, poll_ns, supervise_ns, node_ns, write_ns,
                                            send_ns, clock()))
 
+                def gain_k_now() -> float:
+                    return governor.gain_k if governor is not None else nominal_k
+
                 def status() -> str:
                     stats = link.stats()
                     return (f"link p50 {stats.one_way_delay_p50_s * 1e3:.3f} ms  loss "
                             f"{stats.loss_ratio * 100:.2f} %  {watchdog.state.value}  fh "
                             f"{loop.last_fh[0]:+.2f} N  ft {loop.last_ft[0]:+.2f} N"
-                            f"{inert.status()}")
+                            f"{inert.status()}"
+                            f"{governor.status() if governor is not None else ''}")
 
                 runner = RealTimeRunner(
                     period_s, step, duration_s=options.duration_s,
@@ -335,7 +358,7 @@ def _run_linked_master(
                         hardware.present_tool_force(np.zeros(2))
                         hardware.write(hold)
                         link.send_handle((0.0, 0.0), (float(hold[0]), float(hold[1])),
-                                         Flags.SAFE_STATE)
+                                         Flags.SAFE_STATE, gain_k_now())
                     except Exception as error:  # noqa: BLE001 - shutting down regardless
                         print(f"haptic-master: while stopping: {error}", file=sys.stderr)
                     _flush_node_events(loop)
@@ -357,8 +380,9 @@ def _run_linked_master(
         return status_code or 1
     for event in presence:
         event["time_s"] = event["time_s"] - realtime_start_ns * 1e-9
+    governor = loop_options.governor
     events = ([e.as_dict() for e in watchdog.events] + supervisor.events + loop.node_events
-              + presence)
+              + presence + (governor.events if governor is not None else []))
     events.sort(key=lambda e: e["time_s"])
     if supervisor.faulted:
         status_code = 1
@@ -369,6 +393,7 @@ def _run_linked_master(
         hardware_faults=supervisor.hardware_faults[:50],
         node_faulted=supervisor.faulted, stages=stages.summary(), **zenoh_threads,
         **inert_summary,
+        **(governor.summary() if governor is not None else {}),
         **(extra_summary or {}),
     )
     if display is not None:

@@ -64,6 +64,9 @@ class SlaveState:
     halted: np.ndarray
     environment: Any
     step_count: int = 0
+    gain_ratio: np.ndarray | None = None
+    """(lanes,) k/k0 the compensators' inputs are scaled by: the master's governed gain k
+    (HandleState.gain_k) over this node's; None: 1 (common/margin_table.py)."""
 
     @property
     def lanes(self) -> int:
@@ -158,6 +161,8 @@ class SlaveNode:
              handle_position_m: np.ndarray) -> SlaveOutputs:
         """Advance every lane by one period Ts; inputs (lanes, 2) in N and m."""
         inputs = np.concatenate((handle_force_N, state.tool_force_N), axis=1)
+        if state.gain_ratio is not None:
+            inputs *= state.gain_ratio[:, None]
         actuator = self.compensators.step(state.compensator, inputs)
         halted = state.halted.any()
         if halted:

@@ -42,6 +42,7 @@ from haptic.common.display import DisplayPublisher, EventCursor
 from haptic.common.failures import exit_on_link_error
 from haptic.common.inert import InertMonitor
 from haptic.common.link import Link
+from haptic.common.margin_table import follow_gain, gain_scalable
 from haptic.common.messages import Flags
 from haptic.common.phase_lock import PhaseLock, PhaseLockSettings
 from haptic.common.preflight import add_preflight_options, run_preflight
@@ -300,6 +301,9 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
 
         clock = time.perf_counter_ns
         fh_row, yh_row = fh, yh  # the newest handle message, updated in place
+        nominal_k, scalable = node.model.ch1_gain_k, gain_scalable(node.model)
+        state.gain_ratio = gain_ratio = np.ones(1)
+        echo = [0]  # send time of the newest handle message used, ns (0: none yet)
 
         def step(tick: int, now_ns: int) -> None:
             now_s = (now_ns - perf_start_ns) * 1e-9
@@ -320,6 +324,9 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             if fresh:
                 fh_row[0] = guard.force_N  # bounded
                 yh_row[0] = guard.position_m
+                # the master's governed k (never above ours) and the echo of its send time
+                gain_ratio[0] = follow_gain(message.gain_k, nominal_k, scalable)
+                echo[0] = message.send_time_ns
             if supervisor.receive(message):
                 resync.step(state, yh, now_s)  # to the held handle, cutting (resync.py)
             tool_row = state.tool[0]
@@ -349,7 +356,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             node_ns = clock()
             # send: the tool force, position and velocity, the clay's status
             link.send_tool((float(ft[0]), float(ft[1])), (float(position[0]), float(position[1])),
-                           (float(velocity[0]), float(velocity[1])), engagement, removed, flags)
+                           (float(velocity[0]), float(velocity[1])), engagement, removed, flags,
+                           echo[0])
             send_ns = clock()
             # telemetry: summary figures, trace, recording, display
             magnitude = math.hypot(ft[0], ft[1])
@@ -430,6 +438,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         removed_volume_m3=flags_box["removed"],
         final_tool_position_m=[float(final[0]), float(final[1])], stages=stages.summary(),
         **zenoh_threads, **guard_summary,
+        slave_gain_k=node.model.ch1_gain_k * float((state.gain_ratio if state.gain_ratio is
+                                                     not None else np.ones(1))[0]),
         **(phase_lock.summary() if phase_lock is not None else {"phase_lock_enabled": False}),
         **extra_summary,
     )

@@ -50,10 +50,25 @@ def test_tool_state_round_trip(seq, force, position, velocity, engagement, volum
 
 
 def test_wire_layout_is_a_compact_array():
-    message = HandleState(5, 9, 1000, Flags.FORCES_ENABLED, (1.0, 2.0), (0.1, 0.2))
+    message = HandleState(5, 9, 1000, Flags.FORCES_ENABLED, (1.0, 2.0), (0.1, 0.2), 13.0)
     assert msgpack.unpackb(encode(message)) == [
-        SCHEMA_VERSION, KIND_HANDLE, 5, 9, 1000, 2, 1.0, 2.0, 0.1, 0.2
+        SCHEMA_VERSION, KIND_HANDLE, 5, 9, 1000, 2, 1.0, 2.0, 0.1, 0.2, 13.0
     ]
+    tool = ToolState(5, 9, 1000, Flags(0), (1.0, 2.0), (0.1, 0.2), (0.0, 0.0), 0.5, 0.0, 777)
+    assert msgpack.unpackb(encode(tool))[-1] == 777  # the echoed send time, last
+
+
+def test_gain_and_echo_are_validated():
+    handle = msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, 1, 2, 3, 0, 0.0, 0.0, 0.0, 0.0, -1.0])
+    with pytest.raises(DecodeError, match="gain_k"):
+        decode(handle, KIND_HANDLE)
+    fields = _valid_tool_fields()
+    fields[-1] = -5
+    with pytest.raises(DecodeError, match="echo_send_time_ns"):
+        decode(msgpack.packb(fields), KIND_TOOL)
+    fields[-1] = 1.5
+    with pytest.raises(DecodeError, match="echo_send_time_ns"):
+        decode(msgpack.packb(fields), KIND_TOOL)
 
 
 def test_encode_refuses_non_finite():
@@ -62,7 +77,7 @@ def test_encode_refuses_non_finite():
 
 
 def _valid_tool_fields() -> list:
-    return [SCHEMA_VERSION, KIND_TOOL, 1, 2, 3, 0, 1.0, 2.0, 0.1, 0.2, 0.0, 0.0, 0.5, 1e-6]
+    return [SCHEMA_VERSION, KIND_TOOL, 1, 2, 3, 0, 1.0, 2.0, 0.1, 0.2, 0.0, 0.0, 0.5, 1e-6, 0]
 
 
 @pytest.mark.parametrize(

@@ -39,7 +39,7 @@ def path(injection: InjectionConfig | None = None, seed: int = 0, stale_s: float
 # -- fuzzing: every bad payload is counted under the right reason ------------------------------
 
 def _fields(seq: int) -> list:
-    return [SCHEMA_VERSION, KIND_HANDLE, 1, seq, T0 + seq * MS, 0, 1.0, 2.0, 0.1, 0.2]
+    return [SCHEMA_VERSION, KIND_HANDLE, 1, seq, T0 + seq * MS, 0, 1.0, 2.0, 0.1, 0.2, 13.0]
 
 
 bad_value = st.sampled_from(["x", None, [1.0], b"\x00", {"a": 1}, True])
@@ -68,10 +68,10 @@ def bad_payload(draw, seq: int):
         fields[1] = draw(st.sampled_from([KIND_TOOL, 0, 3, 99]))
         return msgpack.packb(fields), DropReason.WRONG_KIND
     if kind == "non_finite":
-        fields[draw(st.integers(6, 9))] = draw(st.sampled_from([math.nan, math.inf, -math.inf]))
+        fields[draw(st.integers(6, 10))] = draw(st.sampled_from([math.nan, math.inf, -math.inf]))
         return msgpack.packb(fields), DropReason.NON_FINITE
     if kind == "wrong_type":
-        fields[draw(st.integers(2, 9))] = draw(bad_value)
+        fields[draw(st.integers(2, 10))] = draw(bad_value)
         return msgpack.packb(fields, use_bin_type=True), DropReason.MALFORMED
     fields.append(draw(st.floats()))
     return msgpack.packb(fields), DropReason.MALFORMED

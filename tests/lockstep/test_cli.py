@@ -22,6 +22,19 @@ def test_run_writes_traces_and_plot(tmp_path, capsys) -> None:
     assert (out / "traces.png").stat().st_size > 0
 
 
+def test_governed_run_lowers_k_after_a_delay_step(tmp_path, capsys) -> None:
+    out = tmp_path / "run"
+    assert main(["run", "--scenario", "constant-rate", "--environment", "linear", "--k", "13",
+                 "--duration", "0.4", "--delay-profile-to-master", "step 0:0.002 0.2:0.040",
+                 "--governor", "--safety", "off", "--out", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["governor_nominal_k"] == 13.0 and summary["governor_final_k"] < 8.6
+    assert summary["governor_events"][0]["kind"] == "governor_lower_k"
+    assert 0.2 < summary["governor_events"][0]["time_s"] < 0.24
+    gains = np.load(out / "traces.npz")["gain_k"]
+    assert gains[0] == 13.0 and gains[-1] == summary["governor_final_k"]
+
+
 def test_quick_sweep_agrees_with_the_analysis(tmp_path, capsys) -> None:
     assert main(["sweep", "--gains", "3,13,19", "--delays", "0.004,0.011,0.02",
                  "--duration", "2", "--out", str(tmp_path), "--json", "--check"]) == 0
@@ -35,6 +48,8 @@ def test_quick_sweep_agrees_with_the_analysis(tmp_path, capsys) -> None:
 
 @pytest.mark.parametrize("argv", [["run", "--round-trip-delay", "-1"], ["run", "--loss", "2"],
                                   ["run", "--operator", "dance:fx=1"],
+                                  ["run", "--delay-profile-to-master", "step 0:0.002 3"],
+                                  ["run", "--delay-profile-to-slave", "ramp 0:0.1"],
                                   ["sweep", "--gains", "0,3"]])
 def test_bad_arguments_exit_2_with_one_line(argv, capsys) -> None:
     with pytest.raises(SystemExit) as exit_info:

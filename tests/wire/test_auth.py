@@ -217,7 +217,7 @@ def test_another_schema_version_is_refused_at_start() -> None:
         publisher = old.declare_publisher(master_config.key("pair/slave"))
         hello = msgpack.packb([1, KIND_HELLO, 2, 5, bytes(16), time.time_ns(), False])
         deadline = time.monotonic() + WAIT_S
-        with pytest.raises(LinkOpenError, match="schema version 1, this program 2"):
+        with pytest.raises(LinkOpenError, match="schema version 1, this program 3"):
             while time.monotonic() < deadline:
                 publisher.put(hello)
                 master.wait_for_peer(0.05)

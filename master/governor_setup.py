@@ -1,0 +1,64 @@
+"""The margin governor in ``haptic-master``: built at start, stepped once per tick.
+
+Kept apart from the loop (master/program.py calls three functions): :func:`start_governor`
+builds the tau*(k) table, prints it, and refuses a run whose delay profile reaches beyond the
+margin of every gain (exit 3, unless ``--allow-unstable``); :func:`governor_step` feeds the
+governor the echo of the newest tool message.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any, TextIO
+
+from haptic.common.link import Link
+from haptic.common.model import TeleopModel
+from haptic.common.preflight import (
+    DEFAULT_ASSUMED_LINK_DELAY_S,
+    EXIT_UNSTABLE,
+    governor_enabled,
+    round_trip_delay_s,
+)
+from haptic.master.margin_governor import GovernorDecision, MarginGovernor, governor_for
+
+
+def start_governor(config: dict[str, Any], args: argparse.Namespace, model: TeleopModel,
+                   program: str = "haptic-master", stream: TextIO | None = None,
+                   ) -> tuple[MarginGovernor | None, int | None]:
+    """The governor (None when not enabled) and ``None`` to go on, or :data:`EXIT_UNSTABLE`
+    when the largest round trip the configured delay profiles reach is beyond the delay
+    margin of the lowest gain and ``--allow-unstable`` was not given. Raises
+    :class:`~haptic.common.config.ConfigError` (``governor.action``)."""
+    stream = stream if stream is not None else sys.stderr
+    if not governor_enabled(config, args):
+        return None, None
+    governor = governor_for(model, config)
+    print(f"{program}: governor ({governor.settings.action}, usable while round trip <= "
+          f"{governor.settings.safety_factor:g} tau*): {governor.table.describe()}",
+          file=stream, flush=True)
+    worst = round_trip_delay_s(config, getattr(args, "assumed_link_delay",
+                                               DEFAULT_ASSUMED_LINK_DELAY_S),
+                               "master", getattr(args, "peer_delay", None), "max")
+    floor = governor.table.entries[-1].k
+    if worst < governor.table.margin_s(floor):
+        return governor, None
+    if getattr(args, "allow_unstable", False):
+        print(f"{program}: the configured delays reach {worst * 1e3:.2f} ms, beyond tau* of "
+              f"every k down to {floor:g}; starting anyway (--allow-unstable)", file=stream,
+              flush=True)
+        return governor, None
+    print(f"{program}: refusing to start: the configured delays reach {worst * 1e3:.2f} ms "
+          f"round trip, beyond tau* of every k down to {floor:g} "
+          f"({governor.table.margin_s(floor) * 1e3:.2f} ms); pass --allow-unstable to run it",
+          file=stream, flush=True)
+    return None, EXIT_UNSTABLE
+
+
+def governor_step(governor: MarginGovernor, link: Link, now_s: float) -> GovernorDecision:
+    """One tick: the echo age of the newest tool message (the link's poll time minus the
+    echoed handle send time, both CLOCK_REALTIME on this host) into the governor."""
+    latest = link.latest
+    echo_ns = getattr(latest, "echo_send_time_ns", 0) if latest is not None else 0
+    age_s = (link.last_poll_ns - echo_ns) * 1e-9 if echo_ns > 0 else None
+    return governor.update(now_s, age_s)

@@ -1,0 +1,131 @@
+"""The margin governor in lockstep: a one-way delay that steps from 2 ms to 40 ms at t = 3 s
+takes the paper's k = 13 loop (tau* 14.3 ms sampled) far past its margin; ungoverned it grows
+without bound, governed (k lowered to a delay-independent gain on both sides) it stays
+bounded."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from haptic.common.config.scenario import load_scenario
+from haptic.common.delay_profile import parse_delay_profile
+from haptic.common.injection import InjectionConfig
+from haptic.common.margin_table import build_margin_table
+from haptic.lockstep.simulator import LockstepSimulator
+from haptic.lockstep.verdict import growth_verdict
+from haptic.master.margin_governor import GovernorSettings, MarginGovernor
+from haptic.master.operator import parse_operator_spec
+
+DURATION_S = 6.0
+STEP_AT_S = 3.0
+
+
+@pytest.fixture(scope="module")
+def k13(paper_model):
+    return paper_model.with_gain(13.0)
+
+
+@pytest.fixture(scope="module")
+def table(k13, paper_config):
+    return build_margin_table(k13, paper_config["analysis"], min_gain_k=1.0, step_ratio=0.8)
+
+
+def _run(model, governors=None):
+    ts = model.sample_period_s
+    steps = int(round(DURATION_S / ts))
+    pulse = np.zeros((steps, 2))  # a push at the start and one right at the step
+    pulse[:20] = 1.0
+    at = int(round(STEP_AT_S / ts))
+    pulse[at:at + 20] = 1.0
+    simulator = LockstepSimulator(model, load_scenario("constant-rate"),
+                                  parse_operator_spec("constant:fx=0,fy=0"),
+                                  np.array([13.0]), "linear")
+    return simulator.run(
+        DURATION_S, 0, to_slave=InjectionConfig(delay_s=0.002),
+        to_master=InjectionConfig(delay_profile=parse_delay_profile(
+            f"step 0:0.002 {STEP_AT_S}:0.040")),
+        excitation_N=pulse, governors=governors)
+
+
+def test_the_analysis_puts_the_step_beyond_k13_and_within_a_lower_k(table) -> None:
+    assert table.margin_s(13.0) < 0.042 < table.margin_s(table.entries[-1].k)
+    assert table.margin_s(13.0) > 0.004 + 0.0006  # before the step: inside the margin
+
+
+def test_ungoverned_the_step_makes_the_loop_unbounded(k13) -> None:
+    result = _run(k13)
+    verdict = growth_verdict(result, STEP_AT_S + 0.5)
+    assert verdict.growing[0]
+    assert result.peak_handle_force_N.max() > 1e3  # from a 1 N push
+
+
+def test_governed_the_loop_stays_bounded_and_both_sides_follow_k(k13, table) -> None:
+    governor = MarginGovernor(GovernorSettings(enabled=True, recover_after_s=0.0), table)
+    result = _run(k13, [governor])
+    verdict = growth_verdict(result, STEP_AT_S + 0.5)
+    assert not verdict.growing[0] and not result.diverged[0]
+    assert result.peak_handle_force_N.max() < 2.0  # the 1 N pushes, nothing grows
+    gains = result.governed.gains_k[:, 0]
+    ts = k13.sample_period_s
+    assert np.all(gains[:int(STEP_AT_S / ts)] == 13.0)  # 4 ms round trip: k untouched
+    assert gains[-1] == table.entries[-1].k and table.entries[-1].delay_margin_s is None
+    assert np.max(np.abs(np.diff(gains))) < 0.2  # lowered smoothly, no jump
+    first = result.governed.events[0]
+    assert first["kind"] == "governor_lower_k"
+    # acted within the round trip's silence after the step: before the late messages came
+    assert STEP_AT_S < first["time_s"] < STEP_AT_S + 0.040
+    assert governor.max_rtt_s == pytest.approx(0.042 + ts, abs=2 * ts)
+
+
+def test_scaled_inputs_are_the_design_at_the_lower_gain(paper_model) -> None:
+    """Both sides' compensators at k0 = 13 with inputs scaled by 8/13 step exactly as the ones
+    synthesised at k = 8 (Sh = St = 0: the design is linear in k), master and slave."""
+    from haptic.lockstep.simulator import TRANSPARENT_SAFETY
+    from haptic.master.node import MasterNode
+    from haptic.slave_sim.node import SlaveNode
+
+    rng = np.random.default_rng(3)
+    inputs = rng.normal(0.0, 1.0, (400, 1, 6)) * [1.0, 1.0, 0.0, 0.0, 1.0, 1.0]
+    commands = []
+    for gain, ratio in ((13.0, 8.0 / 13.0), (8.0, 1.0)):
+        node = MasterNode.from_model(paper_model.with_gain(gain), TRANSPARENT_SAFETY)
+        state = node.activate(np.zeros((1, 2)))
+        state.gain_ratio[:] = ratio
+        commands.append(np.array([node.step(state, u[:, 0:2], u[:, 2:4], u[:, 4:6])
+                                  for u in inputs]))
+    np.testing.assert_allclose(commands[0], commands[1], rtol=1e-9, atol=1e-12)
+    assert np.abs(commands[1]).max() > 1e-4
+    forces = []
+    scenario = load_scenario("constant-rate")
+    for gain, ratio in ((13.0, 8.0 / 13.0), (8.0, 1.0)):
+        node = SlaveNode(paper_model.with_gain(gain), scenario, "linear")
+        state = node.initial_state(1)
+        state.gain_ratio = np.array([ratio])
+        forces.append(np.array([node.step(state, u[:, 0:2], np.zeros((1, 2))).tool_force_N
+                                for u in inputs]))
+    np.testing.assert_allclose(forces[0], forces[1], rtol=1e-9, atol=1e-12)
+    assert np.abs(forces[1]).max() > 1e-3  # the comparison is not of zeros
+
+
+def test_on_a_ramp_the_governor_acts_before_the_margin(k13, table) -> None:
+    """A one-way delay rising 2 -> 40 ms over 3 s: k is lowered while the round trip is still
+    inside tau*(13), so the loop never runs beyond its margin and stays bounded."""
+    ts = k13.sample_period_s
+    governor = MarginGovernor(GovernorSettings(enabled=True, recover_after_s=0.0), table)
+    steps = int(round(4.0 / ts))
+    pulse = np.zeros((steps, 2))
+    pulse[:20] = 1.0
+    simulator = LockstepSimulator(k13, load_scenario("constant-rate"),
+                                  parse_operator_spec("constant:fx=0,fy=0"),
+                                  np.array([13.0]), "linear")
+    result = simulator.run(4.0, 0, to_slave=InjectionConfig(delay_s=0.002),
+                           to_master=InjectionConfig(delay_profile=parse_delay_profile(
+                               "linear 0:0.002 3:0.040")),
+                           excitation_N=pulse, governors=[governor])
+    first = result.governed.events[0]
+    round_trip_then = 0.002 + (0.002 + 0.038 * first["time_s"] / 3.0)
+    assert round_trip_then < table.margin_s(13.0)  # acted before the margin
+    assert round_trip_then == pytest.approx(0.7 * table.margin_s(13.0), abs=2 * ts)
+    assert not growth_verdict(result, 1.0).growing[0]
+    assert result.peak_handle_force_N.max() < 2.0

@@ -1,0 +1,54 @@
+"""haptic-master's governor set-up: off by default, the table printed, a delay profile
+beyond every gain's margin refused (exit 3) unless --allow-unstable, lower_k refused on a
+design that is not linear in k."""
+
+from __future__ import annotations
+
+import argparse
+import io
+
+import pytest
+
+from haptic.common.config import ConfigError, override
+from haptic.common.model import model_from_config
+from haptic.common.preflight import EXIT_UNSTABLE, round_trip_delay_s
+from haptic.master.governor_setup import start_governor
+
+
+def _args(**values) -> argparse.Namespace:
+    return argparse.Namespace(**{"governor": None, "allow_unstable": False, **values})
+
+
+def test_off_by_default(paper_config) -> None:
+    model = model_from_config(paper_config)
+    assert start_governor(paper_config, _args(), model) == (None, None)
+
+
+def test_a_profile_beyond_every_margin_is_refused_unless_allowed(paper_config) -> None:
+    config = override(paper_config, "link.master.injection.delay_profile",
+                      "step 0:0.002 3:0.100")
+    config = override(config, "governor.min_gain_k", 12.0)  # table: k 13 and 12 only
+    model = model_from_config(config).with_gain(13.0)
+    stream = io.StringIO()
+    governor, refused = start_governor(config, _args(governor=True), model, stream=stream)
+    assert governor is None and refused == EXIT_UNSTABLE
+    lines = stream.getvalue().strip().splitlines()
+    assert "k 13: 14.3 ms" in lines[0] and "--allow-unstable" in lines[-1]
+    governor, refused = start_governor(config, _args(governor=True, allow_unstable=True),
+                                       model, stream=io.StringIO())
+    assert refused is None and [e.k for e in governor.table.entries] == [13.0, 12.0]
+
+
+def test_the_analysis_of_a_governed_run_takes_the_profile_start(paper_config) -> None:
+    config = override(paper_config, "link.master.injection.delay_profile",
+                      "step 0:0.002 3:0.040")
+    assert round_trip_delay_s(config, 0.0, profile="max") == pytest.approx(0.040)
+    assert round_trip_delay_s(config, 0.0, profile="initial") == pytest.approx(0.002)
+
+
+def test_lower_k_needs_a_design_linear_in_k(paper_config) -> None:
+    config = override(paper_config, "model.x.handle_compliance_sh_num", [1e-4])
+    config = override(config, "model.x.handle_compliance_sh_den", [0.01, 1.0])
+    with pytest.raises(ConfigError, match=r"governor\.action"):
+        start_governor(config, _args(governor=True), model_from_config(config),
+                       stream=io.StringIO())
