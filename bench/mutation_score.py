@@ -115,6 +115,12 @@ PRAGMA = "# pragma: no mutate"
 #: this table (``--equivalents``).
 _REPR = "repr of a private field only: no behaviour reads a repr"
 EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
+    ("slave_sim/input_guard.py", "_plausible_run: int = 0", "_plausible_run: int = 1",
+     "read only after a fault, and every fault sets it to 0 first"),
+    ("common/auth.py", "descriptor = os.open(file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)",
+     "descriptor = os.open(file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 385)",
+     "the os.chmod(file, 0o600) that follows sets the mode either way (it is there for a "
+     "file that already existed)"),
     ("master/node.py", "@dataclass(eq=False)", "@dataclass(eq=True)",
      "nothing compares or hashes node states (identity is what the programs keep)"),
     *(("master/node.py", f"{name}: {kind} = field(default={default}, repr=False){tail}",

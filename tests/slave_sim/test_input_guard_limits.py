@@ -237,3 +237,47 @@ def test_counters_and_summary() -> None:
     assert g.summary() == {"input_guard": {"checked": 3, "faults": 1, "saturated": 1,
                                            "rate_limited": 1, "non_finite": 1,
                                            "faulted": True}}
+
+
+def test_the_shipped_defaults_are_the_configurations_and_frozen() -> None:
+    import dataclasses
+
+    shipped = InputGuardSettings()
+    assert shipped == InputGuardSettings.from_config(load_config())
+    assert (shipped.force_limit_N, shipped.force_trip_N, shipped.force_rate_limit_N_per_s,
+            shipped.position_min_m, shipped.position_max_m, shipped.velocity_trip_m_per_s,
+            shipped.jump_margin_m, shipped.clear_after_messages) == (
+        20.0, 60.0, 20000.0, (-0.16, -0.16), (0.16, 0.16), 1.0, 0.001, 20)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        shipped.force_limit_N = 1e9  # type: ignore[misc]
+
+
+def test_a_box_of_the_wrong_length_is_an_error_not_a_partial_check() -> None:
+    table = {"position_min_m": [-0.1, -0.1, -0.1], "position_max_m": [0.1, 0.1]}
+    with pytest.raises(ValueError):
+        InputGuardSettings.from_config({"slave": {"safety": table}})
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_the_jump_is_measured_from_the_previous_position_on_each_axis(axis) -> None:
+    start = (0.05, -0.03)
+    g = primed(position=start)
+    moved = list(start)
+    moved[axis] += 0.0005
+    assert g.admit(msg(1, position=tuple(moved)), PERIOD_S)
+    assert not g.faulted
+
+
+def test_a_jump_of_exactly_the_allowance_is_plausible() -> None:
+    dt_s = max(PERIOD_NS * 1e-9, PERIOD_S)
+    allowed_m = 1.0 * dt_s + 0.001  # computed as the guard does
+    g = primed()
+    assert g.admit(msg(1, position=(allowed_m, 0.0)), PERIOD_S)
+    g = primed()
+    assert g.admit(msg(1, position=(0.0, -allowed_m)), PERIOD_S)
+
+
+def test_a_jumps_reason_gives_millimetres_and_milliseconds() -> None:
+    g = primed()
+    assert not g.admit(msg(1, position=(0.01, 0.0)), PERIOD_S)
+    assert g.events[-1]["reason"] == "handle position jumped 10 mm in 0.5 ms (at most 1.5 mm)"

@@ -14,10 +14,12 @@ import pytest
 
 from haptic.common.auth import (
     HELLO_MAX_AGE_S,
+    HELLO_PERIOD_S,
     KEY_BYTES,
     KIND_HELLO,
     NONCE_BYTES,
     TAG_BYTES,
+    Hello,
     HelloError,
     SessionAuth,
     decode_hello,
@@ -34,7 +36,23 @@ NOW_NS = 1_700_000_000_000_000_000
 
 def test_the_constants_are_the_documented_ones() -> None:
     assert (TAG_BYTES, KEY_BYTES, NONCE_BYTES, KIND_HELLO) == (16, 32, 16, 3)
-    assert HELLO_MAX_AGE_S == 5.0
+    assert (HELLO_MAX_AGE_S, HELLO_PERIOD_S) == (5.0, 0.1)
+
+
+def test_a_hello_is_frozen() -> None:
+    import dataclasses
+
+    hello = decode_hello(encode_hello("master", 1, bytes(16), NOW_NS, PSK), PSK)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        hello.epoch = 2  # type: ignore[misc]
+
+
+def test_an_existing_key_file_is_made_private(tmp_path) -> None:
+    path = tmp_path / "key"
+    path.write_text("old")
+    os.chmod(path, 0o644)
+    write_key_file(path)
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o600 and len(load_key_file(path)) == 32
 
 
 @pytest.mark.parametrize("mode", [0o640, 0o604, 0o610, 0o601, 0o620, 0o602])
@@ -118,8 +136,14 @@ def test_edges_of_a_hello_decode() -> None:
     with pytest.raises(HelloError, match="not msgpack"):
         decode_hello(b"\xc1", None)
     other = msgpack.packb([SCHEMA_VERSION + 1, 3, "anything"], use_bin_type=True)
-    assert decode_hello(other, PSK).version == SCHEMA_VERSION + 1
-    assert decode_hello(msgpack.packb(["v", 3], use_bin_type=True), None).version == -1
+    assert decode_hello(other, PSK) == Hello(SCHEMA_VERSION + 1, "", 0, b"", 0, False)
+    assert decode_hello(msgpack.packb(["v", 3], use_bin_type=True), None) == Hello(
+        -1, "", 0, b"", 0, False)
+    # 256 bytes is not too long (it fails on what follows the body instead)
+    with pytest.raises(HelloError, match="trailing bytes"):
+        decode_hello(ok + bytes(256 - len(ok)), None)
+    zero = msgpack.packb([SCHEMA_VERSION, 3, 2, 0, bytes(16), NOW_NS, False], use_bin_type=True)
+    assert decode_hello(zero, None).epoch == 0
 
 
 def test_an_authenticated_hello_needs_a_tag_that_verifies() -> None:
@@ -158,6 +182,7 @@ def test_verify_refuses_tampering_short_payloads_and_an_unpaired_side() -> None:
     assert slave.verify(tagged[:-1] + bytes([tagged[-1] ^ 1])) is None
     assert slave.verify(bytes([tagged[0] ^ 1]) + tagged[1:]) is None
     assert slave.verify(tagged[-TAG_BYTES:]) is None          # a tag and no body
+    assert slave.verify(master.tag(b"")) is None              # even the empty body's tag
     assert slave.verify(b"y" + master.tag(b"y")) == b"y"      # one byte of body is enough
     assert SessionAuth(PSK, "slave", 22).verify(tagged) is None  # not paired
     with pytest.raises(ValueError, match="32 bytes"):
@@ -195,6 +220,19 @@ def test_hello_refusals_and_what_counts_as_rejected() -> None:
     rerun = SessionAuth(PSK, "master", 11)
     assert slave.accept_hello(decode_hello(rerun.hello(NOW_NS + 1), PSK), NOW_NS + 1)
     assert slave.pairings == 2 and slave.peer.nonce == rerun.nonce
+
+
+def test_the_first_hello_may_carry_any_time_after_zero() -> None:
+    slave = SessionAuth(PSK, "slave", 22)
+    assert slave.accept_hello(decode_hello(SessionAuth(PSK, "master", 1).hello(1), PSK), 1)
+
+
+def test_another_run_with_the_same_time_stamp_is_not_a_re_pairing() -> None:
+    slave = SessionAuth(PSK, "slave", 22)
+    assert slave.accept_hello(decode_hello(SessionAuth(PSK, "master", 1).hello(NOW_NS), PSK),
+                              NOW_NS)
+    twin = decode_hello(SessionAuth(PSK, "master", 2).hello(NOW_NS), PSK)
+    assert not slave.accept_hello(twin, NOW_NS) and slave.peer_epoch == 1
 
 
 def test_before_pairing_there_is_no_peer() -> None:
