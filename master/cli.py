@@ -151,7 +151,7 @@ def _main_alone(args: argparse.Namespace) -> int:
         return 1
     result = {
         "rig": settings.rig, "cycles": summary.cycles, "wall_time_s": summary.wall_time_s,
-        "overruns": summary.overruns, "max_lateness_s": summary.max_lateness_s,
+        "overruns": summary.overruns, "period_error_max_s": summary.period_error_max_s,
         "final_position_m": list(summary.final_position_m), "safe_state": summary.safe_state,
         "events": [{"step": e.step, "time_s": e.time_s, "kind": e.kind, "reason": e.reason,
                     "axis": e.axis} for e in summary.events],
@@ -161,7 +161,8 @@ def _main_alone(args: argparse.Namespace) -> int:
         print(json.dumps(result))
     else:
         print(f"rig {settings.rig}: {summary.cycles} cycles in {summary.wall_time_s:.3f} s, "
-              f"{summary.overruns} overruns (max {summary.max_lateness_s * 1e3:.2f} ms late)")
+              f"{summary.overruns} overruns (period error max "
+              f"{summary.period_error_max_s * 1e3:.2f} ms)")
         print(f"final handle position x {summary.final_position_m[0]:+.6f} m, "
               f"y {summary.final_position_m[1]:+.6f} m; safe state: {summary.safe_state}")
         for event in summary.events:

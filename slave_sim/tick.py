@@ -1,0 +1,144 @@
+"""One tick of the slave, with the I/O passed in: supervise, then the node.
+
+The program (slave_sim/program.py) and the lockstep simulator (lockstep/simulator.py) both
+run their ticks through :class:`SlaveTick`, so the simulator that checks the analysis runs
+the input guard, the supervisor, the resync and the node exactly as they ship
+(docs/architecture.md, "one tick"):
+
+    poll -> supervise -> node -> send -> telemetry
+    (caller) SlaveTick.supervise  SlaveTick.control  (caller)
+
+:meth:`SlaveTick.supervise`, per lane: the input guard bounds a fresh ``HandleState``
+(slave_sim/input_guard.py; a fault is not an input); the supervisor (watchdog, resync,
+work-area guard; slave_sim/supervisor.py) says whether the tool follows the handle
+(``ToolResync``: through the clay at a bounded speed) and whether it runs, stops or resumes.
+:meth:`SlaveTick.control` steps the node (Ch2/Ct2, the tool, the environment) with the
+bounded handle force where the tool runs and zero force elsewhere, and returns the node's
+outputs with the flags to send.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from haptic.common.messages import Flags, HandleState
+from haptic.slave_sim.input_guard import InputGuard
+from haptic.slave_sim.node import SlaveNode, SlaveOutputs, SlaveState
+from haptic.slave_sim.resync import ToolResync
+from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
+
+#: (ready, cutting) -> the flags of the message to the master.
+_FLAGS = {(True, False): Flags.FORCES_ENABLED, (False, False): Flags.SAFE_STATE,
+          (True, True): Flags.FORCES_ENABLED | Flags.IN_CONTACT,
+          (False, True): Flags.SAFE_STATE | Flags.IN_CONTACT}
+
+
+@dataclass
+class SlaveTickOutput:
+    """What one tick produced: the node's outputs (``out``), which lanes ran (``running``,
+    (lanes,) bool), and per lane the flags of the message to the master (FORCES_ENABLED when
+    this side is ready, IN_CONTACT while cutting)."""
+
+    out: SlaveOutputs
+    running: np.ndarray
+    flags: list[Flags]
+
+
+class SlaveTick:
+    """The slave's supervise and node stages for ``len(supervisors)`` lanes.
+
+    ``state``: the node's state (the caller made it, e.g. ``node.initial_state(lanes)``);
+    ``guards``: one :class:`InputGuard` per lane; ``resync``: the tool's way back to the
+    handle. The newest bounded handle force and position per lane are :attr:`handle_force_N`
+    and :attr:`handle_position_m` ((lanes, 2), N and m).
+    """
+
+    def __init__(self, node: SlaveNode, state: SlaveState,
+                 supervisors: Sequence[SlaveSupervisor], guards: Sequence[InputGuard],
+                 resync: ToolResync | None = None) -> None:
+        lanes = len(supervisors)
+        if lanes != state.lanes or len(guards) != lanes:
+            raise ValueError(f"one supervisor and one guard per lane ({state.lanes} lanes)")
+        self.node = node
+        self.state = state
+        self.supervisors = list(supervisors)
+        self.guards = list(guards)
+        self.resync = resync if resync is not None else ToolResync(node)
+        self.lanes = lanes
+        self.handle_force_N = np.zeros((lanes, 2))
+        self.handle_position_m = state.handle_position_m.copy()
+        self.fresh = np.zeros(lanes, bool)
+        self.running = np.zeros(lanes, bool)
+        self._follow = np.zeros(lanes, bool)
+        self._resume = np.zeros(lanes, bool)
+        self._stop = np.zeros(lanes, bool)
+        self._zero_force = np.zeros((lanes, 2))
+
+    def start(self, synced: bool = False) -> None:
+        """Before the first tick: the tool stops and waits for the master; with ``synced``
+        the link counts as up and in sync (the lockstep's warm start) and the tool runs from
+        tick 0 with the handle at :attr:`handle_position_m`."""
+        if not synced:
+            self.node.safe_stop(self.state)
+            return
+        for lane, supervisor in enumerate(self.supervisors):
+            supervisor.start_synced(tuple(self.handle_position_m[lane]))
+            self.guards[lane].position_m = (float(self.handle_position_m[lane, 0]),
+                                            float(self.handle_position_m[lane, 1]))
+        self.running[:] = True
+
+    def supervise(self, now_s: float, messages: Sequence[HandleState | None],
+                  silence_s: Sequence[float] | None = None,
+                  peer_alive: Sequence[bool] | None = None) -> np.ndarray:
+        """Feed every lane's guard and supervisor (``messages``: the fresh ``HandleState``
+        per lane or ``None``; ``silence_s``: time since the last fresh message per lane, s;
+        ``peer_alive``: the master's liveliness per lane); re-place, stop or resume the tool
+        as they say. Returns the lanes whose message was an input (fresh and admitted)."""
+        fresh, follow = self.fresh, self._follow
+        force, position = self.handle_force_N, self.handle_position_m
+        for lane, message in enumerate(messages):
+            admitted = message is not None and self.guards[lane].admit(message, now_s)
+            fresh[lane] = admitted
+            if admitted:
+                guard = self.guards[lane]
+                force[lane] = guard.force_N  # bounded
+                position[lane] = guard.position_m
+            follow[lane] = self.supervisors[lane].receive(message if admitted else None)
+        state = self.state
+        if follow.any():  # to the held handle, cutting (slave_sim/resync.py)
+            self.resync.step(state, position, now_s, None if follow.all() else follow)
+        tool = state.tool
+        resume, stop = self._resume, self._stop
+        for lane, supervisor in enumerate(self.supervisors):
+            transition = supervisor.update(
+                now_s, bool(fresh[lane]), (tool[lane, 0], tool[lane, 2]),
+                0.0 if silence_s is None else silence_s[lane],
+                True if peer_alive is None else peer_alive[lane], self.guards[lane].faulted)
+            resume[lane] = transition is Transition.RESUME
+            stop[lane] = transition is Transition.STOP
+            self.running[lane] = supervisor.running
+        if resume.any():
+            self.node.resume(state, None if resume.all() else resume)
+        if stop.any():
+            self.node.safe_stop(state, None if stop.all() else stop)
+        return fresh
+
+    def control(self) -> SlaveTickOutput:
+        """The node stage: Ch2/Ct2, the tool and the environment, with the bounded handle
+        force where the tool runs and zero force elsewhere."""
+        running = self.running
+        if running.all():
+            force = self.handle_force_N
+        elif not running.any():
+            force = self._zero_force
+        else:
+            force = np.where(running[:, None], self.handle_force_N, 0.0)
+        out = self.node.step(self.state, force, self.handle_position_m)
+        cutting = out.cutting
+        table = _FLAGS
+        flags = [table[supervisor.ready, bool(cut)]
+                 for supervisor, cut in zip(self.supervisors, cutting.tolist(), strict=True)]
+        return SlaveTickOutput(out, running, flags)
