@@ -9,22 +9,26 @@ One run, in order::
     status = harness.wait_for_peer(peer_wait_s, signals)   # None: the peer came
     harness.start()                                         # the run's time origin
     harness.attach_display(display)                         # optional
-    run = harness.run(step, status_text, signals)           # step(tick, now_ns)
-    harness.collect_link()                                  # before the link closes
+    run = harness.run(step, status_text, signals, on_stop)  # step(tick, now_ns)
     summary = harness.summary(run, watchdog, max_force_N, event_lists, **extra)
     harness.finish(summary)                                 # recording, JSON, stderr
+
+Their shared command-line options are :func:`add_networked_options`.
 
 It does no control work and imports no CAN stack, Warp or program package.
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
+from haptic.common.config import ConfigError
 from haptic.common.display import DisplayPublisher, EventCursor
 from haptic.common.link import Link
 from haptic.common.run_recording import RunRecording
@@ -127,21 +131,29 @@ class ProgramHarness:
             self.display.offer_status(values, new_events)
 
     def status_line(self, watchdog: PeerWatchdog, text: str) -> str:
-        """The live status line: the link's delay and loss, the watchdog's state, ``text``."""
+        """The live status line: the link's delay and loss, the watchdog's state, ``text``
+        (this side's figures)."""
         stats = self.link.stats()
         return (f"link p50 {stats.one_way_delay_p50_s * 1e3:.3f} ms  loss "
                 f"{stats.loss_ratio * 100:.2f} %  {watchdog.state.value}  {text}")
 
-    def run(self, step: StepFunction, status_text: Callable[[], str],
-            signals: StopSignals) -> RunStats:
+    def run(self, step: StepFunction, status_text: Callable[[], str], signals: StopSignals,
+            on_stop: Callable[[], None]) -> RunStats:
         """The real-time runner over ``step`` for the run's duration (or until stopped);
-        :attr:`runner` is the runner while it runs (a step may shift its schedule)."""
+        :attr:`runner` is the runner while it runs (a step may shift its schedule). On every
+        way out ``on_stop()`` puts the side in its safe state and tells the peer, then the
+        link's figures are kept (:meth:`collect_link`). ``status_text()``: this side's part
+        of the live status line."""
         options = self.options
         self.runner = RealTimeRunner(
             self.period_s, step, duration_s=options.duration_s, spin_s=options.runner.spin_s,
             realtime=options.runner.realtime, status=status_text,
             show_status=options.show_status, stop_signals=signals)
-        return self.runner.run()
+        try:
+            return self.runner.run()
+        finally:
+            on_stop()
+            self.collect_link()
 
     def collect_link(self) -> None:
         """The link's figures and its peer's comings and goings (before the link closes)."""
@@ -194,3 +206,32 @@ def recording_for(path: str | None, side: str, columns: Sequence[str], period_s:
     finally:
         if recording is not None:
             recording.close(time.time_ns(), None)
+
+
+def add_networked_options(parser: argparse.ArgumentParser, peer: str, out_help: str,
+                          sync_tolerance_m: float) -> argparse._ArgumentGroup:
+    """The networked programs' shared options (one spelling in both): ``--out DIR``
+    (``out_help``: what is written there), ``--peer-wait S``, ``--sync-tolerance M``
+    (default ``sync_tolerance_m``, m) and ``--trace-every N``. Returns the group, for the
+    program's own options."""
+    group = parser.add_argument_group("networked run")
+    group.add_argument("--out", metavar="DIR", type=Path, help=out_help)
+    group.add_argument("--peer-wait", metavar="S", type=float,
+                       help=f"give up (exit 1) when no {peer} appears within S s "
+                       "(default: wait)")
+    group.add_argument("--sync-tolerance", metavar="M", type=float, default=sync_tolerance_m,
+                       help="resync: |tool - Ah1 handle| below this on both axes, m "
+                       f"(default {sync_tolerance_m:g})")
+    group.add_argument("--trace-every", metavar="N", type=int, default=10,
+                       help="keep every Nth tick in the trace (default 10)")
+    return group
+
+
+def check_networked_options(args: argparse.Namespace) -> None:
+    """The shared options' bounds (raises :class:`ConfigError` naming the option)."""
+    if not args.sync_tolerance > 0.0:
+        raise ConfigError("--sync-tolerance", f"must be > 0 m (got {args.sync_tolerance})")
+    if args.trace_every < 1:
+        raise ConfigError("--trace-every", f"must be >= 1 (got {args.trace_every})")
+    if args.record_every < 1:
+        raise ConfigError("--record-every", f"must be >= 1 (got {args.record_every})")

@@ -254,13 +254,7 @@ def _run_linked_master(
                     stages.record(now_ns, (read_ns, poll_ns, supervise_ns, node_ns, write_ns,
                                            send_ns, clock()))
 
-                def status() -> str:
-                    return harness.status_line(watchdog, f"fh {loop.last_fh[0]:+.2f} N  ft "
-                                               f"{loop.last_ft[0]:+.2f} N{inert.status()}")
-
-                try:
-                    run = harness.run(step, status, signals)
-                finally:
+                def stop_safely() -> None:
                     # Safe state: hold where the handle is, no reflected force, then tell the
                     # slave (one message with SAFE_STATE) before the link closes.
                     try:
@@ -273,7 +267,10 @@ def _run_linked_master(
                     except Exception as error:  # noqa: BLE001 - shutting down regardless
                         print(f"haptic-master: while stopping: {error}", file=sys.stderr)
                     _flush_node_events(loop, tick_stages)
-                    harness.collect_link()
+
+                run = harness.run(step, lambda: harness.status_line(
+                    watchdog, f"fh {loop.last_fh[0]:+.2f} N  ft {loop.last_ft[0]:+.2f} N"
+                    f"{inert.status()}"), signals, stop_safely)
                 inert_summary = inert.summary(run.elapsed_s)
         except HardwareError as error:
             print(f"haptic-master: hardware error: {error}", file=sys.stderr)

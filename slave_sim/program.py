@@ -27,28 +27,21 @@ import argparse
 import math
 import sys
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import zenoh
 
-from haptic.common.cli_options import add_run_options, run_options_from_args
-from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
-from haptic.common.config.scenario import load_scenario, max_block_damping
+from haptic.common.config import ConfigError
 from haptic.common.cutting import cutting_figures, steady_cut_fields
 from haptic.common.display import DisplayPublisher
-from haptic.common.failures import exit_on_link_error
 from haptic.common.inert import InertMonitor
 from haptic.common.link import Link
 from haptic.common.messages import Flags
 from haptic.common.phase_lock import PhaseLock, PhaseLockSettings
-from haptic.common.preflight import add_preflight_options, run_preflight
 from haptic.common.program_harness import ProgramHarness, recording_for
 from haptic.common.run_recording import RunRecording
 from haptic.common.runner import StopSignals
-from haptic.common.runner_config import place_other_threads
 from haptic.common.stage_times import StageTimes
 from haptic.common.trace import TraceRecorder
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
@@ -79,75 +72,6 @@ SLAVE_TRACE_COLUMNS = (
     "tool_velocity_y_m_s", "tool_force_x_N", "tool_force_y_N", "engagement", "cutting",
     "forces_enabled",
 )
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The command line."""
-    parser = argparse.ArgumentParser(prog="haptic-slave", description=__doc__.split("\n")[0])
-    add_run_options(parser)
-    parser.add_argument("--scenario", help="scenario name or TOML path ([slave] scenario)")
-    add_preflight_options(parser)
-    group = parser.add_argument_group("networked run")
-    group.add_argument("--out", metavar="DIR", type=Path,
-                       help="write clay.npz, clay.png and slave_trace.npz here at the end")
-    group.add_argument("--peer-wait", metavar="S", type=float,
-                       help="give up (exit 1) when no master appears within S s (default: wait)")
-    group.add_argument("--sync-tolerance", metavar="M", type=float,
-                       default=DEFAULT_SYNC_TOLERANCE_M,
-                       help=f"resync: |tool - Ah1 handle| below this, m "
-                       f"(default {DEFAULT_SYNC_TOLERANCE_M:g})")
-    group.add_argument("--phase-margin", metavar="S", type=float,
-                       help="start the spin before the tick this long after the master's "
-                       "message arrives, s (slave.phase_lock.margin_s)")
-    group.add_argument("--no-phase-lock", action="store_true",
-                       help="let the loop tick free-running (slave.phase_lock.enabled = false)")
-    group.add_argument("--trace-every", metavar="N", type=int, default=10,
-                       help="keep every Nth tick in the trace (default 10)")
-    return parser
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit status: 0; 1 when no master came within --peer-wait;
-    2 for a configuration error (one line); 3 when the stability analysis refuses the loop;
-    4 when the link cannot open (a port in use, an unreachable router; one line)."""
-    args = build_parser().parse_args(argv)
-    zenoh.init_log_from_env_or("error")
-    with exit_on_config_error():
-        config = load_config(args.config)
-        if args.scenario is not None:
-            config = override(config, "slave.scenario", args.scenario)
-        if args.k is not None:
-            config = override(config, "model.ch1.gain_k", args.k)
-        if args.phase_margin is not None:
-            config = override(config, "slave.phase_lock.margin_s", args.phase_margin)
-        if args.no_phase_lock:
-            config = override(config, "slave.phase_lock.enabled", False)
-        options = run_options_from_args(args, "slave", config=config)
-        if not args.sync_tolerance > 0.0:
-            raise ConfigError("--sync-tolerance", f"must be > 0 m (got {args.sync_tolerance})")
-        if args.trace_every < 1:
-            raise ConfigError("--trace-every", f"must be >= 1 (got {args.trace_every})")
-        if args.record_every < 1:
-            raise ConfigError("--record-every", f"must be >= 1 (got {args.record_every})")
-        scenario = load_scenario(options.config["slave"]["scenario"])
-        phase_lock_from(options.config, options.config["model"]["sample_period_s"])
-        InputGuardSettings.from_config(options.config)  # [slave.safety]'s cross-key checks
-    # before Warp's, the recorder's and Zenoh's threads start: they inherit these CPUs
-    placement = place_other_threads(options.runner)
-    with exit_on_config_error():
-        analysis, refused = run_preflight(options.config, args, "haptic-slave", side="slave",
-                                          clay_damping_N_s_per_m=max_block_damping(scenario))
-    if refused is not None:
-        return refused
-    import warp
-
-    warp.config.log_level = warp.LOG_WARNING  # no start-up banner
-    warp.config.quiet = True
-    with exit_on_config_error():
-        node = SlaveNode.from_config(options.config, scenario)
-    with exit_on_link_error("haptic-slave"):
-        return run_slave(node, options, args, {"scenario": scenario.name,
-                                               "analysis": analysis.as_dict(), **placement})
 
 
 def phase_lock_from(config: dict[str, Any], period_s: float) -> PhaseLock | None:
@@ -351,19 +275,16 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                            running=running)
             stages.record(now_ns, (poll_ns, supervise_ns, node_ns, send_ns, clock()))
 
-        def status() -> str:
-            return harness.status_line(watchdog, f"ft {flags_box['ft'][0]:+.2f} N  engagement "
-                                       f"{flags_box['engagement']:.2f}{inert.status()}")
-
-        try:
-            run = harness.run(step, status, signals)
-        finally:
+        def stop_safely() -> None:
             # Safe state: the tool stops; one message with SAFE_STATE before the link closes.
             node.safe_stop(state)
             position = state.tool_position_m()[0]
             link.send_tool((0.0, 0.0), (float(position[0]), float(position[1])), (0.0, 0.0),
                            0.0, flags_box["removed"], Flags.SAFE_STATE)
-            harness.collect_link()
+
+        run = harness.run(step, lambda: harness.status_line(
+            watchdog, f"ft {flags_box['ft'][0]:+.2f} N  engagement "
+            f"{flags_box['engagement']:.2f}{inert.status()}"), signals, stop_safely)
         guard_summary = {**guard.summary(), **inert.summary(run.elapsed_s)}
     final = state.tool_position_m()[0]
     summary = harness.summary(
@@ -405,6 +326,3 @@ def _removed_total_m3(state: Any) -> float:
     total = getattr(state.environment, "removed_total_m3", None)
     return 0.0 if total is None else float(total[0])
 
-
-if __name__ == "__main__":
-    sys.exit(main())
