@@ -97,11 +97,12 @@ class MasterTick:
         ramp in). Returns each lane's transition."""
         transitions = []
         position = np.asarray(handle_position_m, float)
+        rows = position.tolist()  # floats: the supervisors are plain Python
         activate = np.zeros(self.lanes, bool)
         resume = np.zeros(self.lanes, bool)
         for lane, supervisor in enumerate(self.supervisors):
             transition = supervisor.update(
-                now_s, messages[lane], position[lane],
+                now_s, messages[lane], rows[lane],
                 () if faults is None else faults[lane], cycle,
                 0.0 if silence_s is None else silence_s[lane],
                 True if peer_alive is None else peer_alive[lane])

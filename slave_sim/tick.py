@@ -110,11 +110,12 @@ class SlaveTick:
         state = self.state
         if follow.any():  # to the held handle, cutting (slave_sim/resync.py)
             self.resync.step(state, position, now_s, None if follow.all() else follow)
-        tool = state.tool
+        tool = state.tool[:, 0::2].tolist()  # (x, y) per lane, floats
+        fresh_list = fresh.tolist()
         resume, stop = self._resume, self._stop
         for lane, supervisor in enumerate(self.supervisors):
             transition = supervisor.update(
-                now_s, bool(fresh[lane]), (tool[lane, 0], tool[lane, 2]),
+                now_s, fresh_list[lane], tool[lane],
                 0.0 if silence_s is None else silence_s[lane],
                 True if peer_alive is None else peer_alive[lane], self.guards[lane].faulted)
             resume[lane] = transition is Transition.RESUME
