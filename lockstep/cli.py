@@ -22,7 +22,13 @@ from haptic.common.config import ConfigError, exit_on_config_error, load_config
 from haptic.common.config.scenario import load_scenario
 from haptic.common.injection import InjectionConfig
 from haptic.common.model import model_from_config
-from haptic.lockstep.simulator import ENVIRONMENTS, TRANSPARENT_SAFETY, LockstepSimulator
+from haptic.lockstep.simulator import (
+    ENVIRONMENTS,
+    TRANSPARENT_SAFETY,
+    TRANSPARENT_SUPERVISION,
+    LockstepSimulator,
+    LockstepSupervision,
+)
 from haptic.master.operator import parse_operator_spec
 from haptic.master.settings import master_settings
 
@@ -59,7 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--loss", type=float, default=0.0, help="loss probability per message")
     run.add_argument("--duration", type=float, default=3.0, metavar="SECONDS")
     run.add_argument("--safety", choices=("config", "off"), default="config",
-                     help="the master's safety limits from [master.safety], or off")
+                     help="the shipped limits: the master's [master.safety] and the programs' "
+                     "supervision (watchdog [link.watchdog], the slave's work area and "
+                     "[slave.safety]), or off (transparent)")
     run.add_argument("--out", type=Path, default=Path("haptic-sim-run"))
     run.add_argument("--json", action="store_true", help="print a JSON summary")
 
@@ -106,9 +114,12 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
     environment = args.environment or scenario.environment
     operator = parse_operator_spec(args.operator or config["lockstep"]["constant_rate_operator"],
                                    "--operator")
-    safety = master_settings(config).safety if args.safety == "config" else TRANSPARENT_SAFETY
+    shipped = args.safety == "config"
+    safety = master_settings(config).safety if shipped else TRANSPARENT_SAFETY
+    supervision = (LockstepSupervision.from_config(config, scenario) if shipped
+                   else TRANSPARENT_SUPERVISION)
     simulator = LockstepSimulator(model, scenario, operator, np.array([gain]), environment,
-                                  safety, device="cpu")
+                                  safety, device="cpu", supervision=supervision)
     injection = None
     if args.jitter > 0.0 or args.loss > 0.0:
         injection = InjectionConfig(jitter_s=args.jitter, loss_probability=args.loss)
@@ -130,6 +141,7 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
         "peak_tool_force_N": result.peak_tool_force_N[0].tolist(),
         "position_error_rms_m": result.position_error_rms_m[0].tolist(),
         "safety_events": result.safety_events, "out": str(out),
+        "watchdog_trips": _watchdog_trips(simulator),
     }
 
 
@@ -228,5 +240,12 @@ def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
     return 0
 
 
+def _watchdog_trips(simulator: LockstepSimulator) -> dict[str, int]:
+    """The run's watchdog trips on each side (0 without link outages)."""
+    master, slave = simulator.last_ticks
+    return {"master": master.supervisors[0].trips, "slave": slave.supervisors[0].trips}
+
+
 if __name__ == "__main__":
     raise SystemExit(main())
+
