@@ -325,7 +325,7 @@ class LockstepSimulator:
                     fh = fh + excitation[k]
                 yh = sample.handle_position_m
                 master_tick.supervise(now_s, tool_arrivals.tool_states(k, tool_rows), yh,
-                                      silence_s=tool_arrivals.silence_s)
+                                      silence_s=tool_arrivals.silence_s.tolist())
                 used = master_tick.control(fh, yh)
                 command = used.command_m.copy()
                 handle_message[:, 0:2] = used.handle_force_used_N
@@ -336,7 +336,7 @@ class LockstepSimulator:
                 received = handle_line.receive(k)
                 yt = slave_state.tool[:, [0, 2]]
                 slave_tick.supervise(now_s, handle_arrivals.handle_states(k, received),
-                                     silence_s=handle_arrivals.silence_s)
+                                     silence_s=handle_arrivals.silence_s.tolist())
                 ticked = slave_tick.control()
                 out = ticked.out
                 ft = out.tool_force_N

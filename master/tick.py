@@ -95,23 +95,18 @@ class MasterTick:
         slave's liveliness per lane). Lanes whose forces come on get a fresh node state at
         their position (``ACTIVATE``: the node's small-force gate; ``RESUME``: the forces
         ramp in). Returns each lane's transition."""
-        transitions = []
         position = np.asarray(handle_position_m, float)
         rows = position.tolist()  # floats: the supervisors are plain Python
-        activate = np.zeros(self.lanes, bool)
-        resume = np.zeros(self.lanes, bool)
-        for lane, supervisor in enumerate(self.supervisors):
-            transition = supervisor.update(
-                now_s, messages[lane], rows[lane],
-                () if faults is None else faults[lane], cycle,
-                0.0 if silence_s is None else silence_s[lane],
-                True if peer_alive is None else peer_alive[lane])
-            transitions.append(transition)
-            if transition is Transition.ACTIVATE:
-                activate[lane] = True
-            elif transition is Transition.RESUME:
-                resume[lane] = True
-            self.enabled[lane] = supervisor.enabled
+        supervisors = self.supervisors
+        transitions = [
+            supervisor.update(now_s, messages[lane], rows[lane],
+                              () if faults is None else faults[lane], cycle,
+                              0.0 if silence_s is None else silence_s[lane],
+                              True if peer_alive is None else peer_alive[lane])
+            for lane, supervisor in enumerate(supervisors)]
+        self.enabled[...] = [supervisor.enabled for supervisor in supervisors]
+        activate = np.array([t is Transition.ACTIVATE for t in transitions])
+        resume = np.array([t is Transition.RESUME for t in transitions])
         if activate.any() or resume.any():
             self._renew(now_s, np.nan_to_num(position), activate, resume)
         return transitions

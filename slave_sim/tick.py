@@ -72,9 +72,6 @@ class SlaveTick:
         self.handle_position_m = state.handle_position_m.copy()
         self.fresh = np.zeros(lanes, bool)
         self.running = np.zeros(lanes, bool)
-        self._follow = np.zeros(lanes, bool)
-        self._resume = np.zeros(lanes, bool)
-        self._stop = np.zeros(lanes, bool)
         self._zero_force = np.zeros((lanes, 2))
 
     def start(self, synced: bool = False) -> None:
@@ -97,34 +94,42 @@ class SlaveTick:
         per lane or ``None``; ``silence_s``: time since the last fresh message per lane, s;
         ``peer_alive``: the master's liveliness per lane); re-place, stop or resume the tool
         as they say. Returns the lanes whose message was an input (fresh and admitted)."""
-        fresh, follow = self.fresh, self._follow
-        force, position = self.handle_force_N, self.handle_position_m
+        guards, supervisors = self.guards, self.supervisors
+        admitted_lanes = []
+        follow = []
         for lane, message in enumerate(messages):
-            admitted = message is not None and self.guards[lane].admit(message, now_s)
-            fresh[lane] = admitted
+            admitted = message is not None and guards[lane].admit(message, now_s)
             if admitted:
-                guard = self.guards[lane]
-                force[lane] = guard.force_N  # bounded
-                position[lane] = guard.position_m
-            follow[lane] = self.supervisors[lane].receive(message if admitted else None)
+                admitted_lanes.append(lane)
+            # a fault is not an input
+            follow.append(supervisors[lane].receive(message if admitted else None))
+        fresh = self.fresh
+        fresh[...] = False
+        if admitted_lanes:
+            fresh[admitted_lanes] = True
+            self.handle_force_N[admitted_lanes] = [guards[lane].force_N  # bounded
+                                                   for lane in admitted_lanes]
+            self.handle_position_m[admitted_lanes] = [guards[lane].position_m
+                                                      for lane in admitted_lanes]
         state = self.state
-        if follow.any():  # to the held handle, cutting (slave_sim/resync.py)
-            self.resync.step(state, position, now_s, None if follow.all() else follow)
+        if any(follow):  # to the held handle, cutting (slave_sim/resync.py)
+            self.resync.step(state, self.handle_position_m, now_s,
+                             None if all(follow) else np.array(follow))
         tool = state.tool[:, 0::2].tolist()  # (x, y) per lane, floats
         fresh_list = fresh.tolist()
-        resume, stop = self._resume, self._stop
-        for lane, supervisor in enumerate(self.supervisors):
-            transition = supervisor.update(
-                now_s, fresh_list[lane], tool[lane],
-                0.0 if silence_s is None else silence_s[lane],
-                True if peer_alive is None else peer_alive[lane], self.guards[lane].faulted)
-            resume[lane] = transition is Transition.RESUME
-            stop[lane] = transition is Transition.STOP
-            self.running[lane] = supervisor.running
-        if resume.any():
-            self.node.resume(state, None if resume.all() else resume)
-        if stop.any():
-            self.node.safe_stop(state, None if stop.all() else stop)
+        transitions = [
+            supervisor.update(now_s, fresh_list[lane], tool[lane],
+                              0.0 if silence_s is None else silence_s[lane],
+                              True if peer_alive is None else peer_alive[lane],
+                              guards[lane].faulted)
+            for lane, supervisor in enumerate(supervisors)]
+        self.running[...] = [supervisor.running for supervisor in supervisors]
+        resume = [transition is Transition.RESUME for transition in transitions]
+        stop = [transition is Transition.STOP for transition in transitions]
+        if any(resume):
+            self.node.resume(state, None if all(resume) else np.array(resume))
+        if any(stop):
+            self.node.safe_stop(state, None if all(stop) else np.array(stop))
         return fresh
 
     def control(self) -> SlaveTickOutput:
