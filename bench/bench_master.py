@@ -15,9 +15,9 @@ driver on
 
 For each: the CAN cycle (``hardware.read()``: SYNC sent to the last PDO received) and the
 whole control cycle (read + node step + operator display + RPDOs), back to back
-(``unpaced``) and paced at Ts as the real-time runner paces (sleep, then spin the last
-``[runner] spin_s``, 0.1 ms; re-anchored after an overrun), with p50/p99/max, the overruns
-and the largest lateness.
+(``unpaced``) and paced at Ts by the programs' real-time runner (common/runner.py: sleep,
+then spin the last ``[runner] spin_s``, 0.1 ms; re-anchored after a stall), with
+p50/p99/max, the overruns and the runner's period error.
 Figures are wall-clock on this machine (noisy: other programs on a 2-core machine move them
 a lot, so the 1-minute load average is printed with them). Nothing is asserted.
 """
@@ -35,6 +35,7 @@ import numpy as np
 
 from haptic.common.config import load_config, override
 from haptic.common.model import model_from_config
+from haptic.common.runner import FreeRunningClock, RealTimeRunner
 from haptic.master.hardware import HandleHardware, create_hardware
 from haptic.master.node import MasterNode
 from haptic.master.rig_model import RigModel
@@ -107,11 +108,10 @@ def _run_cycles(hardware: HandleHardware, node: MasterNode, cycles: int, pace: b
     zero = np.zeros((1, 2))
     reads = np.empty(cycles)
     totals = np.empty(cycles)
-    overruns = 0
     faulted = 0
-    max_lateness = 0.0
-    deadline = time.perf_counter()
-    for k in range(cycles):
+
+    def step(k: int, _now_ns: int) -> None:
+        nonlocal faulted
         t0 = time.perf_counter()
         reading = hardware.read()
         t1 = time.perf_counter()
@@ -121,26 +121,25 @@ def _run_cycles(hardware: HandleHardware, node: MasterNode, cycles: int, pace: b
         hardware.write(command[0])
         t2 = time.perf_counter()
         reads[k], totals[k] = t1 - t0, t2 - t0
-        if pace:
-            deadline += period_s
-            now = time.perf_counter()
-            if now > deadline:
-                overruns += 1
-                max_lateness = max(max_lateness, now - deadline)
-                deadline = now  # re-anchor after a stall
-            else:
-                if deadline - now > spin_s:
-                    time.sleep(deadline - now - spin_s)
-                while time.perf_counter() < deadline:
-                    pass
+        if k + 1 >= cycles:
+            runner.request_stop("cycles")
+
+    # the programs' runner (common/runner.py); unpaced, its ticks run back to back
+    free = None if pace else FreeRunningClock()
+    runner = RealTimeRunner(period_s, step, spin_s=spin_s if pace else 0.0, show_status=False,
+                            **({} if free is None else {"clock_ns": free.clock_ns,
+                                                        "sleep": free.sleep}))
+    stats = runner.run()
     figures = {f"read_{k}": v for k, v in _percentiles_us(reads).items()}
     figures.update({f"cycle_{k}": v for k, v in _percentiles_us(totals).items()})
     figures["cycles"] = float(cycles)
     figures["faulted_cycles"] = float(faulted)
     if pace:
-        figures.update({"overruns": float(overruns), "overrun_fraction": overruns / cycles,
-                        "max_lateness_us": max_lateness * 1e6,
-                        "target_period_us": period_s * 1e6})
+        figures.update({"overruns": float(stats.overruns),
+                        "overrun_fraction": stats.overruns / cycles,
+                        "period_error_p99_us": stats.period_error_p99_s * 1e6,
+                        "period_error_max_us": stats.period_error_max_s * 1e6,
+                        "stalls": float(stats.stalls), "target_period_us": period_s * 1e6})
     return figures
 
 

@@ -54,7 +54,7 @@ def run(rate_hz: float, flood_s: float, max_samples: int, lead_s: float = 6.0) -
                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
             processes.append(master)
             slave = subprocess.Popen(
-                [sys.executable, "-m", "haptic.slave_sim.program", *common, "--connect",
+                [sys.executable, "-m", "haptic.slave_sim.cli", *common, "--connect",
                  endpoint, "--json-summary", str(tmp / "slave.json")],
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True)
             processes.append(slave)

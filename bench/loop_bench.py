@@ -252,7 +252,7 @@ def echo_node(side: str, argv: list[str]) -> int:
 PROGRAM_COMMANDS = {
     "master": [sys.executable, "-m", "haptic.master.cli", "--operator",
                "regulate:fx=3.6,onset=0.2,max=5", "--peer-wait", "30"],
-    "slave": [sys.executable, "-m", "haptic.slave_sim.program", "--scenario", "constant-rate",
+    "slave": [sys.executable, "-m", "haptic.slave_sim.cli", "--scenario", "constant-rate",
               "--peer-wait", "30"],
 }
 

@@ -59,7 +59,7 @@ def run(duration_s: float, settle_s: float, linear: bool) -> dict:
                  "--json-summary", str(tmp / "master.json")],
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             processes["slave"] = subprocess.Popen(
-                [sys.executable, "-m", "haptic.slave_sim.program", *common, "--connect",
+                [sys.executable, "-m", "haptic.slave_sim.cli", *common, "--connect",
                  endpoint, "--record", str(tmp / "slave.mcap"),
                  "--json-summary", str(tmp / "slave.json")],
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

@@ -76,7 +76,7 @@ def pair_figures(duration_s: float, record: bool, display: bool) -> dict[str, fl
                           endpoint, "--rig", "model", "--operator",
                           "regulate:fx=3.6,onset=0.2,max=5", *record_m, "--json-summary",
                           str(tmp / "master.json")], stderr=subprocess.DEVNULL),
-        subprocess.Popen([sys.executable, "-m", "haptic.slave_sim.program", *common, *run,
+        subprocess.Popen([sys.executable, "-m", "haptic.slave_sim.cli", *common, *run,
                           "--connect", endpoint, *record_s, "--json-summary",
                           str(tmp / "slave.json")], stderr=subprocess.DEVNULL),
     ]
@@ -111,7 +111,7 @@ def run_figures(duration_s: float) -> dict[str, float]:
                           "regulate:fx=3.6,onset=0.2,max=5", "--record",
                           str(tmp / "master.mcap"), "--json-summary", str(tmp / "master.json")],
                          stderr=subprocess.DEVNULL),
-        subprocess.Popen([sys.executable, "-m", "haptic.slave_sim.program", *common, *run,
+        subprocess.Popen([sys.executable, "-m", "haptic.slave_sim.cli", *common, *run,
                           "--connect", endpoint, "--record", str(tmp / "slave.mcap"),
                           "--json-summary", str(tmp / "slave.json")],
                          stderr=subprocess.DEVNULL),

@@ -12,13 +12,13 @@ from typing import Any
 import numpy as np
 
 from haptic.common.analysis.report import Analysis, AnalysisSettings, analyse
-from haptic.common.cli_options import add_retired_delay_option
+from haptic.common.cli_options import add_renamed_option, add_retired_delay_option
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, to_toml
 from haptic.common.model import TeleopModel, model_from_config
 from haptic.common.summary import json_safe
 from haptic.common.synthesis import SynthesisError
 
-#: Cells per side of the stability map written by --plot.
+#: Cells per side of the stability map written by --out.
 MAP_CELLS = 28
 #: What Tt is: the configuration's, or the clay of each block (--environment clay).
 ENVIRONMENTS = ("config", "clay")
@@ -44,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--scenario", metavar="NAME|PATH",
                         help="the workpiece for --environment clay (default: [slave] scenario)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--plot", type=Path, metavar="DIR", help="write PNG plots into DIR")
+    parser.add_argument("--out", type=Path, metavar="DIR", help="write PNG plots into DIR")
+    add_renamed_option(parser, "--plot", "--out DIR")
     parser.add_argument("--print-config", action="store_true",
                         help="print the merged configuration (the defaults with --config over "
                         "them) as TOML and exit")
@@ -152,8 +153,8 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(json_safe(analysis.to_json())))
     else:
         print(format_text(analysis))
-    if args.plot is not None:
-        for path in write_plots(model, analysis, settings, args.plot):
+    if args.out is not None:
+        for path in write_plots(model, analysis, settings, args.out):
             print(f"wrote {path}", file=sys.stderr)
     return 0
 
@@ -165,8 +166,8 @@ def _clay(args: argparse.Namespace, config: dict[str, Any], model: TeleopModel,
     from haptic.common.clay_contact import COUPLING_DAMPING_N_S_PER_M, COUPLING_STIFFNESS_N_PER_M
     from haptic.common.config.scenario import load_scenario
 
-    if args.plot is not None:
-        raise ConfigError("--plot", "not with --environment clay")
+    if args.out is not None:
+        raise ConfigError("--out", "not with --environment clay")
     scenario = load_scenario(args.scenario or config["slave"]["scenario"])
     blocks = [(block.name, block.damping_N_s_per_m) for block in scenario.blocks]
     try:

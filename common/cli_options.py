@@ -288,3 +288,15 @@ def check_zenoh_config(link: LinkConfig) -> None:
         flag = "--zenoh-config" if link.zenoh_config_file else "--zenoh-set"
         text = " ".join(str(error).split())[:240]
         raise ConfigError(flag, f"zenoh rejected the configuration: {text}") from None
+
+
+def add_renamed_option(parser: Any, old: str, new: str) -> None:
+    """Refuse ``old`` (an option that took one value) with an error naming ``new``, its
+    spelling now (one vocabulary across the programs, docs/architecture.md)."""
+
+    class _Renamed(argparse.Action):
+        def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                     values: Any, option_string: str | None = None) -> None:
+            parser.error(f"{old} is now {new}")
+
+    parser.add_argument(old, action=_Renamed, help=argparse.SUPPRESS)

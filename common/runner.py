@@ -306,3 +306,21 @@ class RealTimeRunner:
             step_p99_s=self._step_times.percentile(99.0),
             step_max_s=self._step_times.max_s if self._step_times.count else math.nan,
         )
+
+
+class FreeRunningClock:
+    """A clock and a sleep for :class:`RealTimeRunner` that run the ticks back to back: a
+    sleep advances the clock instead of waiting, so every deadline is met at once (tests,
+    benchmarks and rigs simulated faster than real time; give the runner ``spin_s=0``). The
+    step times and the elapsed time stay real (ns)."""
+
+    def __init__(self) -> None:
+        self._offset_ns = 0
+
+    def clock_ns(self) -> int:
+        """The real monotonic clock plus what the sleeps skipped, ns."""
+        return time.perf_counter_ns() + self._offset_ns
+
+    def sleep(self, seconds: float) -> None:
+        """Skip ``seconds`` instead of waiting them."""
+        self._offset_ns += math.ceil(seconds * 1e9)

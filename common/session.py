@@ -122,7 +122,7 @@ def run_session(args: argparse.Namespace) -> int:
         path.unlink(missing_ok=True)
     # The slave runs a little longer; the session stops it as soon as the master is done.
     commands = {
-        "slave": [sys.executable, "-m", "haptic.slave_sim.program", *common,
+        "slave": [sys.executable, "-m", "haptic.slave_sim.cli", *common,
                   "--duration", repr(args.duration + 5.0), "--connect", endpoint,
                   "--scenario", args.scenario, "--out", str(out),
                   "--json-summary", str(files["slave"]), *shlex.split(args.slave_args)],

@@ -23,7 +23,13 @@ from haptic.common.config.scenario import load_scenario
 from haptic.common.delay_profile import DelayProfileError, parse_delay_profile
 from haptic.common.injection import InjectionConfig
 from haptic.common.model import model_from_config
-from haptic.lockstep.simulator import ENVIRONMENTS, TRANSPARENT_SAFETY, LockstepSimulator
+from haptic.lockstep.simulator import (
+    ENVIRONMENTS,
+    TRANSPARENT_SAFETY,
+    TRANSPARENT_SUPERVISION,
+    LockstepSimulator,
+    LockstepSupervision,
+)
 from haptic.master.margin_governor import governor_for
 from haptic.master.operator import parse_operator_spec
 from haptic.master.settings import master_settings
@@ -68,7 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="run the margin governor (default: [governor] enabled)")
     run.add_argument("--duration", type=float, default=3.0, metavar="SECONDS")
     run.add_argument("--safety", choices=("config", "off"), default="config",
-                     help="the master's safety limits from [master.safety], or off")
+                     help="the shipped limits: the master's [master.safety] and the programs' "
+                     "supervision (watchdog [link.watchdog], the slave's work area and "
+                     "[slave.safety]), or off (transparent)")
     run.add_argument("--out", type=Path, default=Path("haptic-sim-run"))
     run.add_argument("--json", action="store_true", help="print a JSON summary")
 
@@ -115,9 +123,12 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
     environment = args.environment or scenario.environment
     operator = parse_operator_spec(args.operator or config["lockstep"]["constant_rate_operator"],
                                    "--operator")
-    safety = master_settings(config).safety if args.safety == "config" else TRANSPARENT_SAFETY
+    shipped = args.safety == "config"
+    safety = master_settings(config).safety if shipped else TRANSPARENT_SAFETY
+    supervision = (LockstepSupervision.from_config(config, scenario) if shipped
+                   else TRANSPARENT_SUPERVISION)
     simulator = LockstepSimulator(model, scenario, operator, np.array([gain]), environment,
-                                  safety, device="cpu")
+                                  safety, device="cpu", supervision=supervision)
     lines = []
     for flag, text in (("--delay-profile-to-slave", args.delay_profile_to_slave),
                        ("--delay-profile-to-master", args.delay_profile_to_master)):
@@ -152,6 +163,7 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
         "peak_tool_force_N": result.peak_tool_force_N[0].tolist(),
         "position_error_rms_m": result.position_error_rms_m[0].tolist(),
         "safety_events": result.safety_events, "out": str(out),
+        "watchdog_trips": _watchdog_trips(simulator),
         **({} if governors is None else {**governors[0].summary(),
                                           "governor_events": result.governed.events}),
     }
@@ -252,5 +264,12 @@ def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
     return 0
 
 
+def _watchdog_trips(simulator: LockstepSimulator) -> dict[str, int]:
+    """The run's watchdog trips on each side (0 without link outages)."""
+    master, slave = simulator.last_ticks
+    return {"master": master.supervisors[0].trips, "slave": slave.supervisors[0].trips}
+
+
 if __name__ == "__main__":
     raise SystemExit(main())
+

@@ -24,6 +24,7 @@ reproducible.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -33,6 +34,7 @@ import numpy as np
 from haptic.common.config.scenario import Scenario
 from haptic.common.injection import InjectionConfig
 from haptic.common.lti import DiscreteLTI
+from haptic.common.messages import Flags, HandleState, ToolState
 from haptic.common.model import TeleopModel
 from haptic.lockstep.delay_line import DelayLine, source_schedule
 from haptic.lockstep.governed import GovernedLanes
@@ -42,9 +44,15 @@ from haptic.master.node import MasterNode, master_compensator
 from haptic.master.operator import OperatorModel
 from haptic.master.rig_model import RigModel
 from haptic.master.settings import SafetySettings
+from haptic.master.supervisor import MasterSupervisor
+from haptic.master.tick import MasterTick
 from haptic.slave_sim.clay import ClayStepResult
 from haptic.slave_sim.environment import LinearEnvironment, make_environment
+from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from haptic.slave_sim.node import SlaveNode, slave_compensators
+from haptic.slave_sim.resync import ToolResync
+from haptic.slave_sim.supervisor import SlaveSupervisor
+from haptic.slave_sim.tick import SlaveTick
 
 ENVIRONMENTS = ("linear", "clay", "clay+linear")
 
@@ -56,6 +64,50 @@ TRANSPARENT_SAFETY = SafetySettings(
     workspace_trip_margin_m=1e12, ramp_small_force_N=1e14, ramp_small_samples=1,
     ramp_time_s=0.0,
 )
+
+
+@dataclass(frozen=True)
+class LockstepSupervision:
+    """What the lanes' supervisors and input guards act on (master/supervisor.py,
+    slave_sim/supervisor.py, slave_sim/input_guard.py): the watchdog's ``max_message_age_s``
+    (s) and ``resync_messages``, the resync's ``sync_tolerance_m`` (m), the slave's work area
+    (``work_area_m``: x_low, x_high, y_low, y_high, m, margin included; ``grid_m`` the area
+    the handle must be back over to end a work-area stop, or None) and its input bounds."""
+
+    max_message_age_s: float
+    resync_messages: int
+    sync_tolerance_m: float
+    work_area_m: tuple[float, float, float, float]
+    input_guard: InputGuardSettings
+    grid_m: tuple[float, float, float, float] | None = None
+
+    @classmethod
+    def from_config(cls, config: dict[str, Any], scenario: Scenario) -> LockstepSupervision:
+        """The deployed programs' settings: ``[link]``'s watchdog, the slave's work area
+        about the scenario's grid and ``[slave.safety]``."""
+        from haptic.slave_sim.program import DEFAULT_SYNC_TOLERANCE_M, WORK_AREA_MARGIN_M
+
+        watchdog = config["link"]["watchdog"]
+        grid = scenario.grid
+        margin = WORK_AREA_MARGIN_M
+        return cls(float(watchdog["max_message_age_s"]), int(watchdog["resync_messages"]),
+                   DEFAULT_SYNC_TOLERANCE_M,
+                   (grid.x_range_m[0] - margin, grid.x_range_m[1] + margin,
+                    grid.y_range_m[0] - margin, grid.y_range_m[1] + margin),
+                   InputGuardSettings.from_config(config),
+                   (grid.x_range_m[0], grid.x_range_m[1], grid.y_range_m[0], grid.y_range_m[1]))
+
+
+#: Supervision that never acts on a sweep's signals (as :data:`TRANSPARENT_SAFETY`): the
+#: supervisors and guards run every tick, but no silence, work area or input bound is ever
+#: reached; a non-finite input still faults the guard, as it would in the program.
+TRANSPARENT_SUPERVISION = LockstepSupervision(
+    max_message_age_s=1e12, resync_messages=1, sync_tolerance_m=1e12,
+    work_area_m=(-math.inf, math.inf, -math.inf, math.inf),
+    input_guard=InputGuardSettings(
+        force_limit_N=math.inf, force_trip_N=math.inf, force_rate_limit_N_per_s=math.inf,
+        position_min_m=(-math.inf, -math.inf), position_max_m=(math.inf, math.inf),
+        velocity_trip_m_per_s=math.inf, jump_margin_m=math.inf, clear_after_messages=1))
 
 TRACE_NAMES = ("handle_force_N", "handle_position_m", "tool_force_N", "tool_position_m",
                "tool_velocity_m_s", "tool_force_recv_N", "handle_command_m",
@@ -160,7 +212,8 @@ class LockstepSimulator:
     def __init__(self, model: TeleopModel, scenario: Scenario, operator: OperatorModel,
                  gains_k: np.ndarray, environment: str = "linear",
                  safety: SafetySettings = TRANSPARENT_SAFETY, force_noise_std_N: float = 0.0,
-                 clay_impl: str = "warp", device: str = "auto") -> None:
+                 clay_impl: str = "warp", device: str = "auto",
+                 supervision: LockstepSupervision = TRANSPARENT_SUPERVISION) -> None:
         if environment not in ENVIRONMENTS:
             raise ValueError(f"environment must be one of {', '.join(ENVIRONMENTS)}")
         self.model = model
@@ -180,6 +233,29 @@ class LockstepSimulator:
                 make_environment("clay", model, scenario, clay_impl, device),
                 LinearEnvironment(model))
         self.scenario = scenario
+        self.supervision = supervision
+        self.last_ticks: tuple[MasterTick, SlaveTick] | None = None
+
+    def ticks(self, handle_start_m: np.ndarray, tool_start_m: np.ndarray
+              ) -> tuple[MasterTick, SlaveTick]:
+        """The programs' two ticks (master/tick.py, slave_sim/tick.py) over every lane, one
+        supervisor and input guard per lane, started in sync (the link up before tick 0)."""
+        sup = self.supervision
+        ratio = tuple(float(a.position_ratio_ah1) for a in self.model.axes)
+        master = MasterTick(self.master, [
+            MasterSupervisor(ratio, sup.sync_tolerance_m, sup.max_message_age_s,
+                             sup.resync_messages) for _ in range(self.lanes)])
+        master.start(handle_start_m, synced=True)
+        slave_state = self.slave.initial_state(self.lanes, tool_start_m)
+        slave = SlaveTick(self.slave, slave_state, [
+            SlaveSupervisor(ratio, sup.sync_tolerance_m, sup.work_area_m, sup.max_message_age_s,
+                            sup.resync_messages, grid_m=sup.grid_m)
+            for _ in range(self.lanes)],
+            [InputGuard(sup.input_guard, self.period_s) for _ in range(self.lanes)],
+            ToolResync(self.slave))
+        slave.handle_position_m[...] = handle_start_m
+        slave.start(synced=True)
+        return master, slave
 
     def run(self, duration_s: float, round_trip_delay_samples: np.ndarray | int, *,
             to_slave: InjectionConfig | None = None, to_master: InjectionConfig | None = None,
@@ -203,23 +279,37 @@ class LockstepSimulator:
         rng = np.random.default_rng(seed)
         line_rngs = rng.spawn(3)
         to_slave_d = delays // 2
+        to_master_d = delays - to_slave_d
         governed = None if governors is None else GovernedLanes(governors, self.gains_k, steps)
-        handle_line = DelayLine(source_schedule(steps, to_slave_d, 0, ts, to_slave,
-                                                line_rngs[0]), 4 if governed is None else 5,
-                                None if governed is None else np.tile([0, 0, 0, 0, 1.0],
-                                                                      (lanes, 1)))
-        tool_line = DelayLine(source_schedule(steps, delays - to_slave_d, 1, ts, to_master,
-                                              line_rngs[1]), 2)
         start = np.broadcast_to(np.asarray(self.scenario.tool.start_position_m, float),
                                 (lanes, 2))
         ratio = np.array([a.position_ratio_ah1 for a in self.model.axes])
         handle_start = start / ratio
+        enabled = float(Flags.FORCES_ENABLED)
+        # the messages before tick 0 (the link runs in sync before the run): no force, the
+        # handle and the tool at their start, forces enabled on both sides
+        # the handle's message: force, position, flags (and the governed k/k0)
+        handle_columns = 5 if governed is None else 6
+        handle_line = DelayLine(source_schedule(steps, to_slave_d, 0, ts, to_slave,
+                                                line_rngs[0]), handle_columns,
+                                np.column_stack((np.zeros((lanes, 2)), handle_start,
+                                                 np.full(lanes, enabled),
+                                                 np.ones((lanes, handle_columns - 5)))))
+        tool_line = DelayLine(source_schedule(steps, to_master_d, 1, ts, to_master,
+                                              line_rngs[1]), 7,
+                              np.column_stack((np.zeros((lanes, 2)), start,
+                                               np.zeros((lanes, 2)), np.full(lanes, enabled))))
         rig_state = self.rig.initial_state(handle_start, line_rngs[2])
-        master_state = self.master.activate(handle_start)
-        slave_state = self.slave.initial_state(lanes, start)
+        master_tick, slave_tick = self.ticks(handle_start, start)
+        self.last_ticks = (master_tick, slave_tick)  # the run's ticks, for inspection
+        master_state = master_tick.state
+        slave_state = slave_tick.state
         command = master_state.last_command_m.copy()
         if governed is not None:
             slave_state.gain_ratio = np.ones(lanes)
+        handle_arrivals = _Arrivals(handle_line.schedule, to_slave_d, 0, ts)
+        tool_arrivals = _Arrivals(tool_line.schedule, to_master_d, 1, ts)
+        handle_message = np.ones((lanes, handle_columns))
 
         window = max(1, int(round(window_s / ts)))
         n_windows = -(-steps // window)
@@ -238,25 +328,40 @@ class LockstepSimulator:
 
         with np.errstate(over="ignore", invalid="ignore"):
             for k in range(steps):
-                ft_recv = tool_line.receive(k)
+                now_s = k * ts
+                # master: read (the rig at SYNC k) -> poll -> supervise -> node -> write/send
+                tool_rows = tool_line.receive(k)
+                ft_recv = tool_rows[:, :2]
                 sample = self.rig.step(rig_state, command, ft_recv)
                 fh = sample.handle_force_measured_N
                 if excitation is not None and k < excitation.shape[0]:
                     fh = fh + excitation[k]
                 yh = sample.handle_position_m
+                master_tick.supervise(now_s, tool_arrivals.tool_states(k, tool_rows), yh,
+                                      silence_s=tool_arrivals.silence_s.tolist())
                 if governed is not None:  # k on the master now, on the slave with the message
-                    master_state.gain_ratio[:] = governed.update(
+                    master_tick.state.gain_ratio[:] = governed.update(
                         k, ts, tool_line.schedule, handle_line.schedule)
-                command = self.master.step(master_state, fh, yh, ft_recv)
-                handle_line.send(k, np.concatenate((fh, yh), axis=1) if governed is None
-                                 else np.column_stack((fh, yh, master_state.gain_ratio)))
+                    handle_message[:, 5] = master_tick.state.gain_ratio
+                used = master_tick.control(fh, yh)
+                command = used.command_m.copy()
+                handle_message[:, 0:2] = used.handle_force_used_N
+                handle_message[:, 2:4] = yh
+                handle_message[:, 4] = [float(f) for f in used.flags]
+                handle_line.send(k, handle_message)
+                # slave: poll -> supervise -> node -> send
                 received = handle_line.receive(k)
-                if governed is not None:
-                    slave_state.gain_ratio = received[:, 4]
                 yt = slave_state.tool[:, [0, 2]]
-                out = self.slave.step(slave_state, received[:, :2], received[:, 2:4])
+                slave_tick.supervise(now_s, handle_arrivals.handle_states(k, received),
+                                     silence_s=handle_arrivals.silence_s.tolist())
+                if governed is not None:
+                    slave_tick.state.gain_ratio = received[:, 5].copy()
+                ticked = slave_tick.control()
+                out = ticked.out
                 ft = out.tool_force_N
-                tool_line.send(k, ft)
+                tool_line.send(k, np.column_stack((ft, out.tool_position_m,
+                                                   out.tool_velocity_m_s,
+                                                   [float(f) for f in ticked.flags])))
 
                 w = k // window
                 np.maximum(stats.handle_force_max_N[w], fh, out=stats.handle_force_max_N[w])
@@ -277,6 +382,7 @@ class LockstepSimulator:
                               command, sample.operator_intent_force_N)
                     for name, value in zip(TRACE_NAMES, values, strict=True):
                         traces[name][k] = value[recorded]
+        master_state = master_tick.state
         finite = np.isfinite(stats.handle_force_sumsq_N2).all(axis=(0, 2)) & np.isfinite(
             stats.tool_force_sumsq_N2).all(axis=(0, 2))
         return LockstepResult(
@@ -285,5 +391,54 @@ class LockstepSimulator:
             peak_handle_force_N=peak_fh, peak_tool_force_N=peak_ft,
             position_error_rms_m=np.sqrt(error_sumsq / max(steps, 1)),
             diverged=~finite | master_state.faulted, recorded_lanes=recorded, traces=traces,
-            safety_events=len(master_state.events), governed=governed,
+            safety_events=len(master_tick.take_node_events()), governed=governed,
         )
+
+
+#: Every combination of the flags by value (building an IntFlag from an int is slow).
+_FLAGS = {value: Flags(value) for value in range(8)}
+
+
+class _Arrivals:
+    """Which lanes' messages are fresh at a tick (a new message, or one of the run-up's
+    before tick 0), the silence since each lane's last fresh one, and the messages as the
+    program's link would deliver them. ``schedule``: the line's source schedule (steps,
+    lanes); ``delay_samples`` (lanes,) and ``offset_samples``: the line's, for the send tick
+    of the run-up's messages."""
+
+    def __init__(self, schedule: np.ndarray, delay_samples: np.ndarray, offset_samples: int,
+                 period_s: float) -> None:
+        self.schedule = schedule
+        self.lanes = schedule.shape[1]
+        self.period_s = period_s
+        self.lag = np.asarray(delay_samples, np.int64) + offset_samples
+        self.last_fresh = np.zeros(self.lanes, np.int64)
+        self.silence_s = np.zeros(self.lanes)
+        self._previous = np.full(self.lanes, -2, np.int64)
+
+    def _fresh(self, tick: int) -> tuple[np.ndarray, np.ndarray]:
+        source = self.schedule[tick]
+        fresh = (source != self._previous) | (source < 0)
+        self._previous = source
+        self.last_fresh[fresh] = tick
+        self.silence_s[...] = (tick - self.last_fresh) * self.period_s
+        sent = np.where(source >= 0, source, tick - self.lag)
+        return fresh, sent
+
+    def tool_states(self, tick: int, rows: np.ndarray) -> list[ToolState | None]:
+        """The fresh ``ToolState`` per lane (None where nothing new came)."""
+        fresh, sent = self._fresh(tick)
+        period_ns = self.period_s * 1e9
+        return [ToolState(0, int(sent[lane]), int(sent[lane] * period_ns),
+                          _FLAGS[int(row[6])], (row[0], row[1]), (row[2], row[3]),
+                          (row[4], row[5]), 0.0, 0.0) if fresh[lane] else None
+                for lane, row in enumerate(rows.tolist())]
+
+    def handle_states(self, tick: int, rows: np.ndarray) -> list[HandleState | None]:
+        """The fresh ``HandleState`` per lane (None where nothing new came)."""
+        fresh, sent = self._fresh(tick)
+        period_ns = self.period_s * 1e9
+        return [HandleState(0, int(sent[lane]), int(sent[lane] * period_ns),
+                            _FLAGS[int(row[4])], (row[0], row[1]), (row[2], row[3]))
+                if fresh[lane] else None
+                for lane, row in enumerate(rows.tolist())]

@@ -21,6 +21,7 @@ from haptic.common.config import ConfigError, exit_on_config_error, load_config,
 from haptic.common.failures import exit_on_link_error
 from haptic.common.model import model_from_config
 from haptic.common.preflight import add_preflight_options, run_preflight
+from haptic.common.program_harness import add_networked_options, check_networked_options
 from haptic.master.governor_setup import start_governor
 from haptic.master.hardware import HardwareError, create_hardware
 from haptic.master.node import MasterNode
@@ -47,16 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--operator", help="simulated operator spec ([master.sim] operator), "
                         "e.g. regulate:fx=3.6,onset=0.2")
     add_preflight_options(parser)
-    group = parser.add_argument_group("networked run")
-    group.add_argument("--peer-wait", metavar="S", type=float,
-                       help="give up (exit 1) when no slave appears within S s (default: wait)")
-    group.add_argument("--sync-tolerance", metavar="M", type=float,
-                       default=DEFAULT_SYNC_TOLERANCE_M,
-                       help="resync: |tool - Ah1 handle| below this on both axes, m "
-                       f"(default {DEFAULT_SYNC_TOLERANCE_M:g})")
-    group.add_argument("--out", metavar="DIR", type=Path,
-                       help="write master_trace.npz (every --trace-every-th tick) here at the end")
-    group.add_argument("--trace-every", metavar="N", type=int, default=10)
+    add_networked_options(parser, "slave", "write master_trace.npz (every --trace-every-th "
+                          "tick) here at the end", DEFAULT_SYNC_TOLERANCE_M)
     alone = parser.add_argument_group("master alone")
     alone.add_argument("--no-link", action="store_true",
                        help="run the master alone, no slave (default duration 1 s)")
@@ -101,12 +94,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                   "--json-summary FILE and is always paced)")
         config = _config(args)
         options = run_options_from_args(args, "master", config=config)
-        if args.sync_tolerance is not None and not args.sync_tolerance > 0.0:
-            raise ConfigError("--sync-tolerance", f"must be > 0 m (got {args.sync_tolerance})")
-        if args.trace_every < 1:
-            raise ConfigError("--trace-every", f"must be >= 1 (got {args.trace_every})")
-        if args.record_every < 1:
-            raise ConfigError("--record-every", f"must be >= 1 (got {args.record_every})")
+        check_networked_options(args)
         settings = master_settings(options.config)
         model = model_from_config(options.config)
         node = MasterNode.from_model(model, settings.safety)
@@ -157,7 +145,7 @@ def _main_alone(args: argparse.Namespace) -> int:
         return 1
     result = {
         "rig": settings.rig, "cycles": summary.cycles, "wall_time_s": summary.wall_time_s,
-        "overruns": summary.overruns, "max_lateness_s": summary.max_lateness_s,
+        "overruns": summary.overruns, "period_error_max_s": summary.period_error_max_s,
         "final_position_m": list(summary.final_position_m), "safe_state": summary.safe_state,
         "events": [{"step": e.step, "time_s": e.time_s, "kind": e.kind, "reason": e.reason,
                     "axis": e.axis} for e in summary.events],
@@ -167,7 +155,8 @@ def _main_alone(args: argparse.Namespace) -> int:
         print(json.dumps(result))
     else:
         print(f"rig {settings.rig}: {summary.cycles} cycles in {summary.wall_time_s:.3f} s, "
-              f"{summary.overruns} overruns (max {summary.max_lateness_s * 1e3:.2f} ms late)")
+              f"{summary.overruns} overruns (period error max "
+              f"{summary.period_error_max_s * 1e3:.2f} ms)")
         print(f"final handle position x {summary.final_position_m[0]:+.6f} m, "
               f"y {summary.final_position_m[1]:+.6f} m; safe state: {summary.safe_state}")
         for event in summary.events:

@@ -34,22 +34,23 @@ from typing import Any
 import numpy as np
 
 from haptic.common.cli_options import RunOptions
-from haptic.common.display import DisplayPublisher, EventCursor
+from haptic.common.display import DisplayPublisher
 from haptic.common.inert import InertMonitor
 from haptic.common.link import Link
 from haptic.common.messages import Flags
 from haptic.common.model import TeleopModel
+from haptic.common.program_harness import ProgramHarness, recording_for
 from haptic.common.run_recording import RunRecording
-from haptic.common.runner import RealTimeRunner, StopSignals
-from haptic.common.runner_config import place_other_threads, prioritise_zenoh_threads
+from haptic.common.runner import StopSignals
+from haptic.common.runner_config import place_other_threads
 from haptic.common.stage_times import StageTimes
-from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
 from haptic.master.governor_setup import governor_step
 from haptic.master.hardware import HandleHardware, HardwareError
 from haptic.master.margin_governor import MarginGovernor
-from haptic.master.node import MasterNode, MasterNodeState, SafetyEvent
+from haptic.master.node import MasterNode
 from haptic.master.supervisor import MasterSupervisor, Transition
+from haptic.master.tick import MasterTick
 
 #: The stages of one tick, in order (the summary's ``stages``).
 TICK_STAGES = ("read", "poll", "supervise", "node", "write", "send", "telemetry")
@@ -92,27 +93,18 @@ class MasterLoopOptions:
 class _Loop:
     """The mutable state of one run (the tick closure's)."""
 
-    node_state: MasterNodeState | None = None
-    node_offset_s: float = 0.0
     max_force_N: float = 0.0
     node_events: list[dict[str, Any]] = field(default_factory=list)
     last_fh: tuple[float, float] = (0.0, 0.0)
     last_ft: tuple[float, float] = (0.0, 0.0)
 
 
-def _flush_node_events(loop: _Loop) -> None:
-    state = loop.node_state
-    if state is None:
-        return
-    for event in state.events:
-        loop.node_events.append(_node_event(event, loop.node_offset_s))
-    state.events.clear()
-
-
-def _node_event(event: SafetyEvent, offset_s: float) -> dict[str, Any]:
-    axis = f" [{event.axis}]" if event.axis else ""
-    return {"time_s": offset_s + event.time_s, "kind": f"node_{event.kind}",
-            "reason": event.reason + axis}
+def _flush_node_events(loop: _Loop, tick: MasterTick) -> None:
+    """The node's safety events so far into the run's events."""
+    for time_s, event in tick.take_node_events():
+        axis = f" [{event.axis}]" if event.axis else ""
+        loop.node_events.append({"time_s": time_s, "kind": f"node_{event.kind}",
+                                 "reason": event.reason + axis})
 
 
 def run_linked_master(
@@ -130,16 +122,10 @@ def run_linked_master(
     the file is closed properly on every way out."""
     # first: the recorder's, the hardware's and Zenoh's threads inherit these CPUs
     extra_summary = {**place_other_threads(options.runner), **(extra_summary or {})}
-    recording = None
-    if loop_options.record_path:
-        recording = RunRecording(loop_options.record_path, "master", MASTER_RECORD_COLUMNS,
-                                 model.sample_period_s, state_every=loop_options.record_every)
-    try:
+    with recording_for(loop_options.record_path, "master", MASTER_RECORD_COLUMNS,
+                       model.sample_period_s, loop_options.record_every) as recording:
         return _run_linked_master(options, model, node, hardware, loop_options, extra_summary,
                                   recording)
-    finally:
-        if recording is not None:
-            recording.close(time.time_ns(), None)
 
 
 def _run_linked_master(
@@ -148,7 +134,7 @@ def _run_linked_master(
     node: MasterNode,
     hardware: HandleHardware,
     loop_options: MasterLoopOptions,
-    extra_summary: dict[str, Any] | None,
+    extra_summary: dict[str, Any],
     recording: RunRecording | None,
 ) -> int:
     period_s = model.sample_period_s
@@ -158,13 +144,10 @@ def _run_linked_master(
                                   loop_options.sync_tolerance_m, link_config.max_message_age_s,
                                   link_config.resync_messages)
     watchdog = supervisor.watchdog
+    tick_stages = MasterTick(node, [supervisor])  # supervise and node (master/tick.py)
     trace = TraceRecorder(MASTER_TRACE_COLUMNS, loop_options.trace_every)
     loop = _Loop()
     stages = StageTimes(TICK_STAGES)
-    zenoh_threads: dict[str, object] = {}
-    felt_array = np.zeros(2)
-    realtime_start_ns = 0
-    perf_start_ns = 0
     run = None
     status_code = 0
     with StopSignals() as signals:
@@ -175,31 +158,18 @@ def _run_linked_master(
             return 1
         try:
             with Link(link_config) as link:
-                print(f"haptic-master: waiting for the slave on {link_config.key_prefix} "
-                      f"(listen {','.join(link_config.listen) or '-'}, connect "
-                      f"{','.join(link_config.connect) or '-'})", file=sys.stderr, flush=True)
-                if not link.wait_for_peer(loop_options.peer_wait_s, lambda: signals.requested):
-                    if signals.requested:
-                        print("haptic-master: stopped before the slave came", file=sys.stderr)
-                        return 0
-                    print(f"haptic-master: no slave after {loop_options.peer_wait_s:g} s",
-                          file=sys.stderr)
-                    return 1
-                zenoh_threads.update(prioritise_zenoh_threads(options.runner))
+                harness = ProgramHarness("haptic-master", "slave", options, link, period_s,
+                                         recording)
+                came = harness.wait_for_peer(loop_options.peer_wait_s, signals)
+                if came is not None:
+                    return came
                 hardware.activate()
                 reading = hardware.read()
-                supervisor.start(reading.position_m)
-                realtime_start_ns = time.time_ns()
-                perf_start_ns = time.perf_counter_ns()
-                if recording is not None:
-                    recording.start(realtime_start_ns, perf_start_ns, options.config)
-                status_every = max(1, round(0.1 / period_s))  # 10 Hz
-                cursor = EventCursor()
-                display = None
+                tick_stages.start(reading.position_m)
+                harness.start()
                 if loop_options.display and link.session is not None:
-                    display = DisplayPublisher(link.session, link_config.key_prefix,
-                                               "master").start()
-                view_every = display.state_every(period_s) if display is not None else 1
+                    harness.attach_display(DisplayPublisher(
+                        link.session, link_config.key_prefix, "master").start())
 
                 clock = time.perf_counter_ns
                 inert = InertMonitor(options.config["supervision"]["inert_after_s"],
@@ -208,7 +178,6 @@ def _run_linked_master(
                 gate_reason = (f"the start-up gate waits for |fh| < "
                                f"{node.safety.ramp_small_force_N:g} N "
                                f"({node.safety.ramp_small_samples} samples): the operator pushes")
-                zero_force = (0.0, 0.0)
                 governor = loop_options.governor
                 governor_events = governor.events if governor is not None else []
                 nominal_k = model.ch1_gain_k
@@ -225,64 +194,47 @@ def _run_linked_master(
                     message = link.poll()
                     poll_ns = clock()
                     # supervise: watchdog, resync check, fault latch (master/supervisor.py)
-                    now_s = (now_ns - perf_start_ns) * 1e-9
+                    now_s = harness.time_s(now_ns)
                     if reading.events:  # e.g. a drive's statusword warning bits
                         loop.node_events.extend({"time_s": now_s, "kind": "hardware_event",
                                                  "reason": text} for text in reading.events)
-                    transition = supervisor.update(now_s, message, (yhx, yhy), reading.faults,
-                                                   reading.cycle, link.silence_s(),
-                                                   link.peer_alive)
-                    if transition is not Transition.NONE:
+                    transitions = tick_stages.supervise(
+                        now_s, (message,), reading.position_m[None, :], (reading.faults,),
+                        reading.cycle, (link.silence_s(),), (link.peer_alive,))
+                    if transitions[0] is not Transition.NONE:
                         hardware.present_forces_enabled(supervisor.enabled)
-                    if transition is Transition.ACTIVATE or transition is Transition.RESUME:
-                        _flush_node_events(loop)
-                        position = np.nan_to_num(reading.position_m)[None, :]
-                        loop.node_state = (node.activate(position)
-                                           if transition is Transition.ACTIVATE
-                                           else node.resume(position))
-                        loop.node_offset_s = now_s
-                    enabled = supervisor.enabled
                     tool = supervisor.tool
                     gain_k = nominal_k
                     if governor is not None:  # k from the echoed round trip (governor.md)
                         decision = governor_step(governor, link, now_s)
                         gain_k = decision.gain_k
-                        if enabled:
-                            loop.node_state.gain_ratio[0] = gain_k / nominal_k
+                        if supervisor.enabled:
+                            tick_stages.state.gain_ratio[0] = gain_k / nominal_k
                             if decision.beyond_margin and not loop_options.allow_unstable:
-                                node.trip(loop.node_state, [0], "governor: round trip beyond "
+                                node.trip(tick_stages.state, [0], "governor: round trip beyond "
                                           "the delay margin of every k")
                     supervise_ns = clock()
-                    # node: vh = Ch1 fh - Ct1 ft behind the safety layer, or the safe state
-                    if enabled:
-                        state = loop.node_state
-                        ftx, fty = tool.tool_force_N if tool is not None else zero_force
-                        state.inputs[0] = (fhx, fhy, yhx, yhy, ftx, fty)
-                        command = node.step_inputs(state)[0]
-                        if state.faulted[0]:
-                            supervisor.note_node_fault()
-                        # what the compensator used: saturated, scaled by the force ramp (the
-                        # slave's Ch2 integrates exactly this force)
-                        sent = state.handle_force_used_N[0].tolist()
-                        felt = state.tool_force_used_N[0].tolist()
-                        flags = Flags.FORCES_ENABLED
-                    else:
-                        command = supervisor.hold_m
-                        sent = felt = zero_force
-                        flags = Flags.SAFE_STATE
+                    # node: vh = Ch1 fh - Ct1 ft behind the safety layer, or the safe state;
+                    # the node reports what it used (the slave's Ch2 integrates exactly the
+                    # handle force Ch1 used; the operator feels the tool force it used)
+                    used = tick_stages.control(reading.force_N[None, :],
+                                               reading.position_m[None, :])
+                    enabled = bool(used.enabled[0])
+                    command = used.command_m[0]
+                    sent = used.handle_force_used_N[0].tolist()
+                    felt = used.tool_force_used_N[0].tolist()
                     node_ns = clock()
                     # write: the handle command (and, on a simulated rig, the felt force)
-                    felt_array[0] = felt[0]
-                    felt_array[1] = felt[1]
-                    hardware.present_tool_force(felt_array)
+                    hardware.present_tool_force(used.tool_force_used_N[0])
                     hardware.write(command)
                     write_ns = clock()
                     # send: the force the compensator used and the handle position
-                    link.send_handle(sent, (yhx, yhy), flags, gain_k)
+                    link.send_handle(sent, (yhx, yhy), used.flags[0], gain_k)
                     send_ns = clock()
                     # telemetry: summary figures, trace, recording, display
+                    _flush_node_events(loop, tick_stages)
                     inert.update(now_s, link.peer_alive and link.silence_s() < max_age_s,
-                                 enabled and bool(loop.node_state.forces_enabled[0]),
+                                 enabled and bool(tick_stages.state.forces_enabled[0]),
                                  gate_reason if enabled else "node faulted" if supervisor.faulted
                                  else f"watchdog {supervisor.watchdog.state.value}: the resync "
                                  "does not complete")
@@ -308,48 +260,22 @@ def _run_linked_master(
                         recording.state(tick, now_ns, (
                             now_s, fhx, fhy, yhx, yhy, rft[0], rft[1], felt[0], felt[1],
                             tool_pos[0], tool_pos[1], cx, cy, sent[0], sent[1], float(enabled)))
-                    if display is not None and tick % view_every == 0:
-                        display.offer_state({
-                            "handle_force_N": [fhx, fhy], "handle_position_m": [yhx, yhy],
-                            "felt_force_N": [felt[0], felt[1]], "forces_enabled": enabled,
-                            "safe_state": not enabled})
-                    if tick % status_every == 0 and (recording is not None
-                                                     or display is not None):
-                        figures = link.summary()
-                        figures["watchdog_state"] = watchdog.state.value
-                        figures["watchdog_trips"] = watchdog.trips
-                        figures["forces_enabled"] = enabled
-                        if governor is not None:
-                            figures["governor_k"] = governor.gain_k
-                            figures["governor_round_trip_s"] = governor.rtt_s
-                        new_events = cursor.new((watchdog.events, supervisor.events,
-                                                 loop.node_events, governor_events))
-                        if recording is not None:
-                            recording.status(now_ns, figures, new_events)
-                        if display is not None:
-                            display.offer_status(figures, new_events)
+                    harness.offer_state(tick, lambda: {
+                        "handle_force_N": [fhx, fhy], "handle_position_m": [yhx, yhy],
+                        "felt_force_N": [felt[0], felt[1]], "forces_enabled": enabled,
+                        "safe_state": not enabled})
+                    governed = ({} if governor is None else {
+                        "governor_k": governor.gain_k, "governor_round_trip_s": governor.rtt_s})
+                    harness.status(tick, now_ns, watchdog, (watchdog.events, supervisor.events,
+                                                            loop.node_events, governor_events),
+                                   forces_enabled=enabled, **governed)
                     stages.record(now_ns, (read_ns, poll_ns, supervise_ns, node_ns, write_ns,
                                            send_ns, clock()))
 
                 def gain_k_now() -> float:
                     return governor.gain_k if governor is not None else nominal_k
 
-                def status() -> str:
-                    stats = link.stats()
-                    return (f"link p50 {stats.one_way_delay_p50_s * 1e3:.3f} ms  loss "
-                            f"{stats.loss_ratio * 100:.2f} %  {watchdog.state.value}  fh "
-                            f"{loop.last_fh[0]:+.2f} N  ft {loop.last_ft[0]:+.2f} N"
-                            f"{inert.status()}"
-                            f"{governor.status() if governor is not None else ''}")
-
-                runner = RealTimeRunner(
-                    period_s, step, duration_s=options.duration_s,
-                    spin_s=options.runner.spin_s, realtime=options.runner.realtime,
-                    status=status, show_status=options.show_status, stop_signals=signals,
-                )
-                try:
-                    run = runner.run()
-                finally:
+                def stop_safely() -> None:
                     # Safe state: hold where the handle is, no reflected force, then tell the
                     # slave (one message with SAFE_STATE) before the link closes.
                     try:
@@ -361,11 +287,13 @@ def _run_linked_master(
                                          Flags.SAFE_STATE, gain_k_now())
                     except Exception as error:  # noqa: BLE001 - shutting down regardless
                         print(f"haptic-master: while stopping: {error}", file=sys.stderr)
-                    _flush_node_events(loop)
-                    if display is not None:
-                        display.stop()
-                link_summary = link.summary()
-                presence = [e.as_dict() for e in link.presence_events]
+                    _flush_node_events(loop, tick_stages)
+
+                run = harness.run(step, lambda: harness.status_line(
+                    watchdog, f"fh {loop.last_fh[0]:+.2f} N  ft {loop.last_ft[0]:+.2f} N"
+                    f"{inert.status()}"
+                    f"{governor.status() if governor is not None else ''}"), signals,
+                    stop_safely)
                 inert_summary = inert.summary(run.elapsed_s)
         except HardwareError as error:
             print(f"haptic-master: hardware error: {error}", file=sys.stderr)
@@ -378,32 +306,17 @@ def _run_linked_master(
             hardware.cleanup()
     if run is None:
         return status_code or 1
-    for event in presence:
-        event["time_s"] = event["time_s"] - realtime_start_ns * 1e-9
-    governor = loop_options.governor
-    events = ([e.as_dict() for e in watchdog.events] + supervisor.events + loop.node_events
-              + presence + (governor.events if governor is not None else []))
-    events.sort(key=lambda e: e["time_s"])
     if supervisor.faulted:
         status_code = 1
-    summary = make_summary(
-        run.as_summary(), link_summary, max_abs_force_N=loop.max_force_N,
-        watchdog_trips=watchdog.trips, events=events, side="master",
-        watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
-        hardware_faults=supervisor.hardware_faults[:50],
-        node_faulted=supervisor.faulted, stages=stages.summary(), **zenoh_threads,
-        **inert_summary,
-        **(governor.summary() if governor is not None else {}),
-        **(extra_summary or {}),
-    )
-    if display is not None:
-        summary.update(display.figures)
+    governor = loop_options.governor
+    summary = harness.summary(
+        run, watchdog, loop.max_force_N, (watchdog.events, supervisor.events, loop.node_events,
+                                          governor.events if governor is not None else []),
+        hardware_faults=supervisor.hardware_faults[:50], node_faulted=supervisor.faulted,
+        stages=stages.summary(), **inert_summary,
+        **(governor.summary() if governor is not None else {}), **extra_summary)
     if loop_options.trace_path:
         trace.save(loop_options.trace_path)
         summary["trace"] = str(loop_options.trace_path)
-    if recording is not None:
-        summary.update(recording.close(time.time_ns(), summary))
-    if options.json_summary is not None:
-        write_json_summary(options.json_summary, summary)
-    print(f"haptic-master: {format_summary(summary)}", file=sys.stderr, flush=True)
+    harness.finish(summary)
     return status_code

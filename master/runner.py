@@ -1,22 +1,25 @@
-"""The master's own loop: hardware lifecycle, read -> node -> write once per Ts.
+"""The master alone: hardware lifecycle, read -> node -> write once per Ts.
 
-This runner drives the handle alone (no slave link: the received tool force is zero or
-comes from ``tool_force_source``); the networked real-time runner composes the same node.
-Pacing (when asked) sleeps until about 0.3 ms before each deadline, then spins, and
-re-anchors the schedule after a stall instead of firing missed cycles back to back.
+This drives the handle without a slave (the received tool force is zero or comes from
+``tool_force_source``); the networked program composes the same node with its supervisor
+(master/tick.py). The pacing is the real-time runner's (common/runner.py: sleep, spin the
+last ``spin_s``, re-anchor after a stall); unpaced, its ticks run back to back
+(:class:`~haptic.common.runner.FreeRunningClock`).
 """
 
 from __future__ import annotations
 
-import time
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from haptic.common.runner import FreeRunningClock, RealTimeRunner
 from haptic.master.hardware import HandleHardware
 from haptic.master.node import MasterNode, SafetyEvent
 
+#: The runner's spin before each deadline when paced, s.
 SPIN_MARGIN_S = 0.0003
 
 
@@ -37,7 +40,7 @@ class RunSummary:
     cycles: int
     wall_time_s: float
     overruns: int
-    max_lateness_s: float
+    period_error_max_s: float  # the runner's largest |t_k - t_(k-1) - Ts| (paced runs), s
     final_position_m: tuple[float, float]
     safe_state: bool
     events: list[SafetyEvent] = field(default_factory=list)
@@ -68,11 +71,11 @@ def run_master(
     state = node.activate(reading.position_m[None, :])
     faults: list[str] = []
     forces, positions, commands, scales = [], [], [], []
-    overruns = 0
-    max_lateness = 0.0
-    start = time.perf_counter()
-    deadline = start
-    for cycle in range(cycles):
+
+    def step(cycle: int, _now_ns: int) -> None:
+        nonlocal reading
+        if cycle > 0:
+            reading = hardware.read()
         if reading.faults:
             faults.extend(f"cycle {reading.cycle}: {f}" for f in reading.faults)
             node.trip(state, np.array([True]), "hardware: " + "; ".join(reading.faults))
@@ -89,20 +92,16 @@ def run_master(
             scales.append(float(state.force_scale[0]))
         if on_cycle is not None:
             on_cycle(cycle)
-        if pace:
-            deadline += period_s
-            now = time.perf_counter()
-            if now > deadline:
-                overruns += 1
-                max_lateness = max(max_lateness, now - deadline)
-                deadline = now  # re-anchor after a stall
-            else:
-                if deadline - now > SPIN_MARGIN_S:
-                    time.sleep(deadline - now - SPIN_MARGIN_S)
-                while time.perf_counter() < deadline:
-                    pass
-        reading = hardware.read()
-    wall = time.perf_counter() - start
+        if cycle + 1 >= cycles:
+            runner.request_stop("cycles")
+
+    free = None if pace else FreeRunningClock()
+    runner = RealTimeRunner(period_s, step, spin_s=SPIN_MARGIN_S if pace else 0.0,
+                            show_status=False,
+                            **({} if free is None else {"clock_ns": free.clock_ns,
+                                                        "sleep": free.sleep}))
+    stats = runner.run() if cycles > 0 else runner.stats()
+    reading = hardware.read()
     if reading.faults:
         faults.extend(f"cycle {reading.cycle}: {f}" for f in reading.faults)
     hardware.deactivate()
@@ -111,5 +110,8 @@ def run_master(
         trace = MasterTrace(np.array(forces), np.array(positions), np.array(commands),
                             np.array(scales))
     final = reading.position_m
-    return RunSummary(cycles, wall, overruns, max_lateness, (float(final[0]), float(final[1])),
-                      bool(state.faulted[0]), list(state.events), faults, trace)
+    lateness_s = stats.period_error_max_s if pace and not math.isnan(
+        stats.period_error_max_s) else 0.0
+    return RunSummary(stats.steps, stats.elapsed_s, stats.overruns if pace else 0, lateness_s,
+                      (float(final[0]), float(final[1])), bool(state.faulted[0]),
+                      list(state.events), faults, trace)

@@ -65,6 +65,13 @@ class MasterSupervisor:
         """Hold the handle where it is at the start (m; non-finite values read as 0)."""
         self.hold_m = np.nan_to_num(np.asarray(position_m, dtype=float)).copy()
 
+    def start_synced(self) -> None:
+        """Count the link as up and in sync before the first tick: the watchdog is ``ok``
+        and the forces are on (the lockstep simulator's warm start; the node is activated by
+        the caller as for ``ACTIVATE``)."""
+        self.watchdog.state = WatchdogState.OK
+        self.enabled = self.ever_enabled = True
+
     def in_sync(self, handle_x_m: float, handle_y_m: float) -> bool:
         """The slave reports its forces enabled and its tool is at Ah1 yh within the
         tolerance on both axes."""

@@ -27,35 +27,29 @@ import argparse
 import math
 import sys
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import zenoh
 
-from haptic.common.cli_options import add_run_options, run_options_from_args
-from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
-from haptic.common.config.scenario import load_scenario, max_block_damping
+from haptic.common.config import ConfigError
 from haptic.common.cutting import cutting_figures, steady_cut_fields
-from haptic.common.display import DisplayPublisher, EventCursor
-from haptic.common.failures import exit_on_link_error
+from haptic.common.display import DisplayPublisher
 from haptic.common.inert import InertMonitor
 from haptic.common.link import Link
-from haptic.common.margin_table import follow_gain, gain_scalable
+from haptic.common.margin_table import gain_scalable
 from haptic.common.messages import Flags
 from haptic.common.phase_lock import PhaseLock, PhaseLockSettings
-from haptic.common.preflight import add_preflight_options, run_preflight
+from haptic.common.program_harness import ProgramHarness, recording_for
 from haptic.common.run_recording import RunRecording
-from haptic.common.runner import RealTimeRunner, StopSignals
-from haptic.common.runner_config import place_other_threads, prioritise_zenoh_threads
+from haptic.common.runner import StopSignals
 from haptic.common.stage_times import StageTimes
-from haptic.common.summary import format_summary, make_summary, write_json_summary
 from haptic.common.trace import TraceRecorder
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from haptic.slave_sim.node import SlaveNode
 from haptic.slave_sim.resync import ToolResync
-from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
+from haptic.slave_sim.supervisor import SlaveSupervisor
+from haptic.slave_sim.tick import SlaveTick
 from haptic.slave_sim.tool_path import ToolPath
 
 #: The stages of one tick, in order (the summary's ``stages``).
@@ -81,75 +75,6 @@ SLAVE_TRACE_COLUMNS = (
 )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The command line."""
-    parser = argparse.ArgumentParser(prog="haptic-slave", description=__doc__.split("\n")[0])
-    add_run_options(parser)
-    parser.add_argument("--scenario", help="scenario name or TOML path ([slave] scenario)")
-    add_preflight_options(parser)
-    group = parser.add_argument_group("networked run")
-    group.add_argument("--out", metavar="DIR", type=Path,
-                       help="write clay.npz, clay.png and slave_trace.npz here at the end")
-    group.add_argument("--peer-wait", metavar="S", type=float,
-                       help="give up (exit 1) when no master appears within S s (default: wait)")
-    group.add_argument("--sync-tolerance", metavar="M", type=float,
-                       default=DEFAULT_SYNC_TOLERANCE_M,
-                       help=f"resync: |tool - Ah1 handle| below this, m "
-                       f"(default {DEFAULT_SYNC_TOLERANCE_M:g})")
-    group.add_argument("--phase-margin", metavar="S", type=float,
-                       help="start the spin before the tick this long after the master's "
-                       "message arrives, s (slave.phase_lock.margin_s)")
-    group.add_argument("--no-phase-lock", action="store_true",
-                       help="let the loop tick free-running (slave.phase_lock.enabled = false)")
-    group.add_argument("--trace-every", metavar="N", type=int, default=10,
-                       help="keep every Nth tick in the trace (default 10)")
-    return parser
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit status: 0; 1 when no master came within --peer-wait;
-    2 for a configuration error (one line); 3 when the stability analysis refuses the loop;
-    4 when the link cannot open (a port in use, an unreachable router; one line)."""
-    args = build_parser().parse_args(argv)
-    zenoh.init_log_from_env_or("error")
-    with exit_on_config_error():
-        config = load_config(args.config)
-        if args.scenario is not None:
-            config = override(config, "slave.scenario", args.scenario)
-        if args.k is not None:
-            config = override(config, "model.ch1.gain_k", args.k)
-        if args.phase_margin is not None:
-            config = override(config, "slave.phase_lock.margin_s", args.phase_margin)
-        if args.no_phase_lock:
-            config = override(config, "slave.phase_lock.enabled", False)
-        options = run_options_from_args(args, "slave", config=config)
-        if not args.sync_tolerance > 0.0:
-            raise ConfigError("--sync-tolerance", f"must be > 0 m (got {args.sync_tolerance})")
-        if args.trace_every < 1:
-            raise ConfigError("--trace-every", f"must be >= 1 (got {args.trace_every})")
-        if args.record_every < 1:
-            raise ConfigError("--record-every", f"must be >= 1 (got {args.record_every})")
-        scenario = load_scenario(options.config["slave"]["scenario"])
-        phase_lock_from(options.config, options.config["model"]["sample_period_s"])
-        InputGuardSettings.from_config(options.config)  # [slave.safety]'s cross-key checks
-    # before Warp's, the recorder's and Zenoh's threads start: they inherit these CPUs
-    placement = place_other_threads(options.runner)
-    with exit_on_config_error():
-        analysis, refused = run_preflight(options.config, args, "haptic-slave", side="slave",
-                                          clay_damping_N_s_per_m=max_block_damping(scenario))
-    if refused is not None:
-        return refused
-    import warp
-
-    warp.config.log_level = warp.LOG_WARNING  # no start-up banner
-    warp.config.quiet = True
-    with exit_on_config_error():
-        node = SlaveNode.from_config(options.config, scenario)
-    with exit_on_link_error("haptic-slave"):
-        return run_slave(node, options, args, {"scenario": scenario.name,
-                                               "analysis": analysis.as_dict(), **placement})
-
-
 def phase_lock_from(config: dict[str, Any], period_s: float) -> PhaseLock | None:
     """The slave's :class:`PhaseLock` (``[slave.phase_lock]``), or ``None`` when it is off.
     Its lag (delivery of the master's message to the tick using it) is the runner's spin plus
@@ -172,15 +97,9 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
               extra_summary: dict[str, Any]) -> int:
     """The networked slave loop; returns the exit status. With ``--record FILE`` the run is
     recorded to MCAP (common/run_recording.py), the file closed properly on every way out."""
-    recording = None
-    if getattr(args, "record", None):
-        recording = RunRecording(args.record, "slave", SLAVE_RECORD_COLUMNS,
-                                 node.sample_period_s, state_every=args.record_every)
-    try:
+    with recording_for(getattr(args, "record", None), "slave", SLAVE_RECORD_COLUMNS,
+                       node.sample_period_s, getattr(args, "record_every", 1)) as recording:
         return _run_slave(node, options, args, extra_summary, recording)
-    finally:
-        if recording is not None:
-            recording.close(time.time_ns(), None)
 
 
 def _record_clay(recording: RunRecording, state: Any, log_time_ns: int,
@@ -260,88 +179,59 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     max_age_s = link_config.max_message_age_s
     trace = TraceRecorder(SLAVE_TRACE_COLUMNS, args.trace_every)
     state = node.initial_state(1)
-    node.safe_stop(state)
-    resync = ToolResync(node)  # to the handle through the clay at a bounded speed
+    # supervise and node stages (slave_sim/tick.py); the resync moves the tool to the handle
+    # through the clay at a bounded speed
+    tick_stages = SlaveTick(node, state, [supervisor], [guard], ToolResync(node))
+    tick_stages.start()
     stages = StageTimes(TICK_STAGES)
-    zero_force = np.zeros((1, 2))
     path_every = max(1, args.trace_every)
     tool_path = ToolPath()  # bounded memory (slave_sim/tool_path.py)
-    fh = np.zeros((1, 2))
-    yh = state.handle_position_m.copy()
+    fh = tick_stages.handle_force_N  # the newest bounded handle message, updated in place
+    yh = tick_stages.handle_position_m
     flags_box = {"max_force": 0.0, "ft": np.zeros(2), "engagement": 0.0, "removed": 0.0}
     run = None
-    zenoh_threads: dict[str, object] = {}
     with StopSignals() as signals, Link(link_config) as link:
-        print(f"haptic-slave: {node.scenario.name}, environment {node.environment_kind}; "
-              f"waiting for the master on {link_config.key_prefix} (connect "
-              f"{','.join(link_config.connect) or '-'}, listen "
-              f"{','.join(link_config.listen) or '-'})", file=sys.stderr, flush=True)
-        if not link.wait_for_peer(args.peer_wait, lambda: signals.requested):
-            if signals.requested:
-                print("haptic-slave: stopped before the master came", file=sys.stderr)
-                return 0
-            print(f"haptic-slave: no master after {args.peer_wait:g} s", file=sys.stderr)
-            return 1
-        zenoh_threads.update(prioritise_zenoh_threads(options.runner))
-        realtime_start_ns = time.time_ns()
-        perf_start_ns = time.perf_counter_ns()
+        harness = ProgramHarness("haptic-slave", "master", options, link, period_s, recording)
+        came = harness.wait_for_peer(args.peer_wait, signals, f"{node.scenario.name}, "
+                                     f"environment {node.environment_kind}; ")
+        if came is not None:
+            return came
+        harness.start()
         clay_recorded = recording is not None and node.environment_kind == "clay"
-        if recording is not None:
-            recording.start(realtime_start_ns, perf_start_ns, options.config)
-            if clay_recorded:
-                recording.add_channel("/slave/workpiece")
-                recording.add_channel("/slave/clay")
-                _record_clay(recording, state, realtime_start_ns, layout=True)
-        status_every = max(1, round(0.1 / period_s))  # 10 Hz
-        cursor = EventCursor()
-        display = None
+        if clay_recorded:
+            recording.add_channel("/slave/workpiece")
+            recording.add_channel("/slave/clay")
+            _record_clay(recording, state, harness.realtime_start_ns, layout=True)
         if getattr(args, "display", False) and link.session is not None:
-            display = _display_publisher(link, node, state, recording)
-        view_every = display.state_every(period_s) if display is not None else 1
+            harness.attach_display(_display_publisher(link, node, state, recording))
 
         clock = time.perf_counter_ns
-        fh_row, yh_row = fh, yh  # the newest handle message, updated in place
-        nominal_k, scalable = node.model.ch1_gain_k, gain_scalable(node.model)
-        state.gain_ratio = gain_ratio = np.ones(1)
-        echo = [0]  # send time of the newest handle message used, ns (0: none yet)
+        # the master's governed k (never above ours) and the echo of its send time
+        tick_stages.follow_gain(node.model.ch1_gain_k, gain_scalable(node.model))
+        echo = tick_stages.echo_send_time_ns
 
         def step(tick: int, now_ns: int) -> None:
-            now_s = (now_ns - perf_start_ns) * 1e-9
+            now_s = harness.time_s(now_ns)
             # poll: the newest handle message whose delivery time has come
             message = link.poll()
             poll_ns = clock()
-            # supervise: input bounds (slave_sim/input_guard.py), phase lock, watchdog, resync,
-            # work-area guard (slave_sim/supervisor.py)
-            fresh = message is not None and guard.admit(message, now_s)
-            if not fresh:
-                message = None  # a fault is not an input
+            # supervise: input bounds (slave_sim/input_guard.py), watchdog, resync, work-area
+            # guard (slave_sim/supervisor.py), all in slave_sim/tick.py; then the phase lock
+            fresh = bool(tick_stages.supervise(now_s, (message,), (link.silence_s(),),
+                                               (link.peer_alive,))[0])
             if fresh and phase_lock is not None:
                 if link.last_delivery_measured:
-                    runner.shift_schedule(phase_lock.update(link.receive.last_delivery_ns,
-                                                            link.last_poll_ns))
+                    harness.runner.shift_schedule(phase_lock.update(
+                        link.receive.last_delivery_ns, link.last_poll_ns))
                 else:
                     phase_lock.skip_unmeasured()
-            if fresh:
-                fh_row[0] = guard.force_N  # bounded
-                yh_row[0] = guard.position_m
-                # the master's governed k (never above ours) and the echo of its send time
-                gain_ratio[0] = follow_gain(message.gain_k, nominal_k, scalable)
-                echo[0] = message.send_time_ns
-            if supervisor.receive(message):
-                resync.step(state, yh, now_s)  # to the held handle, cutting (resync.py)
-            tool_row = state.tool[0]
-            transition = supervisor.update(now_s, fresh, (tool_row[0], tool_row[2]),
-                                           link.silence_s(), link.peer_alive, guard.faulted)
-            if transition is Transition.RESUME:
-                node.resume(state)
-            elif transition is Transition.STOP:
-                node.safe_stop(state)
             running = supervisor.running
             inert.update(now_s, link.peer_alive and link.silence_s() < max_age_s, running,
                          supervisor.stop_reason())
             supervise_ns = clock()
             # node: Ch2/Ct2, the tool and the clay
-            out = node.step(state, fh if running else zero_force, yh)
+            ticked = tick_stages.control()
+            out = ticked.out
             ft = out.tool_force_N[0]
             position = out.tool_position_m[0]
             velocity = out.tool_velocity_m_s[0]
@@ -350,14 +240,11 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             # FORCES_ENABLED: this side is ready (link in sync, tool at the handle or running);
             # the master enables its forces on it, the slave runs once the master has.
             ready_flag = supervisor.ready
-            flags = Flags.FORCES_ENABLED if ready_flag else Flags.SAFE_STATE
-            if out.cutting[0]:
-                flags |= Flags.IN_CONTACT
             node_ns = clock()
             # send: the tool force, position and velocity, the clay's status
             link.send_tool((float(ft[0]), float(ft[1])), (float(position[0]), float(position[1])),
-                           (float(velocity[0]), float(velocity[1])), engagement, removed, flags,
-                           echo[0])
+                           (float(velocity[0]), float(velocity[1])), engagement, removed,
+                           ticked.flags[0], echo[0])
             send_ns = clock()
             # telemetry: summary figures, trace, recording, display
             magnitude = math.hypot(ft[0], ft[1])
@@ -381,70 +268,39 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                     float(position[0]), float(position[1]), float(velocity[0]),
                     float(velocity[1]), float(ft[0]), float(ft[1]), float(vt[0]), float(vt[1]),
                     engagement, float(out.cutting[0]), removed, float(running)))
-            if display is not None and tick % view_every == 0:
-                display.offer_state({
-                    "tool_force_N": [float(ft[0]), float(ft[1])],
-                    "tool_position_m": [float(position[0]), float(position[1])],
-                    "tool_velocity_m_s": [float(velocity[0]), float(velocity[1])],
-                    "clay_engagement": engagement, "removed_volume_m3": removed,
-                    "in_contact": bool(out.cutting[0]), "forces_enabled": ready_flag,
-                    "safe_state": not ready_flag})
-            if tick % status_every == 0 and (recording is not None or display is not None):
-                figures = link.summary()
-                figures["watchdog_state"] = watchdog.state.value
-                figures["watchdog_trips"] = watchdog.trips
-                figures["running"] = running
-                new_events = cursor.new((watchdog.events, supervisor.events))
-                if recording is not None:
-                    recording.status(now_ns, figures, new_events)
-                if display is not None:
-                    display.offer_status(figures, new_events)
+            harness.offer_state(tick, lambda: {
+                "tool_force_N": [float(ft[0]), float(ft[1])],
+                "tool_position_m": [float(position[0]), float(position[1])],
+                "tool_velocity_m_s": [float(velocity[0]), float(velocity[1])],
+                "clay_engagement": engagement, "removed_volume_m3": removed,
+                "in_contact": bool(out.cutting[0]), "forces_enabled": ready_flag,
+                "safe_state": not ready_flag})
+            harness.status(tick, now_ns, watchdog, (watchdog.events, supervisor.events),
+                           running=running)
             stages.record(now_ns, (poll_ns, supervise_ns, node_ns, send_ns, clock()))
 
-        def status() -> str:
-            stats = link.stats()
-            return (f"link p50 {stats.one_way_delay_p50_s * 1e3:.3f} ms  loss "
-                    f"{stats.loss_ratio * 100:.2f} %  {watchdog.state.value}  ft "
-                    f"{flags_box['ft'][0]:+.2f} N  engagement {flags_box['engagement']:.2f}"
-                    f"{inert.status()}")
-
-        runner = RealTimeRunner(
-            period_s, step, duration_s=options.duration_s, spin_s=options.runner.spin_s,
-            realtime=options.runner.realtime, status=status,
-            show_status=options.show_status, stop_signals=signals,
-        )
-        try:
-            run = runner.run()
-        finally:
+        def stop_safely() -> None:
             # Safe state: the tool stops; one message with SAFE_STATE before the link closes.
             node.safe_stop(state)
             position = state.tool_position_m()[0]
             link.send_tool((0.0, 0.0), (float(position[0]), float(position[1])), (0.0, 0.0),
                            0.0, flags_box["removed"], Flags.SAFE_STATE)
-            if display is not None:
-                display.stop()
-        link_summary = link.summary()
-        presence = [e.as_dict() for e in link.presence_events]
+
+        run = harness.run(step, lambda: harness.status_line(
+            watchdog, f"ft {flags_box['ft'][0]:+.2f} N  engagement "
+            f"{flags_box['engagement']:.2f}{inert.status()}"), signals, stop_safely)
         guard_summary = {**guard.summary(), **inert.summary(run.elapsed_s)}
-    for event in presence:
-        event["time_s"] = event["time_s"] - realtime_start_ns * 1e-9
-    all_events = [e.as_dict() for e in watchdog.events] + supervisor.events + presence
-    all_events.sort(key=lambda e: e["time_s"])
     final = state.tool_position_m()[0]
-    summary = make_summary(
-        run.as_summary(), link_summary, max_abs_force_N=flags_box["max_force"],
-        watchdog_trips=watchdog.trips, events=all_events, side="slave",
-        watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
+    summary = harness.summary(
+        run, watchdog, flags_box["max_force"], (watchdog.events, supervisor.events),
         removed_volume_m3=flags_box["removed"],
         final_tool_position_m=[float(final[0]), float(final[1])], stages=stages.summary(),
-        **zenoh_threads, **guard_summary,
+        **guard_summary,
         slave_gain_k=node.model.ch1_gain_k * float((state.gain_ratio if state.gain_ratio is
                                                      not None else np.ones(1))[0]),
         **(phase_lock.summary() if phase_lock is not None else {"phase_lock_enabled": False}),
         **extra_summary,
     )
-    if display is not None:
-        summary.update(display.figures)
     traced = trace.arrays()
     summary.update(cutting_figures(traced))
     summary.update(steady_cut_fields(traced))
@@ -461,14 +317,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 title=f"{node.scenario.name}: networked run, {run.elapsed_s:.1f} s")
             summary["clay_npz"] = str(out / "clay.npz")
             summary["clay_png"] = str(out / "clay.png")
-    if recording is not None:
-        end_ns = time.time_ns()
-        if clay_recorded:
-            _record_clay(recording, state, end_ns, layout=False)
-        summary.update(recording.close(end_ns, summary))
-    if options.json_summary is not None:
-        write_json_summary(options.json_summary, summary)
-    print(f"haptic-slave: {format_summary(summary)}", file=sys.stderr, flush=True)
+    harness.finish(summary, (lambda recording, end_ns: _record_clay(
+        recording, state, end_ns, layout=False)) if clay_recorded else None)
     cut = summary.get("cut_mean_force_N")
     if cut is not None:
         print(f"haptic-slave: in the clay {summary['cutting_time_s']:.2f} s: mean |ft| "
@@ -482,6 +332,3 @@ def _removed_total_m3(state: Any) -> float:
     total = getattr(state.environment, "removed_total_m3", None)
     return 0.0 if total is None else float(total[0])
 
-
-if __name__ == "__main__":
-    sys.exit(main())

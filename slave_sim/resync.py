@@ -64,12 +64,15 @@ class ToolResync:
         return self.node.position_ratio * np.asarray(handle_position_m, float)
 
     def step(self, state: SlaveState, handle_position_m: np.ndarray,
-             now_s: float | None = None) -> np.ndarray:
+             now_s: float | None = None, lanes: np.ndarray | None = None) -> np.ndarray:
         """One tick of the safe state: every lane (all must be halted) moves towards
         ``Ah1 yh`` by at most ``speed_m_s * Ts`` and the environment cuts along the move;
         returns the distance (m) left per lane. ``now_s``: the caller's clock (s); the move
-        covers the time since the previous call (one period without it)."""
-        if not state.halted.all():
+        covers the time since the previous call (one period without it). ``lanes``: a bool
+        mask of the lanes that move (default all; the lockstep's lanes resync one by one):
+        the others are left as they are, their environment stepped without a move."""
+        moving = np.ones(state.lanes, bool) if lanes is None else np.asarray(lanes, bool)
+        if not state.halted[moving].all():
             raise ValueError("ToolResync.step moves halted tools only (call safe_stop first)")
         node = self.node
         lanes = state.lanes
@@ -83,8 +86,10 @@ class ToolResync:
             self._cut_last = np.ones(lanes, bool)  # unknown: assume clay
         speed = np.where(self._cut_last, self.speed_m_s, self.free_speed_m_s)
         max_step = speed * elapsed
-        target = np.broadcast_to(self.target_m(handle_position_m), (lanes, 2))
         previous = state.tool[:, POSITION_COLUMNS]
+        target = np.broadcast_to(self.target_m(handle_position_m), (lanes, 2))
+        if lanes is not None:
+            target = np.where(moving[:, None], target, previous)
         offset = target - previous
         distance = np.sqrt((offset * offset).sum(axis=1))
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -97,13 +102,27 @@ class ToolResync:
         moved = (move * move).sum(axis=1) > 0.0
         self._cut_last = np.where(moved, np.asarray(result.removed_volume_m3) > 0.0,
                                   self._cut_last)
-        state.tool[:, POSITION_COLUMNS] = position
-        state.tool[:, VELOCITY_COLUMNS] = 0.0
-        state.compensator[...] = 0.0
-        state.actuator_force_N = np.zeros_like(state.actuator_force_N)
-        state.tool_force_N = np.zeros_like(state.tool_force_N)
-        state.handle_position_m = np.array(np.broadcast_to(handle_position_m,
-                                                           state.handle_position_m.shape))
+        if lanes is None:
+            state.tool[:, POSITION_COLUMNS] = position
+            state.tool[:, VELOCITY_COLUMNS] = 0.0
+            state.compensator[...] = 0.0
+            state.actuator_force_N = np.zeros_like(state.actuator_force_N)
+            state.tool_force_N = np.zeros_like(state.tool_force_N)
+            state.handle_position_m = np.array(np.broadcast_to(handle_position_m,
+                                                               state.handle_position_m.shape))
+        else:
+            rows = np.flatnonzero(moving)
+            for column, value in zip(POSITION_COLUMNS, position.T, strict=True):
+                state.tool[rows, column] = value[rows]
+            for column in VELOCITY_COLUMNS:
+                state.tool[rows, column] = 0.0
+            state.compensator[rows] = 0.0
+            for name in ("actuator_force_N", "tool_force_N", "handle_position_m"):
+                setattr(state, name, np.array(getattr(state, name)))  # never write an alias
+            state.actuator_force_N[rows] = 0.0
+            state.tool_force_N[rows] = 0.0
+            state.handle_position_m[rows] = np.broadcast_to(
+                handle_position_m, state.handle_position_m.shape)[rows]
         left = target - position
         return np.sqrt((left * left).sum(axis=1))
 

@@ -69,6 +69,14 @@ class SlaveSupervisor:
         self.grid_m = None if grid_m is None else tuple(float(v) for v in grid_m)
         self.events: list[dict[str, Any]] = []
 
+    def start_synced(self, handle_position_m: tuple[float, float]) -> None:
+        """Count the link as up and in sync before the first tick, the master's forces on and
+        the handle at ``handle_position_m`` (m): the tool runs from tick 0 (the lockstep
+        simulator's warm start)."""
+        self.watchdog.state = WatchdogState.OK
+        self.handle_position_m = (float(handle_position_m[0]), float(handle_position_m[1]))
+        self.master_enabled = self.running = self.ready = True
+
     def receive(self, message: HandleState | None) -> bool:
         """Take the tick's fresh message (or ``None``); returns whether the tool should be
         re-placed at the handle now (it is not running and not stopped by the guard)."""

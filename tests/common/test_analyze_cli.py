@@ -40,7 +40,7 @@ def test_stable_for_every_delay_reports_null_margin(capsys) -> None:
 
 
 def test_plots_are_written(tmp_path: Path) -> None:
-    assert main(["--k", "13", "--round-trip-delay", "0.02", "--plot", str(tmp_path)]) == 0
+    assert main(["--k", "13", "--round-trip-delay", "0.02", "--out", str(tmp_path)]) == 0
     for name in ("nyquist.png", "compensators_bode.png", "stability_map.png"):
         assert (tmp_path / name).stat().st_size > 10_000
 
@@ -74,3 +74,11 @@ def test_negative_delay_is_refused(capsys) -> None:
         main(["--round-trip-delay", "-0.1"])
     assert caught.value.code == 2
     assert "--round-trip-delay" in capsys.readouterr().err
+
+
+def test_the_old_plot_option_is_refused_naming_out(capsys) -> None:
+    """One vocabulary: a program's files go into ``--out DIR``; ``--plot`` says so."""
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--plot", "somewhere"])
+    assert exit_info.value.code == 2
+    assert "--plot is now --out DIR" in capsys.readouterr().err

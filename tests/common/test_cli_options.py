@@ -124,13 +124,13 @@ def _parsers():
     from haptic.common import analyze_cli, session
     from haptic.lockstep import cli as lockstep_cli
     from haptic.master import cli as master_cli
-    from haptic.slave_sim import program as slave_program
+    from haptic.slave_sim import cli as slave_cli
 
     return {
         "haptic-analyze": (analyze_cli.build_parser, []),
         "haptic-sim run": (lockstep_cli.build_parser, ["run"]),
         "haptic-master": (master_cli.build_parser, []),
-        "haptic-slave": (slave_program.build_parser, []),
+        "haptic-slave": (slave_cli.build_parser, []),
         "haptic-session": (session.build_parser, []),
     }
 

@@ -73,3 +73,15 @@ def test_the_rig_names_of_the_schema_are_the_registered_backends() -> None:
     from haptic.master.hardware import hardware_names
 
     assert tuple(sorted(RIG_BACKENDS)) == hardware_names()
+
+
+def test_the_program_harness_loads_no_can_stack_no_warp_and_no_program() -> None:
+    """The harness both programs share (common/program_harness.py) is ``common``: the slave
+    host loads it without python-can, and neither program's package comes with it."""
+    code = ("import sys\nimport haptic.common.program_harness\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+            "('can', 'canopen', 'cantools', 'warp') or m.startswith('haptic.') "
+            "and not m.startswith('haptic.common')))")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=120, check=True)
+    assert result.stdout.strip() == "[]"

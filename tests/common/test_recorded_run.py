@@ -45,7 +45,7 @@ def recorded_run(tmp_path_factory: pytest.TempPathFactory):
          str(files["master"]), "--json-summary", str(summaries["master"])],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     slave = subprocess.Popen(
-        [sys.executable, "-m", "haptic.slave_sim.program", *common, "--connect", endpoint,
+        [sys.executable, "-m", "haptic.slave_sim.cli", *common, "--connect", endpoint,
          "--duration", "2.5", "--record", str(files["slave"]), "--record-every", "2",
          "--json-summary", str(summaries["slave"])],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

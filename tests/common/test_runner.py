@@ -12,7 +12,7 @@ import textwrap
 
 import pytest
 
-from haptic.common.runner import RealTimeRunner, StopSignals
+from haptic.common.runner import FreeRunningClock, RealTimeRunner, StopSignals
 
 PERIOD_NS = 540_000
 
@@ -264,3 +264,25 @@ def test_a_shift_asked_outside_a_run_does_not_move_the_next_run():
     runner.run()
     gaps = [b - a for a, b in zip(starts, starts[1:], strict=False)]
     assert all(abs(g - PERIOD_NS) <= 2_000 for g in gaps)
+
+
+def test_a_free_running_clock_runs_the_ticks_back_to_back_on_schedule() -> None:
+    """Unpaced runs (the master alone with --no-pace, bench_master) use the one runner: a
+    free-running clock skips the sleeps, so a 1 s period's 5 ticks take far less than 5 s,
+    and on that clock every tick starts exactly at its deadline."""
+    free = FreeRunningClock()
+    starts: list[int] = []
+
+    def step(tick: int, now_ns: int) -> None:
+        starts.append(now_ns)
+        if tick == 4:
+            runner.request_stop("done")
+
+    runner = RealTimeRunner(1.0, step, spin_s=0.0, clock_ns=free.clock_ns, sleep=free.sleep,
+                            show_status=False, handle_signals=False)
+    stats = runner.run()
+    assert stats.steps == 5 and stats.stop_reason == "done"
+    assert stats.elapsed_s >= 4.0  # on the free-running clock: four periods skipped
+    gaps = [later - earlier for earlier, later in zip(starts[:-1], starts[1:], strict=True)]
+    assert all(abs(gap - 1_000_000_000) < 1_000_000 for gap in gaps), gaps
+    assert stats.overruns == 0 and stats.stalls == 0

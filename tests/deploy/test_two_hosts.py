@@ -197,7 +197,7 @@ def run_session(processes: Processes, certs, out: Path, topology: str) -> float:
         files = {side: ZENOH / f"peer-{side}.json5" for side in summaries}
     started = time.monotonic()
     slave = processes.start("remote", [
-        "-m", "haptic.slave_sim.program", *common, *ends["slave"],
+        "-m", "haptic.slave_sim.cli", *common, *ends["slave"],
         "--zenoh-config", str(files["slave"]), *zenoh_set(certs.tls_overrides("slave")),
         "--duration", repr(SESSION_S + 20), "--scenario", "constant-rate", "--out", str(out),
         "--json-summary", str(summaries["slave"])])

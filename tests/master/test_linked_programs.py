@@ -63,7 +63,7 @@ class Pair:
         return self._start(args)
 
     def slave(self, duration: float | None, summary: Path, *extra: str) -> subprocess.Popen:
-        args = [sys.executable, "-m", "haptic.slave_sim.program", *self._common(), "--connect",
+        args = [sys.executable, "-m", "haptic.slave_sim.cli", *self._common(), "--connect",
                 self.endpoint, "--json-summary", str(summary), *extra]
         if duration is not None:
             args += ["--duration", str(duration)]
@@ -226,7 +226,7 @@ def test_killed_slave_trips_the_master_and_a_new_slave_resumes(pair, tmp_path) -
     assert summary["watchdog_state"] in ("ok", "tripped")
 
 
-@pytest.mark.parametrize("program", ["haptic.slave_sim.program", "haptic.master.cli"])
+@pytest.mark.parametrize("program", ["haptic.slave_sim.cli", "haptic.master.cli"])
 def test_the_analysis_refuses_an_unstable_loop(program) -> None:
     args = [sys.executable, "-m", program, "--k", "19", "--one-way-delay", "0.02",
             "--duration", "1", "--no-status", "--peer-wait", "1", "--key-prefix",
@@ -245,7 +245,7 @@ def test_the_analysis_refuses_an_unstable_loop(program) -> None:
 
 
 def test_the_slave_ends_cleanly_on_sigterm_while_waiting_for_its_master(tmp_path) -> None:
-    args = [sys.executable, "-m", "haptic.slave_sim.program", "--no-status", "--key-prefix",
+    args = [sys.executable, "-m", "haptic.slave_sim.cli", "--no-status", "--key-prefix",
             f"test/{uuid.uuid4().hex[:8]}", "--connect", f"tcp/127.0.0.1:{_free_port()}",
             "--config", str(_linear_config(tmp_path))]
     process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

@@ -53,7 +53,7 @@ def test_a_file_giving_the_slave_table_keeps_the_default_lock(tmp_path):
     (["--phase-margin", "-1"], "slave.phase_lock.margin_s"),
 ])
 def test_bad_flags_exit_2_with_one_line(argv, named):
-    done = subprocess.run([sys.executable, "-m", "haptic.slave_sim.program", *argv,
+    done = subprocess.run([sys.executable, "-m", "haptic.slave_sim.cli", *argv,
                            "--duration", "1"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 2
     errors = [line for line in done.stderr.splitlines() if line.startswith("config error")]

@@ -101,7 +101,7 @@ def test_page_shows_the_cut_in_chromium(tmp_path: Path) -> None:
                 page = browser.new_page(viewport={"width": 1300, "height": 700})
                 page.goto(url)
                 processes.append(subprocess.Popen(
-                    [sys.executable, "-m", "haptic.slave_sim.program", *common, *run,
+                    [sys.executable, "-m", "haptic.slave_sim.cli", *common, *run,
                      "--connect", endpoint], stdout=subprocess.DEVNULL,
                     stderr=subprocess.DEVNULL))
                 timeout_ms = WAIT_S * 1000

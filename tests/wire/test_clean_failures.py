@@ -37,14 +37,14 @@ def _program_mains():
     from haptic.lockstep import cli as lockstep_cli
     from haptic.master import cli as master_cli
     from haptic.master import rig_sim_cli
-    from haptic.slave_sim import program as slave_program
+    from haptic.slave_sim import cli as slave_cli
     from haptic.slave_sim import run_scenario
     from haptic.view import cli as view_cli
 
     return {
         "haptic-master": (master_cli.main, []),
         "haptic-master --no-link": (master_cli.main, ["--no-link"]),
-        "haptic-slave": (slave_program.main, []),
+        "haptic-slave": (slave_cli.main, []),
         "haptic-analyze": (analyze_cli.main, []),
         "haptic-slave-sim": (run_scenario.main, []),
         "haptic-view": (view_cli.main, []),
@@ -119,7 +119,7 @@ def test_program_on_a_port_in_use_exits_4_with_one_line(program):
     rig = ["--rig", "model"] if program == "haptic-master" else []
     with Link(LinkConfig(side="master", key_prefix=prefix, listen=(endpoint,))):
         module = {"haptic-master": "haptic.master.cli",
-                  "haptic-slave": "haptic.slave_sim.program"}[program]
+                  "haptic-slave": "haptic.slave_sim.cli"}[program]
         done = subprocess.run(
             [sys.executable, "-m", module, *rig, "--listen", endpoint, "--key-prefix", prefix,
              "--peer-wait", "1", "--duration", "1"],

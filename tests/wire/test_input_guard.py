@@ -104,7 +104,7 @@ def test_forged_1e9_N_never_moves_the_slave_tool_beyond_the_bound(tmp_path) -> N
                                stale_after_s=10.0)
     with Link(master_config) as link:
         slave = subprocess.Popen(
-            [sys.executable, "-m", "haptic.slave_sim.program", "--config", str(config),
+            [sys.executable, "-m", "haptic.slave_sim.cli", "--config", str(config),
              "--key-prefix", prefix, "--connect", endpoint, "--no-status", "--peer-wait", "60",
              "--duration", "3", "--json-summary", str(summary_path), "--out", str(out),
              "--max-message-age", "0.5"],

@@ -41,7 +41,7 @@ def test_sigkilled_master_recording_opens_with_make_reader(tmp_path: Path) -> No
          "model", "--record", str(record)],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     slave = subprocess.Popen(
-        [sys.executable, "-m", "haptic.slave_sim.program", *common, "--connect", endpoint,
+        [sys.executable, "-m", "haptic.slave_sim.cli", *common, "--connect", endpoint,
          "--duration", "30"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + WAIT_S

@@ -1,0 +1,223 @@
+"""One tick of the master, with the I/O passed in: supervise, then the node (or the hold).
+
+The program (master/program.py) and the lockstep simulator (lockstep/simulator.py) both run
+their ticks through :class:`MasterTick`, so the simulator that checks the analysis runs the
+supervisor and the node exactly as they ship (docs/architecture.md, "one tick"):
+
+    read  -> poll -> supervise -> node -> write / send -> telemetry
+    (caller) (caller) MasterTick.supervise  MasterTick.control  (caller)
+
+:meth:`MasterTick.supervise` feeds each lane's :class:`~haptic.master.supervisor.
+MasterSupervisor` (watchdog, resync check, fault latch) and (re)activates the node's lanes
+whose forces come on. :meth:`MasterTick.control` steps the node's safety layer and Ch1/Ct1
+for the lanes whose forces are enabled and returns what the node used
+(:class:`MasterTickOutput`): the command, the handle force and the tool force the compensator
+used (saturated, scaled by the force ramp), the ramp's scale, and the flags to send. Lanes
+whose forces are off hold the supervisor's ``hold_m`` and send no force.
+
+The program has one lane; the simulator one lane per cell of a sweep (the node is one Warp
+kernel over every lane; one supervisor per lane).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from haptic.common.messages import Flags, ToolState
+from haptic.master.node import MasterNode, MasterNodeState
+from haptic.master.supervisor import MasterSupervisor, Transition
+
+
+@dataclass
+class MasterTickOutput:
+    """What one tick decided, per lane (arrays have the lanes first; views the next tick
+    overwrites). ``command_m`` (lanes, 2): the handle command, m; ``handle_force_used_N`` and
+    ``tool_force_used_N`` (lanes, 2): the forces the compensator used, N (zero where forces
+    are off): the first goes to the slave's Ch2, the second is what the operator feels;
+    ``force_scale`` (lanes,): the force ramp's factor 0..1; ``enabled`` (lanes,) bool;
+    ``flags``: per lane, the flags of the message to the slave."""
+
+    command_m: np.ndarray
+    handle_force_used_N: np.ndarray
+    tool_force_used_N: np.ndarray
+    force_scale: np.ndarray
+    enabled: np.ndarray
+    flags: list[Flags]
+
+
+class MasterTick:
+    """The master's supervise and node stages for ``len(supervisors)`` lanes."""
+
+    def __init__(self, node: MasterNode, supervisors: Sequence[MasterSupervisor]) -> None:
+        if not supervisors:
+            raise ValueError("at least one supervisor (lane)")
+        self.node = node
+        self.supervisors = list(supervisors)
+        self.lanes = len(self.supervisors)
+        self.state: MasterNodeState | None = None
+        #: the tick time (s) at which the node's state was last made for all lanes: its
+        #: events' times count from here
+        self.node_offset_s = 0.0
+        lanes = self.lanes
+        self.enabled = np.zeros(lanes, bool)
+        self._command = np.zeros((lanes, 2))
+        self._handle_used = np.zeros((lanes, 2))
+        self._tool_used = np.zeros((lanes, 2))
+        self._scale = np.zeros(lanes)
+        self._tool_force = np.zeros((lanes, 2))
+        self._pending_events: list[tuple[float, Any]] = []
+
+    def start(self, position_m: Any, synced: bool = False) -> None:
+        """Hold each lane where its handle is ((lanes, 2) or (2,), m). With ``synced`` the
+        link counts as up and in sync before the first tick (the lockstep's warm start): the
+        forces are on from tick 0 and the node is activated here (its small-force gate
+        applies), as the first ``ACTIVATE`` would."""
+        position = np.broadcast_to(np.asarray(position_m, float), (self.lanes, 2))
+        for lane, supervisor in enumerate(self.supervisors):
+            supervisor.start(position[lane])
+            if synced:
+                supervisor.start_synced()
+        if synced:
+            self.state = self.node.activate(np.nan_to_num(position))
+            self.enabled[:] = True
+
+    def supervise(self, now_s: float, messages: Sequence[ToolState | None],
+                  handle_position_m: np.ndarray, faults: Sequence[Sequence[str]] | None = None,
+                  cycle: int = 0, silence_s: Sequence[float] | None = None,
+                  peer_alive: Sequence[bool] | None = None) -> list[Transition]:
+        """Feed every lane's supervisor (``messages``: the fresh ``ToolState`` per lane or
+        ``None``; ``handle_position_m`` (lanes, 2), m; ``faults``: the hardware's per lane;
+        ``silence_s``: time since the last fresh message per lane, s; ``peer_alive``: the
+        slave's liveliness per lane). Lanes whose forces come on get a fresh node state at
+        their position (``ACTIVATE``: the node's small-force gate; ``RESUME``: the forces
+        ramp in). Returns each lane's transition."""
+        position = np.asarray(handle_position_m, float)
+        rows = position.tolist()  # floats: the supervisors are plain Python
+        supervisors = self.supervisors
+        transitions = [
+            supervisor.update(now_s, messages[lane], rows[lane],
+                              () if faults is None else faults[lane], cycle,
+                              0.0 if silence_s is None else silence_s[lane],
+                              True if peer_alive is None else peer_alive[lane])
+            for lane, supervisor in enumerate(supervisors)]
+        self.enabled[...] = [supervisor.enabled for supervisor in supervisors]
+        activate = np.array([t is Transition.ACTIVATE for t in transitions])
+        resume = np.array([t is Transition.RESUME for t in transitions])
+        if activate.any() or resume.any():
+            self._renew(now_s, np.nan_to_num(position), activate, resume)
+        return transitions
+
+    def _renew(self, now_s: float, position_m: np.ndarray, activate: np.ndarray,
+               resume: np.ndarray) -> None:
+        """A fresh node state for the ``activate`` and ``resume`` lanes (the others keep
+        theirs: their rows are copied over from a state made for every lane)."""
+        node = self.node
+        if self.state is None or activate.all() or resume.all():
+            self._keep_events()
+            every_lane_resumes = bool(resume.all())
+            self.state = (node.resume(position_m) if every_lane_resumes
+                          else node.activate(position_m))
+            self.node_offset_s = now_s
+            if every_lane_resumes or not resume.any():
+                return
+            activate = np.zeros_like(activate)  # done; the resumed lanes follow
+        if activate.any():
+            self._copy_rows(node.activate(position_m), activate)
+        if resume.any():
+            self._copy_rows(node.resume(position_m), resume)
+
+    def _keep_events(self) -> None:
+        """Move the current state's events (with their absolute times) aside before the
+        state is replaced."""
+        self._pending_events.extend(self.take_node_events())
+
+    def _copy_rows(self, fresh: MasterNodeState, lanes: np.ndarray) -> None:
+        """Copy ``lanes``' rows of every per-lane array of ``fresh`` into the current state
+        (in place: the arrays are the kernel's buffers), with ``fresh``'s events of them."""
+        state = self.state
+        if state is None:
+            self.state = fresh
+            return
+        for item in fields(state):
+            if item.name.startswith("_"):
+                continue
+            value = getattr(state, item.name)
+            if isinstance(value, np.ndarray) and value.shape[:1] == (self.lanes,):
+                value[lanes] = getattr(fresh, item.name)[lanes]
+        offset = state.step * self.node.period_s
+        for event in fresh.events:
+            if lanes[event.lane]:
+                state.events.append(type(event)(state.step, offset, event.lane, event.kind,
+                                                event.reason, event.axis))
+
+    def control(self, handle_force_N: np.ndarray, handle_position_m: np.ndarray,
+                tool_force_N: np.ndarray | None = None) -> MasterTickOutput:
+        """The node stage: vh = Ch1 fh - Ct1 ft behind the safety layer for the lanes whose
+        forces are on (``tool_force_N`` (lanes, 2), N: the received tool force, by default
+        the supervisors' newest ``ToolState``'s); the others hold ``hold_m``. A trip of the
+        node's safety layer latches that lane's supervisor. Returns what the node used."""
+        enabled = self.enabled
+        state = self.state
+        if tool_force_N is None:
+            tool_force_N = self._received_tool_force()
+        if state is not None and enabled.any():
+            inputs = state.inputs
+            inputs[:, 0:2] = handle_force_N
+            inputs[:, 2:4] = handle_position_m
+            inputs[:, 4:6] = tool_force_N
+            events_before = len(state.events)
+            self.node.step_inputs(state)
+            if enabled.all():
+                self._command[...] = state.command_m
+                self._handle_used[...] = state.handle_force_used_N
+                self._tool_used[...] = state.tool_force_used_N
+                self._scale[...] = state.force_scale
+            else:  # the off lanes' steps do not count: they start afresh when forces return
+                state.events[events_before:] = [event for event in state.events[events_before:]
+                                                if enabled[event.lane]]
+                self._command[...] = np.where(enabled[:, None], state.command_m, 0.0)
+                self._handle_used[...] = np.where(enabled[:, None], state.handle_force_used_N,
+                                                  0.0)
+                self._tool_used[...] = np.where(enabled[:, None], state.tool_force_used_N, 0.0)
+                self._scale[...] = np.where(enabled, state.force_scale, 0.0)
+            faulted = state.faulted
+            for lane in np.flatnonzero(enabled & faulted):
+                self.supervisors[lane].note_node_fault()
+        else:
+            self._handle_used[...] = 0.0
+            self._tool_used[...] = 0.0
+            self._scale[...] = 0.0
+        flags = []
+        for lane, supervisor in enumerate(self.supervisors):
+            if enabled[lane]:
+                flags.append(Flags.FORCES_ENABLED)
+            else:
+                self._command[lane] = supervisor.hold_m
+                flags.append(Flags.SAFE_STATE)
+        return MasterTickOutput(self._command, self._handle_used, self._tool_used, self._scale,
+                                enabled, flags)
+
+    def _received_tool_force(self) -> np.ndarray:
+        """The newest received tool force per lane (zero before the first message), N."""
+        force = self._tool_force
+        for lane, supervisor in enumerate(self.supervisors):
+            tool = supervisor.tool
+            if tool is not None:
+                force[lane] = tool.tool_force_N
+        return force
+
+    def take_node_events(self) -> list[tuple[float, Any]]:
+        """The node's safety events since the last call, each with its absolute tick time
+        (s: ``node_offset_s`` plus the event's own time); they are removed from the state."""
+        state = self.state
+        if not self._pending_events and (state is None or not state.events):
+            return []
+        taken, self._pending_events = self._pending_events, []
+        if state is not None and state.events:
+            taken.extend((self.node_offset_s + event.time_s, event) for event in state.events)
+            state.events.clear()
+        return taken

@@ -1,0 +1,83 @@
+"""``haptic-slave``: the slave on the remote host: the slave node (Ch2/Ct2, the virtual tool,
+the Warp clay) driven by the handle's messages over the Zenoh link, on the real-time runner
+(the loop: slave_sim/program.py; its tick: slave_sim/tick.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+import zenoh
+
+from haptic.common.cli_options import add_run_options, run_options_from_args
+from haptic.common.config import exit_on_config_error, load_config, override
+from haptic.common.config.scenario import load_scenario, max_block_damping
+from haptic.common.failures import exit_on_link_error
+from haptic.common.preflight import add_preflight_options, run_preflight
+from haptic.common.program_harness import add_networked_options, check_networked_options
+from haptic.common.runner_config import place_other_threads
+from haptic.slave_sim.input_guard import InputGuardSettings
+from haptic.slave_sim.node import SlaveNode
+from haptic.slave_sim.program import DEFAULT_SYNC_TOLERANCE_M, phase_lock_from, run_slave
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line."""
+    parser = argparse.ArgumentParser(prog="haptic-slave", description=__doc__.split("\n")[0])
+    add_run_options(parser)
+    parser.add_argument("--scenario", help="scenario name or TOML path ([slave] scenario)")
+    add_preflight_options(parser)
+    group = add_networked_options(
+        parser, "master", "write clay.npz, clay.png and slave_trace.npz here at the end",
+        DEFAULT_SYNC_TOLERANCE_M)
+    group.add_argument("--phase-margin", metavar="S", type=float,
+                       help="start the spin before the tick this long after the master's "
+                       "message arrives, s (slave.phase_lock.margin_s)")
+    group.add_argument("--no-phase-lock", action="store_true",
+                       help="let the loop tick free-running (slave.phase_lock.enabled = false)")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the exit status: 0; 1 when no master came within --peer-wait;
+    2 for a configuration error (one line); 3 when the stability analysis refuses the loop;
+    4 when the link cannot open (a port in use, an unreachable router; one line)."""
+    args = build_parser().parse_args(argv)
+    zenoh.init_log_from_env_or("error")
+    with exit_on_config_error():
+        config = load_config(args.config)
+        if args.scenario is not None:
+            config = override(config, "slave.scenario", args.scenario)
+        if args.k is not None:
+            config = override(config, "model.ch1.gain_k", args.k)
+        if args.phase_margin is not None:
+            config = override(config, "slave.phase_lock.margin_s", args.phase_margin)
+        if args.no_phase_lock:
+            config = override(config, "slave.phase_lock.enabled", False)
+        options = run_options_from_args(args, "slave", config=config)
+        check_networked_options(args)
+        scenario = load_scenario(options.config["slave"]["scenario"])
+        phase_lock_from(options.config, options.config["model"]["sample_period_s"])
+        InputGuardSettings.from_config(options.config)  # [slave.safety]'s cross-key checks
+    # before Warp's, the recorder's and Zenoh's threads start: they inherit these CPUs
+    placement = place_other_threads(options.runner)
+    with exit_on_config_error():
+        analysis, refused = run_preflight(options.config, args, "haptic-slave", side="slave",
+                                          clay_damping_N_s_per_m=max_block_damping(scenario))
+    if refused is not None:
+        return refused
+    import warp
+
+    warp.config.log_level = warp.LOG_WARNING  # no start-up banner
+    warp.config.quiet = True
+    with exit_on_config_error():
+        node = SlaveNode.from_config(options.config, scenario)
+    with exit_on_link_error("haptic-slave"):
+        return run_slave(node, options, args, {"scenario": scenario.name,
+                                               "analysis": analysis.as_dict(), **placement})
+
+
+if __name__ == "__main__":
+    sys.exit(main())

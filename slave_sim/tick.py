@@ -1,0 +1,168 @@
+"""One tick of the slave, with the I/O passed in: supervise, then the node.
+
+The program (slave_sim/program.py) and the lockstep simulator (lockstep/simulator.py) both
+run their ticks through :class:`SlaveTick`, so the simulator that checks the analysis runs
+the input guard, the supervisor, the resync and the node exactly as they ship
+(docs/architecture.md, "one tick"):
+
+    poll -> supervise -> node -> send -> telemetry
+    (caller) SlaveTick.supervise  SlaveTick.control  (caller)
+
+:meth:`SlaveTick.supervise`, per lane: the input guard bounds a fresh ``HandleState``
+(slave_sim/input_guard.py; a fault is not an input); the supervisor (watchdog, resync,
+work-area guard; slave_sim/supervisor.py) says whether the tool follows the handle
+(``ToolResync``: through the clay at a bounded speed) and whether it runs, stops or resumes.
+:meth:`SlaveTick.control` steps the node (Ch2/Ct2, the tool, the environment) with the
+bounded handle force where the tool runs and zero force elsewhere, and returns the node's
+outputs with the flags to send.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from haptic.common.margin_table import follow_gain
+from haptic.common.messages import Flags, HandleState
+from haptic.slave_sim.input_guard import InputGuard
+from haptic.slave_sim.node import SlaveNode, SlaveOutputs, SlaveState
+from haptic.slave_sim.resync import ToolResync
+from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
+
+#: (ready, cutting) -> the flags of the message to the master.
+_FLAGS = {(True, False): Flags.FORCES_ENABLED, (False, False): Flags.SAFE_STATE,
+          (True, True): Flags.FORCES_ENABLED | Flags.IN_CONTACT,
+          (False, True): Flags.SAFE_STATE | Flags.IN_CONTACT}
+
+
+@dataclass
+class SlaveTickOutput:
+    """What one tick produced: the node's outputs (``out``), which lanes ran (``running``,
+    (lanes,) bool), and per lane the flags of the message to the master (FORCES_ENABLED when
+    this side is ready, IN_CONTACT while cutting)."""
+
+    out: SlaveOutputs
+    running: np.ndarray
+    flags: list[Flags]
+
+
+class SlaveTick:
+    """The slave's supervise and node stages for ``len(supervisors)`` lanes.
+
+    ``state``: the node's state (the caller made it, e.g. ``node.initial_state(lanes)``);
+    ``guards``: one :class:`InputGuard` per lane; ``resync``: the tool's way back to the
+    handle. The newest bounded handle force and position per lane are :attr:`handle_force_N`
+    and :attr:`handle_position_m` ((lanes, 2), N and m).
+    """
+
+    def __init__(self, node: SlaveNode, state: SlaveState,
+                 supervisors: Sequence[SlaveSupervisor], guards: Sequence[InputGuard],
+                 resync: ToolResync | None = None) -> None:
+        lanes = len(supervisors)
+        if lanes != state.lanes or len(guards) != lanes:
+            raise ValueError(f"one supervisor and one guard per lane ({state.lanes} lanes)")
+        self.node = node
+        self.state = state
+        self.supervisors = list(supervisors)
+        self.guards = list(guards)
+        self.resync = resync if resync is not None else ToolResync(node)
+        self.lanes = lanes
+        self.handle_force_N = np.zeros((lanes, 2))
+        self.handle_position_m = state.handle_position_m.copy()
+        self.fresh = np.zeros(lanes, bool)
+        self.running = np.zeros(lanes, bool)
+        self._zero_force = np.zeros((lanes, 2))
+        #: per lane, the send time of the newest admitted handle message (ns, 0: none yet),
+        #: echoed to the master for its round-trip estimate (master/margin_governor.py)
+        self.echo_send_time_ns = [0] * lanes
+        self._gain: tuple[float, bool] | None = None
+
+    def follow_gain(self, nominal_k: float, scalable: bool) -> None:
+        """Follow the master's governed k (``HandleState.gain_k``, never above
+        ``nominal_k``): the node's inputs are scaled by k/k0 per lane (``state.gain_ratio``);
+        ``scalable``: the model's compensators are linear in k (common/margin_table.py)."""
+        self._gain = (float(nominal_k), bool(scalable))
+        self.state.gain_ratio = np.ones(self.lanes)
+
+    def start(self, synced: bool = False) -> None:
+        """Before the first tick: the tool stops and waits for the master; with ``synced``
+        the link counts as up and in sync (the lockstep's warm start) and the tool runs from
+        tick 0 with the handle at :attr:`handle_position_m`."""
+        if not synced:
+            self.node.safe_stop(self.state)
+            return
+        for lane, supervisor in enumerate(self.supervisors):
+            supervisor.start_synced(tuple(self.handle_position_m[lane]))
+            self.guards[lane].position_m = (float(self.handle_position_m[lane, 0]),
+                                            float(self.handle_position_m[lane, 1]))
+        self.running[:] = True
+
+    def supervise(self, now_s: float, messages: Sequence[HandleState | None],
+                  silence_s: Sequence[float] | None = None,
+                  peer_alive: Sequence[bool] | None = None) -> np.ndarray:
+        """Feed every lane's guard and supervisor (``messages``: the fresh ``HandleState``
+        per lane or ``None``; ``silence_s``: time since the last fresh message per lane, s;
+        ``peer_alive``: the master's liveliness per lane); re-place, stop or resume the tool
+        as they say. Returns the lanes whose message was an input (fresh and admitted)."""
+        guards, supervisors = self.guards, self.supervisors
+        admitted_lanes = []
+        follow = []
+        for lane, message in enumerate(messages):
+            admitted = message is not None and guards[lane].admit(message, now_s)
+            if admitted:
+                admitted_lanes.append(lane)
+            # a fault is not an input
+            follow.append(supervisors[lane].receive(message if admitted else None))
+        fresh = self.fresh
+        fresh[...] = False
+        if admitted_lanes:
+            fresh[admitted_lanes] = True
+            self.handle_force_N[admitted_lanes] = [guards[lane].force_N  # bounded
+                                                   for lane in admitted_lanes]
+            self.handle_position_m[admitted_lanes] = [guards[lane].position_m
+                                                      for lane in admitted_lanes]
+            gain = self._gain
+            for lane in admitted_lanes:
+                message = messages[lane]
+                self.echo_send_time_ns[lane] = message.send_time_ns
+                if gain is not None:
+                    self.state.gain_ratio[lane] = follow_gain(message.gain_k, *gain)
+        state = self.state
+        if any(follow):  # to the held handle, cutting (slave_sim/resync.py)
+            self.resync.step(state, self.handle_position_m, now_s,
+                             None if all(follow) else np.array(follow))
+        tool = state.tool[:, 0::2].tolist()  # (x, y) per lane, floats
+        fresh_list = fresh.tolist()
+        transitions = [
+            supervisor.update(now_s, fresh_list[lane], tool[lane],
+                              0.0 if silence_s is None else silence_s[lane],
+                              True if peer_alive is None else peer_alive[lane],
+                              guards[lane].faulted)
+            for lane, supervisor in enumerate(supervisors)]
+        self.running[...] = [supervisor.running for supervisor in supervisors]
+        resume = [transition is Transition.RESUME for transition in transitions]
+        stop = [transition is Transition.STOP for transition in transitions]
+        if any(resume):
+            self.node.resume(state, None if all(resume) else np.array(resume))
+        if any(stop):
+            self.node.safe_stop(state, None if all(stop) else np.array(stop))
+        return fresh
+
+    def control(self) -> SlaveTickOutput:
+        """The node stage: Ch2/Ct2, the tool and the environment, with the bounded handle
+        force where the tool runs and zero force elsewhere."""
+        running = self.running
+        if running.all():
+            force = self.handle_force_N
+        elif not running.any():
+            force = self._zero_force
+        else:
+            force = np.where(running[:, None], self.handle_force_N, 0.0)
+        out = self.node.step(self.state, force, self.handle_position_m)
+        cutting = out.cutting
+        table = _FLAGS
+        flags = [table[supervisor.ready, bool(cut)]
+                 for supervisor, cut in zip(self.supervisors, cutting.tolist(), strict=True)]
+        return SlaveTickOutput(out, running, flags)

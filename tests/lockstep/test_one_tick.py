@@ -1,0 +1,122 @@
+"""The lockstep simulator runs the programs' tick (master/tick.py, slave_sim/tick.py): the
+same supervisors, input guard and nodes, so what the simulator checks is what ships."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from haptic.common.config.scenario import load_scenario
+from haptic.common.injection import InjectionConfig
+from haptic.common.messages import Flags, HandleState, ToolState
+from haptic.common.watchdog import WatchdogState
+from haptic.lockstep.simulator import LockstepSimulator, LockstepSupervision
+from haptic.master.node import MasterNode
+from haptic.master.operator import parse_operator_spec
+from haptic.master.rig_model import RigModel
+from haptic.master.settings import master_settings
+from haptic.master.supervisor import MasterSupervisor
+from haptic.master.tick import MasterTick
+from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
+from haptic.slave_sim.node import SlaveNode
+from haptic.slave_sim.supervisor import SlaveSupervisor
+from haptic.slave_sim.tick import SlaveTick
+
+OPERATOR = "regulate:fx=3.6,onset=0.05"
+
+
+def _deployed(paper_config, paper_model, scenario) -> LockstepSimulator:
+    """One lane with the shipped limits: the master's safety layer and the programs'
+    supervision, watchdog, work area and input guard."""
+    return LockstepSimulator(
+        paper_model, scenario, parse_operator_spec(OPERATOR),
+        np.array([paper_config["model"]["ch1"]["gain_k"]]),
+        "linear", master_settings(paper_config).safety, device="cpu",
+        supervision=LockstepSupervision.from_config(paper_config, scenario))
+
+
+def test_lockstep_outputs_equal_program_ticks_fed_the_same_inputs(paper_config,
+                                                                  paper_model) -> None:
+    """Drive a master tick and a slave tick built as the programs build them (one lane each,
+    messages as the link delivers them) with the rig and one-sample lines by hand: the
+    handle forces, commands and tool forces equal the lockstep's, bit for bit."""
+    scenario = load_scenario("constant-rate")
+    simulator = _deployed(paper_config, paper_model, scenario)
+    duration_s = 0.3
+    result = simulator.run(duration_s, 2, record_lanes=[0])  # d1 = 1 to the slave, d2 = 1 back
+    ts = paper_model.sample_period_s
+    sup = LockstepSupervision.from_config(paper_config, scenario)
+    ratio = tuple(float(a.position_ratio_ah1) for a in paper_model.axes)
+    tool_start = np.asarray(scenario.tool.start_position_m, float)[None, :]
+    handle_start = tool_start / np.asarray(ratio)
+    node = MasterNode.from_model(paper_model, master_settings(paper_config).safety)
+    master = MasterTick(node, [MasterSupervisor(ratio, sup.sync_tolerance_m,
+                                                sup.max_message_age_s, sup.resync_messages)])
+    master.start(handle_start, synced=True)
+    slave_node = SlaveNode(paper_model, scenario, "linear", device="cpu")
+    slave = SlaveTick(slave_node, slave_node.initial_state(1, tool_start),
+                      [SlaveSupervisor(ratio, sup.sync_tolerance_m, sup.work_area_m,
+                                       sup.max_message_age_s, sup.resync_messages,
+                                       grid_m=sup.grid_m)],
+                      [InputGuard(InputGuardSettings.from_config(paper_config), ts)])
+    slave.handle_position_m[...] = handle_start
+    slave.start(synced=True)
+    rig = RigModel.from_model(paper_model, parse_operator_spec(OPERATOR), 0.0)
+    rng = np.random.default_rng(0).spawn(3)[2]
+    rig_state = rig.initial_state(handle_start, rng)
+    enabled = Flags.FORCES_ENABLED
+    to_slave = HandleState(0, -1, -int(ts * 1e9), enabled, (0.0, 0.0),
+                           tuple(handle_start[0]))
+    to_master_next = ToolState(0, -2, 0, enabled, (0.0, 0.0), tuple(tool_start[0]),
+                               (0.0, 0.0), 0.0, 0.0)
+    to_master = to_master_next
+    command = master.state.last_command_m.copy()
+    fh_trace, command_trace, ft_trace = [], [], []
+    for k in range(result.steps):
+        sample = rig.step(rig_state, command, np.array([to_master.tool_force_N]))
+        fh, yh = sample.handle_force_measured_N, sample.handle_position_m
+        master.supervise(k * ts, [to_master], yh)
+        used = master.control(fh, yh)
+        command = used.command_m.copy()
+        sent = HandleState(0, k, int(k * ts * 1e9), used.flags[0],
+                           tuple(used.handle_force_used_N[0].tolist()), tuple(yh[0].tolist()))
+        slave.supervise(k * ts, [to_slave])
+        out = slave.control()
+        to_slave = sent  # one sample to the slave
+        to_master = to_master_next  # the tool force of tick k - 1 describes t_k
+        to_master_next = ToolState(
+            0, k, int(k * ts * 1e9), out.flags[0], tuple(out.out.tool_force_N[0].tolist()),
+            tuple(out.out.tool_position_m[0].tolist()),
+            tuple(out.out.tool_velocity_m_s[0].tolist()), 0.0, 0.0)
+        fh_trace.append(fh[0].copy())
+        command_trace.append(command[0].copy())
+        ft_trace.append(out.out.tool_force_N[0].copy())
+    np.testing.assert_array_equal(result.traces["handle_force_N"][:, 0], np.array(fh_trace))
+    np.testing.assert_array_equal(result.traces["handle_command_m"][:, 0],
+                                  np.array(command_trace))
+    np.testing.assert_array_equal(result.traces["tool_force_N"][:, 0], np.array(ft_trace))
+    # the operator pushed: the node's start-up gate opened and forces went through
+    assert np.abs(result.traces["tool_force_recv_N"]).max() > 0.0
+
+
+def test_the_lockstep_watchdog_trips_on_a_silent_link_and_resyncs(paper_config,
+                                                                  paper_model) -> None:
+    """With the shipped watchdog, a lossy line to the master (bursts of total loss) trips the
+    master's watchdog in the lockstep as in the program: the forces go off (the command
+    holds), the tool stops, and after the resync both sides run again."""
+    scenario = load_scenario("constant-rate")
+    simulator = _deployed(paper_config, paper_model, scenario)
+    bursts = InjectionConfig(burst_enter_probability=0.002, burst_exit_probability=0.005,
+                             burst_loss_probability=1.0)
+    result = simulator.run(2.0, 4, to_master=bursts, seed=3, record_lanes=[0])
+    master, slave = simulator.last_ticks
+    watchdog = master.supervisors[0].watchdog
+    assert watchdog.trips >= 1
+    kinds = [event.kind for event in watchdog.events]
+    assert "trip" in kinds and "forces_enabled" in kinds  # tripped, then resynced
+    # while tripped the master holds the handle: the command does not move
+    trip_s = next(event.time_s for event in watchdog.events if event.kind == "trip")
+    trip_k = int(round(trip_s / paper_model.sample_period_s))
+    held = result.traces["handle_command_m"][trip_k:trip_k + 20, 0]
+    np.testing.assert_array_equal(held, np.broadcast_to(held[0], held.shape))
+    assert watchdog.state is WatchdogState.OK  # back in sync at the end
+    assert not result.diverged[0]
