@@ -75,7 +75,7 @@ def test_a_delay_step_lowers_k_on_both_sides_and_the_run_stays_bounded(tmp_path:
     common = ["--config", str(config), "--key-prefix", f"test/{uuid.uuid4().hex[:8]}",
               "--no-status", "--peer-wait", "40", "--k", "13"]
     master_json, slave_json = tmp_path / "master.json", tmp_path / "slave.json"
-    slave = _start(processes, ["haptic.slave_sim.program", *common, "--connect", endpoint,
+    slave = _start(processes, ["haptic.slave_sim.cli", *common, "--connect", endpoint,
                                "--json-summary", str(slave_json), "--duration", "30"])
     master = _start(processes, ["haptic.master.cli", *common, "--listen", endpoint, "--rig",
                                 "model", "--operator", "constant:fx=1.0,onset=0.05",
