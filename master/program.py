@@ -48,6 +48,7 @@ from haptic.common.trace import TraceRecorder
 from haptic.master.hardware import HandleHardware, HardwareError
 from haptic.master.node import MasterNode, MasterNodeState, SafetyEvent
 from haptic.master.supervisor import MasterSupervisor, Transition
+from haptic.master.tool_guard import ToolGuardSettings, ToolInputGuard
 
 #: The stages of one tick, in order (the summary's ``stages``).
 TICK_STAGES = ("read", "poll", "supervise", "node", "write", "send", "telemetry")
@@ -150,9 +151,10 @@ def _run_linked_master(
     period_s = model.sample_period_s
     ratio = np.array([axis.position_ratio_ah1 for axis in model.axes])
     link_config = options.link
+    tool_guard = ToolInputGuard(ToolGuardSettings.from_config(options.config), period_s)
     supervisor = MasterSupervisor((float(ratio[0]), float(ratio[1])),
                                   loop_options.sync_tolerance_m, link_config.max_message_age_s,
-                                  link_config.resync_messages)
+                                  link_config.resync_messages, tool_guard)
     watchdog = supervisor.watchdog
     trace = TraceRecorder(MASTER_TRACE_COLUMNS, loop_options.trace_every)
     loop = _Loop()
@@ -368,6 +370,7 @@ def _run_linked_master(
         watchdog_state=watchdog.state.value, loop_start_time_s=realtime_start_ns * 1e-9,
         hardware_faults=supervisor.hardware_faults[:50],
         node_faulted=supervisor.faulted, stages=stages.summary(), **zenoh_threads,
+        **tool_guard.summary(),
         **inert_summary,
         **(extra_summary or {}),
     )

@@ -186,4 +186,7 @@ def master_settings(config: dict[str, Any]) -> MasterSettings:
         initial_position_m=tuple(sim_table["initial_position_m"]),
         emulator=emulator_settings(sim_table["emulator"]),
     )
+    from haptic.master.tool_guard import ToolGuardSettings  # its cross-key check, at start
+
+    ToolGuardSettings.from_config(config)
     return MasterSettings(section["rig"], can, sim, safety_from_table(section["safety"]))
