@@ -25,7 +25,7 @@ import numpy as np
 from can.broadcastmanager import ThreadBasedCyclicSendTask
 
 from haptic.master import cia402
-from haptic.master.bus_load import BusLoad, bus_load
+from haptic.master.bus_load import BusLoad, bus_load, cycle_frames
 from haptic.master.canopen_setup import SdoStep, configuration_steps, variable
 from haptic.master.cia402 import DriveState
 from haptic.master.drive_device import load_drive_dictionary
@@ -116,6 +116,14 @@ class CanHandleDriver(HandleHardware):
         self._sync = can.Message(arbitration_id=cia402.SYNC_COB_ID, data=b"",
                                  is_extended_id=False, is_fd=self._fd,
                                  bitrate_switch=self._fd)
+        #: The SYNC counter's overflow value (0x1019) in use, 0 off (set at configure), why.
+        self.sync_counter_overflow = 0
+        self.sync_counter_note = "SYNC counter not configured yet"
+        self._sync_counter = 0  # the last SYNC's counter, 1..overflow
+        self._counted_syncs = [
+            can.Message(arbitration_id=cia402.SYNC_COB_ID, data=bytes([count]),
+                        is_extended_id=False, is_fd=self._fd, bitrate_switch=self._fd)
+            for count in range(1, 241)]
         # What this driver sends (NMT, SYNC, its RPDO1s, SDO requests, its heartbeat; extra
         # frames by id): an interface that hands a process its own frames back
         # (udp_multicast) does not make them late frames.
@@ -142,7 +150,8 @@ class CanHandleDriver(HandleHardware):
         settings = self.settings
         budget = bus_load(self.sample_period_s, settings.bitrate, self._fd,
                           settings.data_bitrate, settings.bus_load_limit,
-                          settings.heartbeat_period_s)
+                          settings.heartbeat_period_s,
+                          cycle_frames(sync_bytes=1 if settings.sync_counter_overflow else 0))
         self.bus_load = budget
         if not budget.ok:
             raise HardwareError(budget.refusal())
@@ -156,9 +165,11 @@ class CanHandleDriver(HandleHardware):
         if self._state is not LifecycleState.UNCONFIGURED:
             return
         budget = self.check_bus_load()
-        if self.announce_bus_load:
-            print(f"haptic-master: {budget.summary()}", file=sys.stderr, flush=True)
         plans = self._plans()  # before the bus: a bad EDS never touches a drive
+        if self.announce_bus_load:
+            print(f"haptic-master: {budget.summary()}; {self.sync_counter_note}",
+                  file=sys.stderr, flush=True)
+        self._sync_counter = 0
         try:
             self._bus = can.Bus(**self.bus_options)
         except (can.CanError, OSError, ValueError, ImportError) as error:
@@ -197,23 +208,46 @@ class CanHandleDriver(HandleHardware):
         self._target_counts = self._position_counts.copy()
 
     def _plans(self) -> list[tuple[Any, list[SdoStep]]]:
-        """Each drive's dictionary (its EDS) and configuration steps."""
+        """Each drive's dictionary (its EDS) and configuration steps. The SYNC counter
+        (0x1019) is on when configured and every drive's EDS has the object (one SYNC
+        serves all: a drive without it expects SYNCs without data)."""
         settings = self.settings
         window_counts = int(round(settings.following_error_window_m
                                   / settings.metres_per_count))
-        plans = []
+        dictionaries = []
         for axis, (node, eds) in enumerate(zip(settings.node_ids, settings.eds_files,
                                                strict=True)):
             what = f"{AXES[axis]} drive's EDS ({eds or 'packaged'})"
             try:
-                dictionary = load_drive_dictionary(eds, node)
+                dictionaries.append((load_drive_dictionary(eds, node), what))
             except (OSError, ValueError, KeyError) as error:
                 raise HardwareError(f"cannot read the {what}: {error}") from None
+        overflow = settings.sync_counter_overflow
+        lacking = [what for dictionary, what in dictionaries if 0x1019 not in dictionary]
+        if overflow and lacking:
+            self.sync_counter_note = (f"SYNC counter off: the {' and the '.join(lacking)} "
+                                      "has no 0x1019")
+            overflow = 0
+        else:
+            self.sync_counter_note = (f"SYNC counter 1..{overflow}" if overflow
+                                      else "SYNC counter off ([master.can] "
+                                      "sync_counter_overflow = 0)")
+        self.sync_counter_overflow = overflow
+        plans = []
+        for node, (dictionary, what) in zip(settings.node_ids, dictionaries, strict=True):
             plans.append((dictionary, configuration_steps(
                 dictionary, node, self.sample_period_s, settings.master_node_id,
                 settings.heartbeat_period_s, settings.heartbeat_timeout_s,
-                settings.rpdo_timeout_s, min(window_counts, 0xFFFFFFFF), what)))
+                settings.rpdo_timeout_s, min(window_counts, 0xFFFFFFFF), what, overflow)))
         return plans
+
+    def _next_sync(self) -> can.Message:
+        """This cycle's SYNC: without data, or with the counter 1..overflow (CiA 301)."""
+        overflow = self.sync_counter_overflow
+        if not overflow:
+            return self._sync
+        self._sync_counter = self._sync_counter % overflow + 1
+        return self._counted_syncs[self._sync_counter - 1]
 
     def _configure_drive(self, axis: int, node: int, dictionary: Any,
                          steps: list[SdoStep]) -> None:
@@ -415,7 +449,7 @@ class CanHandleDriver(HandleHardware):
         if now >= self._heartbeat_due_s:
             self._send(HEARTBEAT_BASE + self.settings.master_node_id, self._master_heartbeat)
             self._heartbeat_due_s = max(self._heartbeat_due_s + self._heartbeat_period_s, now)
-        bus.send(self._sync)
+        bus.send(self._next_sync())
         self._cycle += 1
         dispatch = self._dispatch
         position_m = np.full(2, np.nan)
@@ -502,8 +536,10 @@ class CanHandleDriver(HandleHardware):
                 return
             if code != 0:
                 self.emcy_log.append((AXES[axis], code))
+                meaning = _EMCY_TEXT.get(code)
                 faults.append(f"{AXES[axis]} drive EMCY error code 0x{code:04X} "
-                              f"(register 0x{register:02X})")
+                              f"(register 0x{register:02X}"
+                              + (f"; {meaning})" if meaning else ")"))
                 drive_fault[axis] = True
         elif kind == _HEARTBEAT:
             self._heartbeat_seen_s[axis] = time.monotonic()
@@ -669,6 +705,13 @@ _EXPECTED_AFTER = {
     (DriveState.FAULT, cia402.CW_FAULT_RESET): DriveState.SWITCH_ON_DISABLED,
     (DriveState.QUICK_STOP_ACTIVE, cia402.CW_DISABLE_VOLTAGE): DriveState.SWITCH_ON_DISABLED,
     (DriveState.FAULT_REACTION_ACTIVE, cia402.CW_SHUTDOWN): DriveState.FAULT,
+}
+#: What the EMCY codes of CiA 301/402 the loop meets mean.
+_EMCY_TEXT = {
+    0x8130: "heartbeat or life guard lost", 0x8210: "PDO shorter than mapped",
+    0x8220: "PDO longer than mapped",
+    0x8240: "unexpected SYNC data length: the drive's 0x1019 does not match the SYNC counter",
+    0x8250: "RPDO deadline missed", 0x8611: "following error",
 }
 _ABORT_TEXT = {
     0x05040001: "command specifier not valid", 0x06010000: "unsupported access",

@@ -38,6 +38,7 @@ class CanSettings:
     bus_load_limit: float = 0.7
     fd: bool = True
     data_bitrate: int = 5_000_000
+    sync_counter_overflow: int = 240
 
     @property
     def eds_files(self) -> tuple[str, str]:

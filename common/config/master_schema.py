@@ -65,6 +65,11 @@ CAN_SCHEMA: Schema = {
                 "bit-rate switch; NMT, SDO, EMCY and heartbeat stay classical."),
     "data_bitrate": Field("int", "CAN FD data-phase bitrate, bit/s.", minimum=1_000_000,
                           maximum=12_000_000),
+    "sync_counter_overflow": Field(
+        "int", "SYNC counter (CiA 301 0x1019): the SYNC carries a counter 1..this value, "
+        "written to every drive whose EDS has 0x1019 (none of them lacking it); 0 off.",
+        minimum=0, maximum=240,
+        check=lambda v: None if v != 1 else "must be 0 (off) or 2..240 (CiA 301 0x1019)"),
 }
 
 def _emulator_interface(name: Any) -> str | None:

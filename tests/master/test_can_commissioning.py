@@ -323,12 +323,14 @@ def test_the_bus_load_budget_refuses_classical_can_at_the_papers_rate() -> None:
     with pytest.raises(HardwareError) as error:
         driver.configure()
     message = str(error.value)
-    for option in ("bus load 121% of Ts", "longer Ts", "sensor on its own bus", "CAN FD"):
+    # the SYNC counter's byte (0x1019) is in the budget: 650 + 10 bit-times
+    for option in ("bus load 122% of Ts", "SYNC 65.0 us", "longer Ts", "sensor on its own bus",
+                   "CAN FD"):
         assert option in message
     assert driver._bus is None
     slow = CanHandleDriver(settings.can, {"interface": "virtual", "channel": "unused"},
                            0.05, 0.001)
-    assert slow.check_bus_load().ok  # 650 us of 1 ms: 65 %
+    assert slow.check_bus_load().ok  # 661 us of 1 ms: 66 %
     assert bus_load(TS_S, 1_000_000, True, 5_000_000, 0.7).ok
 
 
@@ -463,3 +465,57 @@ def test_commissioning_keys_are_checked_at_start() -> None:
         master_settings(_config(master__can__heartbeat_timeout_s=0.05))
     with pytest.raises(ConfigError, match="master.can.bus_load_limit"):
         _config(master__can__bus_load_limit=1.5)
+
+
+def test_the_sync_counter_is_configured_from_the_eds_and_followed_by_the_drives() -> None:
+    with _active(_config()) as hardware:
+        rig, driver = hardware.rig, hardware.driver
+        assert driver.sync_counter_overflow == 240
+        assert [device.raw(0x1019) for device in rig.devices] == [240, 240]
+        start = hardware.read().position_m
+        for _ in range(300):  # across the wrap from 240 to 1
+            hardware.write(start)
+            reading = hardware.read()
+            assert not reading.faults, reading.faults
+        assert rig.sync_counter_seen == [driver._sync_counter] * 2
+        assert rig.sync_counter_jumps == [0, 0]
+        driver._sync_counter += 1  # one SYNC lost on the bus: the drives see the jump
+        hardware.read()
+        assert rig.sync_counter_jumps == [1, 1]
+
+
+def test_a_drive_without_0x1019_turns_the_sync_counter_off_for_the_bus(tmp_path: Path) -> None:
+    eds = packaged_eds_path().read_text()
+    path = tmp_path / "no1019.eds"  # canopen reads the object sections, not the lists
+    path.write_text(eds.replace(eds[eds.index("[1019]"):eds.index("[1400]")], ""))
+    config = _config(master__can__y_eds_file=str(path))
+    settings = master_settings(config)
+    hardware = _rig_and_driver(config, settings.can)
+    try:
+        hardware.configure()
+        driver = hardware.driver
+        assert driver.sync_counter_overflow == 0
+        assert "SYNC counter off" in driver.sync_counter_note and "y drive" in \
+            driver.sync_counter_note
+        assert [device.sync_counter_overflow for device in hardware.rig.devices] == [0, 0]
+        hardware.activate()
+        for _ in range(20):
+            reading = hardware.read()
+            assert not reading.faults, reading.faults  # SYNCs without data: no EMCY 0x8240
+    finally:
+        hardware.cleanup()
+
+
+def test_a_sync_of_the_wrong_length_is_refused_by_the_drive_and_reported() -> None:
+    with _active(_config()) as hardware:
+        rig = hardware.rig
+        hardware.read()
+        device = rig.devices[1]  # its 0x1019 changed behind the master's back
+        device.node.set_data(0x1019, 0, bytes([0]), check_writable=False)
+        device.refresh()
+        before = rig.drives[1].sync_count
+        reading = hardware.read()
+        text = "; ".join(reading.faults)
+        assert "y drive EMCY error code 0x8240" in text and "0x1019" in text, text
+        assert "missing TPDO1 from the y drive" in text
+        assert rig.drives[1].sync_count == before  # the drive did not act on that SYNC
