@@ -4,7 +4,10 @@ issue's 10 minutes); each process's RSS sampled every second from /proc. Reports
 the start and the end of the measured span and the growth rate (least squares over the run
 after ``--settle`` s), kB/s. Before issue 17 the slave grew about 25 kB/s. Figures only.
 
-Usage: ``python bench/record_memory_bench.py [--duration S] [--settle S] [--linear] [--json]``.
+``--no-record`` runs the same without recording (the reference: what the recording adds).
+
+Usage: ``python bench/record_memory_bench.py [--duration S] [--settle S] [--linear]
+[--no-record] [--json]``.
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ def _rss_kb(pid: int) -> float | None:
     return None
 
 
-def run(duration_s: float, settle_s: float, linear: bool) -> dict:
+def run(duration_s: float, settle_s: float, linear: bool, record: bool = True) -> dict:
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     prefix = f"bench/{uuid.uuid4().hex[:8]}"
     with tempfile.TemporaryDirectory() as tmp_name:
@@ -55,12 +58,12 @@ def run(duration_s: float, settle_s: float, linear: bool) -> dict:
         try:
             processes["master"] = subprocess.Popen(
                 [sys.executable, "-m", "haptic.master.cli", *common, "--listen", endpoint,
-                 "--rig", "model", "--record", str(tmp / "master.mcap"),
+                 "--rig", "model", *(["--record", str(tmp / "master.mcap")] if record else []),
                  "--json-summary", str(tmp / "master.json")],
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             processes["slave"] = subprocess.Popen(
                 [sys.executable, "-m", "haptic.slave_sim.program", *common, "--connect",
-                 endpoint, "--record", str(tmp / "slave.mcap"),
+                 endpoint, *(["--record", str(tmp / "slave.mcap")] if record else []),
                  "--json-summary", str(tmp / "slave.json")],
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             start = time.monotonic()
@@ -87,7 +90,8 @@ def run(duration_s: float, settle_s: float, linear: bool) -> dict:
                 summary = json.loads(path.read_text())
                 recorder[side] = {k: summary.get(k) for k in (
                     "record_max_queue_depth", "record_dropped", "rate_hz")}
-    result: dict = {"duration_s": duration_s, "settle_s": settle_s, "linear": linear}
+    result: dict = {"duration_s": duration_s, "settle_s": settle_s, "linear": linear,
+                    "record": record}
     for side, points in samples.items():
         data = np.array(points)
         if data.size == 0:
@@ -112,9 +116,11 @@ def main() -> int:
                         help="seconds after the start not in the fit (start-up, allocations)")
     parser.add_argument("--linear", action="store_true",
                         help="the slave with the linear environment (no Warp clay)")
+    parser.add_argument("--no-record", action="store_true",
+                        help="both programs without --record (the reference)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    result = run(args.duration, args.settle, args.linear)
+    result = run(args.duration, args.settle, args.linear, not args.no_record)
     if args.json:
         print(json.dumps(result))
     else:

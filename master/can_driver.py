@@ -92,6 +92,11 @@ class CanHandleDriver(HandleHardware):
         self.announce_bus_load = False
         self._warnings = [0, 0]
         self._tripped = False
+        #: Why the master stopped the drives (stop_motion), None when it did not.
+        self._master_stop: str | None = None
+        self._stop_cycles = 0
+        self._stop_taken = [False, False]
+        self._stop_reported = [False, False]
         self._heartbeat_period_s = settings.heartbeat_period_s
         self._heartbeat_timeout_s = settings.heartbeat_timeout_s
         self._heartbeat_due_s = 0.0
@@ -300,6 +305,7 @@ class CanHandleDriver(HandleHardware):
         if not np.all(np.isfinite(reading.position_m)):
             raise HardwareError("cannot activate without positions: " + "; ".join(reading.faults))
         self._tripped = False
+        self._master_stop = None
         self._warnings = [0, 0]
         for axis, node in enumerate(self.settings.node_ids):
             name = f"{AXES[axis]} drive (node {node})"
@@ -309,6 +315,13 @@ class CanHandleDriver(HandleHardware):
             if back != counts:
                 raise HardwareError(f"{name}: 0x607A reads back {back} after writing {counts}")
         self._target_counts = self._position_counts.copy()
+        self._enable_sequence()
+        self._state = LifecycleState.ACTIVE
+
+    def _enable_sequence(self) -> None:
+        """The CiA 402 enable sequence, one step per SYNC, the targets kept at the actual
+        positions until both drives are enabled; every transition checked (see
+        :meth:`activate`); :class:`HardwareError` when it stops."""
         emcy_start = len(self.emcy_log)
         resets = [0, 0]
         for _ in range(self.settings.enable_timeout_cycles):
@@ -343,7 +356,6 @@ class CanHandleDriver(HandleHardware):
         else:
             self._abort_activation("drives did not reach operation enabled",
                                    self.emcy_log[emcy_start:])
-        self._state = LifecycleState.ACTIVE
 
     def _abort_activation(self, reason: str, emcys: list[tuple[str, int]]) -> None:
         self._send_both(cia402.CW_DISABLE_VOLTAGE)
@@ -366,11 +378,66 @@ class CanHandleDriver(HandleHardware):
         if self._state is not LifecycleState.ACTIVE:
             return
         self._state = LifecycleState.INACTIVE
-        self._send_both(cia402.CW_DISABLE_OPERATION)
+        self._master_stop = None
+        # from quick stop, disable operation is no transition: disable voltage instead
+        self._send_both(cia402.CW_DISABLE_VOLTAGE if self._tripped
+                        else cia402.CW_DISABLE_OPERATION)
         self.read()
         self._send_both(cia402.CW_SHUTDOWN)
         self.read()
         self._start_idle_heartbeat()
+
+    def stop_motion(self, reason: str) -> None:
+        """The master's own trip: quick stop on both drives (CiA 402, controlword 0x0002; each
+        stops by its quick stop option code 0x605A, in Quick stop active or Switch on
+        disabled), the targets held at the actual positions. The next readings report each
+        drive's transition as an event, or a fault when a drive is not stopped within
+        ``enable_timeout_cycles`` SYNCs. Not a fault itself; :meth:`resume_motion` undoes it."""
+        if self._state is not LifecycleState.ACTIVE or self._tripped:
+            return
+        self._tripped = True
+        self._master_stop = reason
+        self._stop_cycles = 0
+        self._stop_taken = [False, False]
+        self._stop_reported = [False, False]
+        self._target_counts = self._position_counts.copy()
+        self._send_both(cia402.CW_QUICK_STOP)
+        self._pending_events.append(f"quick stop on both drives: {reason}")
+
+    def resume_motion(self) -> None:
+        """Re-enable the drives after :meth:`stop_motion`: the enable sequence from where each
+        drive stopped, every transition checked, the targets at the actual positions (the
+        loop's next command starts from there). A failure is a fault in the next reading
+        and the drives stay stopped."""
+        if self._state is not LifecycleState.ACTIVE or self._master_stop is None:
+            return
+        self._master_stop = None
+        self._target_counts = self._position_counts.copy()
+        try:
+            self._enable_sequence()
+        except HardwareError as error:
+            self._pending_faults.append(f"re-enabling after the quick stop failed: {error}")
+            return  # still tripped: write() keeps quick stop
+        self._tripped = False
+        self._target_counts = self._position_counts.copy()
+        self._pending_events.append("drives re-enabled at their actual positions after the "
+                                    "quick stop")
+
+    def _check_quick_stop(self, axis: int, events: list[str], faults: list[str],
+                          drive_fault: list[bool]) -> None:
+        """After the master's quick stop: the drive in Quick stop active or Switch on
+        disabled (an event, once), or a fault once it is late."""
+        state = self._drive_states[axis]
+        if state in (DriveState.QUICK_STOP_ACTIVE, DriveState.SWITCH_ON_DISABLED):
+            if not self._stop_taken[axis]:
+                self._stop_taken[axis] = True
+                events.append(f"{AXES[axis]} drive took the quick stop ({state.value})")
+        elif (self._stop_cycles > self.settings.enable_timeout_cycles
+              and not self._stop_taken[axis] and not self._stop_reported[axis]):
+            self._stop_reported[axis] = True
+            drive_fault[axis] = True
+            faults.append(f"{AXES[axis]} drive did not take the quick stop ({state.value} "
+                          f"after {self._stop_cycles} SYNCs)")
 
     def quick_stop(self, reason: str) -> None:
         """Command quick stop on both drives (they stop where they are) and hold it until the
@@ -444,6 +511,8 @@ class CanHandleDriver(HandleHardware):
         events = self._pending_events
         self._pending_events = []
         drive_fault = [False, False]
+        if self._master_stop is not None:
+            self._stop_cycles += 1
         self._discard_late_frames(faults, drive_fault)
         now = time.monotonic()
         if now >= self._heartbeat_due_s:
@@ -498,6 +567,8 @@ class CanHandleDriver(HandleHardware):
                 faults.append(f"{AXES[axis]} drive left operation enabled "
                               f"({self._drive_states[axis].value})")
                 drive_fault[axis] = True
+            elif self._master_stop is not None and self._state is LifecycleState.ACTIVE:
+                self._check_quick_stop(axis, events, faults, drive_fault)
             if now - self._heartbeat_seen_s[axis] > self._heartbeat_timeout_s and (
                     not self._heartbeat_lost[axis]):
                 self._heartbeat_lost[axis] = True

@@ -229,6 +229,10 @@ def _run_linked_master(
                                                    link.peer_alive)
                     if transition is not Transition.NONE:
                         hardware.present_forces_enabled(supervisor.enabled)
+                        if transition is Transition.HOLD:  # the drives' own quick stop too
+                            hardware.stop_motion(supervisor.stop_reason())
+                        elif transition is Transition.RESUME:  # re-enabled, target = actual
+                            hardware.resume_motion()
                     if transition is Transition.ACTIVATE or transition is Transition.RESUME:
                         _flush_node_events(loop)
                         position = np.nan_to_num(reading.position_m)[None, :]

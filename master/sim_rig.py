@@ -679,6 +679,12 @@ class SimulatedRigHardware(HandleHardware):
     def write(self, position_command_m: np.ndarray) -> None:
         self.driver.write(position_command_m)
 
+    def stop_motion(self, reason: str) -> None:
+        self.driver.stop_motion(reason)
+
+    def resume_motion(self) -> None:
+        self.driver.resume_motion()
+
     def present_tool_force(self, tool_force_N: np.ndarray) -> None:
         self.rig.set_tool_force(tool_force_N)
 

@@ -128,6 +128,17 @@ class MasterSupervisor:
         self.faulted = True
         self.events.append({"time_s": now_s, "kind": "node_trip", "reason": reason})
 
+    def stop_reason(self) -> str:
+        """Why forces are off (for the hardware's quick stop and the events)."""
+        if self.faulted:
+            return "node or hardware fault: " + (self.hardware_faults[-1] if
+                                                 self.hardware_faults else "safety layer trip")
+        if self.tool_guard is not None and self.tool_guard.faulted:
+            return "tool input fault"
+        if self._await_sync:
+            return "tool input fault: waiting for the tool at the handle"
+        return f"watchdog {self.watchdog.state.value}"
+
     @property
     def trips(self) -> int:
         """Watchdog trips so far."""

@@ -519,3 +519,73 @@ def test_a_sync_of_the_wrong_length_is_refused_by_the_drive_and_reported() -> No
         assert "y drive EMCY error code 0x8240" in text and "0x1019" in text, text
         assert "missing TPDO1 from the y drive" in text
         assert rig.drives[1].sync_count == before  # the drive did not act on that SYNC
+
+
+@pytest.mark.parametrize("option", [2, 6])
+def test_the_masters_own_trip_quick_stops_the_drives_and_resume_reenables_at_actual(
+        option: int) -> None:
+    """stop_motion (the master's watchdog or safety trip): controlword quick stop, each drive
+    through Quick stop active (option 2: then Switch on disabled; 6: it stays there), events
+    and no fault; commands meanwhile move nothing. resume_motion: the enable sequence from
+    there, the targets at the actual positions (no jump), then the drives follow again."""
+    with _hardware(_config()) as hardware:
+        rig = hardware.rig
+        for device in rig.devices:  # the drives' quick stop option code (0x605A)
+            device.node.set_data(0x605A, 0, option.to_bytes(2, "little", signed=True),
+                                 check_writable=False)
+            device.refresh()
+        hardware.configure()
+        hardware.activate()
+        start = hardware.read().position_m
+        for _ in range(20):  # move a little first
+            hardware.write(start + np.array([0.002, -0.001]))
+            hardware.read()
+        hardware.stop_motion("watchdog tripped")
+        events: list[str] = []
+        states = set()
+        positions = []
+        for _ in range(40):
+            hardware.write(start + np.array([0.01, 0.01]))  # ignored: the drives are stopped
+            reading = hardware.read()
+            assert not reading.faults, reading.faults
+            events += reading.events
+            states.add(tuple(hardware.driver.drive_states))
+            positions.append(reading.position_m.copy())
+        held = positions[-1]
+        assert "quick stop on both drives: watchdog tripped" in events
+        assert (DriveState.QUICK_STOP_ACTIVE,) * 2 in states
+        final = DriveState.SWITCH_ON_DISABLED if option == 2 else DriveState.QUICK_STOP_ACTIVE
+        assert hardware.driver.drive_states == (final, final)
+        assert "x drive took the quick stop (quick stop active)" in events
+        # stopped (on the drives' own ramp), nowhere near the ignored 10 mm command
+        assert np.ptp(np.array(positions[-10:]), axis=0).max() < 2e-5
+        assert np.abs(held - start).max() < 0.003
+        hardware.resume_motion()
+        assert hardware.driver.drive_states == (DriveState.OPERATION_ENABLED,) * 2
+        resumed = hardware.read()
+        assert "drives re-enabled at their actual positions after the quick stop" in \
+            resumed.events
+        assert not resumed.faults, resumed.faults
+        per_count = hardware.driver.settings.metres_per_count  # target = actual (+ringing)
+        for drive in rig.drives:
+            assert abs(drive.target_counts - drive.position_counts) * per_count < 2e-5
+        np.testing.assert_allclose(resumed.position_m, held, atol=2e-5)  # no jump
+        for _ in range(40):  # and the drives follow commands again
+            hardware.write(held + np.array([0.001, 0.0]))
+            reading = hardware.read()
+        assert not reading.faults, reading.faults
+        assert 0.0002 < reading.position_m[0] - held[0] < 0.0011  # towards the 1 mm command
+
+
+def test_a_drive_that_does_not_take_the_quick_stop_is_a_fault() -> None:
+    with _active(_config()) as hardware:
+        rig = hardware.rig
+        hardware.read()
+        with rig._lock:
+            rig.drives[0].mode = 1  # profile position: the CSP state machine ignores it
+        hardware.stop_motion("node trip")
+        faults: list[str] = []
+        for _ in range(hardware.driver.settings.enable_timeout_cycles + 3):
+            faults += hardware.read().faults
+        assert any("x drive did not take the quick stop" in f for f in faults), faults
+        assert not any(f.startswith("y drive") for f in faults)
