@@ -2,7 +2,9 @@
 ``haptic-slave`` on loopback, both with ``--record``, for ``--duration`` s (default 600: the
 issue's 10 minutes); each process's RSS sampled every second from /proc. Reports the RSS at
 the start and the end of the measured span and the growth rate (least squares over the run
-after ``--settle`` s), kB/s. Before issue 17 the slave grew about 25 kB/s. Figures only.
+after ``--settle`` s), kB/s, and the same slope over the first and the second half of that
+span (a leak keeps its slope; a warm-up flattens), with the growth over the last 5 minutes.
+Before issue 17 the slave grew about 25 kB/s. Figures only.
 
 ``--no-record`` runs the same without recording (the reference: what the recording adds).
 
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import socket
 import subprocess
 import sys
@@ -41,7 +44,8 @@ def _rss_kb(pid: int) -> float | None:
     return None
 
 
-def run(duration_s: float, settle_s: float, linear: bool, record: bool = True) -> dict:
+def run(duration_s: float, settle_s: float, linear: bool, record: bool = True,
+        env: dict[str, str] | None = None) -> dict:
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     prefix = f"bench/{uuid.uuid4().hex[:8]}"
     with tempfile.TemporaryDirectory() as tmp_name:
@@ -53,6 +57,7 @@ def run(duration_s: float, settle_s: float, linear: bool, record: bool = True) -
             config.write_text('[slave]\nscenario = "constant-rate"\nenvironment = "linear"\n'
                               'clay_impl = "numpy"\ndevice = "cpu"\n')
             common += ["--config", str(config)]
+        environ = {**os.environ, **(env or {})}
         processes = {}
         samples: dict[str, list[tuple[float, float]]] = {"master": [], "slave": []}
         try:
@@ -60,12 +65,12 @@ def run(duration_s: float, settle_s: float, linear: bool, record: bool = True) -
                 [sys.executable, "-m", "haptic.master.cli", *common, "--listen", endpoint,
                  "--rig", "model", *(["--record", str(tmp / "master.mcap")] if record else []),
                  "--json-summary", str(tmp / "master.json")],
-                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=environ)
             processes["slave"] = subprocess.Popen(
                 [sys.executable, "-m", "haptic.slave_sim.program", *common, "--connect",
                  endpoint, *(["--record", str(tmp / "slave.mcap")] if record else []),
                  "--json-summary", str(tmp / "slave.json")],
-                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=environ)
             start = time.monotonic()
             while any(p.poll() is None for p in processes.values()):
                 now = time.monotonic() - start
@@ -91,7 +96,7 @@ def run(duration_s: float, settle_s: float, linear: bool, record: bool = True) -
                 recorder[side] = {k: summary.get(k) for k in (
                     "record_max_queue_depth", "record_dropped", "rate_hz")}
     result: dict = {"duration_s": duration_s, "settle_s": settle_s, "linear": linear,
-                    "record": record}
+                    "record": record, "env": env or {}}
     for side, points in samples.items():
         data = np.array(points)
         if data.size == 0:
@@ -99,11 +104,19 @@ def run(duration_s: float, settle_s: float, linear: bool, record: bool = True) -
         # the run's own span: from settle_s after the first sample to 5 s before the last
         keep = (data[:, 0] >= data[0, 0] + settle_s) & (data[:, 0] <= data[-1, 0] - 5.0)
         span = data[keep]
-        if len(span) >= 3:
+        if len(span) >= 6:
             slope = float(np.polyfit(span[:, 0], span[:, 1], 1)[0])
             result[f"{side}_rss_start_kB"] = float(span[0, 1])
             result[f"{side}_rss_end_kB"] = float(span[-1, 1])
             result[f"{side}_rss_growth_kB_per_s"] = slope
+            # a leak grows as fast in the second half as in the first; a warm-up (allocator
+            # arenas, buffer pools filling) slows down and stops
+            half = len(span) // 2
+            for name, part in (("first_half", span[:half]), ("second_half", span[half:])):
+                result[f"{side}_rss_growth_{name}_kB_per_s"] = float(
+                    np.polyfit(part[:, 0], part[:, 1], 1)[0])
+            last = span[span[:, 0] >= span[-1, 0] - 300.0]  # the last 5 minutes
+            result[f"{side}_rss_growth_last_5min_kB"] = float(last[-1, 1] - last[0, 1])
         result[f"{side}_record_bytes"] = sizes.get(side)
         result[f"{side}_recorder"] = recorder.get(side)
     return result
@@ -118,9 +131,13 @@ def main() -> int:
                         help="the slave with the linear environment (no Warp clay)")
     parser.add_argument("--no-record", action="store_true",
                         help="both programs without --record (the reference)")
+    parser.add_argument("--env", action="append", default=[], metavar="NAME=VALUE",
+                        help="an environment variable for both programs (repeatable), e.g. "
+                        "MALLOC_ARENA_MAX=2")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    result = run(args.duration, args.settle, args.linear, not args.no_record)
+    env = dict(item.split("=", 1) for item in args.env)
+    result = run(args.duration, args.settle, args.linear, not args.no_record, env)
     if args.json:
         print(json.dumps(result))
     else:
