@@ -274,6 +274,7 @@ def _run_linked_master(
                     inert.update(now_s, link.peer_alive and link.silence_s() < max_age_s,
                                  enabled and bool(loop.node_state.forces_enabled[0]),
                                  gate_reason if enabled else "node faulted" if supervisor.faulted
+                                 else supervisor.stop_reason() if supervisor.input_faulted
                                  else f"watchdog {supervisor.watchdog.state.value}: the resync "
                                  "does not complete")
                     magnitude = math.hypot(felt[0], felt[1])

@@ -128,6 +128,11 @@ class MasterSupervisor:
         self.faulted = True
         self.events.append({"time_s": now_s, "kind": "node_trip", "reason": reason})
 
+    @property
+    def input_faulted(self) -> bool:
+        """A tool input fault holds the forces off (or its resync is still waiting)."""
+        return self._await_sync
+
     def stop_reason(self) -> str:
         """Why forces are off (for the hardware's quick stop and the events)."""
         if self.faulted:
