@@ -117,6 +117,9 @@ def run(duration_s: float, settle_s: float, linear: bool, record: bool = True,
                     np.polyfit(part[:, 0], part[:, 1], 1)[0])
             last = span[span[:, 0] >= span[-1, 0] - 300.0]  # the last 5 minutes
             result[f"{side}_rss_growth_last_5min_kB"] = float(last[-1, 1] - last[0, 1])
+        # the RSS every ~10 s of the run (s since the start, kB): where a growth happened
+        series = data[:: max(1, round(10.0 / max(np.median(np.diff(data[:, 0])), 1e-3)))]
+        result[f"{side}_rss_series_kB"] = [[round(float(t), 1), float(r)] for t, r in series]
         result[f"{side}_record_bytes"] = sizes.get(side)
         result[f"{side}_recorder"] = recorder.get(side)
     return result
@@ -142,7 +145,8 @@ def main() -> int:
         print(json.dumps(result))
     else:
         for key, value in result.items():
-            print(f"{key:32s} {value}")
+            if not key.endswith("_series_kB"):
+                print(f"{key:40s} {value}")
     return 0
 
 
