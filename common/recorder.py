@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from mcap.data_stream import RecordBuilder
-from mcap.records import Footer
+from mcap.records import DataEnd, Footer
 from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 
 #: Default queue capacity, messages (about 35 s of one 1850 Hz channel).
@@ -42,10 +42,13 @@ DEFAULT_CHUNK_SIZE = 256 * 1024
 
 
 def _provisional_trailer() -> bytes:
-    """A Footer without a summary (summary_start 0) and the closing magic: what a reader that
-    seeks to the end (``mcap.reader.make_reader(...).iter_messages()``, Foxglove) needs to
-    fall back to reading the records in order."""
+    """A DataEnd (data section CRC 0: not computed), a Footer without a summary
+    (summary_start 0) and the closing magic: a complete MCAP file without a summary section,
+    what a reader that seeks to the end (``mcap.reader.make_reader(...).iter_messages()``,
+    Foxglove) needs to fall back to reading the records in order, and what a checker of the
+    container format (``pymcap-cli doctor``) accepts without an error."""
     builder = RecordBuilder()
+    DataEnd(data_section_crc=0).write(builder)
     Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
     return builder.end() + MCAP0_MAGIC
 

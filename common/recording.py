@@ -23,8 +23,8 @@ from mcap.stream_reader import StreamReader
 class Recording:
     """A decoded recording: ``messages[topic]`` is a list of ``(log_time_ns, dict)`` in file
     order; ``schemas[topic]`` the channel's JSON schema; ``metadata[name]`` the metadata
-    records; ``complete``: the file ended with its data-end record and footer (closed
-    properly)."""
+    records; ``complete``: the file ended with its data-end record, a summary section and its
+    footer (closed properly)."""
 
     path: Path
     messages: dict[str, list[tuple[int, dict[str, Any]]]] = field(default_factory=dict)
@@ -87,9 +87,10 @@ def read_recording(path: str | Path) -> Recording:
                 elif isinstance(record, Metadata):
                     recording.metadata[record.name] = dict(record.metadata)
                 elif isinstance(record, Footer):
-                    # closed properly: DataEnd, then the footer; a killed recorder's file ends
-                    # in a provisional footer without DataEnd (common/recorder.py)
-                    recording.complete = data_end
+                    # closed properly: DataEnd, the summary section, then the footer; a
+                    # killed recorder's file ends in a provisional DataEnd and a footer
+                    # without a summary (summary_start 0, common/recorder.py)
+                    recording.complete = data_end and record.summary_start != 0
                     break
                 elif isinstance(record, DataEnd):
                     data_end = True

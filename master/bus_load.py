@@ -97,10 +97,11 @@ class BusLoad:
                 "or CAN FD ([master.can] fd = true, data_bitrate)")
 
 
-def cycle_frames(sensor_bytes: int = 8) -> tuple[CycleFrame, ...]:
-    """The frames of one control cycle: SYNC, both TPDO1 (statusword + position, 6 bytes),
-    the sensor frame, both RPDO1 (controlword + target, 6 bytes)."""
-    return (CycleFrame("SYNC", 0), CycleFrame("TPDO1 x", 6), CycleFrame("TPDO1 y", 6),
+def cycle_frames(sensor_bytes: int = 8, sync_bytes: int = 0) -> tuple[CycleFrame, ...]:
+    """The frames of one control cycle: SYNC (``sync_bytes``: 1 with the SYNC counter), both
+    TPDO1 (statusword + position, 6 bytes), the sensor frame, both RPDO1 (controlword +
+    target, 6 bytes)."""
+    return (CycleFrame("SYNC", sync_bytes), CycleFrame("TPDO1 x", 6), CycleFrame("TPDO1 y", 6),
             CycleFrame("sensor", sensor_bytes), CycleFrame("RPDO1 x", 6),
             CycleFrame("RPDO1 y", 6))
 

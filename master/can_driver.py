@@ -25,7 +25,7 @@ import numpy as np
 from can.broadcastmanager import ThreadBasedCyclicSendTask
 
 from haptic.master import cia402
-from haptic.master.bus_load import BusLoad, bus_load
+from haptic.master.bus_load import BusLoad, bus_load, cycle_frames
 from haptic.master.canopen_setup import SdoStep, configuration_steps, variable
 from haptic.master.cia402 import DriveState
 from haptic.master.drive_device import load_drive_dictionary
@@ -92,6 +92,11 @@ class CanHandleDriver(HandleHardware):
         self.announce_bus_load = False
         self._warnings = [0, 0]
         self._tripped = False
+        #: Why the master stopped the drives (stop_motion), None when it did not.
+        self._master_stop: str | None = None
+        self._stop_cycles = 0
+        self._stop_taken = [False, False]
+        self._stop_reported = [False, False]
         self._heartbeat_period_s = settings.heartbeat_period_s
         self._heartbeat_timeout_s = settings.heartbeat_timeout_s
         self._heartbeat_due_s = 0.0
@@ -116,6 +121,14 @@ class CanHandleDriver(HandleHardware):
         self._sync = can.Message(arbitration_id=cia402.SYNC_COB_ID, data=b"",
                                  is_extended_id=False, is_fd=self._fd,
                                  bitrate_switch=self._fd)
+        #: The SYNC counter's overflow value (0x1019) in use, 0 off (set at configure), why.
+        self.sync_counter_overflow = 0
+        self.sync_counter_note = "SYNC counter not configured yet"
+        self._sync_counter = 0  # the last SYNC's counter, 1..overflow
+        self._counted_syncs = [
+            can.Message(arbitration_id=cia402.SYNC_COB_ID, data=bytes([count]),
+                        is_extended_id=False, is_fd=self._fd, bitrate_switch=self._fd)
+            for count in range(1, 241)]
         # What this driver sends (NMT, SYNC, its RPDO1s, SDO requests, its heartbeat; extra
         # frames by id): an interface that hands a process its own frames back
         # (udp_multicast) does not make them late frames.
@@ -142,7 +155,8 @@ class CanHandleDriver(HandleHardware):
         settings = self.settings
         budget = bus_load(self.sample_period_s, settings.bitrate, self._fd,
                           settings.data_bitrate, settings.bus_load_limit,
-                          settings.heartbeat_period_s)
+                          settings.heartbeat_period_s,
+                          cycle_frames(sync_bytes=1 if settings.sync_counter_overflow else 0))
         self.bus_load = budget
         if not budget.ok:
             raise HardwareError(budget.refusal())
@@ -156,9 +170,11 @@ class CanHandleDriver(HandleHardware):
         if self._state is not LifecycleState.UNCONFIGURED:
             return
         budget = self.check_bus_load()
-        if self.announce_bus_load:
-            print(f"haptic-master: {budget.summary()}", file=sys.stderr, flush=True)
         plans = self._plans()  # before the bus: a bad EDS never touches a drive
+        if self.announce_bus_load:
+            print(f"haptic-master: {budget.summary()}; {self.sync_counter_note}",
+                  file=sys.stderr, flush=True)
+        self._sync_counter = 0
         try:
             self._bus = can.Bus(**self.bus_options)
         except (can.CanError, OSError, ValueError, ImportError) as error:
@@ -197,23 +213,46 @@ class CanHandleDriver(HandleHardware):
         self._target_counts = self._position_counts.copy()
 
     def _plans(self) -> list[tuple[Any, list[SdoStep]]]:
-        """Each drive's dictionary (its EDS) and configuration steps."""
+        """Each drive's dictionary (its EDS) and configuration steps. The SYNC counter
+        (0x1019) is on when configured and every drive's EDS has the object (one SYNC
+        serves all: a drive without it expects SYNCs without data)."""
         settings = self.settings
         window_counts = int(round(settings.following_error_window_m
                                   / settings.metres_per_count))
-        plans = []
+        dictionaries = []
         for axis, (node, eds) in enumerate(zip(settings.node_ids, settings.eds_files,
                                                strict=True)):
             what = f"{AXES[axis]} drive's EDS ({eds or 'packaged'})"
             try:
-                dictionary = load_drive_dictionary(eds, node)
+                dictionaries.append((load_drive_dictionary(eds, node), what))
             except (OSError, ValueError, KeyError) as error:
                 raise HardwareError(f"cannot read the {what}: {error}") from None
+        overflow = settings.sync_counter_overflow
+        lacking = [what for dictionary, what in dictionaries if 0x1019 not in dictionary]
+        if overflow and lacking:
+            self.sync_counter_note = (f"SYNC counter off: the {' and the '.join(lacking)} "
+                                      "has no 0x1019")
+            overflow = 0
+        else:
+            self.sync_counter_note = (f"SYNC counter 1..{overflow}" if overflow
+                                      else "SYNC counter off ([master.can] "
+                                      "sync_counter_overflow = 0)")
+        self.sync_counter_overflow = overflow
+        plans = []
+        for node, (dictionary, what) in zip(settings.node_ids, dictionaries, strict=True):
             plans.append((dictionary, configuration_steps(
                 dictionary, node, self.sample_period_s, settings.master_node_id,
                 settings.heartbeat_period_s, settings.heartbeat_timeout_s,
-                settings.rpdo_timeout_s, min(window_counts, 0xFFFFFFFF), what)))
+                settings.rpdo_timeout_s, min(window_counts, 0xFFFFFFFF), what, overflow)))
         return plans
+
+    def _next_sync(self) -> can.Message:
+        """This cycle's SYNC: without data, or with the counter 1..overflow (CiA 301)."""
+        overflow = self.sync_counter_overflow
+        if not overflow:
+            return self._sync
+        self._sync_counter = self._sync_counter % overflow + 1
+        return self._counted_syncs[self._sync_counter - 1]
 
     def _configure_drive(self, axis: int, node: int, dictionary: Any,
                          steps: list[SdoStep]) -> None:
@@ -266,6 +305,7 @@ class CanHandleDriver(HandleHardware):
         if not np.all(np.isfinite(reading.position_m)):
             raise HardwareError("cannot activate without positions: " + "; ".join(reading.faults))
         self._tripped = False
+        self._master_stop = None
         self._warnings = [0, 0]
         for axis, node in enumerate(self.settings.node_ids):
             name = f"{AXES[axis]} drive (node {node})"
@@ -275,6 +315,13 @@ class CanHandleDriver(HandleHardware):
             if back != counts:
                 raise HardwareError(f"{name}: 0x607A reads back {back} after writing {counts}")
         self._target_counts = self._position_counts.copy()
+        self._enable_sequence()
+        self._state = LifecycleState.ACTIVE
+
+    def _enable_sequence(self) -> None:
+        """The CiA 402 enable sequence, one step per SYNC, the targets kept at the actual
+        positions until both drives are enabled; every transition checked (see
+        :meth:`activate`); :class:`HardwareError` when it stops."""
         emcy_start = len(self.emcy_log)
         resets = [0, 0]
         for _ in range(self.settings.enable_timeout_cycles):
@@ -309,7 +356,6 @@ class CanHandleDriver(HandleHardware):
         else:
             self._abort_activation("drives did not reach operation enabled",
                                    self.emcy_log[emcy_start:])
-        self._state = LifecycleState.ACTIVE
 
     def _abort_activation(self, reason: str, emcys: list[tuple[str, int]]) -> None:
         self._send_both(cia402.CW_DISABLE_VOLTAGE)
@@ -332,11 +378,66 @@ class CanHandleDriver(HandleHardware):
         if self._state is not LifecycleState.ACTIVE:
             return
         self._state = LifecycleState.INACTIVE
-        self._send_both(cia402.CW_DISABLE_OPERATION)
+        self._master_stop = None
+        # from quick stop, disable operation is no transition: disable voltage instead
+        self._send_both(cia402.CW_DISABLE_VOLTAGE if self._tripped
+                        else cia402.CW_DISABLE_OPERATION)
         self.read()
         self._send_both(cia402.CW_SHUTDOWN)
         self.read()
         self._start_idle_heartbeat()
+
+    def stop_motion(self, reason: str) -> None:
+        """The master's own trip: quick stop on both drives (CiA 402, controlword 0x0002; each
+        stops by its quick stop option code 0x605A, in Quick stop active or Switch on
+        disabled), the targets held at the actual positions. The next readings report each
+        drive's transition as an event, or a fault when a drive is not stopped within
+        ``enable_timeout_cycles`` SYNCs. Not a fault itself; :meth:`resume_motion` undoes it."""
+        if self._state is not LifecycleState.ACTIVE or self._tripped:
+            return
+        self._tripped = True
+        self._master_stop = reason
+        self._stop_cycles = 0
+        self._stop_taken = [False, False]
+        self._stop_reported = [False, False]
+        self._target_counts = self._position_counts.copy()
+        self._send_both(cia402.CW_QUICK_STOP)
+        self._pending_events.append(f"quick stop on both drives: {reason}")
+
+    def resume_motion(self) -> None:
+        """Re-enable the drives after :meth:`stop_motion`: the enable sequence from where each
+        drive stopped, every transition checked, the targets at the actual positions (the
+        loop's next command starts from there). A failure is a fault in the next reading
+        and the drives stay stopped."""
+        if self._state is not LifecycleState.ACTIVE or self._master_stop is None:
+            return
+        self._master_stop = None
+        self._target_counts = self._position_counts.copy()
+        try:
+            self._enable_sequence()
+        except HardwareError as error:
+            self._pending_faults.append(f"re-enabling after the quick stop failed: {error}")
+            return  # still tripped: write() keeps quick stop
+        self._tripped = False
+        self._target_counts = self._position_counts.copy()
+        self._pending_events.append("drives re-enabled at their actual positions after the "
+                                    "quick stop")
+
+    def _check_quick_stop(self, axis: int, events: list[str], faults: list[str],
+                          drive_fault: list[bool]) -> None:
+        """After the master's quick stop: the drive in Quick stop active or Switch on
+        disabled (an event, once), or a fault once it is late."""
+        state = self._drive_states[axis]
+        if state in (DriveState.QUICK_STOP_ACTIVE, DriveState.SWITCH_ON_DISABLED):
+            if not self._stop_taken[axis]:
+                self._stop_taken[axis] = True
+                events.append(f"{AXES[axis]} drive took the quick stop ({state.value})")
+        elif (self._stop_cycles > self.settings.enable_timeout_cycles
+              and not self._stop_taken[axis] and not self._stop_reported[axis]):
+            self._stop_reported[axis] = True
+            drive_fault[axis] = True
+            faults.append(f"{AXES[axis]} drive did not take the quick stop ({state.value} "
+                          f"after {self._stop_cycles} SYNCs)")
 
     def quick_stop(self, reason: str) -> None:
         """Command quick stop on both drives (they stop where they are) and hold it until the
@@ -410,12 +511,14 @@ class CanHandleDriver(HandleHardware):
         events = self._pending_events
         self._pending_events = []
         drive_fault = [False, False]
+        if self._master_stop is not None:
+            self._stop_cycles += 1
         self._discard_late_frames(faults, drive_fault)
         now = time.monotonic()
         if now >= self._heartbeat_due_s:
             self._send(HEARTBEAT_BASE + self.settings.master_node_id, self._master_heartbeat)
             self._heartbeat_due_s = max(self._heartbeat_due_s + self._heartbeat_period_s, now)
-        bus.send(self._sync)
+        bus.send(self._next_sync())
         self._cycle += 1
         dispatch = self._dispatch
         position_m = np.full(2, np.nan)
@@ -464,6 +567,8 @@ class CanHandleDriver(HandleHardware):
                 faults.append(f"{AXES[axis]} drive left operation enabled "
                               f"({self._drive_states[axis].value})")
                 drive_fault[axis] = True
+            elif self._master_stop is not None and self._state is LifecycleState.ACTIVE:
+                self._check_quick_stop(axis, events, faults, drive_fault)
             if now - self._heartbeat_seen_s[axis] > self._heartbeat_timeout_s and (
                     not self._heartbeat_lost[axis]):
                 self._heartbeat_lost[axis] = True
@@ -502,8 +607,10 @@ class CanHandleDriver(HandleHardware):
                 return
             if code != 0:
                 self.emcy_log.append((AXES[axis], code))
+                meaning = _EMCY_TEXT.get(code)
                 faults.append(f"{AXES[axis]} drive EMCY error code 0x{code:04X} "
-                              f"(register 0x{register:02X})")
+                              f"(register 0x{register:02X}"
+                              + (f"; {meaning})" if meaning else ")"))
                 drive_fault[axis] = True
         elif kind == _HEARTBEAT:
             self._heartbeat_seen_s[axis] = time.monotonic()
@@ -669,6 +776,13 @@ _EXPECTED_AFTER = {
     (DriveState.FAULT, cia402.CW_FAULT_RESET): DriveState.SWITCH_ON_DISABLED,
     (DriveState.QUICK_STOP_ACTIVE, cia402.CW_DISABLE_VOLTAGE): DriveState.SWITCH_ON_DISABLED,
     (DriveState.FAULT_REACTION_ACTIVE, cia402.CW_SHUTDOWN): DriveState.FAULT,
+}
+#: What the EMCY codes of CiA 301/402 the loop meets mean.
+_EMCY_TEXT = {
+    0x8130: "heartbeat or life guard lost", 0x8210: "PDO shorter than mapped",
+    0x8220: "PDO longer than mapped",
+    0x8240: "unexpected SYNC data length: the drive's 0x1019 does not match the SYNC counter",
+    0x8250: "RPDO deadline missed", 0x8611: "following error",
 }
 _ABORT_TEXT = {
     0x05040001: "command specifier not valid", 0x06010000: "unsupported access",

@@ -3,7 +3,8 @@ the drive's own object dictionary (its EDS or DCF file, ``canopen.import_od``).
 
 :func:`configuration_steps` lists, in order, every object write the cyclic loop needs, each
 typed by the EDS's variable (the driver reads every one back): modes of operation (cyclic
-synchronous position), the interpolation period 0x60C2 = Ts, the SYNC COB-ID, the heartbeat
+synchronous position), the interpolation period 0x60C2 = Ts, the SYNC COB-ID (and the SYNC
+counter's overflow value 0x1019 where the drives have it), the heartbeat
 producer (0x1017) and consumer of the master's heartbeat (0x1016), the following error window
 (0x6065), then RPDO1 and TPDO1 the standard way (disable the PDO with COB-ID bit 31,
 transmission type 1 = every SYNC, mapping count 0, the entries, the count, the RPDO
@@ -77,8 +78,9 @@ def configuration_steps(dictionary: od.ObjectDictionary, node_id: int,
                         sample_period_s: float, master_node_id: int,
                         heartbeat_period_s: float, heartbeat_timeout_s: float,
                         rpdo_timeout_s: float, following_error_window_counts: int,
-                        what: str) -> list[SdoStep]:
-    """The SDO writes that configure one drive (see the module docstring), in order."""
+                        what: str, sync_counter_overflow: int = 0) -> list[SdoStep]:
+    """The SDO writes that configure one drive (see the module docstring), in order;
+    ``sync_counter_overflow`` > 0 writes the SYNC counter's overflow value (0x1019) too."""
 
     def step(index: int, subindex: int, value: int) -> SdoStep:
         var = variable(dictionary, index, subindex, what)
@@ -92,6 +94,7 @@ def configuration_steps(dictionary: od.ObjectDictionary, node_id: int,
         step(0x6060, 0, cia402.MODE_CYCLIC_SYNC_POSITION),
         step(0x60C2, 1, value), step(0x60C2, 2, exponent),
         step(0x1005, 0, cia402.SYNC_COB_ID),
+        *([step(0x1019, 0, sync_counter_overflow)] if sync_counter_overflow else []),
         step(0x1017, 0, max(1, round(heartbeat_period_s * 1e3))),
         step(0x1016, 1, (master_node_id << 16) | max(1, round(heartbeat_timeout_s * 1e3))),
         step(0x6065, 0, following_error_window_counts),

@@ -189,8 +189,8 @@ def next_drive_state(state: DriveState, controlword: int, previous_controlword: 
     if controlword & 0x82 == 0x00:  # disable voltage
         return DriveState.SWITCH_ON_DISABLED
     if controlword & 0x86 == 0x02:  # quick stop
-        if state is DriveState.OPERATION_ENABLED:
-            return DriveState.QUICK_STOP_ACTIVE
+        if state in (DriveState.OPERATION_ENABLED, DriveState.QUICK_STOP_ACTIVE):
+            return DriveState.QUICK_STOP_ACTIVE  # (held: no transition out of quick stop)
         return DriveState.SWITCH_ON_DISABLED
     if controlword & 0x87 == 0x06:  # shutdown
         if state in (DriveState.SWITCH_ON_DISABLED, DriveState.SWITCHED_ON,

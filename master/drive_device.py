@@ -7,9 +7,10 @@ disabled until configured, TPDO1 = statusword only, RPDO1 = controlword only, 0x
 no heartbeat), answered by canopen's SDO server (expedited and segmented transfers, the
 standard abort codes), with the CiA 301 rules for PDO configuration enforced on every write
 (mapping only while the PDO is disabled and its count is 0, mappable objects that exist,
-at most 8 bytes, or 64 on CAN FD). The PDO layouts, SYNC COB-ID, heartbeat producer and
-consumer, interpolation period, following-error window and the reaction options are read
-from the dictionary once per change (cached: the cyclic path only looks at attributes).
+at most 8 bytes, or 64 on CAN FD). The PDO layouts, SYNC COB-ID and counter (0x1019),
+heartbeat producer and consumer, interpolation period, following-error window and the
+reaction options are read from the dictionary once per change (cached: the cyclic path only
+looks at attributes).
 
 The drive's motion state (CiA 402 state, targets, the model's position) lives in
 :class:`DriveRuntime`, which the rig (:mod:`haptic.master.sim_rig`) copies and steps once per
@@ -43,6 +44,7 @@ ABORT_INVALID_VALUE = 0x06090030
 EMCY_HEARTBEAT = 0x8130
 EMCY_PDO_LENGTH_SHORT = 0x8210
 EMCY_PDO_LENGTH_EXCEEDED = 0x8220
+EMCY_SYNC_LENGTH = 0x8240
 EMCY_RPDO_TIMEOUT = 0x8250
 EMCY_FOLLOWING_ERROR = 0x8611
 
@@ -237,6 +239,8 @@ class DriveObjects:
                 runtime.target_counts = value
         elif index == 0x60C2 and subindex == 1 and value == 0:
             raise SdoAbortedError(ABORT_VALUE_RANGE)
+        elif index == 0x1019 and (value == 1 or value > 240):
+            raise SdoAbortedError(ABORT_VALUE_RANGE)
         self._dirty = True
 
     def _check_mapping(self, index: int, count: int, rpdo: bool) -> None:
@@ -266,6 +270,8 @@ class DriveObjects:
         self._rpdo_codec, self._rpdo_indices = self.rpdo.codec(), self.rpdo.indices
         self._tpdo_codec, self._tpdo_indices = self.tpdo.codec(), self.tpdo.indices
         self.sync_cob_id = self.raw(0x1005) & 0x7FF
+        #: 0x1019: 0, SYNCs carry no data; 2..240, a 1-byte counter 1..this value
+        self.sync_counter_overflow = self.raw(0x1019) if 0x1019 in self.dictionary else 0
         self.heartbeat_producer_ms = self.raw(0x1017)
         consumer = self.raw(0x1016, 1)
         self.heartbeat_consumer_node = (consumer >> 16) & 0x7F

@@ -94,6 +94,21 @@ class HandleHardware(ABC):
     def write(self, position_command_m: np.ndarray) -> None:
         """Send the axis position commands (x, y), m; ignored unless active."""
 
+    def stop_motion(self, reason: str) -> None:
+        """The master's own safety trip (``reason``: the watchdog, the node's safety layer, a
+        tool input fault): forces are off and the program commands the hold position; a rig
+        whose drives can stop themselves does so too (CiA 402 quick stop), and reports each
+        drive's transition as an event (or a fault when it does not take it) in the next
+        readings. The default does nothing more than the commanded hold. Never raises."""
+        del reason
+
+    def resume_motion(self) -> None:
+        """Forces come back after :meth:`stop_motion`: the drives are re-enabled holding where
+        they are (target = actual position) before the loop commands them again; a failure is
+        a fault in the next reading (the drives stay stopped). The default does nothing.
+        Never raises."""
+        return None
+
     def present_tool_force(self, tool_force_N: np.ndarray) -> None:
         """The tool force (N, x and y) the master is reflecting this cycle. Real hardware
         ignores it (the operator feels it through the handle); a simulated rig hands it to

@@ -51,6 +51,7 @@ from haptic.master.margin_governor import MarginGovernor
 from haptic.master.node import MasterNode
 from haptic.master.supervisor import MasterSupervisor, Transition
 from haptic.master.tick import MasterTick
+from haptic.master.tool_guard import ToolGuardSettings, ToolInputGuard
 
 #: The stages of one tick, in order (the summary's ``stages``).
 TICK_STAGES = ("read", "poll", "supervise", "node", "write", "send", "telemetry")
@@ -140,9 +141,10 @@ def _run_linked_master(
     period_s = model.sample_period_s
     ratio = np.array([axis.position_ratio_ah1 for axis in model.axes])
     link_config = options.link
+    tool_guard = ToolInputGuard(ToolGuardSettings.from_config(options.config), period_s)
     supervisor = MasterSupervisor((float(ratio[0]), float(ratio[1])),
                                   loop_options.sync_tolerance_m, link_config.max_message_age_s,
-                                  link_config.resync_messages)
+                                  link_config.resync_messages, tool_guard)
     watchdog = supervisor.watchdog
     tick_stages = MasterTick(node, [supervisor])  # supervise and node (master/tick.py)
     trace = TraceRecorder(MASTER_TRACE_COLUMNS, loop_options.trace_every)
@@ -203,6 +205,10 @@ def _run_linked_master(
                         reading.cycle, (link.silence_s(),), (link.peer_alive,))
                     if transitions[0] is not Transition.NONE:
                         hardware.present_forces_enabled(supervisor.enabled)
+                        if transitions[0] is Transition.HOLD:  # the drives' quick stop too
+                            hardware.stop_motion(supervisor.stop_reason())
+                        elif transitions[0] is Transition.RESUME:  # re-enabled at actual
+                            hardware.resume_motion()
                     tool = supervisor.tool
                     gain_k = nominal_k
                     if governor is not None:  # k from the echoed round trip (governor.md)
@@ -236,6 +242,7 @@ def _run_linked_master(
                     inert.update(now_s, link.peer_alive and link.silence_s() < max_age_s,
                                  enabled and bool(tick_stages.state.forces_enabled[0]),
                                  gate_reason if enabled else "node faulted" if supervisor.faulted
+                                 else supervisor.stop_reason() if supervisor.input_faulted
                                  else f"watchdog {supervisor.watchdog.state.value}: the resync "
                                  "does not complete")
                     magnitude = math.hypot(felt[0], felt[1])
@@ -313,7 +320,7 @@ def _run_linked_master(
         run, watchdog, loop.max_force_N, (watchdog.events, supervisor.events, loop.node_events,
                                           governor.events if governor is not None else []),
         hardware_faults=supervisor.hardware_faults[:50], node_faulted=supervisor.faulted,
-        stages=stages.summary(), **inert_summary,
+        stages=stages.summary(), **tool_guard.summary(), **inert_summary,
         **(governor.summary() if governor is not None else {}), **extra_summary)
     if loop_options.trace_path:
         trace.save(loop_options.trace_path)

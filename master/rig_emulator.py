@@ -359,6 +359,14 @@ class EmulatedRigHardware(HandleHardware):
         self.driver.write(position_command_m)
         self._send_display()
 
+    def stop_motion(self, reason: str) -> None:
+        if self.driver is not None:
+            self.driver.stop_motion(reason)
+
+    def resume_motion(self) -> None:
+        if self.driver is not None:
+            self.driver.resume_motion()
+
     def present_tool_force(self, tool_force_N: np.ndarray) -> None:
         """Send the tool force (N) to the emulated operator: the operator display frame goes
         out after this cycle's RPDOs (or before the next SYNC, whichever comes first)."""

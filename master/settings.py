@@ -38,6 +38,7 @@ class CanSettings:
     bus_load_limit: float = 0.7
     fd: bool = True
     data_bitrate: int = 5_000_000
+    sync_counter_overflow: int = 240
 
     @property
     def eds_files(self) -> tuple[str, str]:
@@ -186,4 +187,7 @@ def master_settings(config: dict[str, Any]) -> MasterSettings:
         initial_position_m=tuple(sim_table["initial_position_m"]),
         emulator=emulator_settings(sim_table["emulator"]),
     )
+    from haptic.master.tool_guard import ToolGuardSettings  # its cross-key check, at start
+
+    ToolGuardSettings.from_config(config)
     return MasterSettings(section["rig"], can, sim, safety_from_table(section["safety"]))

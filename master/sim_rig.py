@@ -51,6 +51,7 @@ from haptic.master.drive_device import (
     EMCY_FOLLOWING_ERROR,
     EMCY_HEARTBEAT,
     EMCY_RPDO_TIMEOUT,
+    EMCY_SYNC_LENGTH,
     SW_FOLLOWING_ERROR,
     SW_WARNING,
     DriveObjects,
@@ -173,6 +174,9 @@ class SimulatedCanRig:
         #: SYNCs received as CAN FD frames: the cyclic answers go out as FD frames too.
         self._sync_fd = False
         self.sync_count = 0
+        #: Each drive's last SYNC counter (0: none yet) and the counter jumps it saw.
+        self.sync_counter_seen = [0, 0]
+        self.sync_counter_jumps = [0, 0]
         #: SYNCs answered with an answer prepared on the operator display frame.
         self.prepared_syncs = 0
         self.errors: list[str] = []
@@ -376,9 +380,12 @@ class SimulatedCanRig:
             if fd != self._sync_fd:
                 self._discard_prepared()
                 self._sync_fd = fd
+            refused = self._check_sync(data)
+            if refused:
+                self._discard_prepared()
             answer, self._prepared = self._prepared, None
             if answer is None:
-                answer = self._prepare_sync(undoable=False)
+                answer = self._prepare_sync(undoable=False, refused=refused)
             else:
                 self.prepared_syncs += 1
             self._commit_sync(answer)
@@ -438,6 +445,7 @@ class SimulatedCanRig:
                         DriveState.SWITCH_ON_DISABLED, 0, 0)
                 drive.nmt_state = NMT_PRE_OPERATIONAL_STATE
                 self._heartbeat_heard[self.drives.index(drive)] = None
+                self.sync_counter_seen[self.drives.index(drive)] = 0
                 self._send(0x700 + drive.node_id, b"\x00")
 
     def _position_counts(self, axis: int, sample: RigSample | None = None) -> int:
@@ -447,7 +455,29 @@ class SimulatedCanRig:
             self.state.plant[0] @ self.model.position_C[axis])
         return int(self.settings.counts_from_metres(position))
 
-    def _prepare_sync(self, undoable: bool) -> _SyncAnswer:
+    def _check_sync(self, data: bytes) -> frozenset[int]:
+        """Each drive checks a SYNC against its 0x1019 (CiA 301): without a counter it must
+        carry no data; with one, one byte. A drive refuses a SYNC of another length (EMCY
+        0x8240; it does not act on that SYNC, as CANopen stacks do); a counter that is not
+        the last one plus 1 (wrapping to 1 after the overflow value) means SYNCs lost on the
+        bus (counted in :attr:`sync_counter_jumps`). Returns the axes that refused it."""
+        refused = set()
+        for axis, device in enumerate(self.devices):
+            overflow = device.sync_counter_overflow
+            if len(data) != (1 if overflow else 0):
+                refused.add(axis)
+                self._send(cia402.EMCY_BASE + device.node_id,
+                           cia402.emcy_frame(EMCY_SYNC_LENGTH))
+                continue
+            if overflow:
+                last = self.sync_counter_seen[axis]
+                if last and data[0] != last % overflow + 1:
+                    self.sync_counter_jumps[axis] += 1
+                self.sync_counter_seen[axis] = data[0]
+        return frozenset(refused)
+
+    def _prepare_sync(self, undoable: bool, refused: frozenset[int] = frozenset()
+                      ) -> _SyncAnswer:
         """The devices' answer to the next SYNC: each drive applies the controlword and
         target it latched (a pending fault first, with its EMCY; CiA 402 transitions, quick
         stop holding the position), the model advances one period with the enabled drives'
@@ -459,8 +489,8 @@ class SimulatedCanRig:
         frames: list[tuple[int, bytes]] = []
         targets = np.full((1, 2), np.nan)
         for axis, (drive, device) in enumerate(zip(drives, self.devices, strict=True)):
-            if device.sync_cob_id != cia402.SYNC_COB_ID:
-                continue  # this drive listens for SYNC elsewhere
+            if device.sync_cob_id != cia402.SYNC_COB_ID or axis in refused:
+                continue  # this drive listens for SYNC elsewhere, or refused this one
             if drive.persistent_fault_code and drive.state is not DriveState.FAULT:
                 drive.pending_fault_code = drive.persistent_fault_code
             if drive.pending_fault_code:
@@ -520,6 +550,8 @@ class SimulatedCanRig:
         sample = self.model.step(self.state, targets, self.tool_force_N)
         for axis, (drive, device) in enumerate(zip(drives, self.devices, strict=True)):
             drive.position_counts = self._position_counts(axis, sample)
+            if axis in refused:
+                continue
             drive.sync_count += 1
             self._check_following_error(drive, device, frames)
             if drive.nmt_state != NMT_OPERATIONAL_STATE or not device.tpdo.enabled or (
@@ -646,6 +678,12 @@ class SimulatedRigHardware(HandleHardware):
 
     def write(self, position_command_m: np.ndarray) -> None:
         self.driver.write(position_command_m)
+
+    def stop_motion(self, reason: str) -> None:
+        self.driver.stop_motion(reason)
+
+    def resume_motion(self) -> None:
+        self.driver.resume_motion()
 
     def present_tool_force(self, tool_force_N: np.ndarray) -> None:
         self.rig.set_tool_force(tool_force_N)

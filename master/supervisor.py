@@ -11,6 +11,9 @@ the hardware's faults, the link's silence (s) and the slave's liveliness. Decisi
   the tolerance on both axes;
 - a hardware fault, or a trip of the node's safety layer (:meth:`note_node_fault`), latches
   the safe state for the rest of the run;
+- with a ``tool_guard`` (master/tool_guard.py), an implausible ``ToolState`` is not an input
+  (the tick sees no message) and its fault turns forces off until it clears and the tool is
+  in sync with the handle again;
 - the safe state holds the handle where it was when forces went off (or at the start).
 
 :meth:`update` returns a :class:`Transition`: ``ACTIVATE`` the first time forces come on (the
@@ -28,6 +31,7 @@ import numpy as np
 
 from haptic.common.messages import Flags, ToolState
 from haptic.common.watchdog import PeerWatchdog, WatchdogState
+from haptic.master.tool_guard import ToolInputGuard
 
 
 class Transition(enum.Enum):
@@ -43,11 +47,14 @@ class MasterSupervisor:
     """Watchdog, resync check and fault latch of the master (see the module docstring).
 
     ``position_ratio``: Ah1 per axis (x, y), dimensionless; ``sync_tolerance_m``: the resync
-    position tolerance per axis, m; ``max_message_age_s``/``resync_messages``: the watchdog's.
+    position tolerance per axis, m; ``max_message_age_s``/``resync_messages``: the watchdog's;
+    ``tool_guard``: the bounds on the received tool messages (None: none; its events go to
+    :attr:`events`).
     """
 
     def __init__(self, position_ratio: tuple[float, float], sync_tolerance_m: float,
-                 max_message_age_s: float, resync_messages: int) -> None:
+                 max_message_age_s: float, resync_messages: int,
+                 tool_guard: ToolInputGuard | None = None) -> None:
         if not sync_tolerance_m > 0.0:
             raise ValueError(f"sync_tolerance_m must be > 0 (got {sync_tolerance_m})")
         self.ratio_x, self.ratio_y = (float(v) for v in position_ratio)
@@ -60,6 +67,10 @@ class MasterSupervisor:
         self.hold_m = np.zeros(2)
         self.hardware_faults: list[str] = []
         self.events: list[dict[str, Any]] = []
+        self.tool_guard = tool_guard
+        if tool_guard is not None:
+            tool_guard.events = self.events
+        self._await_sync = False  # after a tool input fault: forces wait for the resync check
 
     def start(self, position_m: Any) -> None:
         """Hold the handle where it is at the start (m; non-finite values read as 0)."""
@@ -87,16 +98,23 @@ class MasterSupervisor:
                faults: tuple[str, ...] | list[str] = (), cycle: int = 0,
                silence_s: float = 0.0, peer_alive: bool = True) -> Transition:
         """One tick; returns what changed (see :class:`Transition`)."""
+        guard = self.tool_guard
+        if message is not None and guard is not None and not guard.admit(message, now_s):
+            message = None  # a fault is not an input
+            self._await_sync = True
         if message is not None:
             self.tool = message
         handle_x_m, handle_y_m = (float(v) for v in handle_position_m)
-        state = self.watchdog.update(now_s, message is not None, silence_s,
-                                     self.in_sync(handle_x_m, handle_y_m), peer_alive)
+        synced = self.in_sync(handle_x_m, handle_y_m)
+        state = self.watchdog.update(now_s, message is not None, silence_s, synced, peer_alive)
+        input_fault = guard is not None and guard.faulted
+        if self._await_sync and not input_fault and synced:
+            self._await_sync = False
         if faults:
             self.hardware_faults.extend(f"cycle {cycle}: {fault}" for fault in faults)
             if not self.faulted:
                 self._latch(now_s, "hardware: " + "; ".join(faults))
-        enabled = state is WatchdogState.OK and not self.faulted
+        enabled = state is WatchdogState.OK and not self.faulted and not self._await_sync
         if enabled == self.enabled:
             return Transition.NONE
         self.enabled = enabled
@@ -116,6 +134,22 @@ class MasterSupervisor:
     def _latch(self, now_s: float, reason: str) -> None:
         self.faulted = True
         self.events.append({"time_s": now_s, "kind": "node_trip", "reason": reason})
+
+    @property
+    def input_faulted(self) -> bool:
+        """A tool input fault holds the forces off (or its resync is still waiting)."""
+        return self._await_sync
+
+    def stop_reason(self) -> str:
+        """Why forces are off (for the hardware's quick stop and the events)."""
+        if self.faulted:
+            return "node or hardware fault: " + (self.hardware_faults[-1] if
+                                                 self.hardware_faults else "safety layer trip")
+        if self.tool_guard is not None and self.tool_guard.faulted:
+            return "tool input fault"
+        if self._await_sync:
+            return "tool input fault: waiting for the tool at the handle"
+        return f"watchdog {self.watchdog.state.value}"
 
     @property
     def trips(self) -> int:

@@ -65,6 +65,11 @@ CAN_SCHEMA: Schema = {
                 "bit-rate switch; NMT, SDO, EMCY and heartbeat stay classical."),
     "data_bitrate": Field("int", "CAN FD data-phase bitrate, bit/s.", minimum=1_000_000,
                           maximum=12_000_000),
+    "sync_counter_overflow": Field(
+        "int", "SYNC counter (CiA 301 0x1019): the SYNC carries a counter 1..this value, "
+        "written to every drive whose EDS has 0x1019 (none of them lacking it); 0 off.",
+        minimum=0, maximum=240,
+        check=lambda v: None if v != 1 else "must be 0 (off) or 2..240 (CiA 301 0x1019)"),
 }
 
 def _emulator_interface(name: Any) -> str | None:
@@ -127,6 +132,24 @@ SAFETY_SCHEMA: Schema = {
                          minimum=0.0),
 }
 
+#: [master.tool_input]: the master's bounds on received tool messages (master/tool_guard.py).
+TOOL_INPUT_SCHEMA: Schema = {
+    "force_trip_N": Field("float", "A received tool force beyond this on an axis is a fault "
+                          "(below it the node saturates at force_limit_N), N.", minimum=0.0,
+                          exclusive_minimum=True),
+    "position_min_m": Field("float_list", "Lowest plausible tool position (x, y), m.",
+                            check=_pair),
+    "position_max_m": Field("float_list", "Highest plausible tool position (x, y), m.",
+                            check=_pair),
+    "velocity_trip_m_per_s": Field(
+        "float", "A tool position that moved faster than this between two messages is a "
+        "fault, m/s.", minimum=0.0, exclusive_minimum=True),
+    "jump_margin_m": Field("float", "Allowance on top of the speed bound for a tool position "
+                           "jump, m.", minimum=0.0),
+    "clear_after_messages": Field("int", "Plausible tool messages in a row that clear a "
+                                  "fault.", minimum=1),
+}
+
 MASTER_SCHEMA: Schema = {
     "rig": Field("str", "Handle hardware by name: can (servo drives on a CAN bus), sim "
                  "(the simulated drives and sensor in their own process, haptic-rig-sim), "
@@ -136,4 +159,5 @@ MASTER_SCHEMA: Schema = {
     "can": CAN_SCHEMA,
     "sim": SIM_SCHEMA,
     "safety": SAFETY_SCHEMA,
+    "tool_input": TOOL_INPUT_SCHEMA,
 }

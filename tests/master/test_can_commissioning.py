@@ -323,12 +323,14 @@ def test_the_bus_load_budget_refuses_classical_can_at_the_papers_rate() -> None:
     with pytest.raises(HardwareError) as error:
         driver.configure()
     message = str(error.value)
-    for option in ("bus load 121% of Ts", "longer Ts", "sensor on its own bus", "CAN FD"):
+    # the SYNC counter's byte (0x1019) is in the budget: 650 + 10 bit-times
+    for option in ("bus load 122% of Ts", "SYNC 65.0 us", "longer Ts", "sensor on its own bus",
+                   "CAN FD"):
         assert option in message
     assert driver._bus is None
     slow = CanHandleDriver(settings.can, {"interface": "virtual", "channel": "unused"},
                            0.05, 0.001)
-    assert slow.check_bus_load().ok  # 650 us of 1 ms: 65 %
+    assert slow.check_bus_load().ok  # 661 us of 1 ms: 66 %
     assert bus_load(TS_S, 1_000_000, True, 5_000_000, 0.7).ok
 
 
@@ -463,3 +465,127 @@ def test_commissioning_keys_are_checked_at_start() -> None:
         master_settings(_config(master__can__heartbeat_timeout_s=0.05))
     with pytest.raises(ConfigError, match="master.can.bus_load_limit"):
         _config(master__can__bus_load_limit=1.5)
+
+
+def test_the_sync_counter_is_configured_from_the_eds_and_followed_by_the_drives() -> None:
+    with _active(_config()) as hardware:
+        rig, driver = hardware.rig, hardware.driver
+        assert driver.sync_counter_overflow == 240
+        assert [device.raw(0x1019) for device in rig.devices] == [240, 240]
+        start = hardware.read().position_m
+        for _ in range(300):  # across the wrap from 240 to 1
+            hardware.write(start)
+            reading = hardware.read()
+            assert not reading.faults, reading.faults
+        assert rig.sync_counter_seen == [driver._sync_counter] * 2
+        assert rig.sync_counter_jumps == [0, 0]
+        driver._sync_counter += 1  # one SYNC lost on the bus: the drives see the jump
+        hardware.read()
+        assert rig.sync_counter_jumps == [1, 1]
+
+
+def test_a_drive_without_0x1019_turns_the_sync_counter_off_for_the_bus(tmp_path: Path) -> None:
+    eds = packaged_eds_path().read_text()
+    path = tmp_path / "no1019.eds"  # canopen reads the object sections, not the lists
+    path.write_text(eds.replace(eds[eds.index("[1019]"):eds.index("[1400]")], ""))
+    config = _config(master__can__y_eds_file=str(path))
+    settings = master_settings(config)
+    hardware = _rig_and_driver(config, settings.can)
+    try:
+        hardware.configure()
+        driver = hardware.driver
+        assert driver.sync_counter_overflow == 0
+        assert "SYNC counter off" in driver.sync_counter_note and "y drive" in \
+            driver.sync_counter_note
+        assert [device.sync_counter_overflow for device in hardware.rig.devices] == [0, 0]
+        hardware.activate()
+        for _ in range(20):
+            reading = hardware.read()
+            assert not reading.faults, reading.faults  # SYNCs without data: no EMCY 0x8240
+    finally:
+        hardware.cleanup()
+
+
+def test_a_sync_of_the_wrong_length_is_refused_by_the_drive_and_reported() -> None:
+    with _active(_config()) as hardware:
+        rig = hardware.rig
+        hardware.read()
+        device = rig.devices[1]  # its 0x1019 changed behind the master's back
+        device.node.set_data(0x1019, 0, bytes([0]), check_writable=False)
+        device.refresh()
+        before = rig.drives[1].sync_count
+        reading = hardware.read()
+        text = "; ".join(reading.faults)
+        assert "y drive EMCY error code 0x8240" in text and "0x1019" in text, text
+        assert "missing TPDO1 from the y drive" in text
+        assert rig.drives[1].sync_count == before  # the drive did not act on that SYNC
+
+
+@pytest.mark.parametrize("option", [2, 6])
+def test_the_masters_own_trip_quick_stops_the_drives_and_resume_reenables_at_actual(
+        option: int) -> None:
+    """stop_motion (the master's watchdog or safety trip): controlword quick stop, each drive
+    through Quick stop active (option 2: then Switch on disabled; 6: it stays there), events
+    and no fault; commands meanwhile move nothing. resume_motion: the enable sequence from
+    there, the targets at the actual positions (no jump), then the drives follow again."""
+    with _hardware(_config()) as hardware:
+        rig = hardware.rig
+        for device in rig.devices:  # the drives' quick stop option code (0x605A)
+            device.node.set_data(0x605A, 0, option.to_bytes(2, "little", signed=True),
+                                 check_writable=False)
+            device.refresh()
+        hardware.configure()
+        hardware.activate()
+        start = hardware.read().position_m
+        for _ in range(20):  # move a little first
+            hardware.write(start + np.array([0.002, -0.001]))
+            hardware.read()
+        hardware.stop_motion("watchdog tripped")
+        events: list[str] = []
+        states = set()
+        positions = []
+        for _ in range(40):
+            hardware.write(start + np.array([0.01, 0.01]))  # ignored: the drives are stopped
+            reading = hardware.read()
+            assert not reading.faults, reading.faults
+            events += reading.events
+            states.add(tuple(hardware.driver.drive_states))
+            positions.append(reading.position_m.copy())
+        held = positions[-1]
+        assert "quick stop on both drives: watchdog tripped" in events
+        assert (DriveState.QUICK_STOP_ACTIVE,) * 2 in states
+        final = DriveState.SWITCH_ON_DISABLED if option == 2 else DriveState.QUICK_STOP_ACTIVE
+        assert hardware.driver.drive_states == (final, final)
+        assert "x drive took the quick stop (quick stop active)" in events
+        # stopped (on the drives' own ramp), nowhere near the ignored 10 mm command
+        assert np.ptp(np.array(positions[-10:]), axis=0).max() < 2e-5
+        assert np.abs(held - start).max() < 0.003
+        hardware.resume_motion()
+        assert hardware.driver.drive_states == (DriveState.OPERATION_ENABLED,) * 2
+        resumed = hardware.read()
+        assert "drives re-enabled at their actual positions after the quick stop" in \
+            resumed.events
+        assert not resumed.faults, resumed.faults
+        per_count = hardware.driver.settings.metres_per_count  # target = actual (+ringing)
+        for drive in rig.drives:
+            assert abs(drive.target_counts - drive.position_counts) * per_count < 2e-5
+        np.testing.assert_allclose(resumed.position_m, held, atol=2e-5)  # no jump
+        for _ in range(40):  # and the drives follow commands again
+            hardware.write(held + np.array([0.001, 0.0]))
+            reading = hardware.read()
+        assert not reading.faults, reading.faults
+        assert 0.0002 < reading.position_m[0] - held[0] < 0.0011  # towards the 1 mm command
+
+
+def test_a_drive_that_does_not_take_the_quick_stop_is_a_fault() -> None:
+    with _active(_config()) as hardware:
+        rig = hardware.rig
+        hardware.read()
+        with rig._lock:
+            rig.drives[0].mode = 1  # profile position: the CSP state machine ignores it
+        hardware.stop_motion("node trip")
+        faults: list[str] = []
+        for _ in range(hardware.driver.settings.enable_timeout_cycles + 3):
+            faults += hardware.read().faults
+        assert any("x drive did not take the quick stop" in f for f in faults), faults
+        assert not any(f.startswith("y drive") for f in faults)

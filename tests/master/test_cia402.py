@@ -110,3 +110,15 @@ def test_sdo_abort_and_emcy_frames() -> None:
     payload = cia402.emcy_frame(0x2310, 0x03)
     assert len(payload) == 8
     assert cia402.decode_emcy(payload) == (0x2310, 0x03)
+
+
+def test_quick_stop_held_stays_in_quick_stop_active() -> None:
+    """CiA 402: a drive in Quick stop active that keeps receiving quick stop stays there
+    (option codes 5-8); disable voltage leaves it (transition 12), enable operation resumes
+    (transition 16)."""
+    qsa = cia402.DriveState.QUICK_STOP_ACTIVE
+    assert cia402.next_drive_state(qsa, cia402.CW_QUICK_STOP, cia402.CW_QUICK_STOP) is qsa
+    assert cia402.next_drive_state(qsa, cia402.CW_DISABLE_VOLTAGE, cia402.CW_QUICK_STOP) is \
+        cia402.DriveState.SWITCH_ON_DISABLED
+    assert cia402.next_drive_state(qsa, cia402.CW_ENABLE_OPERATION, cia402.CW_QUICK_STOP) is \
+        cia402.DriveState.OPERATION_ENABLED

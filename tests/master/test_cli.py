@@ -16,7 +16,7 @@ def test_shipped_master_section_loads() -> None:
     master = config["master"]
     assert master["rig"] == "sim"
     assert master["can"]["x_node_id"] != master["can"]["y_node_id"]
-    assert set(master) == {"rig", "can", "sim", "safety"}
+    assert set(master) == {"rig", "can", "sim", "safety", "tool_input"}
 
 
 @pytest.mark.parametrize(("key", "value"), [
@@ -25,6 +25,8 @@ def test_shipped_master_section_loads() -> None:
     ("master.can.force_scale_N_per_count", [0.01]),
     ("master.can.x_node_id", 128),
     ("master.safety.ramp_small_samples", 0),
+    ("master.tool_input.clear_after_messages", 0),
+    ("master.can.sync_counter_overflow", 1),
 ])
 def test_bad_master_values_name_their_key(key: str, value: object) -> None:
     with pytest.raises(ConfigError) as caught:

@@ -224,6 +224,13 @@ def test_killed_slave_trips_the_master_and_a_new_slave_resumes(pair, tmp_path) -
     assert kinds.index("peer_returned") < kinds.index("forces_enabled")
     assert "node_enable" in kinds[kinds.index("forces_enabled"):]
     assert summary["watchdog_state"] in ("ok", "tripped")
+    # the trip quick-stopped the emulated drives (CiA 402), the resync re-enabled them at
+    # their actual positions; no fault latched on the way (issue 18)
+    hardware = [e["reason"] for e in after if e["kind"] == "hardware_event"]
+    assert any(r.startswith("quick stop on both drives: watchdog") for r in hardware), hardware
+    assert any(r.startswith("x drive took the quick stop") for r in hardware), hardware
+    assert any(r.startswith("drives re-enabled at their actual positions") for r in hardware)
+    assert not summary["node_faulted"], summary["hardware_faults"]
 
 
 @pytest.mark.parametrize("program", ["haptic.slave_sim.cli", "haptic.master.cli"])

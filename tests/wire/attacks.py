@@ -55,6 +55,36 @@ def steady_master(link: Link, duration_s: float, force_N: tuple[float, float] = 
     return forged
 
 
+def steady_slave(link: Link, duration_s: float, period_s: float = 0.001,
+                 inject: Callable[[int], tuple[float, float] | None] | None = None) -> int:
+    """A well-behaved slave (ready, no contact, its tool where the master's handle is, Ah1 =
+    1) for ``duration_s``, one message per ``period_s``. ``inject(i)`` may return a tool
+    position offset (m) to send in message ``i`` of the same sender instead (a faulty slave,
+    or a forger that has the session: the tool "jumps"). Returns the number of jumped
+    messages sent."""
+    forged = 0
+    deadline = time.monotonic() + duration_s
+    i = 0
+    next_s = time.monotonic()
+    position_m = (0.0, 0.0)
+    while time.monotonic() < deadline:
+        link.poll()
+        if isinstance(link.latest, HandleState):
+            position_m = link.latest.handle_position_m
+        offset = inject(i) if inject is not None else None
+        sent = position_m
+        if offset is not None:
+            forged += 1
+            sent = (position_m[0] + offset[0], position_m[1] + offset[1])
+        link.send_tool((0.0, 0.0), sent, (0.0, 0.0), 0.0, 0.0, Flags.FORCES_ENABLED)
+        i += 1
+        next_s += period_s
+        delay = next_s - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+    return forged
+
+
 def forged_payload(kind: int, epoch: int, seq: int, force_N: float,
                    send_time_ns: int | None = None, version: int = SCHEMA_VERSION) -> bytes:
     """An unauthenticated message of ``kind`` in the wire format (a stranger's forgery):

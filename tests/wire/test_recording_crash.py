@@ -5,6 +5,7 @@ complete chunk, at every instant of the run, and a closed file still has its sum
 from __future__ import annotations
 
 import json
+import shutil
 import signal
 import subprocess
 import sys
@@ -12,6 +13,7 @@ import textwrap
 import time
 from pathlib import Path
 
+import pytest
 from mcap.reader import make_reader
 
 from haptic.common.recorder import McapRecorder
@@ -62,6 +64,24 @@ def test_sigkilled_recording_opens_with_make_reader(tmp_path: Path) -> None:
     assert live_reads and live_reads == sorted(live_reads)
     recording = read_recording(path)
     assert not recording.complete and recording.counts()["/master/state"] == len(values)
+    _doctor_finds_no_error(path, len(values))
+
+
+def _doctor_finds_no_error(path: Path, messages: int) -> None:
+    """``pymcap-cli doctor`` (PyPI's MCAP command line with a ``doctor``; the Go ``mcap`` CLI
+    is not on the package registries) checks the file against the MCAP container
+    specification: no error, no warning (a killed file has no summary: info only)."""
+    doctor = shutil.which("pymcap-cli") or str(Path(sys.executable).with_name("pymcap-cli"))
+    if not Path(doctor).exists():
+        pytest.skip("pymcap-cli is not installed (the [test] extra installs it)")
+    result = subprocess.run([doctor, "doctor", "--format", "jsonl", str(path)],
+                            capture_output=True, text=True, timeout=120)
+    lines = [json.loads(line) for line in result.stdout.splitlines() if line.startswith("{")]
+    summary = next(line for line in lines if line["type"] == "summary")
+    problems = [line for line in lines if line.get("severity") in ("error", "warning")]
+    assert result.returncode == 0 and not problems, problems
+    assert summary["errors"] == 0 and summary["warnings"] == 0
+    assert summary["messages"] >= messages
 
 
 def test_closed_recording_keeps_its_summary_and_no_provisional_footer(tmp_path: Path) -> None:
