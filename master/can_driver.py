@@ -485,6 +485,11 @@ class CanHandleDriver(HandleHardware):
         task, self._idle_heartbeat = self._idle_heartbeat, None
         if task is not None:
             task.stop()
+            # stop() only flags the thread: wait for a send in progress to finish, so the
+            # bus is never shut down under it (python-can would log a traceback)
+            thread = getattr(task, "thread", None)
+            if thread is not None and thread is not threading.current_thread():
+                thread.join(timeout=self._heartbeat_period_s + 0.5)
 
     def _close_bus(self) -> None:
         self._stop_idle_heartbeat()
