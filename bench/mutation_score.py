@@ -117,6 +117,8 @@ _REPR = "repr of a private field only: no behaviour reads a repr"
 EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
     ("slave_sim/input_guard.py", "_plausible_run: int = 0", "_plausible_run: int = 1",
      "read only after a fault, and every fault sets it to 0 first"),
+    ("slave_sim/input_guard.py", "_send_ns: int = 0", "_send_ns: int = 1",
+     "read only for a message of the same epoch as an admitted one, which set it"),
     ("common/auth.py", "descriptor = os.open(file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)",
      "descriptor = os.open(file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 385)",
      "the os.chmod(file, 0o600) that follows sets the mode either way (it is there for a "

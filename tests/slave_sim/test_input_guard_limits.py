@@ -281,3 +281,14 @@ def test_a_jumps_reason_gives_millimetres_and_milliseconds() -> None:
     g = primed()
     assert not g.admit(msg(1, position=(0.01, 0.0)), PERIOD_S)
     assert g.events[-1]["reason"] == "handle position jumped 10 mm in 0.5 ms (at most 1.5 mm)"
+
+
+def test_a_jumps_reason_keeps_three_significant_digits() -> None:
+    g = primed()
+    assert not g.admit(msg(1, position=(0.0999, 0.0)), PERIOD_S)
+    assert g.events[-1]["reason"] == "handle position jumped 99.9 mm in 0.5 ms (at most 1.5 mm)"
+    g = guard(jump_margin_m=0.0994)  # allows 0.5 mm + 99.4 mm in one period
+    assert g.admit(msg(0), 0.0)
+    assert not g.admit(msg(1, position=(0.12, 0.0)), PERIOD_S)
+    assert g.events[-1]["reason"] == ("handle position jumped 120 mm in 0.5 ms "
+                                      "(at most 99.9 mm)")
