@@ -33,6 +33,7 @@ from haptic.common.config.scenario import Scenario
 from haptic.common.injection import InjectionConfig
 from haptic.common.lti import DiscreteLTI
 from haptic.common.model import TeleopModel
+from haptic.common.passivity import PassivitySettings
 from haptic.lockstep.delay_line import DelayLine, source_schedule
 from haptic.lockstep.stacked import StackedLTI
 from haptic.master.node import MasterNode, master_compensator
@@ -156,7 +157,8 @@ class LockstepSimulator:
     def __init__(self, model: TeleopModel, scenario: Scenario, operator: OperatorModel,
                  gains_k: np.ndarray, environment: str = "linear",
                  safety: SafetySettings = TRANSPARENT_SAFETY, force_noise_std_N: float = 0.0,
-                 clay_impl: str = "warp", device: str = "auto") -> None:
+                 clay_impl: str = "warp", device: str = "auto",
+                 passivity: PassivitySettings | None = None) -> None:
         if environment not in ENVIRONMENTS:
             raise ValueError(f"environment must be one of {', '.join(ENVIRONMENTS)}")
         self.model = model
@@ -165,10 +167,12 @@ class LockstepSimulator:
         self.lanes = self.gains_k.size
         self.environment = environment
         master_block, slave_block = stacked_compensators(model, self.gains_k)
-        self.master = MasterNode(master_block, safety)
+        # passivity: None runs the paper's scheme, settings the TDPA layer (tdpa mode).
+        self.passivity = passivity
+        self.master = MasterNode(master_block, safety, passivity)
         self.rig = RigModel.from_model(model, operator, force_noise_std_N)
         base = "linear" if environment == "linear" else "clay"
-        self.slave = SlaveNode(model, scenario, base, clay_impl, device)
+        self.slave = SlaveNode(model, scenario, base, clay_impl, device, passivity)
         # The node synthesizes its compensators for the model's k; lanes use their own k.
         self.slave.compensators = slave_block
         if environment == "clay+linear":
@@ -196,10 +200,11 @@ class LockstepSimulator:
         rng = np.random.default_rng(seed)
         line_rngs = rng.spawn(3)
         to_slave_d = delays // 2
+        tdpa = self.passivity is not None  # the messages carry the cumulative input energy
         handle_line = DelayLine(source_schedule(steps, to_slave_d, 0, ts, to_slave,
-                                                line_rngs[0]), 4)
+                                                line_rngs[0]), 4 + tdpa)
         tool_line = DelayLine(source_schedule(steps, delays - to_slave_d, 1, ts, to_master,
-                                              line_rngs[1]), 2)
+                                              line_rngs[1]), 2 + tdpa)
         start = np.broadcast_to(np.asarray(self.scenario.tool.start_position_m, float),
                                 (lanes, 2))
         ratio = np.array([a.position_ratio_ah1 for a in self.model.axes])
@@ -227,18 +232,21 @@ class LockstepSimulator:
         with np.errstate(over="ignore", invalid="ignore"):
             for k in range(steps):
                 ft_recv = tool_line.receive(k)
+                slave_energy = ft_recv[:, 2] if tdpa else None
+                ft_recv = ft_recv[:, :2]
                 sample = self.rig.step(rig_state, command, ft_recv)
                 fh = sample.handle_force_measured_N
                 if excitation is not None and k < excitation.shape[0]:
                     fh = fh + excitation[k]
                 yh = sample.handle_position_m
-                command = self.master.step(master_state, fh, yh, ft_recv)
-                handle_line.send(k, np.concatenate((fh, yh), axis=1))
+                command = self.master.step(master_state, fh, yh, ft_recv, slave_energy)
+                handle_line.send(k, _message(tdpa, fh, yh, master_state.passivity))
                 received = handle_line.receive(k)
                 yt = slave_state.tool[:, [0, 2]]
-                out = self.slave.step(slave_state, received[:, :2], received[:, 2:])
+                out = self.slave.step(slave_state, received[:, :2], received[:, 2:4],
+                                      received[:, 4] if tdpa else None)
                 ft = out.tool_force_N
-                tool_line.send(k, ft)
+                tool_line.send(k, _message(tdpa, ft, None, slave_state.passivity))
 
                 w = k // window
                 np.maximum(stats.handle_force_max_N[w], fh, out=stats.handle_force_max_N[w])
@@ -259,6 +267,7 @@ class LockstepSimulator:
                               command, sample.operator_intent_force_N)
                     for name, value in zip(TRACE_NAMES, values, strict=True):
                         traces[name][k] = value[recorded]
+        self.final_states = (master_state, slave_state)
         finite = np.isfinite(stats.handle_force_sumsq_N2).all(axis=(0, 2)) & np.isfinite(
             stats.tool_force_sumsq_N2).all(axis=(0, 2))
         return LockstepResult(
@@ -269,3 +278,13 @@ class LockstepSimulator:
             diverged=~finite | master_state.faulted, recorded_lanes=recorded, traces=traces,
             safety_events=len(master_state.events),
         )
+
+
+def _message(tdpa: bool, first: np.ndarray, second: np.ndarray | None, port: Any
+             ) -> np.ndarray:
+    """A line's message per lane: the signals, and in ``tdpa`` mode the sender's cumulative
+    handed-over energy (J) as the last column."""
+    parts = [first] if second is None else [first, second]
+    if tdpa:
+        parts.append(port.sent_J[:, None])
+    return np.concatenate(parts, axis=1) if len(parts) > 1 else first

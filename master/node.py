@@ -43,6 +43,7 @@ import numpy as np
 
 from haptic.common.lti import DiscreteLTI, Path, combine, discretize
 from haptic.common.model import TeleopModel
+from haptic.common.passivity import PassivityPort, PassivitySettings
 from haptic.common.synthesis import synthesize
 from haptic.master import node_kernels as kernels
 from haptic.master.settings import SafetySettings
@@ -95,6 +96,8 @@ class MasterNodeState:
     _event_bits: np.ndarray | None = field(default=None, repr=False)
     _event_count: np.ndarray | None = field(default=None, repr=False)
     _buffers: tuple = field(default=(), repr=False)  # keeps the Warp arrays alive
+    #: The TDPA observer and controller of the handle's port (``tdpa`` mode), else None.
+    passivity: PassivityPort | None = None
 
     @property
     def lanes(self) -> int:
@@ -128,7 +131,8 @@ class MasterNode:
     one per lane (a stacked block whose ``A`` is (lanes, n, n), as the sweep uses).
     """
 
-    def __init__(self, compensator: Any, safety: SafetySettings) -> None:
+    def __init__(self, compensator: Any, safety: SafetySettings,
+                 passivity: PassivitySettings | None = None) -> None:
         if tuple(compensator.input_names) != COMPENSATOR_INPUTS or (
             tuple(compensator.output_names) != COMPENSATOR_OUTPUTS
         ):
@@ -136,6 +140,8 @@ class MasterNode:
         self.compensator = compensator
         self.safety = safety
         self.period_s = compensator.period_s
+        #: ``None``: the paper's scheme; else the TDPA layer's settings (``tdpa`` mode).
+        self.passivity = passivity
         self._workspace_min = np.asarray(safety.workspace_min_m, float)
         self._workspace_max = np.asarray(safety.workspace_max_m, float)
         self._matrices: tuple | None = None
@@ -155,9 +161,10 @@ class MasterNode:
         _warp().load_module(kernels, device=DEVICE)
 
     @classmethod
-    def from_model(cls, model: TeleopModel, safety: SafetySettings) -> MasterNode:
-        """The node for the configured model and safety limits."""
-        return cls(master_compensator(model), safety)
+    def from_model(cls, model: TeleopModel, safety: SafetySettings,
+                   passivity: PassivitySettings | None = None) -> MasterNode:
+        """The node for the configured model and safety limits (and TDPA layer)."""
+        return cls(master_compensator(model), safety, passivity)
 
     def _kernel_constants(self) -> tuple[tuple, Any]:
         """The compensator's matrices as (L, ., .) Warp arrays and the limits struct, built
@@ -247,6 +254,10 @@ class MasterNode:
             _event_bits=event_bits.numpy(), _event_count=event_count.numpy(),
             _buffers=buffers,
         )
+        if self.passivity is not None:
+            state.passivity = PassivityPort.create(self.passivity, self.period_s, lanes,
+                                                   self.passivity.master_keep_J)
+            state.passivity.previous_position_m[...] = safe
         for lane in np.flatnonzero(faulted_at_start):
             self._trip(state, lane, "non-finite handle position at activation", None)
         return state
@@ -288,17 +299,21 @@ class MasterNode:
         handle_force_N: np.ndarray,
         handle_position_m: np.ndarray,
         tool_force_recv_N: np.ndarray,
+        peer_energy_J: np.ndarray | None = None,
     ) -> np.ndarray:
         """One period: returns the handle position command (lanes, 2), m, always finite.
 
         ``handle_force_N``: fh measured by the sensor (N); ``handle_position_m``: yh from
         the encoders (m); ``tool_force_recv_N``: the tool force received from the slave (N),
-        zero when there is none.
+        zero when there is none; ``peer_energy_J`` (lanes,): the slave's cumulative input
+        energy received (``tdpa`` mode; ignored otherwise).
         """
         inputs = state.inputs
         inputs[:, 0:2] = handle_force_N
         inputs[:, 2:4] = handle_position_m
         inputs[:, 4:6] = tool_force_recv_N
+        if peer_energy_J is not None and state.passivity is not None:
+            state.passivity.receive(peer_energy_J)
         return self.step_inputs(state).copy()
 
     def step_inputs(self, state: MasterNodeState) -> np.ndarray:
@@ -306,10 +321,30 @@ class MasterNode:
         N, yh x y in m, ft x y in N); returns ``state.command_m`` (lanes, 2), m, a view the
         next step overwrites. The real-time tick writes its six numbers and calls this."""
         state._kernel.launch()
+        if state.passivity is not None:
+            self._passivity_step(state)
         if state._event_count[0]:
             self._collect_events(state)
         state.step += 1
         return state.command_m
+
+    def _passivity_step(self, state: MasterNodeState) -> None:
+        """TDPA at the handle's port (common/passivity.py): the command yields along fh by
+        what the observer's account lacks for this step's work ``fh . dcmd``, then that work
+        is observed (the handle's servo and the operator's arm terminate the port). The
+        correction re-bases the offset like the kernel's own limits."""
+        port = state.passivity
+        limit = self.safety.force_limit_N
+        force = np.clip(np.nan_to_num(state.inputs[:, 0:2]), -limit, limit)
+        command = state.command_m
+        correction = port.yield_command(force, command - port.previous_position_m)
+        correction[state.faulted] = 0.0
+        moved = np.clip(command + correction, self._workspace_min, self._workspace_max)
+        command += moved - command
+        state.origin_m[...] += moved - state.last_command_m
+        state.last_command_m[...] = command
+        port.observe(np.einsum("ij,ij->i", force, command - port.previous_position_m))
+        port.previous_position_m[...] = command
 
     def _collect_events(self, state: MasterNodeState) -> None:
         """Turn the kernel's event codes into :class:`SafetyEvent` in the safety layer's

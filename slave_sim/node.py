@@ -23,6 +23,7 @@ import numpy as np
 from haptic.common.config.scenario import Scenario, load_scenario
 from haptic.common.lti import DiscreteLTI, Path, combine, discretize
 from haptic.common.model import TeleopModel, model_from_config
+from haptic.common.passivity import PassivityPort, PassivitySettings
 from haptic.common.synthesis import synthesize
 from haptic.slave_sim.environment import make_environment
 from haptic.slave_sim.tool import POSITION_COLUMNS, VELOCITY_COLUMNS, tool_constants, tool_plant
@@ -64,6 +65,8 @@ class SlaveState:
     halted: np.ndarray
     environment: Any
     step_count: int = 0
+    #: The TDPA observer and controller of the tool's port (``tdpa`` mode), else None.
+    passivity: PassivityPort | None = None
 
     @property
     def lanes(self) -> int:
@@ -109,8 +112,11 @@ class SlaveNode:
     """
 
     def __init__(self, model: TeleopModel, scenario: Scenario, environment: str | None = None,
-                 clay_impl: str = "warp", device: str = "auto") -> None:
+                 clay_impl: str = "warp", device: str = "auto",
+                 passivity: PassivitySettings | None = None) -> None:
         self.model = model
+        #: ``None``: the paper's scheme; else the TDPA layer's settings (``tdpa`` mode).
+        self.passivity = passivity
         self.scenario = scenario
         self.sample_period_s = model.sample_period_s
         self.compensators = slave_compensators(model)
@@ -152,13 +158,22 @@ class SlaveNode:
             handle_position_m=start / self._position_ratio,
             halted=np.zeros(lanes, bool),
             environment=self.environment.initial_state(lanes),
+            passivity=None if self.passivity is None else PassivityPort.create(
+                self.passivity, self.sample_period_s, lanes, self.passivity.slave_keep_J),
         )
 
     def step(self, state: SlaveState, handle_force_N: np.ndarray,
-             handle_position_m: np.ndarray) -> SlaveOutputs:
-        """Advance every lane by one period Ts; inputs (lanes, 2) in N and m."""
+             handle_position_m: np.ndarray, peer_energy_J: np.ndarray | None = None
+             ) -> SlaveOutputs:
+        """Advance every lane by one period Ts; inputs (lanes, 2) in N and m;
+        ``peer_energy_J`` (lanes,): the master's cumulative input energy received (``tdpa``
+        mode; ignored otherwise)."""
         inputs = np.concatenate((handle_force_N, state.tool_force_N), axis=1)
         actuator = self.compensators.step(state.compensator, inputs)
+        port = state.passivity
+        if port is not None:
+            actuator = self._passivity_force(state, port, actuator, handle_position_m,
+                                             peer_energy_J)
         halted = state.halted.any()
         if halted:
             actuator[state.halted] = 0.0
@@ -180,6 +195,8 @@ class SlaveNode:
             force[state.halted] = 0.0
         state.tool_force_N = force
         state.actuator_force_N = actuator
+        if port is not None:  # the work the environment did on the tool, into the network
+            port.observe(-np.einsum("ij,ij->i", force, position - previous))
         state.handle_position_m = handle_position_m
         state.step_count += 1
         return SlaveOutputs(
@@ -192,6 +209,19 @@ class SlaveNode:
             removed_volume_m3=result.removed_volume_m3,
             tracking_error_m=position - self._position_ratio * handle_position_m,
         )
+
+    def _passivity_force(self, state: SlaveState, port: PassivityPort, actuator: np.ndarray,
+                         handle_position_m: np.ndarray, peer_energy_J: np.ndarray | None
+                         ) -> np.ndarray:
+        """TDPA at the tool's port (common/passivity.py): the drift correction towards
+        ``Ah1 yh`` where it adds no energy, then the adaptive damper on the tool."""
+        if peer_energy_J is not None:
+            port.receive(peer_energy_J)
+        velocity = state.tool[:, VELOCITY_COLUMNS]
+        gap = self._position_ratio * np.asarray(handle_position_m) - state.tool[
+            :, POSITION_COLUMNS]
+        force = state.tool_force_N
+        return port.damp(actuator + port.drift_force(gap, velocity, force), velocity, force)
 
     def safe_stop(self, state: SlaveState, lanes: np.ndarray | slice | None = None) -> None:
         """Put ``lanes`` (default: all) in the safe state: the tool stops where it is (zero
