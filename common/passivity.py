@@ -13,14 +13,15 @@ Preusche 2010; Artigas, Ryu, Preusche and Hirzinger 2011, the "time delay power 
   compensators cancel, is inside the network, the clay terminates it).
 
 Each side keeps an energy account (the observer, ``tank_J``): its port's work in, minus its
-work out, plus the energy the peer handed over; what it holds beyond ``keep_J`` it hands to the
-peer, and every message carries the cumulative handed-over energy ``sent_J``. That sum only
-grows, so a lost or late message merely delays the peer's view: the newest value received is
-the largest (:meth:`PassivityPort.receive`). With ``keep_J = 0`` this is Artigas' TDPN (the
-slave may give out what the master took in, and back); a small ``keep_J`` lets each side
-return the energy its own local dynamics stored a moment ago (the energy packets of Franken,
-Stramigioli et al. 2011) without any energy being counted twice: energy in flight belongs to
-neither side, so the sum of the two ports' output never exceeds the sum of their input.
+work out, plus the energy the peer handed over; its own input, as far as it holds more than
+``keep_J``, it hands to the peer, and every message carries the cumulative handed-over energy
+``sent_J``. That sum only grows, so a lost or late message merely delays the peer's view: the
+newest value received is the largest (:meth:`PassivityPort.receive`). With ``keep_J = 0`` this
+is Artigas' TDPN (the slave may give out what the master took in, and back); a small ``keep_J``
+lets each side return the energy its own local dynamics stored a moment ago (the energy packets
+of Franken, Stramigioli et al. 2011) without any energy being counted twice: energy in flight
+belongs to neither side, so the sum of the two ports' output never exceeds the sum of their
+input.
 
 Both ports are in admittance causality (force in, motion out: the master commands the
 handle's position from fh, the virtual tool moves and the clay answers with ft), so the
@@ -141,13 +142,15 @@ class PassivityPort:
         self.tank_J -= excess
 
     def observe(self, work_in_J: np.ndarray) -> None:
-        """Account one step's work into the network at this port (lanes,), J; hand what the
-        port holds beyond ``keep_J`` to the peer (``sent_J``)."""
+        """Account one step's work into the network at this port (lanes,), J; hand the step's
+        input, as far as the port holds more than ``keep_J``, to the peer (``sent_J``)."""
         work = np.nan_to_num(np.asarray(work_in_J, float))
         self.input_energy_J += np.maximum(work, 0.0)
         self.output_energy_J += np.maximum(-work, 0.0)
         self.tank_J += work
-        give = np.maximum(self.tank_J - self.keep_J, 0.0)
+        # Only this step's own input is handed over (energy received stays until spent or
+        # capped, so it does not bounce between the sides), and only beyond keep_J.
+        give = np.clip(self.tank_J - self.keep_J, 0.0, np.maximum(work, 0.0))
         self.sent_J += give
         self.tank_J -= give
         self._cap_credit()

@@ -119,6 +119,10 @@ class LockstepResult:
     recorded_lanes: np.ndarray
     traces: dict[str, np.ndarray] = field(default_factory=dict)
     safety_events: int = 0
+    #: (lanes, 2): RMS of fh - ft/Ah2, N (what the operator feels against what the tool
+    #: applies, scaled), and yt - Ah1 yh at the last tick, m.
+    force_error_rms_N: np.ndarray | None = None
+    final_position_gap_m: np.ndarray | None = None
 
     @property
     def time_s(self) -> np.ndarray:
@@ -224,6 +228,8 @@ class LockstepSimulator:
         peak_fh = np.zeros((lanes, 2))
         peak_ft = np.zeros((lanes, 2))
         error_sumsq = np.zeros((lanes, 2))
+        force_error_sumsq = np.zeros((lanes, 2))
+        force_ratio = np.array([a.force_ratio_ah2 for a in self.model.axes])
         recorded = np.asarray([] if record_lanes is None else record_lanes, int)
         traces = {name: np.empty((steps, recorded.size, 2)) for name in TRACE_NAMES} \
             if recorded.size else {}
@@ -262,6 +268,8 @@ class LockstepSimulator:
                 np.maximum(peak_ft, np.abs(ft), out=peak_ft)
                 error = yh - yt
                 error_sumsq += error * error
+                force_error = fh - ft / force_ratio
+                force_error_sumsq += force_error * force_error
                 if recorded.size:
                     values = (fh, yh, ft, out.tool_position_m, out.tool_velocity_m_s, ft_recv,
                               command, sample.operator_intent_force_N)
@@ -277,6 +285,9 @@ class LockstepSimulator:
             position_error_rms_m=np.sqrt(error_sumsq / max(steps, 1)),
             diverged=~finite | master_state.faulted, recorded_lanes=recorded, traces=traces,
             safety_events=len(master_state.events),
+            force_error_rms_N=np.sqrt(force_error_sumsq / max(steps, 1)),
+            final_position_gap_m=(slave_state.tool[:, [0, 2]] - ratio * yh) if steps else
+            np.zeros((lanes, 2)),
         )
 
 

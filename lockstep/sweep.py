@@ -15,7 +15,8 @@ Modes:
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -25,6 +26,8 @@ from haptic.common.clay_contact import clay_impedance
 from haptic.common.config.scenario import load_scenario
 from haptic.common.injection import InjectionConfig
 from haptic.common.model import TeleopModel
+from haptic.common.passivity import MODES as CONTROL_MODES
+from haptic.common.passivity import PassivitySettings
 from haptic.common.synthesis import SynthesisError
 from haptic.lockstep.simulator import LockstepSimulator
 from haptic.lockstep.verdict import GROWTH_THRESHOLD, growth_verdict
@@ -45,6 +48,10 @@ CLAY_OPERATOR = "constant:fx=3.6,fy=0,onset=0,rise=1.0"
 CLAY_GROWTH_THRESHOLD = 0.5
 #: Clay damping of the constant-rate workpiece used for the linearisation Tt = B s, N s/m.
 CLAY_DAMPING_N_S_PER_M = 100.0
+#: A cell is bounded when its last window's amplitude is at most this times the reference's.
+BOUNDED_AMPLITUDE_RATIO = 1.0
+#: Mean length of a burst of lost messages in a bursty sweep, messages.
+BURST_LENGTH_MESSAGES = 10.0
 #: A disagreeing cell within this relative distance of the analytic boundary (in delay or
 #: in gain) is inside the band.
 BAND = 0.10
@@ -63,6 +70,11 @@ class SweepSettings:
     jitter_s: float = 0.0
     loss_probability: float = 0.0
     seed: int = 0
+    #: "paper" (the paper's scheme) or "tdpa" (with the passivity layer, common/passivity.py).
+    control: str = "paper"
+    #: Loss in Gilbert-Elliott bursts of mean length BURST_LENGTH_MESSAGES at the same mean
+    #: rate ``loss_probability``, instead of independent losses.
+    bursty: bool = False
 
 
 @dataclass
@@ -85,6 +97,15 @@ class SweepResult:
     extra: dict = field(default_factory=dict)
 
     @property
+    def bounded(self) -> np.ndarray:
+        """Cells whose oscillation in the last window is no larger (peak to peak) than in
+        the reference window after the excitation, and finite: one criterion for both
+        controls (a passivity layer may leave a small bounded chatter that the energy
+        verdict, made for a decaying linear loop, would call growing)."""
+        ratio = np.nan_to_num(self.amplitude_ratio, nan=np.inf)
+        return np.isfinite(self.peak_force_N) & (ratio <= BOUNDED_AMPLITUDE_RATIO)
+
+    @property
     def agree(self) -> np.ndarray:
         """Cells where the lockstep and the analysis give the same verdict."""
         return self.growing == ~self.analytic_stable
@@ -93,9 +114,13 @@ class SweepResult:
         """The JSON figures of the sweep (cells, agreement, speed)."""
         agree = self.agree
         outside = ~agree & ~self.in_band
+        bounded = int(self.bounded.sum())
         return {
             "mode": self.settings.mode,
+            "control": self.settings.control,
             "cells": int(agree.size),
+            "bounded": bounded,
+            "unbounded": int(agree.size) - bounded,
             "agree": int(agree.sum()),
             "disagree": int((~agree).sum()),
             "disagree_outside_band": int(outside.sum()),
@@ -123,6 +148,52 @@ class SweepResult:
                     "energy_ratio": float(self.energy_ratio[i, j]),
                 })
         return rows
+
+
+def sweep_injection(settings: SweepSettings) -> InjectionConfig | None:
+    """The injection on both lines of a sweep: independent losses, or Gilbert-Elliott bursts
+    of mean length BURST_LENGTH_MESSAGES whose stationary loss rate is ``loss_probability``."""
+    loss = settings.loss_probability
+    if settings.jitter_s <= 0.0 and loss <= 0.0:
+        return None
+    if not settings.bursty or loss <= 0.0:
+        return InjectionConfig(jitter_s=settings.jitter_s, loss_probability=loss)
+    leave = 1.0 / BURST_LENGTH_MESSAGES
+    return InjectionConfig(jitter_s=settings.jitter_s, burst_exit_probability=leave,
+                           burst_enter_probability=min(1.0, loss * leave / (1.0 - loss)),
+                           burst_loss_probability=1.0)
+
+
+def per_cell(result: SweepResult, lockstep: Any) -> list[dict]:
+    """One dict per cell with the evidence figures of issue 16 (units in the names)."""
+    settings = result.settings
+    gains = np.asarray(settings.gains_k, float)
+    shape = (gains.size, result.delay_samples.size)
+    force_error = lockstep.force_error_rms_N.max(axis=1).reshape(shape)
+    gap = np.linalg.norm(lockstep.final_position_gap_m, axis=1).reshape(shape)
+    peak = np.maximum(lockstep.peak_handle_force_N.max(axis=1),
+                      lockstep.peak_tool_force_N.max(axis=1)).reshape(shape)
+    cells = []
+    for i, gain in enumerate(gains):
+        for j, samples in enumerate(result.delay_samples):
+            cells.append({
+                "control": settings.control,
+                "round_trip_s": round(float(samples) * result.sample_period_s, 9),
+                "jitter_s": settings.jitter_s, "loss": settings.loss_probability,
+                "bursty": settings.bursty, "k": float(gain),
+                "bounded": bool(result.bounded[i, j]),
+                "max_abs_force_N": _finite(peak[i, j]),
+                "rms_force_error_N": _finite(force_error[i, j]),
+                "rms_position_error_m": _finite(result.position_error_rms_m[i, j]),
+                "final_position_gap_m": _finite(gap[i, j]),
+            })
+    return cells
+
+
+def _finite(value: float) -> float | None:
+    """A JSON-safe number: None for inf/nan (a diverged lane)."""
+    value = float(value)
+    return value if np.isfinite(value) else None
 
 
 def sweep_model(model: TeleopModel, mode: str) -> TeleopModel:
@@ -184,13 +255,13 @@ def run_sweep(model: TeleopModel, settings: SweepSettings) -> SweepResult:
         excitation = None
     else:
         raise ValueError(f"mode must be one of {', '.join(MODES)}")
-    injection = None
-    if settings.jitter_s > 0.0 or settings.loss_probability > 0.0:
-        injection = InjectionConfig(jitter_s=settings.jitter_s,
-                                    loss_probability=settings.loss_probability)
+    if settings.control not in CONTROL_MODES:
+        raise ValueError(f"control must be one of {', '.join(CONTROL_MODES)}")
+    injection = sweep_injection(settings)
     started = time.perf_counter()
+    passivity = PassivitySettings() if settings.control == "tdpa" else None
     simulator = LockstepSimulator(model, scenario, operator, lane_gains, environment,
-                                  clay_impl="warp", device="cpu")
+                                  clay_impl="warp", device="cpu", passivity=passivity)
     result = simulator.run(settings.duration_s, lane_delays, to_slave=injection,
                            to_master=injection, seed=settings.seed, excitation_N=excitation,
                            window_s=settings.window_s)
@@ -213,7 +284,7 @@ def run_sweep(model: TeleopModel, settings: SweepSettings) -> SweepResult:
             other_side = (delay < low) != (delay < margins[i]) or (delay < high) != (
                 delay < margins[i])
             in_band[i, j] = _within(float(delay), margins[i]) or other_side
-    return SweepResult(
+    swept = SweepResult(
         settings=settings, sample_period_s=ts, delay_samples=delay_samples,
         growing=verdict.growing.reshape(shape), analytic_stable=analytic_stable,
         in_band=in_band, peak_force_N=result.peak_handle_force_N.max(axis=1).reshape(shape),
@@ -222,6 +293,27 @@ def run_sweep(model: TeleopModel, settings: SweepSettings) -> SweepResult:
         energy_ratio=verdict.energy_ratio.reshape(shape), margin_s=margins,
         simulated_seconds=result.simulated_seconds, wall_seconds=wall,
     )
+    swept.extra["per_cell"] = per_cell(swept, result)
+    return swept
+
+
+def run_sweep_grid(model: TeleopModel, settings: SweepSettings, jitters_s: tuple[float, ...],
+                   losses: tuple[float, ...]) -> tuple[dict, list[SweepResult]]:
+    """The sweep at every (jitter, loss) pair, one run each: the summary sums today's counts
+    over the runs and lists every cell in ``per_cell``."""
+    results = [run_sweep(model, replace(settings, jitter_s=float(jitter),
+                                        loss_probability=float(loss)))
+               for jitter in jitters_s for loss in losses]
+    summaries = [result.summary() for result in results]
+    summary = dict(summaries[0])
+    for key in ("cells", "bounded", "unbounded", "agree", "disagree", "disagree_outside_band",
+                "simulated_seconds", "wall_seconds"):
+        summary[key] = round(sum(item[key] for item in summaries), 3)
+    summary["sim_per_wall"] = round(summary["simulated_seconds"]
+                                    / max(summary["wall_seconds"], 1e-9), 1)
+    summary["bursty"] = settings.bursty
+    summary["per_cell"] = [cell for result in results for cell in result.extra["per_cell"]]
+    return summary, results
 
 
 def write_csv(result: SweepResult, path: str) -> None:
