@@ -268,10 +268,12 @@ class Link:
         handle_force_N: tuple[float, float],
         handle_position_m: tuple[float, float],
         flags: Flags = NO_FLAGS,
+        energy_J: float = 0.0,
     ) -> HandleState:
-        """Master: stamp and publish the handle's force (N) and position (m)."""
+        """Master: stamp and publish the handle's force (N) and position (m), and the
+        passivity layer's handed-over energy (J)."""
         message = HandleState(self.epoch, self.next_sequence(), 0, flags, handle_force_N,
-                              handle_position_m)
+                              handle_position_m, energy_J)
         return self.send(message)  # type: ignore[return-value]
 
     def send_tool(
@@ -282,12 +284,13 @@ class Link:
         clay_engagement: float,
         removed_volume_m3: float,
         flags: Flags = NO_FLAGS,
+        energy_J: float = 0.0,
     ) -> ToolState:
-        """Slave: stamp and publish the tool's force (N), position (m), velocity (m/s) and the
-        clay's status."""
+        """Slave: stamp and publish the tool's force (N), position (m), velocity (m/s), the
+        clay's status and the passivity layer's handed-over energy (J)."""
         message = ToolState(
             self.epoch, self.next_sequence(), 0, flags, tool_force_N, tool_position_m,
-            tool_velocity_m_s, clay_engagement, removed_volume_m3,
+            tool_velocity_m_s, clay_engagement, removed_volume_m3, energy_J,
         )
         return self.send(message)  # type: ignore[return-value]
 

@@ -8,7 +8,8 @@ Every message is a msgpack array (compact: no field names on the wire)::
     :data:`SCHEMA_VERSION`; a receiver drops any other value (``unknown_version``), and a
     peer of another version is refused at start (common/link.py). Version 2 (issue 17) adds
     the pairing hello (common/auth.py) and, on an authenticated link, a 16-byte tag after
-    the msgpack body.
+    the msgpack body. Version 3 (issue 16) adds ``energy_J`` to both payloads and the
+    :attr:`Flags.TDPA` bit.
 ``kind``
     :data:`KIND_HANDLE` (master to slave, :class:`HandleState`) or :data:`KIND_TOOL` (slave to
     master, :class:`ToolState`).
@@ -23,11 +24,15 @@ Every message is a msgpack array (compact: no field names on the wire)::
     encode everything else first and stamp the time last (:func:`encode_around_send_time`).
 ``flags``
     a bit field of :class:`Flags`.
-payload, :class:`HandleState` (4 floats)
-    ``handle_force_N`` x, y; ``handle_position_m`` x, y.
-payload, :class:`ToolState` (8 floats)
+payload, :class:`HandleState` (5 floats)
+    ``handle_force_N`` x, y; ``handle_position_m`` x, y; ``energy_J`` (>= 0).
+payload, :class:`ToolState` (9 floats)
     ``tool_force_N`` x, y; ``tool_position_m`` x, y; ``tool_velocity_m_s`` x, y;
-    ``clay_engagement`` (0..1); ``removed_volume_m3`` (>= 0).
+    ``clay_engagement`` (0..1); ``removed_volume_m3`` (>= 0); ``energy_J`` (>= 0).
+
+``energy_J`` is the sender's cumulative energy handed to the peer by the passivity layer
+(common/passivity.py, ``[control] mode = "tdpa"``), J; monotone, so a lost message only
+delays it. A sender in the paper's scheme sends 0 and leaves :attr:`Flags.TDPA` clear.
 
 :func:`decode` never lets an exception other than :class:`DecodeError` escape; the error's
 ``reason`` (a :class:`DropReason`) says which counter the receiver charges.
@@ -42,13 +47,13 @@ from typing import Any
 
 import msgpack
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 KIND_HANDLE = 1
 KIND_TOOL = 2
 
 _HEADER_LENGTH = 6
-_HANDLE_FLOATS = 4
-_TOOL_FLOATS = 8
+_HANDLE_FLOATS = 5
+_TOOL_FLOATS = 9
 _MAX_U32 = 2**32 - 1
 _MAX_U63 = 2**63 - 1
 _MAX_FLAGS = 0xFF
@@ -65,6 +70,9 @@ class Flags(enum.IntFlag):
     """The sender applies forces (it is past the watchdog's re-synchronisation)."""
     IN_CONTACT = 4
     """Slave only: the tool touches the clay."""
+    TDPA = 8
+    """The sender runs the passivity layer (``[control] mode = "tdpa"``): its ``energy_J``
+    is the energy it handed over. Both sides must agree (:func:`control_mismatch`)."""
 
 
 class DropReason(enum.StrEnum):
@@ -97,7 +105,8 @@ class DecodeError(ValueError):
 class HandleState:
     """Master to slave: the operator's force on the handle and the handle's position.
 
-    Forces in N, positions in m, each as an (x, y) pair; ``send_time_ns`` is CLOCK_REALTIME, ns.
+    Forces in N, positions in m, each as an (x, y) pair; ``send_time_ns`` is CLOCK_REALTIME, ns;
+    ``energy_J`` the passivity layer's handed-over energy (J, cumulative).
     """
 
     epoch: int
@@ -106,6 +115,7 @@ class HandleState:
     flags: Flags
     handle_force_N: tuple[float, float]
     handle_position_m: tuple[float, float]
+    energy_J: float = 0.0
 
     KIND = KIND_HANDLE
 
@@ -125,7 +135,8 @@ class ToolState:
     ``tool_force_N`` is the force the tool applies to the clay (N, x and y; the clay pushes
     back with its negative), ``tool_position_m`` (m), ``tool_velocity_m_s`` (m/s);
     ``clay_engagement`` is the fraction of the tool's cutting edge inside clay (0..1) and
-    ``removed_volume_m3`` the clay volume removed since the start (m^3).
+    ``removed_volume_m3`` the clay volume removed since the start (m^3); ``energy_J`` the
+    passivity layer's handed-over energy (J, cumulative).
     """
 
     epoch: int
@@ -137,6 +148,7 @@ class ToolState:
     tool_velocity_m_s: tuple[float, float]
     clay_engagement: float
     removed_volume_m3: float
+    energy_J: float = 0.0
 
     KIND = KIND_TOOL
 
@@ -164,7 +176,7 @@ def encode_around_send_time(message: Message) -> tuple[bytes, bytes]:
     time last, so the measured one-way delay starts when the message goes to Zenoh, not
     before its encoding. Raises ``ValueError`` for a non-finite value."""
     if isinstance(message, HandleState):
-        floats = (*message.handle_force_N, *message.handle_position_m)
+        floats = (*message.handle_force_N, *message.handle_position_m, message.energy_J)
     elif isinstance(message, ToolState):
         floats = (
             *message.tool_force_N,
@@ -172,6 +184,7 @@ def encode_around_send_time(message: Message) -> tuple[bytes, bytes]:
             *message.tool_velocity_m_s,
             message.clay_engagement,
             message.removed_volume_m3,
+            message.energy_J,
         )
     else:
         raise TypeError(f"not a message: {type(message).__name__}")
@@ -252,8 +265,10 @@ def decode(payload: bytes, expected_kind: int) -> Message:
         if len(body) != _HANDLE_FLOATS:
             raise DecodeError(DropReason.MALFORMED, f"handle payload has {len(body)} values")
         v = _floats(body)
+        if v[4] < 0.0:
+            raise DecodeError(DropReason.MALFORMED, f"energy_J {v[4]} is negative")
         return HandleState(
-            epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3])
+            epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3]), v[4]
         )
     if len(body) != _TOOL_FLOATS:
         raise DecodeError(DropReason.MALFORMED, f"tool payload has {len(body)} values")
@@ -262,7 +277,20 @@ def decode(payload: bytes, expected_kind: int) -> Message:
         raise DecodeError(DropReason.MALFORMED, f"clay_engagement {v[6]} outside 0..1")
     if v[7] < 0.0:
         raise DecodeError(DropReason.MALFORMED, f"removed_volume_m3 {v[7]} is negative")
+    if v[8] < 0.0:
+        raise DecodeError(DropReason.MALFORMED, f"energy_J {v[8]} is negative")
     return ToolState(
         epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3]), (v[4], v[5]),
-        v[6], v[7],
+        v[6], v[7], v[8],
     )
+
+
+def control_mismatch(own_mode: str, message: Message) -> str | None:
+    """Why a peer's message shows it runs another control mode than ``own_mode`` ("paper"
+    or "tdpa"), or None: a tdpa side paired with a paper side would wait for energy that
+    never comes (and a paper side would ignore it), so the programs refuse the pairing."""
+    peer = "tdpa" if message.flags & Flags.TDPA else "paper"
+    if peer == own_mode:
+        return None
+    return (f"the peer runs [control] mode = \"{peer}\", this side \"{own_mode}\"; "
+            "set the same mode on both sides")
