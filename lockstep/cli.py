@@ -19,6 +19,7 @@ import numpy as np
 
 from haptic.common.cli_options import add_retired_delay_option
 from haptic.common.config import ConfigError, exit_on_config_error, load_config
+from haptic.common.config.control_schema import passivity_settings
 from haptic.common.config.scenario import load_scenario
 from haptic.common.injection import InjectionConfig
 from haptic.common.model import model_from_config
@@ -60,6 +61,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--duration", type=float, default=3.0, metavar="SECONDS")
     run.add_argument("--safety", choices=("config", "off"), default="config",
                      help="the master's safety limits from [master.safety], or off")
+    run.add_argument("--control", choices=("paper", "tdpa"), default=None,
+                     help="control scheme (default: the config's [control] mode)")
     run.add_argument("--out", type=Path, default=Path("haptic-sim-run"))
     run.add_argument("--json", action="store_true", help="print a JSON summary")
 
@@ -113,8 +116,10 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
     operator = parse_operator_spec(args.operator or config["lockstep"]["constant_rate_operator"],
                                    "--operator")
     safety = master_settings(config).safety if args.safety == "config" else TRANSPARENT_SAFETY
+    if args.control is not None:
+        config["control"]["mode"] = args.control
     simulator = LockstepSimulator(model, scenario, operator, np.array([gain]), environment,
-                                  safety, device="cpu")
+                                  safety, device="cpu", passivity=passivity_settings(config))
     injection = None
     if args.jitter > 0.0 or args.loss > 0.0:
         injection = InjectionConfig(jitter_s=args.jitter, loss_probability=args.loss)
@@ -136,6 +141,8 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
         "peak_tool_force_N": result.peak_tool_force_N[0].tolist(),
         "position_error_rms_m": result.position_error_rms_m[0].tolist(),
         "safety_events": result.safety_events, "out": str(out),
+        "control": config["control"]["mode"],
+        "final_position_gap_m": result.final_position_gap_m[0].tolist(),
     }
 
 

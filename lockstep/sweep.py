@@ -48,8 +48,8 @@ CLAY_OPERATOR = "constant:fx=3.6,fy=0,onset=0,rise=1.0"
 CLAY_GROWTH_THRESHOLD = 0.5
 #: Clay damping of the constant-rate workpiece used for the linearisation Tt = B s, N s/m.
 CLAY_DAMPING_N_S_PER_M = 100.0
-#: A cell is bounded when its last window's amplitude is at most this times the reference's.
-BOUNDED_AMPLITUDE_RATIO = 1.0
+#: A linear-mode cell is bounded when no force exceeds this times the test pulse's.
+BOUNDED_FORCE_FACTOR = 2.0
 #: Mean length of a burst of lost messages in a bursty sweep, messages.
 BURST_LENGTH_MESSAGES = 10.0
 #: A disagreeing cell within this relative distance of the analytic boundary (in delay or
@@ -95,15 +95,20 @@ class SweepResult:
     simulated_seconds: float
     wall_seconds: float
     extra: dict = field(default_factory=dict)
+    #: (gains, delays) max |fh| and |ft| over the axes and the run, N (None: not computed).
+    max_abs_force_N: np.ndarray | None = None
 
     @property
     def bounded(self) -> np.ndarray:
-        """Cells whose oscillation in the last window is no larger (peak to peak) than in
-        the reference window after the excitation, and finite: one criterion for both
-        controls (a passivity layer may leave a small bounded chatter that the energy
-        verdict, made for a decaying linear loop, would call growing)."""
-        ratio = np.nan_to_num(self.amplitude_ratio, nan=np.inf)
-        return np.isfinite(self.peak_force_N) & (ratio <= BOUNDED_AMPLITUDE_RATIO)
+        """Cells whose response stays bounded: finite, and in the linear mode no force above
+        BOUNDED_FORCE_FACTOR times the test pulse over the run (a passivity layer may leave
+        a small bounded chatter that the energy verdict, made for a decaying linear loop,
+        would call growing); in the clay mode, not growing by the energy verdict."""
+        peak = self.peak_force_N if self.max_abs_force_N is None else self.max_abs_force_N
+        finite = np.isfinite(peak)
+        if self.settings.mode != "linear":
+            return finite & ~self.growing
+        return finite & (peak <= BOUNDED_FORCE_FACTOR * PULSE_FORCE_N)
 
     @property
     def agree(self) -> np.ndarray:
@@ -171,8 +176,7 @@ def per_cell(result: SweepResult, lockstep: Any) -> list[dict]:
     shape = (gains.size, result.delay_samples.size)
     force_error = lockstep.force_error_rms_N.max(axis=1).reshape(shape)
     gap = np.linalg.norm(lockstep.final_position_gap_m, axis=1).reshape(shape)
-    peak = np.maximum(lockstep.peak_handle_force_N.max(axis=1),
-                      lockstep.peak_tool_force_N.max(axis=1)).reshape(shape)
+    peak = result.max_abs_force_N
     cells = []
     for i, gain in enumerate(gains):
         for j, samples in enumerate(result.delay_samples):
@@ -292,6 +296,8 @@ def run_sweep(model: TeleopModel, settings: SweepSettings) -> SweepResult:
         amplitude_ratio=verdict.amplitude_ratio.reshape(shape),
         energy_ratio=verdict.energy_ratio.reshape(shape), margin_s=margins,
         simulated_seconds=result.simulated_seconds, wall_seconds=wall,
+        max_abs_force_N=np.maximum(result.peak_handle_force_N.max(axis=1),
+                                   result.peak_tool_force_N.max(axis=1)).reshape(shape),
     )
     swept.extra["per_cell"] = per_cell(swept, result)
     return swept

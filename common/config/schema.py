@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from haptic.common.config.control_schema import CONTROL_SCHEMA
 from haptic.common.config.loader import Field, Schema
 from haptic.common.config.lockstep_schema import LOCKSTEP_SCHEMA
 from haptic.common.config.master_schema import MASTER_SCHEMA
@@ -142,4 +143,5 @@ SCHEMA: Schema = {
     "lockstep": LOCKSTEP_SCHEMA,
     "runner": RUNNER_SCHEMA,
     "supervision": SUPERVISION_SCHEMA,
+    "control": CONTROL_SCHEMA,
 }
