@@ -130,6 +130,18 @@ class PassivityPort:
         self.peer_sent_J = newest
         self._cap_credit()
 
+    def continue_from(self, previous: PassivityPort | None) -> None:
+        """Carry the monotone counters over from the port this one replaces (a node state
+        made afresh after a resync): the peer keeps seeing ``sent_J`` grow, and what the peer
+        sent is not counted twice. The account itself starts empty (which is safe)."""
+        if previous is not None:
+            self.sent_J[...] = previous.sent_J
+            self.peer_sent_J[...] = previous.peer_sent_J
+
+    def peer_restarted(self) -> None:
+        """The peer's counter started again (a new run, a new epoch): count from zero."""
+        self.peer_sent_J[...] = 0.0
+
     def reserve_J(self) -> np.ndarray:
         """The observer: energy the port may still give out, J (lanes,); negative when the
         network has been active at this port beyond what the controller could dissipate."""

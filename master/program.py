@@ -39,6 +39,7 @@ from haptic.common.inert import InertMonitor
 from haptic.common.link import Link
 from haptic.common.messages import Flags
 from haptic.common.model import TeleopModel
+from haptic.common.passivity_link import PassivityLink
 from haptic.common.run_recording import RunRecording
 from haptic.common.runner import RealTimeRunner, StopSignals
 from haptic.common.runner_config import place_other_threads, prioritise_zenoh_threads
@@ -205,6 +206,7 @@ def _run_linked_master(
                                f"{node.safety.ramp_small_force_N:g} N "
                                f"({node.safety.ramp_small_samples} samples): the operator pushes")
                 zero_force = (0.0, 0.0)
+                tdpa_peer = PassivityLink(node.passivity is not None)
 
                 def step(tick: int, now_ns: int) -> None:
                     nonlocal reading
@@ -216,6 +218,8 @@ def _run_linked_master(
                     read_ns = clock()
                     # poll: the newest tool message whose delivery time has come
                     message = link.poll()
+                    if message is not None:  # a peer in the other [control] mode: refused
+                        tdpa_peer.check(message)
                     poll_ns = clock()
                     # supervise: watchdog, resync check, fault latch (master/supervisor.py)
                     now_s = (now_ns - perf_start_ns) * 1e-9
@@ -230,9 +234,12 @@ def _run_linked_master(
                     if transition is Transition.ACTIVATE or transition is Transition.RESUME:
                         _flush_node_events(loop)
                         position = np.nan_to_num(reading.position_m)[None, :]
+                        previous = loop.node_state
                         loop.node_state = (node.activate(position)
                                            if transition is Transition.ACTIVATE
                                            else node.resume(position))
+                        if previous is not None and previous.passivity is not None:
+                            loop.node_state.passivity.continue_from(previous.passivity)
                         loop.node_offset_s = now_s
                     enabled = supervisor.enabled
                     tool = supervisor.tool
@@ -242,6 +249,8 @@ def _run_linked_master(
                         state = loop.node_state
                         ftx, fty = tool.tool_force_N if tool is not None else zero_force
                         state.inputs[0] = (fhx, fhy, yhx, yhy, ftx, fty)
+                        if state.passivity is not None and tool is not None:
+                            tdpa_peer.receive(state.passivity, tool)
                         command = node.step_inputs(state)[0]
                         if state.faulted[0]:
                             supervisor.note_node_fault()
@@ -262,7 +271,8 @@ def _run_linked_master(
                     hardware.write(command)
                     write_ns = clock()
                     # send: the force the compensator used and the handle position
-                    link.send_handle(sent, (yhx, yhy), flags)
+                    link.send_handle(sent, (yhx, yhy), flags | tdpa_peer.flags,
+                                     tdpa_peer.sent_J(loop.node_state))
                     send_ns = clock()
                     # telemetry: summary figures, trace, recording, display
                     inert.update(now_s, link.peer_alive and link.silence_s() < max_age_s,

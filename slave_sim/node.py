@@ -134,12 +134,14 @@ class SlaveNode:
 
     @classmethod
     def from_config(cls, config: dict[str, Any], scenario: Scenario | None = None) -> SlaveNode:
-        """The node of a validated configuration (``[model]`` and ``[slave]``)."""
+        """The node of a validated configuration (``[model]``, ``[slave]``, ``[control]``)."""
         section = config["slave"]
         scenario = scenario or load_scenario(section["scenario"])
         environment = None if section["environment"] == "scenario" else section["environment"]
+        from haptic.common.config.control_schema import passivity_settings
+
         return cls(model_from_config(config), scenario, environment, section["clay_impl"],
-                   section["device"])
+                   section["device"], passivity_settings(config))
 
     def initial_state(self, lanes: int = 1, start_position_m: np.ndarray | None = None
                       ) -> SlaveState:

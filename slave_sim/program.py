@@ -43,6 +43,7 @@ from haptic.common.failures import exit_on_link_error
 from haptic.common.inert import InertMonitor
 from haptic.common.link import Link
 from haptic.common.messages import Flags
+from haptic.common.passivity_link import PassivityLink
 from haptic.common.phase_lock import PhaseLock, PhaseLockSettings
 from haptic.common.preflight import add_preflight_options, run_preflight
 from haptic.common.run_recording import RunRecording
@@ -300,11 +301,14 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
 
         clock = time.perf_counter_ns
         fh_row, yh_row = fh, yh  # the newest handle message, updated in place
+        tdpa_peer = PassivityLink(node.passivity is not None)  # energy_J on the wire
 
         def step(tick: int, now_ns: int) -> None:
             now_s = (now_ns - perf_start_ns) * 1e-9
             # poll: the newest handle message whose delivery time has come
             message = link.poll()
+            if message is not None:  # a peer in the other [control] mode: refused
+                tdpa_peer.check(message)
             poll_ns = clock()
             # supervise: input bounds (slave_sim/input_guard.py), phase lock, watchdog, resync,
             # work-area guard (slave_sim/supervisor.py)
@@ -320,6 +324,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             if fresh:
                 fh_row[0] = guard.force_N  # bounded
                 yh_row[0] = guard.position_m
+                if state.passivity is not None:
+                    tdpa_peer.receive(state.passivity, message)
             if supervisor.receive(message):
                 resync.step(state, yh, now_s)  # to the held handle, cutting (resync.py)
             tool_row = state.tool[0]
@@ -349,7 +355,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             node_ns = clock()
             # send: the tool force, position and velocity, the clay's status
             link.send_tool((float(ft[0]), float(ft[1])), (float(position[0]), float(position[1])),
-                           (float(velocity[0]), float(velocity[1])), engagement, removed, flags)
+                           (float(velocity[0]), float(velocity[1])), engagement, removed,
+                           flags | tdpa_peer.flags, tdpa_peer.sent_J(state))
             send_ns = clock()
             # telemetry: summary figures, trace, recording, display
             magnitude = math.hypot(ft[0], ft[1])
