@@ -55,6 +55,7 @@ settings, and the node calls it with a few lines.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -113,12 +114,14 @@ class PassivityPort:
 
     @classmethod
     def create(cls, settings: PassivitySettings, period_s: float, lanes: int,
-               keep_J: float = 0.0) -> PassivityPort:
+               keep_J: float = 0.0, zeros: Any = np.zeros) -> PassivityPort:
         """A port with nothing observed yet; ``keep_J``: the energy of its own input the port
-        keeps to return itself (0: everything goes to the peer, Artigas' TDPN)."""
-        zeros = [np.zeros(lanes) for _ in range(9)]
-        return cls(settings, float(period_s), float(keep_J), *zeros,
-                   np.zeros(lanes, np.int64), np.zeros((lanes, 2)))
+        keeps to return itself (0: everything goes to the peer, Artigas' TDPN). ``zeros``
+        ``(shape, dtype) -> array`` makes the arrays (the master: views of Warp buffers); the
+        port only ever changes them in place."""
+        floats = [zeros((lanes,), np.float64) for _ in range(9)]
+        return cls(settings, float(period_s), float(keep_J), *floats,
+                   zeros((lanes,), np.int64), zeros((lanes, 2), np.float64))
 
     def receive(self, peer_sent_J: np.ndarray) -> None:
         """Take the peer's cumulative handed-over energy from a message (lanes,), J. A lane
@@ -127,7 +130,7 @@ class PassivityPort:
         value = np.asarray(peer_sent_J, float)
         newest = np.fmax(self.peer_sent_J, np.where(np.isfinite(value), value, -np.inf))
         self.tank_J += newest - self.peer_sent_J
-        self.peer_sent_J = newest
+        self.peer_sent_J[...] = newest
         self._cap_credit()
 
     def continue_from(self, previous: PassivityPort | None) -> None:
@@ -183,7 +186,7 @@ class PassivityPort:
                                            self.correction_m + rise))
         if most_m is not None:
             size = np.minimum(size, np.maximum(most_m, 0.0))
-        self.correction_m = size
+        self.correction_m[...] = size
         self.active_steps += size > 0.0
         self.dissipated_energy_J += size * np.sqrt(force2)
         return size[:, None] * force_N / np.sqrt(np.maximum(force2, 1e-300))[:, None]
@@ -215,7 +218,7 @@ class PassivityPort:
         rise = s.damper_force_rate_N_per_s * ts
         magnitude = np.minimum(alpha * speed, np.minimum(s.damper_force_max_N,
                                                          self.damper_force_N + rise))
-        self.damper_force_N = magnitude
+        self.damper_force_N[...] = magnitude
         alpha = np.where(moving, magnitude / np.maximum(speed, 1e-300), 0.0)
         self.active_steps += alpha > 0.0
         self.dissipated_energy_J += alpha * speed2 * ts
@@ -237,3 +240,23 @@ class PassivityPort:
         budget = np.maximum(self.reserve_J() - own, 0.0)
         scale = np.where(work <= budget, 1.0, budget / np.maximum(work, 1e-300))
         return force * scale[:, None]
+
+
+def master_step_reference(port: PassivityPort, inputs: np.ndarray, command_m: np.ndarray,
+                          last_command_m: np.ndarray, origin_m: np.ndarray,
+                          faulted: np.ndarray, force_limit_N: float,
+                          workspace_min_m: np.ndarray, workspace_max_m: np.ndarray) -> None:
+    """The master's passivity step in numpy, in place, after the node's kernel wrote
+    ``command_m`` (lanes, 2): the command yields along fh by what the account lacks for this
+    step's work ``fh . dcmd``, the offset is re-based like the kernel's own limits, then the
+    work is observed. The reference of haptic.master.passivity_kernel (same arithmetic)."""
+    raw = inputs[:, 0:2]
+    force = np.clip(np.where(np.isfinite(raw), raw, 0.0), -force_limit_N, force_limit_N)
+    correction = port.yield_command(force, command_m - port.previous_position_m)
+    correction[faulted] = 0.0
+    moved = np.clip(command_m + correction, workspace_min_m, workspace_max_m)
+    command_m[...] = moved
+    origin_m += moved - last_command_m
+    last_command_m[...] = moved
+    port.observe(np.einsum("ij,ij->i", force, moved - port.previous_position_m))
+    port.previous_position_m[...] = moved

@@ -26,22 +26,32 @@ class PassivityLink:
         self.mode = "tdpa" if tdpa else "paper"
         self.flags = Flags.TDPA if tdpa else Flags(0)
         self._peer_epoch: int | None = None
+        self._checked_epoch: int | None = None
         self._value = np.zeros(1)
 
     def check(self, message: Any) -> None:
-        """Raise :class:`LinkOpenError` when the peer's message shows the other mode."""
+        """Raise :class:`LinkOpenError` when the first message of a peer's run (epoch) shows
+        the other mode; later messages of that run are not checked again (a stopping peer's
+        last safe-state message carries no mode)."""
+        if message.epoch == self._checked_epoch:
+            return
         why = control_mismatch(self.mode, message)
         if why is not None:
             raise LinkOpenError(why)
+        self._checked_epoch = message.epoch
 
-    def receive(self, port: PassivityPort, message: Any) -> None:
-        """Give ``port`` (one lane) the peer's energy from ``message``; a new epoch (the peer
-        restarted) starts its count again."""
+    def peer_energy(self, port: PassivityPort, message: Any) -> float:
+        """The peer's cumulative handed-over energy in ``message``, J; a new epoch (the peer
+        restarted) first makes ``port`` count the peer's energy from zero again."""
         if message.epoch != self._peer_epoch:
             if self._peer_epoch is not None:
                 port.peer_restarted()
             self._peer_epoch = message.epoch
-        self._value[0] = message.energy_J
+        return float(message.energy_J)
+
+    def receive(self, port: PassivityPort, message: Any) -> None:
+        """Give ``port`` (one lane) the peer's energy from ``message`` (numpy path)."""
+        self._value[0] = self.peer_energy(port, message)
         port.receive(self._value)
 
     @staticmethod

@@ -188,6 +188,10 @@ def run_preflight(config: dict[str, Any], args: argparse.Namespace, program: str
     print(f"{program}: {result.describe()}{environment}", file=stream, flush=True)
     if result.stable:
         return result, None
+    if config.get("control", {}).get("mode") == "tdpa":
+        print(f"{program}: [control] mode = \"tdpa\": the passivity layer keeps the loop "
+              "stable beyond this margin (docs/control.md)", file=stream, flush=True)
+        return result, None
     if getattr(args, "allow_unstable", False):
         print(f"{program}: starting anyway (--allow-unstable)", file=stream, flush=True)
         return result, None

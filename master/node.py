@@ -46,6 +46,7 @@ from haptic.common.model import TeleopModel
 from haptic.common.passivity import PassivityPort, PassivitySettings
 from haptic.common.synthesis import synthesize
 from haptic.master import node_kernels as kernels
+from haptic.master import passivity_kernel
 from haptic.master.settings import SafetySettings
 
 AXES = ("x", "y")
@@ -96,8 +97,13 @@ class MasterNodeState:
     _event_bits: np.ndarray | None = field(default=None, repr=False)
     _event_count: np.ndarray | None = field(default=None, repr=False)
     _buffers: tuple = field(default=(), repr=False)  # keeps the Warp arrays alive
-    #: The TDPA observer and controller of the handle's port (``tdpa`` mode), else None.
+    #: The TDPA observer and controller of the handle's port (``tdpa`` mode), else None;
+    #: its arrays are views of the passivity kernel's buffers.
     passivity: PassivityPort | None = None
+    #: (lanes,) the slave's cumulative handed-over energy received, J (NaN: none yet); the
+    #: passivity kernel takes it at every step (``tdpa`` mode).
+    peer_energy_J: np.ndarray | None = None
+    _passivity_kernel: Any = field(default=None, repr=False)
 
     @property
     def lanes(self) -> int:
@@ -159,6 +165,8 @@ class MasterNode:
         # Load (or compile, about 2 s the first time) the kernel now, never inside a tick.
         self._kernel_constants()
         _warp().load_module(kernels, device=DEVICE)
+        if passivity is not None:
+            _warp().load_module(passivity_kernel, device=DEVICE)
 
     @classmethod
     def from_model(cls, model: TeleopModel, safety: SafetySettings,
@@ -255,9 +263,8 @@ class MasterNode:
             _buffers=buffers,
         )
         if self.passivity is not None:
-            state.passivity = PassivityPort.create(self.passivity, self.period_s, lanes,
-                                                   self.passivity.master_keep_J)
-            state.passivity.previous_position_m[...] = safe
+            self._attach_passivity(state, safe, (inputs, faulted, command, last_command,
+                                                 origin))
         for lane in np.flatnonzero(faulted_at_start):
             self._trip(state, lane, "non-finite handle position at activation", None)
         return state
@@ -312,8 +319,8 @@ class MasterNode:
         inputs[:, 0:2] = handle_force_N
         inputs[:, 2:4] = handle_position_m
         inputs[:, 4:6] = tool_force_recv_N
-        if peer_energy_J is not None and state.passivity is not None:
-            state.passivity.receive(peer_energy_J)
+        if peer_energy_J is not None and state.peer_energy_J is not None:
+            state.peer_energy_J[...] = peer_energy_J
         return self.step_inputs(state).copy()
 
     def step_inputs(self, state: MasterNodeState) -> np.ndarray:
@@ -321,30 +328,56 @@ class MasterNode:
         N, yh x y in m, ft x y in N); returns ``state.command_m`` (lanes, 2), m, a view the
         next step overwrites. The real-time tick writes its six numbers and calls this."""
         state._kernel.launch()
-        if state.passivity is not None:
-            self._passivity_step(state)
+        if state._passivity_kernel is not None:  # TDPA at the handle's port
+            state._passivity_kernel.launch()
         if state._event_count[0]:
             self._collect_events(state)
         state.step += 1
         return state.command_m
 
-    def _passivity_step(self, state: MasterNodeState) -> None:
-        """TDPA at the handle's port (common/passivity.py): the command yields along fh by
-        what the observer's account lacks for this step's work ``fh . dcmd``, then that work
-        is observed (the handle's servo and the operator's arm terminate the port). The
-        correction re-bases the offset like the kernel's own limits."""
-        port = state.passivity
-        limit = self.safety.force_limit_N
-        force = np.clip(np.nan_to_num(state.inputs[:, 0:2]), -limit, limit)
-        command = state.command_m
-        correction = port.yield_command(force, command - port.previous_position_m)
-        correction[state.faulted] = 0.0
-        moved = np.clip(command + correction, self._workspace_min, self._workspace_max)
-        command += moved - command
-        state.origin_m[...] += moved - state.last_command_m
-        state.last_command_m[...] = command
-        port.observe(np.einsum("ij,ij->i", force, command - port.previous_position_m))
-        port.previous_position_m[...] = command
+    def _attach_passivity(self, state: MasterNodeState, position: np.ndarray,
+                          node_buffers: tuple) -> None:
+        """The TDPA port of ``state``: its arrays as views of Warp buffers, and the recorded
+        launch of :mod:`haptic.master.passivity_kernel` over them and the node's buffers."""
+        wp = _warp()
+        lanes = position.shape[0]
+        buffers: list = []
+        types = {np.float64: wp.float64, np.int64: wp.int64}
+
+        def zeros(shape: tuple, dtype: Any) -> np.ndarray:
+            array = wp.zeros(shape, dtype=types[dtype], device=DEVICE)
+            buffers.append(array)
+            return array.numpy()
+
+        settings = self.passivity
+        port = PassivityPort.create(settings, self.period_s, lanes, settings.master_keep_J,
+                                    zeros)
+        port.previous_position_m[...] = position
+        peer = wp.full(lanes, wp.float64(np.nan), dtype=wp.float64, device=DEVICE)
+        limits = passivity_kernel.PassivityLimits()
+        limits.period_s = self.period_s
+        limits.force_limit_N = self.safety.force_limit_N
+        limits.force_floor_N = settings.force_floor_N
+        limits.conductance_max_m_per_N_s = settings.conductance_max_m_per_N_s
+        limits.correction_speed_max_m_per_s = settings.correction_speed_max_m_per_s
+        limits.correction_accel_max_m_per_s2 = settings.correction_accel_max_m_per_s2
+        limits.credit_max_J = settings.credit_max_J
+        limits.keep_J = settings.master_keep_J
+        limits.workspace_min_x_m, limits.workspace_min_y_m = map(float, self._workspace_min)
+        limits.workspace_max_x_m, limits.workspace_max_y_m = map(float, self._workspace_max)
+        inputs, faulted, command, last_command, origin = node_buffers
+        # PassivityPort's field order: tank, sent, peer_sent, input, output, forgotten,
+        # dissipated, correction, (damper force), active steps, previous position.
+        tank, sent, peer_sent, energy_in, energy_out, forgotten, dissipated, correction = (
+            buffers[:8])
+        state.passivity = port
+        state.peer_energy_J = peer.numpy()
+        state._passivity_kernel = wp.launch(
+            passivity_kernel.master_passivity_kernel, dim=lanes, device=DEVICE,
+            inputs=[inputs, peer, faulted, command, last_command, origin, buffers[10], tank,
+                    sent, peer_sent, energy_in, energy_out, forgotten, dissipated, correction,
+                    buffers[9], limits], record_cmd=True)
+        state._buffers = (*state._buffers, *buffers, peer)
 
     def _collect_events(self, state: MasterNodeState) -> None:
         """Turn the kernel's event codes into :class:`SafetyEvent` in the safety layer's

@@ -250,7 +250,8 @@ def _run_linked_master(
                         ftx, fty = tool.tool_force_N if tool is not None else zero_force
                         state.inputs[0] = (fhx, fhy, yhx, yhy, ftx, fty)
                         if state.passivity is not None and tool is not None:
-                            tdpa_peer.receive(state.passivity, tool)
+                            state.peer_energy_J[0] = tdpa_peer.peer_energy(state.passivity,
+                                                                           tool)
                         command = node.step_inputs(state)[0]
                         if state.faulted[0]:
                             supervisor.note_node_fault()
