@@ -10,6 +10,7 @@ import json
 import socket
 import subprocess
 import sys
+import time
 import uuid
 from pathlib import Path
 
@@ -86,7 +87,34 @@ def test_tdpa_pair_is_bounded_and_aligned_over_a_delayed_lossy_link(tmp_path, on
 
 @pytest.mark.slow
 def test_a_pair_in_different_control_modes_is_refused(tmp_path) -> None:
-    slave, master = _run_pair(tmp_path, "tdpa", "paper", 3.0)
-    assert master.returncode == 4 and slave.returncode == 4
-    for result in (master, slave):
-        assert "[control] mode" in result.stdout
+    """Whichever side first hears the other refuses with exit status 4 and a line naming
+    ``[control] mode``; the other may then wait for a peer that left, so it is ended by its
+    PID once the first has refused."""
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    prefix = f"test/{uuid.uuid4().hex[:8]}"
+    common = ["--key-prefix", prefix, "--no-status", "--peer-wait", "30"]
+    processes = [
+        subprocess.Popen([sys.executable, "-m", "haptic.slave_sim.program", "--config",
+                          str(_config(tmp_path, "paper")), *common, "--connect", endpoint,
+                          "--duration", "20"], stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT, text=True),
+        subprocess.Popen([sys.executable, "-m", "haptic.master.cli", "--config",
+                          str(_config(tmp_path, "tdpa")), *common, "--listen", endpoint,
+                          "--rig", "sim", "--duration", "20"], stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT, text=True)]
+    try:
+        deadline = time.monotonic() + WAIT_S
+        while all(p.poll() is None for p in processes):
+            assert time.monotonic() < deadline, "neither side refused the other"
+            time.sleep(0.1)
+        time.sleep(2.0)  # the other side may refuse too
+    finally:
+        for process in processes:
+            if process.poll() is None:
+                process.kill()
+        outputs = [process.communicate(timeout=WAIT_S)[0] for process in processes]
+    refused = [out for process, out in zip(processes, outputs, strict=True)
+               if process.returncode == 4]
+    assert refused, outputs
+    assert all("[control] mode" in out for out in refused)
+    assert all(process.returncode != 0 for process in processes)
