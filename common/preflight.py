@@ -31,6 +31,7 @@ from typing import Any, TextIO
 from haptic.common.analysis.report import AnalysisSettings, axis_loop
 from haptic.common.analysis.stability import delay_margin, is_stable
 from haptic.common.config import ConfigError, override
+from haptic.common.config.control_schema import drift_parameters
 from haptic.common.model import model_from_config
 from haptic.common.synthesis import SynthesisError
 
@@ -138,6 +139,7 @@ def check_stability(config: dict[str, Any], round_trip_s: float,
         max_delay_s=section["max_delay_s"],
         max_gain_k=section["max_gain_k"],
         sample_period_s=model.sample_period_s if sampled else None,
+        drift=drift_parameters(config) if "control" in config else None,
     )
     k = model.ch1_gain_k
     axes = []

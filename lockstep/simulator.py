@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from haptic.common.config.scenario import Scenario
+from haptic.common.drift import DriftCoupling
 from haptic.common.injection import InjectionConfig
 from haptic.common.lti import DiscreteLTI
 from haptic.common.model import TeleopModel
@@ -162,7 +163,8 @@ class LockstepSimulator:
                  gains_k: np.ndarray, environment: str = "linear",
                  safety: SafetySettings = TRANSPARENT_SAFETY, force_noise_std_N: float = 0.0,
                  clay_impl: str = "warp", device: str = "auto",
-                 passivity: PassivitySettings | None = None) -> None:
+                 passivity: PassivitySettings | None = None,
+                 drift: DriftCoupling | None = None) -> None:
         if environment not in ENVIRONMENTS:
             raise ValueError(f"environment must be one of {', '.join(ENVIRONMENTS)}")
         self.model = model
@@ -176,7 +178,7 @@ class LockstepSimulator:
         self.master = MasterNode(master_block, safety, passivity)
         self.rig = RigModel.from_model(model, operator, force_noise_std_N)
         base = "linear" if environment == "linear" else "clay"
-        self.slave = SlaveNode(model, scenario, base, clay_impl, device, passivity)
+        self.slave = SlaveNode(model, scenario, base, clay_impl, device, passivity, drift)
         # The node synthesizes its compensators for the model's k; lanes use their own k.
         self.slave.compensators = slave_block
         if environment == "clay+linear":

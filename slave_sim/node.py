@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from haptic.common.config.scenario import Scenario, load_scenario
+from haptic.common.drift import DriftCoupling
 from haptic.common.lti import DiscreteLTI, Path, combine, discretize
 from haptic.common.model import TeleopModel, model_from_config
 from haptic.common.passivity import PassivityPort, PassivitySettings
@@ -67,6 +68,8 @@ class SlaveState:
     step_count: int = 0
     #: The TDPA observer and controller of the tool's port (``tdpa`` mode), else None.
     passivity: PassivityPort | None = None
+    #: The paper mode's drift coupling filter (common/drift.py), else None.
+    drift: np.ndarray | None = None
 
     @property
     def lanes(self) -> int:
@@ -113,8 +116,11 @@ class SlaveNode:
 
     def __init__(self, model: TeleopModel, scenario: Scenario, environment: str | None = None,
                  clay_impl: str = "warp", device: str = "auto",
-                 passivity: PassivitySettings | None = None) -> None:
+                 passivity: PassivitySettings | None = None,
+                 drift: DriftCoupling | None = None) -> None:
         self.model = model
+        #: The paper mode's drift coupling (common/drift.py); None: off.
+        self.drift = drift
         #: ``None``: the paper's scheme; else the TDPA layer's settings (``tdpa`` mode).
         self.passivity = passivity
         self.scenario = scenario
@@ -138,10 +144,11 @@ class SlaveNode:
         section = config["slave"]
         scenario = scenario or load_scenario(section["scenario"])
         environment = None if section["environment"] == "scenario" else section["environment"]
-        from haptic.common.config.control_schema import passivity_settings
+        from haptic.common.config.control_schema import drift_coupling, passivity_settings
 
-        return cls(model_from_config(config), scenario, environment, section["clay_impl"],
-                   section["device"], passivity_settings(config))
+        model = model_from_config(config)
+        return cls(model, scenario, environment, section["clay_impl"], section["device"],
+                   passivity_settings(config), drift_coupling(config, model.sample_period_s))
 
     def initial_state(self, lanes: int = 1, start_position_m: np.ndarray | None = None
                       ) -> SlaveState:
@@ -162,6 +169,7 @@ class SlaveNode:
             environment=self.environment.initial_state(lanes),
             passivity=None if self.passivity is None else PassivityPort.create(
                 self.passivity, self.sample_period_s, lanes, self.passivity.slave_keep_J),
+            drift=None if self.drift is None else self.drift.initial_state(lanes),
         )
 
     def step(self, state: SlaveState, handle_force_N: np.ndarray,
@@ -173,6 +181,9 @@ class SlaveNode:
         inputs = np.concatenate((handle_force_N, state.tool_force_N), axis=1)
         actuator = self.compensators.step(state.compensator, inputs)
         port = state.passivity
+        if state.drift is not None:  # paper mode's slow coupling of Ah1 yh_recv - yt
+            actuator += self.drift.force(state.drift, self._position_ratio * np.asarray(
+                handle_position_m) - state.tool[:, POSITION_COLUMNS])
         if port is not None:
             actuator = self._passivity_force(state, port, actuator, handle_position_m,
                                              peer_energy_J)
@@ -231,6 +242,8 @@ class SlaveNode:
         states are cleared. Halted lanes stay put and send zero force until :meth:`resume`."""
         index = slice(None) if lanes is None else lanes
         state.halted[index] = True
+        if state.drift is not None:
+            state.drift[index] = 0.0
         state.tool[index, 1] = 0.0
         state.tool[index, 3] = 0.0
         state.compensator[index] = 0.0

@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from haptic.common.config.loader import Field, Schema
+from haptic.common.drift import DriftCoupling
 from haptic.common.passivity import MODES, PassivitySettings
 
 CONTROL_SCHEMA: Schema = {
@@ -40,7 +41,32 @@ CONTROL_SCHEMA: Schema = {
                                      "the tool to Ah1 yh, N/m (0: off).", minimum=0.0),
     "drift_force_max_N": Field("float", "tdpa: cap of the drift correction's force, N.",
                                minimum=0.0),
+    "paper_drift_stiffness_N_per_m": Field(
+        "float", "paper: stiffness kp of the slow drift coupling vt += kp wc/(s + wc) (Ah1 yh - "
+        "yt) at the slave, N/m (0: off, the paper's scheme exactly; haptic-analyze includes "
+        "it).", minimum=0.0),
+    "paper_drift_bandwidth_rad_s": Field(
+        "float", "paper: its low-pass bandwidth wc, rad/s.", minimum=0.0,
+        exclusive_minimum=True),
 }
+
+
+def drift_coupling(config: dict[str, Any], period_s: float) -> DriftCoupling | None:
+    """The paper mode's drift coupling, or None when it is off (or in ``tdpa`` mode)."""
+    section = config["control"]
+    if section["mode"] != "paper" or section["paper_drift_stiffness_N_per_m"] == 0.0:
+        return None
+    return DriftCoupling(float(section["paper_drift_stiffness_N_per_m"]),
+                         float(section["paper_drift_bandwidth_rad_s"]), float(period_s))
+
+
+def drift_parameters(config: dict[str, Any]) -> tuple[float, float] | None:
+    """(kp N/m, wc rad/s) of the paper mode's drift coupling for the analysis, or None."""
+    section = config["control"]
+    if section["mode"] != "paper" or section["paper_drift_stiffness_N_per_m"] == 0.0:
+        return None
+    return (float(section["paper_drift_stiffness_N_per_m"]),
+            float(section["paper_drift_bandwidth_rad_s"]))
 
 
 def control_mode(config: dict[str, Any]) -> str:
