@@ -72,8 +72,8 @@ class PassivitySettings:
     correction_speed_max_m_per_s: float = 0.2
     correction_accel_max_m_per_s2: float = 200.0
     credit_max_J: float = 0.5
-    master_keep_J: float = 0.05
-    slave_keep_J: float = 0.05
+    master_keep_J: float = 0.002
+    slave_keep_J: float = 0.002
     velocity_floor_m_per_s: float = 1e-5
     damper_max_N_s_per_m: float = 2000.0
     damper_force_max_N: float = 40.0
