@@ -14,6 +14,7 @@ import numpy as np
 from haptic.common.analysis.report import Analysis, AnalysisSettings, analyse
 from haptic.common.cli_options import add_renamed_option, add_retired_delay_option
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, to_toml
+from haptic.common.config.control_schema import drift_parameters
 from haptic.common.model import TeleopModel, model_from_config
 from haptic.common.summary import json_safe
 from haptic.common.synthesis import SynthesisError
@@ -59,6 +60,7 @@ def _settings(config: dict[str, Any], model: TeleopModel, sampled: bool) -> Anal
         max_delay_s=section["max_delay_s"],
         max_gain_k=section["max_gain_k"],
         sample_period_s=model.sample_period_s if sampled else None,
+        drift=drift_parameters(config),
     )
 
 
@@ -150,9 +152,14 @@ def main(argv: list[str] | None = None) -> int:
         except SynthesisError as error:
             raise ConfigError("model", str(error)) from None
     if args.json:
-        print(json.dumps(json_safe(analysis.to_json())))
+        report = analysis.to_json()
+        report["drift_coupling"] = settings.drift  # (kp N/m, wc rad/s) or None: not in loop
+        print(json.dumps(json_safe(report)))
     else:
         print(format_text(analysis))
+        if settings.drift is not None:
+            print(f"with the paper mode's drift coupling kp = {settings.drift[0]:g} N/m, "
+                  f"wc = {settings.drift[1]:g} rad/s in the loop")
     if args.out is not None:
         for path in write_plots(model, analysis, settings, args.out):
             print(f"wrote {path}", file=sys.stderr)

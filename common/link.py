@@ -269,11 +269,13 @@ class Link:
         handle_position_m: tuple[float, float],
         flags: Flags = NO_FLAGS,
         gain_k: float = 0.0,
+        energy_J: float = 0.0,
     ) -> HandleState:
-        """Master: stamp and publish the handle's force (N), position (m) and the Ch1 gain k
-        its compensator uses (0: not said)."""
+        """Master: stamp and publish the handle's force (N), position (m), the Ch1 gain k
+        its compensator uses (0: not said) and the passivity layer's handed-over energy
+        (J)."""
         message = HandleState(self.epoch, self.next_sequence(), 0, flags, handle_force_N,
-                              handle_position_m, gain_k)
+                              handle_position_m, gain_k, energy_J)
         return self.send(message)  # type: ignore[return-value]
 
     def send_tool(
@@ -285,12 +287,15 @@ class Link:
         removed_volume_m3: float,
         flags: Flags = NO_FLAGS,
         echo_send_time_ns: int = 0,
+        energy_J: float = 0.0,
     ) -> ToolState:
         """Slave: stamp and publish the tool's force (N), position (m), velocity (m/s), the
-        clay's status and the echo of the newest handle message's send time (ns; 0: none)."""
+        clay's status, the echo of the newest handle message's send time (ns; 0: none) and
+        the passivity layer's handed-over energy (J)."""
         message = ToolState(
             self.epoch, self.next_sequence(), 0, flags, tool_force_N, tool_position_m,
             tool_velocity_m_s, clay_engagement, removed_volume_m3, echo_send_time_ns,
+            energy_J,
         )
         return self.send(message)  # type: ignore[return-value]
 

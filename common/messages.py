@@ -9,7 +9,8 @@ Every message is a msgpack array (compact: no field names on the wire)::
     peer of another version is refused at start (common/link.py). Version 2 (issue 17) adds
     the pairing hello (common/auth.py) and, on an authenticated link, a 16-byte tag after
     the msgpack body; version 3 (issue 16) the handle's ``gain_k`` and the tool's
-    ``echo_send_time_ns``.
+    ``echo_send_time_ns``; version 4 (issue 16) ``energy_J`` in both payloads and the
+    :attr:`Flags.TDPA` bit.
 ``kind``
     :data:`KIND_HANDLE` (master to slave, :class:`HandleState`) or :data:`KIND_TOOL` (slave to
     master, :class:`ToolState`).
@@ -27,12 +28,18 @@ Every message is a msgpack array (compact: no field names on the wire)::
 payload, :class:`HandleState` (5 floats)
     ``handle_force_N`` x, y; ``handle_position_m`` x, y; ``gain_k``, the Ch1 gain k the
     master's compensator uses now (> 0; 0: not said, the slave uses its configured k): the
-    margin governor (master/margin_governor.py) lowers it and the slave follows.
-payload, :class:`ToolState` (8 floats and an integer)
+    margin governor (master/margin_governor.py) lowers it and the slave follows;
+    ``energy_J`` (>= 0).
+payload, :class:`ToolState` (9 floats and an integer)
     ``tool_force_N`` x, y; ``tool_position_m`` x, y; ``tool_velocity_m_s`` x, y;
-    ``clay_engagement`` (0..1); ``removed_volume_m3`` (>= 0); ``echo_send_time_ns``, the
-    ``send_time_ns`` of the newest handle message the slave had used when it sent this one
-    (0: none yet), so the master measures the loop's round trip on its own clock.
+    ``clay_engagement`` (0..1); ``removed_volume_m3`` (>= 0); ``energy_J`` (>= 0);
+    ``echo_send_time_ns``, the ``send_time_ns`` of the newest handle message the slave had
+    used when it sent this one (0: none yet), so the master measures the loop's round trip
+    on its own clock.
+
+``energy_J`` is the sender's cumulative energy handed to the peer by the passivity layer
+(common/passivity.py, ``[control] mode = "tdpa"``), J; monotone, so a lost message only
+delays it. A sender in the paper's scheme sends 0 and leaves :attr:`Flags.TDPA` clear.
 
 :func:`decode` never lets an exception other than :class:`DecodeError` escape; the error's
 ``reason`` (a :class:`DropReason`) says which counter the receiver charges.
@@ -47,13 +54,13 @@ from typing import Any
 
 import msgpack
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 KIND_HANDLE = 1
 KIND_TOOL = 2
 
 _HEADER_LENGTH = 6
-_HANDLE_FLOATS = 5
-_TOOL_FLOATS = 8
+_HANDLE_FLOATS = 6
+_TOOL_FLOATS = 9
 _TOOL_VALUES = _TOOL_FLOATS + 1  # the floats and the echoed send time
 _MAX_U32 = 2**32 - 1
 _MAX_U63 = 2**63 - 1
@@ -71,6 +78,9 @@ class Flags(enum.IntFlag):
     """The sender applies forces (it is past the watchdog's re-synchronisation)."""
     IN_CONTACT = 4
     """Slave only: the tool touches the clay."""
+    TDPA = 8
+    """The sender runs the passivity layer (``[control] mode = "tdpa"``): its ``energy_J``
+    is the energy it handed over. Both sides must agree (:func:`control_mismatch`)."""
 
 
 class DropReason(enum.StrEnum):
@@ -103,7 +113,8 @@ class DecodeError(ValueError):
 class HandleState:
     """Master to slave: the operator's force on the handle and the handle's position.
 
-    Forces in N, positions in m, each as an (x, y) pair; ``send_time_ns`` is CLOCK_REALTIME, ns.
+    Forces in N, positions in m, each as an (x, y) pair; ``send_time_ns`` is CLOCK_REALTIME, ns;
+    ``energy_J`` the passivity layer's handed-over energy (J, cumulative).
     """
 
     epoch: int
@@ -114,6 +125,8 @@ class HandleState:
     handle_position_m: tuple[float, float]
     gain_k: float = 0.0
     """The Ch1 gain k the master's compensator uses (0: not said)."""
+    energy_J: float = 0.0
+    """The master's cumulative energy handed to the slave (tdpa), J."""
 
     KIND = KIND_HANDLE
 
@@ -133,7 +146,8 @@ class ToolState:
     ``tool_force_N`` is the force the tool applies to the clay (N, x and y; the clay pushes
     back with its negative), ``tool_position_m`` (m), ``tool_velocity_m_s`` (m/s);
     ``clay_engagement`` is the fraction of the tool's cutting edge inside clay (0..1) and
-    ``removed_volume_m3`` the clay volume removed since the start (m^3).
+    ``removed_volume_m3`` the clay volume removed since the start (m^3); ``energy_J`` the
+    passivity layer's handed-over energy (J, cumulative).
     """
 
     epoch: int
@@ -147,6 +161,8 @@ class ToolState:
     removed_volume_m3: float
     echo_send_time_ns: int = 0
     """``send_time_ns`` of the newest handle message the slave had used (0: none)."""
+    energy_J: float = 0.0
+    """The slave's cumulative energy handed to the master (tdpa), J."""
 
     KIND = KIND_TOOL
 
@@ -175,7 +191,8 @@ def encode_around_send_time(message: Message) -> tuple[bytes, bytes]:
     before its encoding. Raises ``ValueError`` for a non-finite value."""
     tail: tuple[int, ...] = ()
     if isinstance(message, HandleState):
-        floats = (*message.handle_force_N, *message.handle_position_m, message.gain_k)
+        floats = (*message.handle_force_N, *message.handle_position_m, message.gain_k,
+                  message.energy_J)
     elif isinstance(message, ToolState):
         floats = (
             *message.tool_force_N,
@@ -183,6 +200,7 @@ def encode_around_send_time(message: Message) -> tuple[bytes, bytes]:
             *message.tool_velocity_m_s,
             message.clay_engagement,
             message.removed_volume_m3,
+            message.energy_J,
         )
         echo = int(message.echo_send_time_ns)
         if not 0 <= echo <= _MAX_U63:
@@ -269,8 +287,11 @@ def decode(payload: bytes, expected_kind: int) -> Message:
         v = _floats(body)
         if v[4] < 0.0:
             raise DecodeError(DropReason.MALFORMED, f"gain_k {v[4]} is negative")
+        if v[5] < 0.0:
+            raise DecodeError(DropReason.MALFORMED, f"energy_J {v[5]} is negative")
         return HandleState(
-            epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3]), v[4]
+            epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3]), v[4],
+            energy_J=v[5],
         )
     if len(body) != _TOOL_VALUES:
         raise DecodeError(DropReason.MALFORMED, f"tool payload has {len(body)} values")
@@ -282,7 +303,20 @@ def decode(payload: bytes, expected_kind: int) -> Message:
         raise DecodeError(DropReason.MALFORMED, f"clay_engagement {v[6]} outside 0..1")
     if v[7] < 0.0:
         raise DecodeError(DropReason.MALFORMED, f"removed_volume_m3 {v[7]} is negative")
+    if v[8] < 0.0:
+        raise DecodeError(DropReason.MALFORMED, f"energy_J {v[8]} is negative")
     return ToolState(
         epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3]), (v[4], v[5]),
-        v[6], v[7], echo,
+        v[6], v[7], echo, energy_J=v[8],
     )
+
+
+def control_mismatch(own_mode: str, message: Message) -> str | None:
+    """Why a peer's message shows it runs another control mode than ``own_mode`` ("paper"
+    or "tdpa"), or None: a tdpa side paired with a paper side would wait for energy that
+    never comes (and a paper side would ignore it), so the programs refuse the pairing."""
+    peer = "tdpa" if message.flags & Flags.TDPA else "paper"
+    if peer == own_mode:
+        return None
+    return (f"the peer runs [control] mode = \"{peer}\", this side \"{own_mode}\"; "
+            "set the same mode on both sides")

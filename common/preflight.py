@@ -31,6 +31,7 @@ from typing import Any, TextIO
 from haptic.common.analysis.report import AnalysisSettings, axis_loop
 from haptic.common.analysis.stability import delay_margin, is_stable
 from haptic.common.config import ConfigError, override
+from haptic.common.config.control_schema import drift_parameters
 from haptic.common.delay_profile import parse_delay_profile
 from haptic.common.model import model_from_config
 from haptic.common.synthesis import SynthesisError
@@ -155,6 +156,7 @@ def check_stability(config: dict[str, Any], round_trip_s: float,
         max_delay_s=section["max_delay_s"],
         max_gain_k=section["max_gain_k"],
         sample_period_s=model.sample_period_s if sampled else None,
+        drift=drift_parameters(config) if "control" in config else None,
     )
     k = model.ch1_gain_k
     axes = []
@@ -205,6 +207,10 @@ def run_preflight(config: dict[str, Any], args: argparse.Namespace, program: str
     result = check_stability(analysed, tau, bool(getattr(args, "sampled_analysis", False)))
     print(f"{program}: {result.describe()}{environment}", file=stream, flush=True)
     if result.stable:
+        return result, None
+    if config.get("control", {}).get("mode") == "tdpa":
+        print(f"{program}: [control] mode = \"tdpa\": the passivity layer keeps the loop "
+              "stable beyond this margin (docs/control.md)", file=stream, flush=True)
         return result, None
     if getattr(args, "allow_unstable", False):
         print(f"{program}: starting anyway (--allow-unstable)", file=stream, flush=True)

@@ -169,11 +169,15 @@ class ReceivePath:
 
     def rejects_at_once(self, payload: bytes) -> bool:
         """The flood filter, before anything costly (the arrival stamp, msgpack): a payload
-        that cannot be a message (every message is a msgpack fixarray of 6 to 15 items, at
-        most 1024 bytes) is counted (received, ``malformed``) and True is returned; False:
-        hand it to :meth:`accept`."""
-        if payload and 0x96 <= payload[0] <= 0x9F and len(payload) <= _MAX_PAYLOAD_BYTES:
-            return False
+        that cannot be a message (every message is a msgpack array of 6 to 31 items: a
+        fixarray up to 15, an array16 header ``dc 00 nn`` above; at most 1024 bytes) is
+        counted (received, ``malformed``) and True is returned; False: hand it to
+        :meth:`accept`."""
+        if payload and len(payload) <= _MAX_PAYLOAD_BYTES:
+            first = payload[0]
+            if 0x96 <= first <= 0x9F or (first == 0xDC and len(payload) > 3
+                                         and payload[1] == 0 and 16 <= payload[2] <= 31):
+                return False
         self._n.received += 1
         self._n.dropped[_MALFORMED] += 1
         return True

@@ -19,6 +19,7 @@ import numpy as np
 
 from haptic.common.cli_options import add_retired_delay_option
 from haptic.common.config import ConfigError, exit_on_config_error, load_config
+from haptic.common.config.control_schema import passivity_settings
 from haptic.common.config.scenario import load_scenario
 from haptic.common.delay_profile import DelayProfileError, parse_delay_profile
 from haptic.common.injection import InjectionConfig
@@ -77,6 +78,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the shipped limits: the master's [master.safety] and the programs' "
                      "supervision (watchdog [link.watchdog], the slave's work area and "
                      "[slave.safety]), or off (transparent)")
+    run.add_argument("--control", choices=("paper", "tdpa"), default=None,
+                     help="control scheme (default: the config's [control] mode)")
     run.add_argument("--out", type=Path, default=Path("haptic-sim-run"))
     run.add_argument("--json", action="store_true", help="print a JSON summary")
 
@@ -92,8 +95,14 @@ def build_parser() -> argparse.ArgumentParser:
                        help="round-trip delays, s: a,b,c or start:stop:step (default 0:0.02:0.001)")
     sweep.add_argument("--duration", type=float, default=None, metavar="SECONDS",
                        help="run length, s (default 3; clay: 2.25, the tool still in the block)")
-    sweep.add_argument("--jitter", type=float, default=0.0, metavar="SECONDS")
-    sweep.add_argument("--loss", type=float, default=0.0)
+    sweep.add_argument("--jitter", type=_floats, default=(0.0,), metavar="SECONDS",
+                       help="jitter bound on each line, s: one value or a list (a grid)")
+    sweep.add_argument("--loss", type=_floats, default=(0.0,),
+                       help="loss probability per message: one value or a list (a grid)")
+    sweep.add_argument("--bursty", action="store_true",
+                       help="lose messages in bursts (mean 10) at the same mean rate")
+    sweep.add_argument("--control", choices=("paper", "tdpa"), default="paper",
+                       help="the paper's scheme or the passivity layer (docs/control.md)")
     sweep.add_argument("--seed", type=int, default=0)
     sweep.add_argument("--out", type=Path, default=None, help="write sweep.csv and "
                        "sweep.png here")
@@ -127,8 +136,11 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
     safety = master_settings(config).safety if shipped else TRANSPARENT_SAFETY
     supervision = (LockstepSupervision.from_config(config, scenario) if shipped
                    else TRANSPARENT_SUPERVISION)
+    if args.control is not None:
+        config["control"]["mode"] = args.control
     simulator = LockstepSimulator(model, scenario, operator, np.array([gain]), environment,
-                                  safety, device="cpu", supervision=supervision)
+                                  safety, device="cpu", supervision=supervision,
+                                  passivity=passivity_settings(config))
     lines = []
     for flag, text in (("--delay-profile-to-slave", args.delay_profile_to_slave),
                        ("--delay-profile-to-master", args.delay_profile_to_master)):
@@ -166,6 +178,8 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
         "watchdog_trips": _watchdog_trips(simulator),
         **({} if governors is None else {**governors[0].summary(),
                                           "governor_events": result.governed.events}),
+        "control": config["control"]["mode"],
+        "final_position_gap_m": result.final_position_gap_m[0].tolist(),
     }
 
 
@@ -231,7 +245,7 @@ CLAY_SWEEP_DURATION_S = 2.25
 
 def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
     """Run the sweep, write its files, print its figures; 1 when --check fails."""
-    from haptic.lockstep.sweep import SweepSettings, plot_heatmap, run_sweep, write_csv
+    from haptic.lockstep.sweep import SweepSettings, plot_heatmap, run_sweep_grid, write_csv
 
     delays = args.delays or _floats("0:0.02:0.001")
     for value in delays:
@@ -242,21 +256,33 @@ def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
         args.duration = CLAY_SWEEP_DURATION_S if args.mode == "clay" else 3.0
     if not args.duration >= 1.0:
         raise ConfigError("--duration", "must be >= 1 s (the verdict compares windows)")
+    for value in args.jitter:
+        _check_seconds("--jitter", value)
+    if any(not 0.0 <= value < 1.0 for value in args.loss):
+        raise ConfigError("--loss", "every loss probability must be in [0, 1)")
     model = model_from_config(config)
     reference = 1.0 if args.mode == "clay" else 0.25
     settings = SweepSettings(gains_k=tuple(args.gains), delays_s=tuple(delays), mode=args.mode,
                              duration_s=args.duration, reference_start_s=reference,
-                             jitter_s=args.jitter, loss_probability=args.loss, seed=args.seed)
-    result = run_sweep(model, settings)
-    summary = result.summary()
+                             seed=args.seed, control=args.control, bursty=args.bursty)
+    summary, results = run_sweep_grid(model, settings, tuple(args.jitter), tuple(args.loss))
+    result = results[0]
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         write_csv(result, str(args.out / "sweep.csv"))
         plot_heatmap(result, str(args.out / "sweep.png"), model)
+    if args.out is not None:
+        (args.out / "per_cell.json").write_text(json.dumps(summary["per_cell"]))
     if args.json:
         print(json.dumps(summary))
     else:
-        print("\n".join(f"{key}: {value}" for key, value in summary.items()))
+        print("\n".join(f"{key}: {value}" for key, value in summary.items()
+                        if key != "per_cell"))
+    if args.check and args.control == "tdpa":
+        if summary["unbounded"] > 0:
+            print("sweep check failed: tdpa cells unbounded", file=sys.stderr)
+            return 1
+        return 0
     if args.check and summary["disagree_outside_band"] > 0:
         print("sweep check failed: cells disagree with the analysis outside the band",
               file=sys.stderr)

@@ -32,10 +32,12 @@ from typing import Any
 import numpy as np
 
 from haptic.common.config.scenario import Scenario
+from haptic.common.drift import DriftCoupling
 from haptic.common.injection import InjectionConfig
 from haptic.common.lti import DiscreteLTI
 from haptic.common.messages import Flags, HandleState, ToolState
 from haptic.common.model import TeleopModel
+from haptic.common.passivity import PassivitySettings
 from haptic.lockstep.delay_line import DelayLine, source_schedule
 from haptic.lockstep.governed import GovernedLanes
 from haptic.lockstep.stacked import StackedLTI
@@ -174,6 +176,10 @@ class LockstepResult:
     traces: dict[str, np.ndarray] = field(default_factory=dict)
     safety_events: int = 0
     governed: GovernedLanes | None = None
+    #: (lanes, 2): RMS of fh - ft/Ah2, N (what the operator feels against what the tool
+    #: applies, scaled), and yt - Ah1 yh at the last tick, m.
+    force_error_rms_N: np.ndarray | None = None
+    final_position_gap_m: np.ndarray | None = None
 
     @property
     def time_s(self) -> np.ndarray:
@@ -213,7 +219,9 @@ class LockstepSimulator:
                  gains_k: np.ndarray, environment: str = "linear",
                  safety: SafetySettings = TRANSPARENT_SAFETY, force_noise_std_N: float = 0.0,
                  clay_impl: str = "warp", device: str = "auto",
-                 supervision: LockstepSupervision = TRANSPARENT_SUPERVISION) -> None:
+                 supervision: LockstepSupervision = TRANSPARENT_SUPERVISION,
+                 passivity: PassivitySettings | None = None,
+                 drift: DriftCoupling | None = None) -> None:
         if environment not in ENVIRONMENTS:
             raise ValueError(f"environment must be one of {', '.join(ENVIRONMENTS)}")
         self.model = model
@@ -222,10 +230,12 @@ class LockstepSimulator:
         self.lanes = self.gains_k.size
         self.environment = environment
         master_block, slave_block = stacked_compensators(model, self.gains_k)
-        self.master = MasterNode(master_block, safety)
+        # passivity: None runs the paper's scheme, settings the TDPA layer (tdpa mode).
+        self.passivity = passivity
+        self.master = MasterNode(master_block, safety, passivity)
         self.rig = RigModel.from_model(model, operator, force_noise_std_N)
         base = "linear" if environment == "linear" else "clay"
-        self.slave = SlaveNode(model, scenario, base, clay_impl, device)
+        self.slave = SlaveNode(model, scenario, base, clay_impl, device, passivity, drift)
         # The node synthesizes its compensators for the model's k; lanes use their own k.
         self.slave.compensators = slave_block
         if environment == "clay+linear":
@@ -281,6 +291,7 @@ class LockstepSimulator:
         to_slave_d = delays // 2
         to_master_d = delays - to_slave_d
         governed = None if governors is None else GovernedLanes(governors, self.gains_k, steps)
+        tdpa = int(self.passivity is not None)  # the messages carry the cumulative input energy
         start = np.broadcast_to(np.asarray(self.scenario.tool.start_position_m, float),
                                 (lanes, 2))
         ratio = np.array([a.position_ratio_ah1 for a in self.model.axes])
@@ -288,17 +299,23 @@ class LockstepSimulator:
         enabled = float(Flags.FORCES_ENABLED)
         # the messages before tick 0 (the link runs in sync before the run): no force, the
         # handle and the tool at their start, forces enabled on both sides
-        # the handle's message: force, position, flags (and the governed k/k0)
-        handle_columns = 5 if governed is None else 6
+        # the handle's message: force, position, flags (then the governed k/k0 and the
+        # passivity layer's handed-over energy, J, where they apply); the tool's: force,
+        # position, velocity, flags (then the energy)
+        gain_column = 5 if governed is not None else None
+        handle_columns = 5 + (governed is not None) + tdpa
+        handle_energy_column = handle_columns - 1 if tdpa else None
         handle_line = DelayLine(source_schedule(steps, to_slave_d, 0, ts, to_slave,
                                                 line_rngs[0]), handle_columns,
                                 np.column_stack((np.zeros((lanes, 2)), handle_start,
                                                  np.full(lanes, enabled),
-                                                 np.ones((lanes, handle_columns - 5)))))
+                                                 np.ones((lanes, handle_columns - 5 - tdpa)),
+                                                 np.zeros((lanes, tdpa)))))
         tool_line = DelayLine(source_schedule(steps, to_master_d, 1, ts, to_master,
-                                              line_rngs[1]), 7,
+                                              line_rngs[1]), 7 + tdpa,
                               np.column_stack((np.zeros((lanes, 2)), start,
-                                               np.zeros((lanes, 2)), np.full(lanes, enabled))))
+                                               np.zeros((lanes, 2)), np.full(lanes, enabled),
+                                               np.zeros((lanes, tdpa)))))
         rig_state = self.rig.initial_state(handle_start, line_rngs[2])
         master_tick, slave_tick = self.ticks(handle_start, start)
         self.last_ticks = (master_tick, slave_tick)  # the run's ticks, for inspection
@@ -321,6 +338,8 @@ class LockstepSimulator:
         peak_fh = np.zeros((lanes, 2))
         peak_ft = np.zeros((lanes, 2))
         error_sumsq = np.zeros((lanes, 2))
+        force_error_sumsq = np.zeros((lanes, 2))
+        force_ratio = np.array([a.force_ratio_ah2 for a in self.model.axes])
         recorded = np.asarray([] if record_lanes is None else record_lanes, int)
         traces = {name: np.empty((steps, recorded.size, 2)) for name in TRACE_NAMES} \
             if recorded.size else {}
@@ -342,12 +361,16 @@ class LockstepSimulator:
                 if governed is not None:  # k on the master now, on the slave with the message
                     master_tick.state.gain_ratio[:] = governed.update(
                         k, ts, tool_line.schedule, handle_line.schedule)
-                    handle_message[:, 5] = master_tick.state.gain_ratio
+                    handle_message[:, gain_column] = master_tick.state.gain_ratio
+                if tdpa:  # the slave's handed-over energy, as the program's link gives it
+                    master_tick.state.peer_energy_J[:] = tool_rows[:, 7]
                 used = master_tick.control(fh, yh)
                 command = used.command_m.copy()
                 handle_message[:, 0:2] = used.handle_force_used_N
                 handle_message[:, 2:4] = yh
                 handle_message[:, 4] = [float(f) for f in used.flags]
+                if tdpa:
+                    handle_message[:, handle_energy_column] = master_tick.state.passivity.sent_J
                 handle_line.send(k, handle_message)
                 # slave: poll -> supervise -> node -> send
                 received = handle_line.receive(k)
@@ -355,13 +378,17 @@ class LockstepSimulator:
                 slave_tick.supervise(now_s, handle_arrivals.handle_states(k, received),
                                      silence_s=handle_arrivals.silence_s.tolist())
                 if governed is not None:
-                    slave_tick.state.gain_ratio = received[:, 5].copy()
+                    slave_tick.state.gain_ratio = received[:, gain_column].copy()
+                if tdpa:
+                    slave_tick.peer_energy_J = received[:, handle_energy_column]
                 ticked = slave_tick.control()
                 out = ticked.out
                 ft = out.tool_force_N
-                tool_line.send(k, np.column_stack((ft, out.tool_position_m,
-                                                   out.tool_velocity_m_s,
-                                                   [float(f) for f in ticked.flags])))
+                tool_message = [ft, out.tool_position_m, out.tool_velocity_m_s,
+                                np.array([float(f) for f in ticked.flags])[:, None]]
+                if tdpa:
+                    tool_message.append(slave_tick.state.passivity.sent_J[:, None])
+                tool_line.send(k, np.column_stack(tool_message))
 
                 w = k // window
                 np.maximum(stats.handle_force_max_N[w], fh, out=stats.handle_force_max_N[w])
@@ -377,12 +404,15 @@ class LockstepSimulator:
                 np.maximum(peak_ft, np.abs(ft), out=peak_ft)
                 error = yh - yt
                 error_sumsq += error * error
+                force_error = fh - ft / force_ratio
+                force_error_sumsq += force_error * force_error
                 if recorded.size:
                     values = (fh, yh, ft, out.tool_position_m, out.tool_velocity_m_s, ft_recv,
                               command, sample.operator_intent_force_N)
                     for name, value in zip(TRACE_NAMES, values, strict=True):
                         traces[name][k] = value[recorded]
         master_state = master_tick.state
+        self.final_states = (master_state, slave_tick.state)
         finite = np.isfinite(stats.handle_force_sumsq_N2).all(axis=(0, 2)) & np.isfinite(
             stats.tool_force_sumsq_N2).all(axis=(0, 2))
         return LockstepResult(
@@ -392,6 +422,9 @@ class LockstepSimulator:
             position_error_rms_m=np.sqrt(error_sumsq / max(steps, 1)),
             diverged=~finite | master_state.faulted, recorded_lanes=recorded, traces=traces,
             safety_events=len(master_tick.take_node_events()), governed=governed,
+            force_error_rms_N=np.sqrt(force_error_sumsq / max(steps, 1)),
+            final_position_gap_m=(slave_tick.state.tool[:, [0, 2]] - ratio * yh) if steps else
+            np.zeros((lanes, 2)),
         )
 
 

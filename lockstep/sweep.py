@@ -15,7 +15,8 @@ Modes:
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -25,6 +26,8 @@ from haptic.common.clay_contact import clay_impedance
 from haptic.common.config.scenario import load_scenario
 from haptic.common.injection import InjectionConfig
 from haptic.common.model import TeleopModel
+from haptic.common.passivity import MODES as CONTROL_MODES
+from haptic.common.passivity import PassivitySettings
 from haptic.common.synthesis import SynthesisError
 from haptic.lockstep.simulator import LockstepSimulator
 from haptic.lockstep.verdict import GROWTH_THRESHOLD, growth_verdict
@@ -45,6 +48,10 @@ CLAY_OPERATOR = "constant:fx=3.6,fy=0,onset=0,rise=1.0"
 CLAY_GROWTH_THRESHOLD = 0.5
 #: Clay damping of the constant-rate workpiece used for the linearisation Tt = B s, N s/m.
 CLAY_DAMPING_N_S_PER_M = 100.0
+#: A linear-mode cell is bounded when no force exceeds this times the test pulse's.
+BOUNDED_FORCE_FACTOR = 2.0
+#: Mean length of a burst of lost messages in a bursty sweep, messages.
+BURST_LENGTH_MESSAGES = 10.0
 #: A disagreeing cell within this relative distance of the analytic boundary (in delay or
 #: in gain) is inside the band.
 BAND = 0.10
@@ -63,6 +70,11 @@ class SweepSettings:
     jitter_s: float = 0.0
     loss_probability: float = 0.0
     seed: int = 0
+    #: "paper" (the paper's scheme) or "tdpa" (with the passivity layer, common/passivity.py).
+    control: str = "paper"
+    #: Loss in Gilbert-Elliott bursts of mean length BURST_LENGTH_MESSAGES at the same mean
+    #: rate ``loss_probability``, instead of independent losses.
+    bursty: bool = False
 
 
 @dataclass
@@ -83,6 +95,20 @@ class SweepResult:
     simulated_seconds: float
     wall_seconds: float
     extra: dict = field(default_factory=dict)
+    #: (gains, delays) max |fh| and |ft| over the axes and the run, N (None: not computed).
+    max_abs_force_N: np.ndarray | None = None
+
+    @property
+    def bounded(self) -> np.ndarray:
+        """Cells whose response stays bounded: finite, and in the linear mode no force above
+        BOUNDED_FORCE_FACTOR times the test pulse over the run (a passivity layer may leave
+        a small bounded chatter that the energy verdict, made for a decaying linear loop,
+        would call growing); in the clay mode, not growing by the energy verdict."""
+        peak = self.peak_force_N if self.max_abs_force_N is None else self.max_abs_force_N
+        finite = np.isfinite(peak)
+        if self.settings.mode != "linear":
+            return finite & ~self.growing
+        return finite & (peak <= BOUNDED_FORCE_FACTOR * PULSE_FORCE_N)
 
     @property
     def agree(self) -> np.ndarray:
@@ -93,9 +119,13 @@ class SweepResult:
         """The JSON figures of the sweep (cells, agreement, speed)."""
         agree = self.agree
         outside = ~agree & ~self.in_band
+        bounded = int(self.bounded.sum())
         return {
             "mode": self.settings.mode,
+            "control": self.settings.control,
             "cells": int(agree.size),
+            "bounded": bounded,
+            "unbounded": int(agree.size) - bounded,
             "agree": int(agree.sum()),
             "disagree": int((~agree).sum()),
             "disagree_outside_band": int(outside.sum()),
@@ -123,6 +153,51 @@ class SweepResult:
                     "energy_ratio": float(self.energy_ratio[i, j]),
                 })
         return rows
+
+
+def sweep_injection(settings: SweepSettings) -> InjectionConfig | None:
+    """The injection on both lines of a sweep: independent losses, or Gilbert-Elliott bursts
+    of mean length BURST_LENGTH_MESSAGES whose stationary loss rate is ``loss_probability``."""
+    loss = settings.loss_probability
+    if settings.jitter_s <= 0.0 and loss <= 0.0:
+        return None
+    if not settings.bursty or loss <= 0.0:
+        return InjectionConfig(jitter_s=settings.jitter_s, loss_probability=loss)
+    leave = 1.0 / BURST_LENGTH_MESSAGES
+    return InjectionConfig(jitter_s=settings.jitter_s, burst_exit_probability=leave,
+                           burst_enter_probability=min(1.0, loss * leave / (1.0 - loss)),
+                           burst_loss_probability=1.0)
+
+
+def per_cell(result: SweepResult, lockstep: Any) -> list[dict]:
+    """One dict per cell with the evidence figures of issue 16 (units in the names)."""
+    settings = result.settings
+    gains = np.asarray(settings.gains_k, float)
+    shape = (gains.size, result.delay_samples.size)
+    force_error = lockstep.force_error_rms_N.max(axis=1).reshape(shape)
+    gap = np.linalg.norm(lockstep.final_position_gap_m, axis=1).reshape(shape)
+    peak = result.max_abs_force_N
+    cells = []
+    for i, gain in enumerate(gains):
+        for j, samples in enumerate(result.delay_samples):
+            cells.append({
+                "control": settings.control,
+                "round_trip_s": round(float(samples) * result.sample_period_s, 9),
+                "jitter_s": settings.jitter_s, "loss": settings.loss_probability,
+                "bursty": settings.bursty, "k": float(gain),
+                "bounded": bool(result.bounded[i, j]),
+                "max_abs_force_N": _finite(peak[i, j]),
+                "rms_force_error_N": _finite(force_error[i, j]),
+                "rms_position_error_m": _finite(result.position_error_rms_m[i, j]),
+                "final_position_gap_m": _finite(gap[i, j]),
+            })
+    return cells
+
+
+def _finite(value: float) -> float | None:
+    """A JSON-safe number: None for inf/nan (a diverged lane)."""
+    value = float(value)
+    return value if np.isfinite(value) else None
 
 
 def sweep_model(model: TeleopModel, mode: str) -> TeleopModel:
@@ -184,13 +259,13 @@ def run_sweep(model: TeleopModel, settings: SweepSettings) -> SweepResult:
         excitation = None
     else:
         raise ValueError(f"mode must be one of {', '.join(MODES)}")
-    injection = None
-    if settings.jitter_s > 0.0 or settings.loss_probability > 0.0:
-        injection = InjectionConfig(jitter_s=settings.jitter_s,
-                                    loss_probability=settings.loss_probability)
+    if settings.control not in CONTROL_MODES:
+        raise ValueError(f"control must be one of {', '.join(CONTROL_MODES)}")
+    injection = sweep_injection(settings)
     started = time.perf_counter()
+    passivity = PassivitySettings() if settings.control == "tdpa" else None
     simulator = LockstepSimulator(model, scenario, operator, lane_gains, environment,
-                                  clay_impl="warp", device="cpu")
+                                  clay_impl="warp", device="cpu", passivity=passivity)
     result = simulator.run(settings.duration_s, lane_delays, to_slave=injection,
                            to_master=injection, seed=settings.seed, excitation_N=excitation,
                            window_s=settings.window_s)
@@ -213,7 +288,7 @@ def run_sweep(model: TeleopModel, settings: SweepSettings) -> SweepResult:
             other_side = (delay < low) != (delay < margins[i]) or (delay < high) != (
                 delay < margins[i])
             in_band[i, j] = _within(float(delay), margins[i]) or other_side
-    return SweepResult(
+    swept = SweepResult(
         settings=settings, sample_period_s=ts, delay_samples=delay_samples,
         growing=verdict.growing.reshape(shape), analytic_stable=analytic_stable,
         in_band=in_band, peak_force_N=result.peak_handle_force_N.max(axis=1).reshape(shape),
@@ -221,7 +296,30 @@ def run_sweep(model: TeleopModel, settings: SweepSettings) -> SweepResult:
         amplitude_ratio=verdict.amplitude_ratio.reshape(shape),
         energy_ratio=verdict.energy_ratio.reshape(shape), margin_s=margins,
         simulated_seconds=result.simulated_seconds, wall_seconds=wall,
+        max_abs_force_N=np.maximum(result.peak_handle_force_N.max(axis=1),
+                                   result.peak_tool_force_N.max(axis=1)).reshape(shape),
     )
+    swept.extra["per_cell"] = per_cell(swept, result)
+    return swept
+
+
+def run_sweep_grid(model: TeleopModel, settings: SweepSettings, jitters_s: tuple[float, ...],
+                   losses: tuple[float, ...]) -> tuple[dict, list[SweepResult]]:
+    """The sweep at every (jitter, loss) pair, one run each: the summary sums today's counts
+    over the runs and lists every cell in ``per_cell``."""
+    results = [run_sweep(model, replace(settings, jitter_s=float(jitter),
+                                        loss_probability=float(loss)))
+               for jitter in jitters_s for loss in losses]
+    summaries = [result.summary() for result in results]
+    summary = dict(summaries[0])
+    for key in ("cells", "bounded", "unbounded", "agree", "disagree", "disagree_outside_band",
+                "simulated_seconds", "wall_seconds"):
+        summary[key] = round(sum(item[key] for item in summaries), 3)
+    summary["sim_per_wall"] = round(summary["simulated_seconds"]
+                                    / max(summary["wall_seconds"], 1e-9), 1)
+    summary["bursty"] = settings.bursty
+    summary["per_cell"] = [cell for result in results for cell in result.extra["per_cell"]]
+    return summary, results
 
 
 def write_csv(result: SweepResult, path: str) -> None:

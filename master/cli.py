@@ -18,6 +18,7 @@ import zenoh
 
 from haptic.common.cli_options import add_run_options, run_options_from_args
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
+from haptic.common.config.control_schema import passivity_settings
 from haptic.common.failures import exit_on_link_error
 from haptic.common.model import model_from_config
 from haptic.common.preflight import add_preflight_options, run_preflight
@@ -97,7 +98,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_networked_options(args)
         settings = master_settings(options.config)
         model = model_from_config(options.config)
-        node = MasterNode.from_model(model, settings.safety)
+        node = MasterNode.from_model(model, settings.safety,
+                                     passivity_settings(options.config))
     with exit_on_config_error():
         clay = None
         if args.analysis_environment == "clay":
@@ -134,7 +136,7 @@ def _main_alone(args: argparse.Namespace) -> int:
             raise ConfigError("--duration", f"must be a finite number > 0 (got {duration})")
         settings = master_settings(config)
         model = model_from_config(config)
-        node = MasterNode.from_model(model, settings.safety)
+        node = MasterNode.from_model(model, settings.safety, passivity_settings(config))
         hardware = create_hardware(settings.rig, config)
     cycles = max(1, round(duration / model.sample_period_s))
     try:

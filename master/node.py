@@ -44,8 +44,10 @@ import numpy as np
 
 from haptic.common.lti import DiscreteLTI, Path, combine, discretize
 from haptic.common.model import TeleopModel
+from haptic.common.passivity import PassivityPort, PassivitySettings
 from haptic.common.synthesis import synthesize
 from haptic.master import node_kernels as kernels
+from haptic.master import passivity_kernel
 from haptic.master.settings import SafetySettings
 
 AXES = ("x", "y")
@@ -97,6 +99,13 @@ class MasterNodeState:
     _event_bits: np.ndarray | None = field(default=None, repr=False)
     _event_count: np.ndarray | None = field(default=None, repr=False)
     _buffers: tuple = field(default=(), repr=False)  # keeps the Warp arrays alive
+    #: The TDPA observer and controller of the handle's port (``tdpa`` mode), else None;
+    #: its arrays are views of the passivity kernel's buffers.
+    passivity: PassivityPort | None = None
+    #: (lanes,) the slave's cumulative handed-over energy received, J (NaN: none yet); the
+    #: passivity kernel takes it at every step (``tdpa`` mode).
+    peer_energy_J: np.ndarray | None = None
+    _passivity_kernel: Any = field(default=None, repr=False)
 
     @property
     def lanes(self) -> int:
@@ -130,7 +139,8 @@ class MasterNode:
     one per lane (a stacked block whose ``A`` is (lanes, n, n), as the sweep uses).
     """
 
-    def __init__(self, compensator: Any, safety: SafetySettings) -> None:
+    def __init__(self, compensator: Any, safety: SafetySettings,
+                 passivity: PassivitySettings | None = None) -> None:
         if tuple(compensator.input_names) != COMPENSATOR_INPUTS or (
             tuple(compensator.output_names) != COMPENSATOR_OUTPUTS
         ):
@@ -138,6 +148,8 @@ class MasterNode:
         self.compensator = compensator
         self.safety = safety
         self.period_s = compensator.period_s
+        #: ``None``: the paper's scheme; else the TDPA layer's settings (``tdpa`` mode).
+        self.passivity = passivity
         self._workspace_min = np.asarray(safety.workspace_min_m, float)
         self._workspace_max = np.asarray(safety.workspace_max_m, float)
         self._matrices: tuple | None = None
@@ -155,11 +167,14 @@ class MasterNode:
         # Load (or compile, about 2 s the first time) the kernel now, never inside a tick.
         self._kernel_constants()
         _warp().load_module(kernels, device=DEVICE)
+        if passivity is not None:
+            _warp().load_module(passivity_kernel, device=DEVICE)
 
     @classmethod
-    def from_model(cls, model: TeleopModel, safety: SafetySettings) -> MasterNode:
-        """The node for the configured model and safety limits."""
-        return cls(master_compensator(model), safety)
+    def from_model(cls, model: TeleopModel, safety: SafetySettings,
+                   passivity: PassivitySettings | None = None) -> MasterNode:
+        """The node for the configured model and safety limits (and TDPA layer)."""
+        return cls(master_compensator(model), safety, passivity)
 
     def _kernel_constants(self) -> tuple[tuple, Any]:
         """The compensator's matrices as (L, ., .) Warp arrays and the limits struct, built
@@ -253,6 +268,9 @@ class MasterNode:
             _event_bits=event_bits.numpy(), _event_count=event_count.numpy(),
             _buffers=buffers,
         )
+        if self.passivity is not None:
+            self._attach_passivity(state, safe, (inputs, faulted, command, last_command,
+                                                 origin))
         for lane in np.flatnonzero(faulted_at_start):
             self._trip(state, lane, "non-finite handle position at activation", None)
         return state
@@ -294,17 +312,21 @@ class MasterNode:
         handle_force_N: np.ndarray,
         handle_position_m: np.ndarray,
         tool_force_recv_N: np.ndarray,
+        peer_energy_J: np.ndarray | None = None,
     ) -> np.ndarray:
         """One period: returns the handle position command (lanes, 2), m, always finite.
 
         ``handle_force_N``: fh measured by the sensor (N); ``handle_position_m``: yh from
         the encoders (m); ``tool_force_recv_N``: the tool force received from the slave (N),
-        zero when there is none.
+        zero when there is none; ``peer_energy_J`` (lanes,): the slave's cumulative input
+        energy received (``tdpa`` mode; ignored otherwise).
         """
         inputs = state.inputs
         inputs[:, 0:2] = handle_force_N
         inputs[:, 2:4] = handle_position_m
         inputs[:, 4:6] = tool_force_recv_N
+        if peer_energy_J is not None and state.peer_energy_J is not None:
+            state.peer_energy_J[...] = peer_energy_J
         return self.step_inputs(state).copy()
 
     def step_inputs(self, state: MasterNodeState) -> np.ndarray:
@@ -312,10 +334,56 @@ class MasterNode:
         N, yh x y in m, ft x y in N); returns ``state.command_m`` (lanes, 2), m, a view the
         next step overwrites. The real-time tick writes its six numbers and calls this."""
         state._kernel.launch()
+        if state._passivity_kernel is not None:  # TDPA at the handle's port
+            state._passivity_kernel.launch()
         if state._event_count[0]:
             self._collect_events(state)
         state.step += 1
         return state.command_m
+
+    def _attach_passivity(self, state: MasterNodeState, position: np.ndarray,
+                          node_buffers: tuple) -> None:
+        """The TDPA port of ``state``: its arrays as views of Warp buffers, and the recorded
+        launch of :mod:`haptic.master.passivity_kernel` over them and the node's buffers."""
+        wp = _warp()
+        lanes = position.shape[0]
+        buffers: list = []
+        types = {np.float64: wp.float64, np.int64: wp.int64}
+
+        def zeros(shape: tuple, dtype: Any) -> np.ndarray:
+            array = wp.zeros(shape, dtype=types[dtype], device=DEVICE)
+            buffers.append(array)
+            return array.numpy()
+
+        settings = self.passivity
+        port = PassivityPort.create(settings, self.period_s, lanes, settings.master_keep_J,
+                                    zeros)
+        port.previous_position_m[...] = position
+        peer = wp.full(lanes, wp.float64(np.nan), dtype=wp.float64, device=DEVICE)
+        limits = passivity_kernel.PassivityLimits()
+        limits.period_s = self.period_s
+        limits.force_limit_N = self.safety.force_limit_N
+        limits.force_floor_N = settings.force_floor_N
+        limits.conductance_max_m_per_N_s = settings.conductance_max_m_per_N_s
+        limits.correction_speed_max_m_per_s = settings.correction_speed_max_m_per_s
+        limits.correction_accel_max_m_per_s2 = settings.correction_accel_max_m_per_s2
+        limits.credit_max_J = settings.credit_max_J
+        limits.keep_J = settings.master_keep_J
+        limits.workspace_min_x_m, limits.workspace_min_y_m = map(float, self._workspace_min)
+        limits.workspace_max_x_m, limits.workspace_max_y_m = map(float, self._workspace_max)
+        inputs, faulted, command, last_command, origin = node_buffers
+        # PassivityPort's field order: tank, sent, peer_sent, input, output, forgotten,
+        # dissipated, correction, (damper force), active steps, previous position.
+        tank, sent, peer_sent, energy_in, energy_out, forgotten, dissipated, correction = (
+            buffers[:8])
+        state.passivity = port
+        state.peer_energy_J = peer.numpy()
+        state._passivity_kernel = wp.launch(
+            passivity_kernel.master_passivity_kernel, dim=lanes, device=DEVICE,
+            inputs=[inputs, peer, faulted, command, last_command, origin, buffers[10], tank,
+                    sent, peer_sent, energy_in, energy_out, forgotten, dissipated, correction,
+                    buffers[9], limits], record_cmd=True)
+        state._buffers = (*state._buffers, *buffers, peer)
 
     def _collect_events(self, state: MasterNodeState) -> None:
         """Turn the kernel's event codes into :class:`SafetyEvent` in the safety layer's

@@ -39,6 +39,7 @@ from haptic.common.inert import InertMonitor
 from haptic.common.link import Link
 from haptic.common.messages import Flags
 from haptic.common.model import TeleopModel
+from haptic.common.passivity_link import PassivityLink
 from haptic.common.program_harness import ProgramHarness, recording_for
 from haptic.common.run_recording import RunRecording
 from haptic.common.runner import StopSignals
@@ -183,6 +184,7 @@ def _run_linked_master(
                 governor = loop_options.governor
                 governor_events = governor.events if governor is not None else []
                 nominal_k = model.ch1_gain_k
+                tdpa_peer = PassivityLink(node.passivity is not None)  # energy_J on the wire
 
                 def step(tick: int, now_ns: int) -> None:
                     nonlocal reading
@@ -194,6 +196,8 @@ def _run_linked_master(
                     read_ns = clock()
                     # poll: the newest tool message whose delivery time has come
                     message = link.poll()
+                    if message is not None:  # a peer in the other [control] mode: refused
+                        tdpa_peer.check(message)
                     poll_ns = clock()
                     # supervise: watchdog, resync check, fault latch (master/supervisor.py)
                     now_s = harness.time_s(now_ns)
@@ -220,6 +224,11 @@ def _run_linked_master(
                                 node.trip(tick_stages.state, [0], "governor: round trip beyond "
                                           "the delay margin of every k")
                     supervise_ns = clock()
+                    node_state = tick_stages.state
+                    if (node_state is not None and node_state.passivity is not None
+                            and tool is not None):  # the slave's handed-over energy
+                        node_state.peer_energy_J[0] = tdpa_peer.peer_energy(
+                            node_state.passivity, tool)
                     # node: vh = Ch1 fh - Ct1 ft behind the safety layer, or the safe state;
                     # the node reports what it used (the slave's Ch2 integrates exactly the
                     # handle force Ch1 used; the operator feels the tool force it used)
@@ -235,7 +244,8 @@ def _run_linked_master(
                     hardware.write(command)
                     write_ns = clock()
                     # send: the force the compensator used and the handle position
-                    link.send_handle(sent, (yhx, yhy), used.flags[0], gain_k)
+                    link.send_handle(sent, (yhx, yhy), used.flags[0] | tdpa_peer.flags, gain_k,
+                                     tdpa_peer.sent_J(tick_stages.state))
                     send_ns = clock()
                     # telemetry: summary figures, trace, recording, display
                     _flush_node_events(loop, tick_stages)

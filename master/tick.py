@@ -119,8 +119,12 @@ class MasterTick:
         if self.state is None or activate.all() or resume.all():
             self._keep_events()
             every_lane_resumes = bool(resume.all())
+            previous = self.state
             self.state = (node.resume(position_m) if every_lane_resumes
                           else node.activate(position_m))
+            if previous is not None and previous.passivity is not None:
+                # the passivity layer's energies are monotone over the whole run
+                self.state.passivity.continue_from(previous.passivity)
             self.node_offset_s = now_s
             if every_lane_resumes or not resume.any():
                 return

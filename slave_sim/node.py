@@ -21,8 +21,10 @@ from typing import Any
 import numpy as np
 
 from haptic.common.config.scenario import Scenario, load_scenario
+from haptic.common.drift import DriftCoupling
 from haptic.common.lti import DiscreteLTI, Path, combine, discretize
 from haptic.common.model import TeleopModel, model_from_config
+from haptic.common.passivity import PassivityPort, PassivitySettings
 from haptic.common.synthesis import synthesize
 from haptic.slave_sim.environment import make_environment
 from haptic.slave_sim.tool import POSITION_COLUMNS, VELOCITY_COLUMNS, tool_constants, tool_plant
@@ -67,6 +69,10 @@ class SlaveState:
     gain_ratio: np.ndarray | None = None
     """(lanes,) k/k0 the compensators' inputs are scaled by: the master's governed gain k
     (HandleState.gain_k) over this node's; None: 1 (common/margin_table.py)."""
+    #: The TDPA observer and controller of the tool's port (``tdpa`` mode), else None.
+    passivity: PassivityPort | None = None
+    #: The paper mode's drift coupling filter (common/drift.py), else None.
+    drift: np.ndarray | None = None
 
     @property
     def lanes(self) -> int:
@@ -112,8 +118,14 @@ class SlaveNode:
     """
 
     def __init__(self, model: TeleopModel, scenario: Scenario, environment: str | None = None,
-                 clay_impl: str = "warp", device: str = "auto") -> None:
+                 clay_impl: str = "warp", device: str = "auto",
+                 passivity: PassivitySettings | None = None,
+                 drift: DriftCoupling | None = None) -> None:
         self.model = model
+        #: The paper mode's drift coupling (common/drift.py); None: off.
+        self.drift = drift
+        #: ``None``: the paper's scheme; else the TDPA layer's settings (``tdpa`` mode).
+        self.passivity = passivity
         self.scenario = scenario
         self.sample_period_s = model.sample_period_s
         self.compensators = slave_compensators(model)
@@ -131,12 +143,15 @@ class SlaveNode:
 
     @classmethod
     def from_config(cls, config: dict[str, Any], scenario: Scenario | None = None) -> SlaveNode:
-        """The node of a validated configuration (``[model]`` and ``[slave]``)."""
+        """The node of a validated configuration (``[model]``, ``[slave]``, ``[control]``)."""
         section = config["slave"]
         scenario = scenario or load_scenario(section["scenario"])
         environment = None if section["environment"] == "scenario" else section["environment"]
-        return cls(model_from_config(config), scenario, environment, section["clay_impl"],
-                   section["device"])
+        from haptic.common.config.control_schema import drift_coupling, passivity_settings
+
+        model = model_from_config(config)
+        return cls(model, scenario, environment, section["clay_impl"], section["device"],
+                   passivity_settings(config), drift_coupling(config, model.sample_period_s))
 
     def initial_state(self, lanes: int = 1, start_position_m: np.ndarray | None = None
                       ) -> SlaveState:
@@ -155,15 +170,28 @@ class SlaveNode:
             handle_position_m=start / self._position_ratio,
             halted=np.zeros(lanes, bool),
             environment=self.environment.initial_state(lanes),
+            passivity=None if self.passivity is None else PassivityPort.create(
+                self.passivity, self.sample_period_s, lanes, self.passivity.slave_keep_J),
+            drift=None if self.drift is None else self.drift.initial_state(lanes),
         )
 
     def step(self, state: SlaveState, handle_force_N: np.ndarray,
-             handle_position_m: np.ndarray) -> SlaveOutputs:
-        """Advance every lane by one period Ts; inputs (lanes, 2) in N and m."""
+             handle_position_m: np.ndarray, peer_energy_J: np.ndarray | None = None
+             ) -> SlaveOutputs:
+        """Advance every lane by one period Ts; inputs (lanes, 2) in N and m;
+        ``peer_energy_J`` (lanes,): the master's cumulative input energy received (``tdpa``
+        mode; ignored otherwise)."""
         inputs = np.concatenate((handle_force_N, state.tool_force_N), axis=1)
         if state.gain_ratio is not None:
             inputs *= state.gain_ratio[:, None]
         actuator = self.compensators.step(state.compensator, inputs)
+        port = state.passivity
+        if state.drift is not None:  # paper mode's slow coupling of Ah1 yh_recv - yt
+            actuator += self.drift.force(state.drift, self._position_ratio * np.asarray(
+                handle_position_m) - state.tool[:, POSITION_COLUMNS])
+        if port is not None:
+            actuator = self._passivity_force(state, port, actuator, handle_position_m,
+                                             peer_energy_J)
         halted = state.halted.any()
         if halted:
             actuator[state.halted] = 0.0
@@ -185,6 +213,8 @@ class SlaveNode:
             force[state.halted] = 0.0
         state.tool_force_N = force
         state.actuator_force_N = actuator
+        if port is not None:  # the work the environment did on the tool, into the network
+            port.observe(-np.einsum("ij,ij->i", force, position - previous))
         state.handle_position_m = handle_position_m
         state.step_count += 1
         return SlaveOutputs(
@@ -198,12 +228,27 @@ class SlaveNode:
             tracking_error_m=position - self._position_ratio * handle_position_m,
         )
 
+    def _passivity_force(self, state: SlaveState, port: PassivityPort, actuator: np.ndarray,
+                         handle_position_m: np.ndarray, peer_energy_J: np.ndarray | None
+                         ) -> np.ndarray:
+        """TDPA at the tool's port (common/passivity.py): the drift correction towards
+        ``Ah1 yh`` where it adds no energy, then the adaptive damper on the tool."""
+        if peer_energy_J is not None:
+            port.receive(peer_energy_J)
+        velocity = state.tool[:, VELOCITY_COLUMNS]
+        gap = self._position_ratio * np.asarray(handle_position_m) - state.tool[
+            :, POSITION_COLUMNS]
+        force = state.tool_force_N
+        return port.damp(actuator + port.drift_force(gap, velocity, force), velocity, force)
+
     def safe_stop(self, state: SlaveState, lanes: np.ndarray | slice | None = None) -> None:
         """Put ``lanes`` (default: all) in the safe state: the tool stops where it is (zero
         velocity), the actuator force and the force sent back are zero, and the compensator
         states are cleared. Halted lanes stay put and send zero force until :meth:`resume`."""
         index = slice(None) if lanes is None else lanes
         state.halted[index] = True
+        if state.drift is not None:
+            state.drift[index] = 0.0
         state.tool[index, 1] = 0.0
         state.tool[index, 3] = 0.0
         state.compensator[index] = 0.0

@@ -39,6 +39,7 @@ from haptic.common.inert import InertMonitor
 from haptic.common.link import Link
 from haptic.common.margin_table import gain_scalable
 from haptic.common.messages import Flags
+from haptic.common.passivity_link import PassivityLink
 from haptic.common.phase_lock import PhaseLock, PhaseLockSettings
 from haptic.common.program_harness import ProgramHarness, recording_for
 from haptic.common.run_recording import RunRecording
@@ -209,11 +210,14 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         # the master's governed k (never above ours) and the echo of its send time
         tick_stages.follow_gain(node.model.ch1_gain_k, gain_scalable(node.model))
         echo = tick_stages.echo_send_time_ns
+        tdpa_peer = PassivityLink(node.passivity is not None)  # energy_J on the wire
 
         def step(tick: int, now_ns: int) -> None:
             now_s = harness.time_s(now_ns)
             # poll: the newest handle message whose delivery time has come
             message = link.poll()
+            if message is not None:  # a peer in the other [control] mode: refused
+                tdpa_peer.check(message)
             poll_ns = clock()
             # supervise: input bounds (slave_sim/input_guard.py), watchdog, resync, work-area
             # guard (slave_sim/supervisor.py), all in slave_sim/tick.py; then the phase lock
@@ -225,6 +229,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                         link.receive.last_delivery_ns, link.last_poll_ns))
                 else:
                     phase_lock.skip_unmeasured()
+            if fresh and state.passivity is not None:  # the master's handed-over energy
+                tdpa_peer.receive(state.passivity, message)
             running = supervisor.running
             inert.update(now_s, link.peer_alive and link.silence_s() < max_age_s, running,
                          supervisor.stop_reason())
@@ -244,7 +250,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             # send: the tool force, position and velocity, the clay's status
             link.send_tool((float(ft[0]), float(ft[1])), (float(position[0]), float(position[1])),
                            (float(velocity[0]), float(velocity[1])), engagement, removed,
-                           ticked.flags[0], echo[0])
+                           ticked.flags[0] | tdpa_peer.flags, echo[0],
+                           tdpa_peer.sent_J(state))
             send_ns = clock()
             # telemetry: summary figures, trace, recording, display
             magnitude = math.hypot(ft[0], ft[1])

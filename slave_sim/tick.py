@@ -77,6 +77,9 @@ class SlaveTick:
         #: per lane, the send time of the newest admitted handle message (ns, 0: none yet),
         #: echoed to the master for its round-trip estimate (master/margin_governor.py)
         self.echo_send_time_ns = [0] * lanes
+        #: (lanes,) the master's cumulative handed-over energy, J, as last received (the
+        #: passivity layer, ``tdpa`` mode; None otherwise)
+        self.peer_energy_J: np.ndarray | None = None
         self._gain: tuple[float, bool] | None = None
 
     def follow_gain(self, nominal_k: float, scalable: bool) -> None:
@@ -160,7 +163,7 @@ class SlaveTick:
             force = self._zero_force
         else:
             force = np.where(running[:, None], self.handle_force_N, 0.0)
-        out = self.node.step(self.state, force, self.handle_position_m)
+        out = self.node.step(self.state, force, self.handle_position_m, self.peer_energy_J)
         cutting = out.cutting
         table = _FLAGS
         flags = [table[supervisor.ready, bool(cut)]

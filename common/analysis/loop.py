@@ -76,8 +76,13 @@ class AxisLoop:
         axis: AxisModel,
         compensators: AxisCompensators,
         sample_period_s: float | None = None,
+        drift: tuple[float, float] | None = None,
     ) -> None:
+        """``drift``: the paper mode's drift coupling (kp N/m, wc rad/s) at the slave,
+        ``vt += kp wc/(s + wc) (Ah1 yh_recv - yt)`` (common/drift.py); None: the paper's
+        loop exactly."""
         self.axis = axis
+        self.drift = drift
         self.compensators = compensators
         self.sample_period_s = sample_period_s
         ph = handle_with_operator(axis)
@@ -102,6 +107,21 @@ class AxisLoop:
                    for name, system in (("ch1", comps.ch1), ("ct1", comps.ct1),
                                         ("ch2", comps.ch2), ("ct2", comps.ct2))},
             }
+        if drift is not None:
+            # The coupling's parts: Cp, the tool seen by its force Gt' = Gt/(1 - Tt St) and
+            # the handle seen by its command Gh' = Gh/(1 + Th Sh) (docs/control.md).
+            kp, wc = drift
+            th = _polynomial_tf(axis.operator_impedance_th_N_per_m)
+            tt = tf(axis.environment_impedance_tt_N_per_m, axis.environment_impedance_den)
+            gt = axis.tool_actuator_gt / (1 - tt * axis.tool_compliance_st)
+            gh = axis.handle_actuator_gh / (1 + th * axis.handle_compliance_sh)
+            extra = {"cp": tf([kp * wc], [1.0, wc]), "gt_": minimal_tf(gt),
+                     "gh_": minimal_tf(gh)}
+            if sample_period_s is not None:
+                extra = {"cp": control.sample_system(extra["cp"], sample_period_s, "tustin"),
+                         "gt_": control.sample_system(extra["gt_"], sample_period_s, "zoh"),
+                         "gh_": control.sample_system(extra["gh_"], sample_period_s, "zoh")}
+            self._parts.update(extra)
 
     @property
     def sampled(self) -> bool:
@@ -127,6 +147,10 @@ class AxisLoop:
             pt = pt - self._pt_feedthrough + self._pt_feedthrough / point
         a = (1.0 + ph * value["ch1"]) * (1.0 - pt * value["ct2"])
         b = ph * value["ct1"] * pt * value["ch2"]
+        if self.drift is not None:  # the slow coupling of Ah1 yh_recv - yt at the slave
+            gh = value["gh_"] if self.sample_period_s is None else value["gh_"] / point
+            a = a + (1.0 + ph * value["ch1"]) * value["gt_"] * value["cp"]
+            b = b + gh * value["ct1"] * pt * value["cp"] * self.axis.position_ratio_ah1
         return LoopTerms(a=a, b=b, s=s)
 
     def terms(self, omega_rad_s: np.ndarray, shift_1_per_s: float = 0.0) -> LoopTerms:

@@ -36,6 +36,9 @@ class AnalysisSettings:
     max_delay_s: float = 1.0
     max_gain_k: float = 200.0
     sample_period_s: float | None = None  # None: continuous model; else sampled at this Ts
+    #: The paper mode's drift coupling (kp N/m, wc rad/s) in the loop (common/drift.py);
+    #: None: the paper's loop exactly.
+    drift: tuple[float, float] | None = None
 
     @property
     def grid(self) -> FrequencyGrid:
@@ -91,7 +94,8 @@ def axis_loop(
 ) -> AxisLoop:
     """The loop of ``axis`` with the compensators synthesized for gain ``k``."""
     gained = model.with_gain(k)
-    return AxisLoop(axis, synthesize_axis(axis, gained.ch1), settings.sample_period_s)
+    return AxisLoop(axis, synthesize_axis(axis, gained.ch1), settings.sample_period_s,
+                    settings.drift)
 
 
 def _stable_at(model: TeleopModel, axis: AxisModel, k: float, delay_s: float,

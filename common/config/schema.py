@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from haptic.common.config.control_schema import CONTROL_SCHEMA
 from haptic.common.config.governor_schema import GOVERNOR_SCHEMA
 from haptic.common.config.loader import Field, Schema
 from haptic.common.config.lockstep_schema import LOCKSTEP_SCHEMA
@@ -144,4 +145,5 @@ SCHEMA: Schema = {
     "runner": RUNNER_SCHEMA,
     "supervision": SUPERVISION_SCHEMA,
     "governor": GOVERNOR_SCHEMA,
+    "control": CONTROL_SCHEMA,
 }

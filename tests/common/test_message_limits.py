@@ -25,13 +25,14 @@ MAX_U32 = 2**32 - 1
 MAX_U63 = 2**63 - 1
 
 
-def _handle(epoch=1, seq=2, send=3, flags=2, floats=(0.5, -0.5, 0.01, 0.02, 13.0)) -> bytes:
+def _handle(epoch=1, seq=2, send=3, flags=2,
+            floats=(0.5, -0.5, 0.01, 0.02, 13.0, 0.0)) -> bytes:
     return msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, epoch, seq, send, flags, *floats])
 
 
 def _tool(engagement=0.5, volume=1e-9, flags=2, echo=0) -> bytes:
     return msgpack.packb([SCHEMA_VERSION, KIND_TOOL, 1, 2, 3, flags,
-                          1.0, 2.0, 0.1, 0.2, 0.0, 0.0, engagement, volume, echo])
+                          1.0, 2.0, 0.1, 0.2, 0.0, 0.0, engagement, volume, 0.0, echo])
 
 
 def _refused(payload: bytes, kind: int = KIND_HANDLE) -> DecodeError:
@@ -41,9 +42,10 @@ def _refused(payload: bytes, kind: int = KIND_HANDLE) -> DecodeError:
 
 
 def test_wire_values_of_the_kinds_and_flags() -> None:
-    assert (SCHEMA_VERSION, KIND_HANDLE, KIND_TOOL) == (3, 1, 2)  # 3: gain k and echo (#16)
-    assert (int(Flags.SAFE_STATE), int(Flags.FORCES_ENABLED), int(Flags.IN_CONTACT)) == (
-        1, 2, 4)
+    # 3: gain k and echo, 4: energy fields (#16)
+    assert (SCHEMA_VERSION, KIND_HANDLE, KIND_TOOL) == (4, 1, 2)
+    assert (int(Flags.SAFE_STATE), int(Flags.FORCES_ENABLED), int(Flags.IN_CONTACT),
+            int(Flags.TDPA)) == (1, 2, 4, 8)
     wire = msgpack.unpackb(encode(ToolState(0, 0, 0, Flags.IN_CONTACT | Flags.SAFE_STATE,
                                             (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)))
     assert wire[1] == 2 and wire[5] == 5

@@ -52,16 +52,25 @@ def test_tool_state_round_trip(seq, force, position, velocity, engagement, volum
 def test_wire_layout_is_a_compact_array():
     message = HandleState(5, 9, 1000, Flags.FORCES_ENABLED, (1.0, 2.0), (0.1, 0.2), 13.0)
     assert msgpack.unpackb(encode(message)) == [
-        SCHEMA_VERSION, KIND_HANDLE, 5, 9, 1000, 2, 1.0, 2.0, 0.1, 0.2, 13.0
+        SCHEMA_VERSION, KIND_HANDLE, 5, 9, 1000, 2, 1.0, 2.0, 0.1, 0.2, 13.0, 0.0
     ]
     tool = ToolState(5, 9, 1000, Flags(0), (1.0, 2.0), (0.1, 0.2), (0.0, 0.0), 0.5, 0.0, 777)
     assert msgpack.unpackb(encode(tool))[-1] == 777  # the echoed send time, last
 
 
 def test_gain_and_echo_are_validated():
-    handle = msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, 1, 2, 3, 0, 0.0, 0.0, 0.0, 0.0, -1.0])
+    handle = msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, 1, 2, 3, 0, 0.0, 0.0, 0.0, 0.0, -1.0,
+                            0.0])
     with pytest.raises(DecodeError, match="gain_k"):
         decode(handle, KIND_HANDLE)
+    handle = msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, 1, 2, 3, 0, 0.0, 0.0, 0.0, 0.0, 1.0,
+                            -1e-9])
+    with pytest.raises(DecodeError, match="energy_J"):
+        decode(handle, KIND_HANDLE)
+    fields = _valid_tool_fields()
+    fields[-2] = -1e-9
+    with pytest.raises(DecodeError, match="energy_J"):
+        decode(msgpack.packb(fields), KIND_TOOL)
     fields = _valid_tool_fields()
     fields[-1] = -5
     with pytest.raises(DecodeError, match="echo_send_time_ns"):
@@ -77,7 +86,8 @@ def test_encode_refuses_non_finite():
 
 
 def _valid_tool_fields() -> list:
-    return [SCHEMA_VERSION, KIND_TOOL, 1, 2, 3, 0, 1.0, 2.0, 0.1, 0.2, 0.0, 0.0, 0.5, 1e-6, 0]
+    return [SCHEMA_VERSION, KIND_TOOL, 1, 2, 3, 0, 1.0, 2.0, 0.1, 0.2, 0.0, 0.0, 0.5, 1e-6,
+            0.25, 0]
 
 
 @pytest.mark.parametrize(
@@ -93,6 +103,8 @@ def _valid_tool_fields() -> list:
         (lambda f: f.__setitem__(8, math.nan), DropReason.NON_FINITE),
         (lambda f: f.__setitem__(9, "x"), DropReason.MALFORMED),
         (lambda f: f.__setitem__(12, 1.5), DropReason.MALFORMED),
+        (lambda f: f.__setitem__(14, -1.0), DropReason.MALFORMED),  # energy is cumulative
+        (lambda f: f.pop(), DropReason.MALFORMED),  # a version-2 tool payload
         (lambda f: f.__setitem__(13, -1.0), DropReason.MALFORMED),
         (lambda f: f.pop(), DropReason.MALFORMED),
         (lambda f: f.append(0.0), DropReason.MALFORMED),
@@ -140,3 +152,17 @@ def test_decode_of_random_msgpack_structures_raises_only_decode_error(value):
         decode(payload, KIND_TOOL)
     except DecodeError:
         pass
+
+
+def test_energy_travels_and_a_control_mismatch_is_named() -> None:
+    from haptic.common.messages import control_mismatch
+
+    message = HandleState(1, 2, 3, Flags.TDPA | Flags.FORCES_ENABLED, (1.0, 2.0), (0.1, 0.2),
+                          energy_J=0.125)
+    decoded = decode(encode(message), KIND_HANDLE)
+    assert decoded.energy_J == 0.125
+    assert control_mismatch("tdpa", decoded) is None
+    assert 'mode = "tdpa"' in control_mismatch("paper", decoded)
+    paper = ToolState(1, 2, 3, Flags(0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)
+    assert control_mismatch("paper", paper) is None
+    assert 'mode = "paper"' in control_mismatch("tdpa", paper)

@@ -24,7 +24,7 @@ from haptic.common.config import ConfigError, load_config, override
 from haptic.common.failures import LinkOpenError
 from haptic.common.link import Link
 from haptic.common.link_config import LinkConfig, link_config_from
-from haptic.common.messages import KIND_TOOL, ToolState
+from haptic.common.messages import KIND_TOOL, SCHEMA_VERSION, ToolState
 from tests.wire.attacks import forged_payload
 
 WAIT_S = 15.0
@@ -215,9 +215,12 @@ def test_another_schema_version_is_refused_at_start() -> None:
     with Link(master_config) as master, _raw_session(endpoint) as old:
         token = old.liveliness().declare_token(master_config.liveliness_key("slave"))
         publisher = old.declare_publisher(master_config.key("pair/slave"))
-        hello = msgpack.packb([1, KIND_HELLO, 2, 5, bytes(16), time.time_ns(), False])
+        old_version = SCHEMA_VERSION - 1  # e.g. a peer from before the energy fields (#16)
+        hello = msgpack.packb([old_version, KIND_HELLO, 2, 5, bytes(16), time.time_ns(),
+                               False])
         deadline = time.monotonic() + WAIT_S
-        with pytest.raises(LinkOpenError, match="schema version 1, this program 3"):
+        with pytest.raises(LinkOpenError, match=f"schema version {old_version}, this program "
+                           f"{SCHEMA_VERSION}"):
             while time.monotonic() < deadline:
                 publisher.put(hello)
                 master.wait_for_peer(0.05)
