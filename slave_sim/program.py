@@ -339,3 +339,9 @@ def _removed_total_m3(state: Any) -> float:
     total = getattr(state.environment, "removed_total_m3", None)
     return 0.0 if total is None else float(total[0])
 
+
+
+if __name__ == "__main__":  # the entry point moved to slave_sim/cli.py; old launchers still work
+    from haptic.slave_sim.cli import main
+
+    raise SystemExit(main())

@@ -40,7 +40,7 @@ def _run_pair(tmp_path: Path, master_mode: str, slave_mode: str, duration_s: flo
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     prefix = f"test/{uuid.uuid4().hex[:8]}"
     common = ["--key-prefix", prefix, "--no-status", "--peer-wait", "30", *injection]
-    slave_args = [sys.executable, "-m", "haptic.slave_sim.program", "--config",
+    slave_args = [sys.executable, "-m", "haptic.slave_sim.cli", "--config",
                   str(_config(tmp_path, slave_mode)), *common, "--connect", endpoint,
                   "--json-summary", str(tmp_path / "slave.json"), "--out",
                   str(tmp_path / "slave_out"), "--duration", str(duration_s + 1.0)]
@@ -96,7 +96,7 @@ def test_a_pair_in_different_control_modes_is_refused(tmp_path) -> None:
     prefix = f"test/{uuid.uuid4().hex[:8]}"
     common = ["--key-prefix", prefix, "--no-status", "--peer-wait", "30"]
     processes = [
-        subprocess.Popen([sys.executable, "-m", "haptic.slave_sim.program", "--config",
+        subprocess.Popen([sys.executable, "-m", "haptic.slave_sim.cli", "--config",
                           str(_config(tmp_path, "paper")), *common, "--connect", endpoint,
                           "--duration", "20"], stdout=subprocess.PIPE,
                          stderr=subprocess.STDOUT, text=True),
