@@ -117,7 +117,8 @@ PRAGMA = "# pragma: no mutate"
 #: this table (``--equivalents``).
 _REPR = "repr of a private field only: no behaviour reads a repr"
 _CUDA = ("CUDA-only path (the pinned staging buffers and their copies): not run on the CPU "
-         "device, where the step uses zero-copy views")
+         "device, where the step uses zero-copy views; on a GPU machine "
+         "test_clay_limits.py::test_cuda_device_matches_numpy runs it")
 EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
     ("slave_sim/input_guard.py", "_plausible_run: int = 0", "_plausible_run: int = 1",
      "read only after a fault, and every fault sets it to 0 first"),
