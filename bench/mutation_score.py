@@ -84,8 +84,10 @@ MODULES: dict[str, Target] = {
     "common/auth.py": Target(("tests/wire/test_auth_units.py", "tests/wire/test_auth.py")),
     "common/clay_contact.py": Target(("tests/slave_sim/test_clay.py",
                                       "tests/lockstep/test_clay_analysis.py")),
-    "slave_sim/clay.py": Target(("tests/slave_sim/test_clay.py",)),
-    "slave_sim/clay_kernels.py": Target(("tests/slave_sim/test_clay.py",), every=3),
+    "slave_sim/clay.py": Target(("tests/slave_sim/test_clay_limits.py",
+                                 "tests/slave_sim/test_clay.py")),
+    "slave_sim/clay_kernels.py": Target(("tests/slave_sim/test_clay_limits.py",
+                                         "tests/slave_sim/test_clay.py"), every=3),
 }
 
 _BINARY = (("Add", "Sub"), ("Sub", "Add"), ("Mul", "Div"), ("Div", "Mul"), ("FloorDiv", "Div"),
@@ -114,6 +116,9 @@ PRAGMA = "# pragma: no mutate"
 #: after, why), the lines stripped. They are not run and not counted; docs/testing.md shows
 #: this table (``--equivalents``).
 _REPR = "repr of a private field only: no behaviour reads a repr"
+_CUDA = ("CUDA-only path (the pinned staging buffers and their copies): not run on the CPU "
+         "device, where the step uses zero-copy views; on a GPU machine "
+         "test_clay_limits.py::test_cuda_device_matches_numpy runs it")
 EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
     ("slave_sim/input_guard.py", "_plausible_run: int = 0", "_plausible_run: int = 1",
      "read only after a fault, and every fault sets it to 0 first"),
@@ -208,6 +213,31 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
      "fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=True)",
      "fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=False)",
      "no valid message holds a map: whatever its keys, it is refused"),
+    ("slave_sim/clay.py", "@dataclass(eq=False)", "@dataclass(eq=True)",
+     "nothing compares or hashes clay states (identity is what the callers keep)"),
+    ("slave_sim/clay.py",
+     "contact_ready: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))",
+     "contact_ready: np.ndarray = field(default_factory=lambda: np.zeros( 1, bool))",
+     "every ClayState is made by _ClayBase._new_state, which sets contact_ready to "
+     "zeros(lanes): the default is never used"),
+    ("slave_sim/clay.py", "state.direction = np.zeros((lanes, 2))",
+     "state.direction = np.zeros((lanes, 3))",
+     "a third column nobody writes or reads: proxy_numpy and yield_numpy use columns 0 and 1"),
+    *(("slave_sim/clay.py", before, after, _CUDA) for before, after in (
+        ('runtime["pinned"] = {name: wp.zeros((lanes, 2), dtype=wp.float64, device="cpu",',
+         'runtime["pinned"] = {name: wp.zeros((lanes, 3), dtype=wp.float64, device="cpu",'),
+        ('runtime["pinned"] = {name: wp.zeros((lanes, 2), dtype=wp.float64, device="cpu",\n'
+         "pinned=True)", "pinned=False)"),
+        ("for name in self._INPUTS + self._OUTPUTS}", "for name in self._INPUTS - self._OUTPUTS}"),
+        ("for name in self._INPUTS:", "for name in []:"),
+        ('wp.copy(rt["arrays"][name], rt["pinned"][name])\nfor launch in rt["launches"]:',
+         "for launch in []:"),
+        ("for name in self._OUTPUTS:", "for name in []:"))),
+    ("slave_sim/clay_kernels.py", "u = wp.clamp(t, wp.float64(0.0), wp.float64(1.0))",
+     "u = wp.clamp(t, wp.float64(0.0), wp.float64( 2.0))",
+     "the cut only reaches cells with distance < outer_radius = inner_radius + edge_width, "
+     "where t = (distance - inner_radius) / edge_width < 1 (or an ulp above, where the "
+     "smoothstep is 1 to double precision either way): the upper clamp never acts"),
 )
 #: pytest plugins a mutant run does without (unraisableexception's gc.collect() alone costs
 #: 0.8 s per run over the preloaded libraries).

@@ -1,0 +1,338 @@
+"""The clay law pinned at its limits: geometry constants, engagement cap and threshold, the
+removal-weighted damping, state resets and validations, the footprint window at the grid's
+edge. Small grids on the CPU device: fast (the mutation score runs this file first)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from haptic.common.config.scenario import load_scenario
+from haptic.slave_sim.clay import (
+    MIN_DISPLACEMENT_M,
+    NumpyClay,
+    WarpClay,
+    geometry_for,
+    make_clay,
+    resolve_device,
+)
+
+SAMPLE_PERIOD_S = 0.00054
+#: A deep block at the grid's low x edge (5 mm above the tool's bottom, d_ref = 3 mm), air,
+#: then two shallow blocks (1.5 mm) of different damping meeting at y = 0. 0.25 mm cells.
+LIMITS_SCENARIO = """
+[scenario]
+name = "limits"
+description = "small grid for the clay's limits"
+environment = "clay"
+[grid]
+x_range_m = [0.0, 0.04]
+y_range_m = [-0.01, 0.01]
+cells_x = 160
+cells_y = 80
+[tool]
+radius_m = 0.005
+bottom_height_m = 0.007
+reference_depth_m = 0.003
+edge_width_m = 0.001
+max_speed_m_s = 0.5
+start_position_m = [0.0, 0.0]
+[operator]
+handle_force_N = [3.0, 0.0]
+[workpiece]
+blocks = ["deep", "a", "b"]
+[blocks.deep]
+shape = "box"
+x_range_m = [0.0, 0.012]
+y_range_m = [-0.01, 0.01]
+height_m = 0.012
+damping_N_s_per_m = 60.0
+[blocks.a]
+shape = "box"
+x_range_m = [0.028, 0.04]
+y_range_m = [-0.01, 0.0]
+height_m = 0.0085
+damping_N_s_per_m = 100.0
+[blocks.b]
+shape = "box"
+x_range_m = [0.028, 0.04]
+y_range_m = [0.0, 0.01]
+height_m = 0.0085
+damping_N_s_per_m = 40.0
+"""
+AIR_X_M = 0.02  # no block at this x
+
+
+@pytest.fixture(scope="module")
+def scenario(tmp_path_factory):
+    path = tmp_path_factory.mktemp("limits") / "limits.toml"
+    path.write_text(LIMITS_SCENARIO)
+    return load_scenario(str(path))
+
+
+@pytest.fixture(scope="module", params=["numpy", "warp"])
+def impl(request) -> str:
+    return request.param
+
+
+def _clay(scenario, impl: str, **coupling: float):
+    return make_clay(scenario, SAMPLE_PERIOD_S, impl, "cpu", **coupling)
+
+
+def test_geometry_constants_from_the_tool_dimensions(scenario) -> None:
+    """Radii, window sizes and the per-step cut cap, computed here from the tool's size."""
+    geo = geometry_for(scenario, SAMPLE_PERIOD_S)
+    radius, width, depth = 0.005, 0.001, 0.003
+    dx = dy = 0.04 / 160
+    assert geo.outer_radius == pytest.approx(0.0055, rel=1e-12)
+    assert geo.inner_radius == pytest.approx(0.0045, rel=1e-12)
+    # the window spans the footprint's diameter plus a cell each side: 2 x 5.5 mm / 0.25 mm
+    assert (geo.window_x, geo.window_y) == (46, 46)
+    assert geo.cells_x == 160 and geo.cells_y == 80
+    # the smoothstep's steepest slope is 1.5 (at u = 1/2): the chamfer's is 1.5 d_ref / w
+    u = np.linspace(0.0, 1.0, 100001)
+    slope = np.gradient(u * u * (3 - 2 * u), u).max()
+    assert slope == pytest.approx(1.5, rel=1e-6)
+    assert geo.cut_cap == pytest.approx(slope * depth / width * 0.5 * SAMPLE_PERIOD_S, rel=1e-6)
+    assert geo.cut_cap == pytest.approx(1.215e-3, rel=1e-12)
+    assert geo.edge_height == depth and geo.inv_edge_width == pytest.approx(1 / width)
+    assert geo.cell_area == pytest.approx(dx * dy, rel=1e-12)
+    assert (geo.x0, geo.y0, geo.bottom_height) == (0.0, -0.01, 0.007)
+    # coarse cells (6.7 x 5 mm): ceil(11 / 6.7) + 2 = 4 columns; ceil(11 / 5) + 2 = 5 rows is
+    # more than the grid's 4: the window is the whole grid, never more
+    coarse = geometry_for(scenario.with_grid(6, 4), SAMPLE_PERIOD_S)
+    assert (coarse.window_x, coarse.window_y) == (4, 4)
+    # a window of ceil(2 R_out / dx) + 2 covers every cell whose centre the footprint reaches
+    assert radius + 0.5 * width == geo.outer_radius
+
+
+def test_window_covers_the_footprint_and_the_first_step_cuts_at_most_the_cap(scenario,
+                                                                             impl) -> None:
+    clay = _clay(scenario, impl)
+    state = clay.initial_state(1)
+    before = state.heights_m()[0]
+    position = np.array([[0.006, 0.0]])  # inside the deep block
+    result = clay.step(state, position, position, np.zeros((1, 2)))
+    cut = before - state.heights_m()[0]
+    x, y = clay.workpiece.cell_centers_m()
+    distance = np.hypot(x[None, :] - 0.006, y[:, None])
+    under_flat = distance < clay.geometry.inner_radius
+    # 5 mm of clay over the flat bottom, capped to cut_cap per step, every cell of it
+    assert cut[under_flat] == pytest.approx(clay.geometry.cut_cap, rel=1e-12)
+    assert cut.max() == pytest.approx(clay.geometry.cut_cap, rel=1e-12)
+    assert (cut[distance >= clay.geometry.outer_radius] == 0.0).all()
+    assert (cut[distance < clay.geometry.outer_radius] > 0.0).all()
+    assert result.removed_volume_m3[0] == pytest.approx(cut.sum() * clay.geometry.cell_area,
+                                                        rel=1e-12)
+    # a removal far above the reference cut for a still tool: engagement 1 (cutting)
+    assert result.engagement[0] == 1.0 and result.cutting[0]
+    assert result.damping_N_s_per_m[0] == pytest.approx(60.0, rel=1e-12)
+
+
+def test_footprint_at_the_grid_edge_cuts_the_first_column(scenario, impl) -> None:
+    """A tool centred on the grid's low x edge: the window starts at column 0 and cuts it."""
+    clay = _clay(scenario, impl)
+    state = clay.initial_state(1)
+    position = np.array([[0.0, 0.0]])
+    ix0, iy0 = clay.footprint_windows(position)
+    assert ix0[0] == 0 and 0 < iy0[0] < 80 - 46
+    clay.step(state, position, position, np.zeros((1, 2)))
+    cut = clay.workpiece.heights_m - state.heights_m()[0]
+    _, y = clay.workpiece.cell_centers_m()
+    rows = np.abs(y) < 0.004
+    assert cut[rows, 0] == pytest.approx(clay.geometry.cut_cap, rel=1e-12)
+    # at the high edge too (the window's last column is the grid's)
+    state = clay.initial_state(1)
+    clay.step(state, np.array([[0.04, 0.0]]), np.array([[0.04, 0.0]]), np.zeros((1, 2)))
+    cut = clay.workpiece.heights_m - state.heights_m()[0]
+    assert (cut[rows, -1] > 0.0).all()
+
+
+def test_cut_across_two_blocks_weights_the_damping_by_removal(scenario, impl) -> None:
+    clay = _clay(scenario, impl)
+    state = clay.initial_state(1)
+    position = np.array([[0.034, 0.0015]])  # more of the footprint in b (y > 0) than in a
+    result = clay.step(state, position, position, np.zeros((1, 2)))
+    cut = clay.workpiece.heights_m - state.heights_m()[0]
+    block = clay.workpiece.block_id
+    volume_a = cut[block == 1].sum() * clay.geometry.cell_area
+    volume_b = cut[block == 2].sum() * clay.geometry.cell_area
+    assert volume_a > 0.0 and volume_b > 1.5 * volume_a
+    expected = (100.0 * volume_a + 40.0 * volume_b) / (volume_a + volume_b)
+    assert result.damping_N_s_per_m[0] == pytest.approx(expected, rel=1e-12)
+    assert result.removed_volume_m3[0] == pytest.approx(volume_a + volume_b, rel=1e-12)
+
+
+def test_result_engagement_and_damping_by_hand(scenario) -> None:
+    """The step's bookkeeping on hand-made sums: lanes 0..5."""
+    clay = NumpyClay(scenario, SAMPLE_PERIOD_S)
+    area = clay.reference_area_m2
+    assert area == pytest.approx(2 * 0.005 * 0.003, rel=1e-12)
+    lanes = 6
+    state = clay.initial_state(lanes)
+    before = np.zeros((lanes, 2))
+    after = np.array([
+        [3e-4, 4e-4],  # diagonal, 0.5 mm: half the reference cut
+        [3e-4, -4e-4],  # diagonal the other way: three reference cuts, capped at 1
+        [MIN_DISPLACEMENT_M, 0.0],  # exactly at the threshold: counts as still
+        [1e-4, 0.0],  # moved, nothing removed
+        [0.0, 0.0],  # still, a speck removed
+        [0.0, 0.0],  # still, nothing removed
+    ])
+    assert np.hypot(after[2, 0], after[2, 1]) == MIN_DISPLACEMENT_M
+    volume_a, volume_b = 0.2 * area * 5e-4, 0.3 * area * 5e-4  # two blocks
+    removed = np.array([volume_a + volume_b, 3 * area * 5e-4, 1e-20, 0.0, 1e-30, 0.0])
+    weighted = np.array([100.0 * volume_a + 40.0 * volume_b, 60.0 * removed[1],
+                         80.0 * 1e-20, 0.0, 20.0 * 1e-30, 0.0])
+    sums = np.stack([removed, weighted], axis=1)
+    force = np.arange(2 * lanes, dtype=float).reshape(lanes, 2)
+    result = clay._result(state, sums, before, after, force)
+    np.testing.assert_array_equal(result.cutting, [True, True, True, False, True, False])
+    np.testing.assert_allclose(result.engagement, [0.5, 1.0, 1.0, 0.0, 1.0, 0.0], rtol=1e-12)
+    np.testing.assert_allclose(result.damping_N_s_per_m, [64.0, 60.0, 80.0, 0.0, 20.0, 0.0],
+                               rtol=1e-12)
+    np.testing.assert_array_equal(result.removed_volume_m3, removed)
+    np.testing.assert_array_equal(state.removed_total_m3, removed)
+    np.testing.assert_array_equal(result.force_N, force)
+    np.testing.assert_array_equal(result.proxy_position_m, after)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        result.engagement = np.ones(lanes)  # type: ignore[misc]
+
+
+def test_a_steady_diagonal_shallow_cut_has_partial_engagement(scenario, impl) -> None:
+    """Across a/b diagonally at 45 degrees, 1.5 mm deep: engagement ~0.45 every steady step,
+    equal to the removal over the reference cut of the proxy's own travel."""
+    clay = _clay(scenario, impl)
+    state = clay.initial_state(1)
+    speed = 0.04
+    velocity = np.array([[speed, speed]]) / math.sqrt(2)
+    position = np.array([[0.03, -0.007]])
+    engagement, ratio = [], []
+    for _ in range(300):
+        previous = position
+        position = previous + velocity * SAMPLE_PERIOD_S
+        proxy_before = state.proxy_position_m()
+        result = clay.step(state, previous, position, velocity)
+        travel = np.hypot(*(result.proxy_position_m[0] - proxy_before[0]))
+        engagement.append(result.engagement[0])
+        ratio.append(result.removed_volume_m3[0] / (clay.reference_area_m2 * travel))
+    late = slice(200, None)
+    assert 0.3 < np.mean(engagement[late]) < 0.6
+    np.testing.assert_allclose(engagement[late], ratio[late], rtol=1e-9)
+
+
+def test_reset_of_some_lanes_and_of_all(scenario, impl) -> None:
+    clay = _clay(scenario, impl)
+    state = clay.initial_state(2)
+    velocity = np.array([[0.04, 0.0], [0.04, 0.0]])
+    position = np.array([[0.004, -0.003], [0.004, 0.003]])
+    for _ in range(40):  # into the deep block: both lanes resist
+        previous = position
+        position = previous + velocity * SAMPLE_PERIOD_S
+        clay.step(state, previous, position, velocity)
+    resistance = state.resistance_N_s_per_m()
+    proxy = state.proxy_position_m()
+    assert (resistance > 0.0).all()
+    target = np.array([0.03, 0.001])
+    state.place_proxy(target, np.array([True, False]))
+    np.testing.assert_array_equal(state.proxy_position_m(), [target, proxy[1]])
+    np.testing.assert_array_equal(np.array(_host(state.proxy_prev))[0], target)
+    np.testing.assert_array_equal(state.resistance_N_s_per_m(), [0.0, resistance[1]])
+    state.place_proxy([[0.01, 0.002], [0.02, -0.002]])
+    np.testing.assert_array_equal(state.proxy_position_m(), [[0.01, 0.002], [0.02, -0.002]])
+    np.testing.assert_array_equal(_host(state.proxy_prev), [[0.01, 0.002], [0.02, -0.002]])
+    np.testing.assert_array_equal(state.resistance_N_s_per_m(), [0.0, 0.0])
+    assert state.contact_ready.tolist() == [True, True]
+
+
+def _host(array) -> np.ndarray:
+    return np.array(array.numpy() if hasattr(array, "numpy") else array)
+
+
+def test_first_step_places_the_proxy_at_the_previous_position(scenario, impl) -> None:
+    clay = _clay(scenario, impl)
+    state = clay.initial_state()
+    assert state.lanes == 1 and state.contact_ready.tolist() == [False]
+    previous = np.array([[AIR_X_M, 0.0]])
+    result = clay.step(state, previous, previous + [[1e-5, 0.0]], np.array([[0.02, 0.0]]))
+    assert state.contact_ready.tolist() == [True]
+    np.testing.assert_array_equal(_host(state.proxy_prev), previous)
+    assert not result.cutting[0] and result.engagement[0] == 0.0
+
+
+def test_a_move_through_air_leaves_no_resistance(scenario, impl) -> None:
+    """Cutting, then a step out into the air: the resistance drops to exactly 0 (not NaN)."""
+    clay = _clay(scenario, impl)
+    state = clay.initial_state(1)
+    velocity = np.array([[-0.04, 0.0]])  # into the deep block towards -x
+    position = np.array([[0.008, 0.0]])
+    for _ in range(20):
+        previous = position
+        position = previous + velocity * SAMPLE_PERIOD_S
+        clay.step(state, previous, position, velocity)
+    assert state.resistance_N_s_per_m()[0] > 0.0
+    # the tool pulls back out of the clay to the air gap: the proxy follows, nothing is cut
+    velocity = -velocity
+    away = np.array([[AIR_X_M, 0.0]])
+    result = clay.step(state, position, away, velocity)
+    assert not result.cutting[0]
+    assert state.resistance_N_s_per_m().tolist() == [0.0]
+    result = clay.step(state, away, away + [[1e-4, 0.0]], velocity)
+    assert state.resistance_N_s_per_m().tolist() == [0.0]
+    assert not result.force_N.any()
+
+
+def test_block_damping_validation_at_zero(scenario, impl) -> None:
+    clay = _clay(scenario, impl)
+    state = clay.initial_state(2)
+    state.set_block_damping(np.zeros(3))
+    np.testing.assert_array_equal(state.block_damping_N_s_per_m(), np.zeros((2, 3)))
+    state.set_block_damping([0.5, 0.25, 0.0])
+    np.testing.assert_array_equal(state.block_damping_N_s_per_m(), [[0.5, 0.25, 0.0]] * 2)
+    with pytest.raises(ValueError, match="damping"):
+        state.set_block_damping([1.0, -1e-12, 1.0])
+    np.testing.assert_array_equal(state.block_damping_N_s_per_m(), [[0.5, 0.25, 0.0]] * 2)
+    assert isinstance(state.block_damping_N_s_per_m(), np.ndarray)
+
+
+def test_coupling_validation_at_its_limits(scenario) -> None:
+    for stiffness, damping in ((0.0, 1.0), (-1.0, 1.0), (1000.0, -1e-12)):
+        with pytest.raises(ValueError, match="coupling"):
+            NumpyClay(scenario, SAMPLE_PERIOD_S, stiffness, damping)
+    clay = NumpyClay(scenario, SAMPLE_PERIOD_S, 1e-9, 0.0)
+    assert (clay.coupling_stiffness_N_per_m, clay.coupling_damping_N_s_per_m) == (1e-9, 0.0)
+    assert WarpClay(scenario, SAMPLE_PERIOD_S, "cpu", 1e-9, 0.0).contact.damping == 0.0
+
+
+def test_device_auto_with_one_cuda_device(monkeypatch) -> None:
+    """One CUDA device is enough for "auto" to pick it (no GPU needed: the count is asked)."""
+    import warp as wp
+
+    wp.init()
+    for count, expected in ((0, "cpu"), (1, "cuda"), (2, "cuda")):
+        monkeypatch.setattr(wp, "get_cuda_device_count", lambda count=count: count)
+        assert resolve_device("auto") == expected
+    assert resolve_device("cuda:1") == "cuda:1"
+
+
+@pytest.mark.skipif(not __import__("warp").get_cuda_device_count(),
+                    reason="needs a CUDA device (the pinned staging path)")
+def test_cuda_device_matches_numpy(scenario) -> None:
+    """The CUDA path (pinned host buffers copied in and out) against the numpy reference."""
+    ref = _clay(scenario, "numpy")
+    cuda = make_clay(scenario, SAMPLE_PERIOD_S, "warp", "cuda")
+    a, b = cuda.initial_state(2), ref.initial_state(2)
+    velocity = np.array([[0.04, 0.0], [0.0, 0.04]])
+    position = np.array([[0.003, 0.0], [0.03, -0.006]])
+    for _ in range(60):
+        previous = position
+        position = previous + velocity * SAMPLE_PERIOD_S
+        ra = cuda.step(a, previous, position, velocity)
+        rb = ref.step(b, previous, position, velocity)
+        np.testing.assert_allclose(ra.force_N, rb.force_N, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(ra.proxy_position_m, rb.proxy_position_m, rtol=0, atol=1e-15)
+    assert (a.removed_total_m3 > 0).all()
+    np.testing.assert_allclose(a.heights_m(), b.heights_m(), rtol=0, atol=1e-15)
