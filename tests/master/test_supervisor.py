@@ -3,6 +3,8 @@ tool at Ah1 yh; a trip holds the handle where it was; faults latch."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -143,3 +145,102 @@ def test_a_fault_without_a_cycle_is_logged_at_cycle_0() -> None:
     supervisor.update(PERIOD_S, None, (0.01, 0.02), faults=("drive y: EMCY 0x8130",), cycle=7)
     assert supervisor.hardware_faults == ["cycle 0: drive x: EMCY 0x8130",
                                           "cycle 7: drive y: EMCY 0x8130"]
+
+
+# --- with the tool-input guard (master/tool_guard.py) -------------------------------------
+
+def guarded(clear_after: int = 3) -> MasterSupervisor:
+    from haptic.master.tool_guard import ToolGuardSettings, ToolInputGuard
+
+    settings = ToolGuardSettings(clear_after_messages=clear_after)
+    supervisor = MasterSupervisor(RATIO, 0.001, MAX_AGE_S, RESYNC,
+                                  ToolInputGuard(settings, PERIOD_S))
+    supervisor.start((0.01, 0.02))
+    return supervisor
+
+
+def test_a_guarded_supervisor_runs_like_an_unguarded_one_on_plausible_messages() -> None:
+    supervisor = guarded()
+    assert not supervisor.input_faulted
+    transitions = run_in_sync(supervisor, RESYNC)
+    assert transitions[-1] is Transition.ACTIVATE and supervisor.enabled
+    assert supervisor.stop_reason() == "watchdog ok"
+    assert not supervisor.input_faulted
+
+
+def test_an_implausible_tool_message_turns_forces_off_until_cleared_and_in_sync() -> None:
+    supervisor = guarded(clear_after=3)
+    run_in_sync(supervisor, RESYNC)
+    handle = (0.01, 0.02)
+    bad = tool(RATIO[0] * handle[0], RATIO[1] * handle[1], seq=RESYNC)
+    bad = ToolState(1, RESYNC, RESYNC * 540_000, bad.flags, (1e6, 0.0), bad.tool_position_m,
+                    (0.0, 0.0), 0.0, 0.0)
+    assert supervisor.update(RESYNC * PERIOD_S, bad, handle) is Transition.HOLD
+    assert not supervisor.enabled and supervisor.input_faulted
+    assert supervisor.tool.tool_force_N != (1e6, 0.0)  # not an input
+    assert supervisor.stop_reason() == "tool input fault"
+    # plausible messages again: the guard clears after 3, forces wait for the resync check
+    transitions = [supervisor.update((RESYNC + i) * PERIOD_S,
+                                     _timed_tool(RATIO[0] * handle[0], RATIO[1] * handle[1],
+                                                 RESYNC + i), handle)
+                   for i in range(1, 3)]
+    assert transitions == [Transition.NONE] * 2 and supervisor.input_faulted
+    assert supervisor.stop_reason() == "tool input fault"
+    resumed = supervisor.update((RESYNC + 3) * PERIOD_S,
+                                _timed_tool(RATIO[0] * handle[0], RATIO[1] * handle[1],
+                                            RESYNC + 3), handle)
+    assert resumed is Transition.RESUME and supervisor.enabled
+    assert not supervisor.input_faulted
+
+
+def test_after_an_input_fault_forces_wait_for_the_tool_at_the_handle() -> None:
+    supervisor = guarded(clear_after=1)
+    run_in_sync(supervisor, RESYNC)
+    handle = (0.01, 0.02)
+    bad = ToolState(1, RESYNC, RESYNC * 540_000, Flags.FORCES_ENABLED, (math.nan, 0.0),
+                    (RATIO[0] * handle[0], RATIO[1] * handle[1]), (0.0, 0.0), 0.0, 0.0)
+    assert supervisor.update(RESYNC * PERIOD_S, bad, handle) is Transition.HOLD
+    # plausible but 2 mm away from Ah1 yh: the guard clears, the resync check does not pass
+    # (each move below stays inside the guard's 2 m/s x 0.54 ms + 2 mm allowance)
+    far = _timed_tool(RATIO[0] * handle[0] + 0.002, RATIO[1] * handle[1], RESYNC + 1)
+    assert supervisor.update((RESYNC + 1) * PERIOD_S, far, handle) is Transition.NONE
+    assert supervisor.input_faulted and not supervisor.enabled
+    assert supervisor.stop_reason() == "tool input fault: waiting for the tool at the handle"
+    back = _timed_tool(RATIO[0] * handle[0] + 0.0015, RATIO[1] * handle[1], RESYNC + 2)
+    assert supervisor.update((RESYNC + 2) * PERIOD_S, back, handle) is Transition.NONE
+    assert supervisor.input_faulted  # still 1.5 mm off
+    home = _timed_tool(RATIO[0] * handle[0], RATIO[1] * handle[1], RESYNC + 3)
+    assert supervisor.update((RESYNC + 3) * PERIOD_S, home, handle) is Transition.RESUME
+
+
+def test_no_message_is_not_a_fault() -> None:
+    supervisor = guarded()
+    run_in_sync(supervisor, RESYNC)
+    assert supervisor.update(RESYNC * PERIOD_S, None, (0.01, 0.02)) is Transition.NONE
+    assert supervisor.enabled and not supervisor.input_faulted
+    assert supervisor.tool_guard.counters.faults == 0
+
+
+def test_stop_reasons_name_the_latest_hardware_fault() -> None:
+    supervisor = make()
+    supervisor.update(0.0, None, (0.01, 0.02), faults=("drive x: EMCY 0x8130",))
+    supervisor.update(PERIOD_S, None, (0.01, 0.02), faults=("drive y: EMCY 0x8611",))
+    assert supervisor.stop_reason() == "node or hardware fault: cycle 0: drive y: EMCY 0x8611"
+    node_only = make()
+    node_only.note_node_fault()
+    assert node_only.stop_reason() == "node or hardware fault: safety layer trip"
+
+
+def test_a_warm_start_is_enabled_and_counts_as_ever_enabled() -> None:
+    supervisor = make()
+    supervisor.start_synced()
+    assert supervisor.enabled and supervisor.ever_enabled
+    assert supervisor.state_name() == "ok"
+    # the next tick in sync changes nothing; a silence then holds
+    assert run_in_sync(supervisor, 1)[0] is Transition.NONE
+    assert supervisor.update(1.0, None, (0.01, 0.02), silence_s=1.0) is Transition.HOLD
+
+
+def _timed_tool(x_m: float, y_m: float, seq: int) -> ToolState:
+    return ToolState(1, seq, seq * 540_000, Flags.FORCES_ENABLED, (0.0, 0.0), (x_m, y_m),
+                     (0.0, 0.0), 0.0, 0.0)

@@ -170,3 +170,12 @@ def test_stop_reasons_name_the_watchdog_or_the_master() -> None:
     assert supervisor.stop_reason() == "watchdog tripped"
     supervisor.update(0.3, False, (0.05, 0.0), silence_s=1.0, input_fault=True)
     assert supervisor.stop_reason() == "input fault"
+
+
+def test_a_warm_start_runs_at_once_with_the_handle_where_it_is() -> None:
+    supervisor = make()
+    supervisor.start_synced((0.03, 0.02))
+    assert supervisor.handle_position_m == (0.03, 0.02)
+    assert supervisor.master_enabled and supervisor.running and supervisor.ready
+    assert supervisor.update(0.0, False, (0.03, 0.02)) is Transition.NONE
+    assert supervisor.running
