@@ -225,7 +225,8 @@ def test_stop_reasons_name_the_latest_hardware_fault() -> None:
     supervisor = make()
     supervisor.update(0.0, None, (0.01, 0.02), faults=("drive x: EMCY 0x8130",))
     supervisor.update(PERIOD_S, None, (0.01, 0.02), faults=("drive y: EMCY 0x8611",))
-    assert supervisor.stop_reason() == "node or hardware fault: cycle 0: drive y: EMCY 0x8611"
+    supervisor.update(2 * PERIOD_S, None, (0.01, 0.02), faults=("sensor: frame lost",), cycle=2)
+    assert supervisor.stop_reason() == "node or hardware fault: cycle 2: sensor: frame lost"
     node_only = make()
     node_only.note_node_fault()
     assert node_only.stop_reason() == "node or hardware fault: safety layer trip"
