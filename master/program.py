@@ -99,6 +99,20 @@ class _Loop:
     node_events: list[dict[str, Any]] = field(default_factory=list)
     last_fh: tuple[float, float] = (0.0, 0.0)
     last_ft: tuple[float, float] = (0.0, 0.0)
+    #: the last handle position measured on both axes, m (what the wire carries while a
+    #: reading is missing)
+    last_yh: tuple[float, float] = (0.0, 0.0)
+
+
+def position_for_the_wire(position_m: tuple[float, float],
+                          last_m: tuple[float, float]) -> tuple[float, float]:
+    """The handle position (m) to send: the reading where both axes are finite, else the last
+    finite one. A missed PDO reads NaN; the node trips on it (master/node.py) and the message
+    says SAFE_STATE, but a NaN can never go on the wire (messages.encode refuses it)."""
+    x_m, y_m = position_m
+    if math.isfinite(x_m) and math.isfinite(y_m):
+        return position_m
+    return last_m
 
 
 def _flush_node_events(loop: _Loop, tick: MasterTick) -> None:
@@ -169,6 +183,9 @@ def _run_linked_master(
                 hardware.activate()
                 reading = hardware.read()
                 tick_stages.start(reading.position_m)
+                loop.last_yh = position_for_the_wire(
+                    tuple(reading.position_m.tolist()), tuple(
+                        np.nan_to_num(reading.position_m).tolist()))
                 harness.start()
                 if loop_options.display and link.session is not None:
                     harness.attach_display(DisplayPublisher(
@@ -244,7 +261,8 @@ def _run_linked_master(
                     hardware.write(command)
                     write_ns = clock()
                     # send: the force the compensator used and the handle position
-                    link.send_handle(sent, (yhx, yhy), used.flags[0] | tdpa_peer.flags, gain_k,
+                    loop.last_yh = position_for_the_wire((yhx, yhy), loop.last_yh)
+                    link.send_handle(sent, loop.last_yh, used.flags[0] | tdpa_peer.flags, gain_k,
                                      tdpa_peer.sent_J(tick_stages.state))
                     send_ns = clock()
                     # telemetry: summary figures, trace, recording, display

@@ -245,3 +245,17 @@ def test_a_warm_start_is_enabled_and_counts_as_ever_enabled() -> None:
 def _timed_tool(x_m: float, y_m: float, seq: int) -> ToolState:
     return ToolState(1, seq, seq * 540_000, Flags.FORCES_ENABLED, (0.0, 0.0), (x_m, y_m),
                      (0.0, 0.0), 0.0, 0.0)
+
+
+def test_a_missing_handle_reading_never_goes_on_the_wire() -> None:
+    """A missed PDO reads NaN on an axis: the master sends the last measured position (the
+    node trips on the NaN itself); a finite reading goes out as it is."""
+    from haptic.common.messages import HandleState, encode
+    from haptic.master.program import position_for_the_wire
+
+    last = (0.01, 0.02)
+    assert position_for_the_wire((0.011, 0.021), last) == (0.011, 0.021)
+    for missing in ((math.nan, 0.021), (0.011, math.nan), (math.inf, -math.inf)):
+        sent = position_for_the_wire(missing, last)
+        assert sent == last
+        encode(HandleState(1, 1, 1, Flags.SAFE_STATE, (0.0, 0.0), sent))  # never raises
