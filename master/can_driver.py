@@ -81,6 +81,8 @@ class CanHandleDriver(HandleHardware):
         self.last_reading: HandleReading | None = None
         #: Frames that arrived after their cycle's timeout and were discarded.
         self.late_frames = 0
+        #: SDO requests sent again because no reply came within SDO_RESEND_S
+        self.sdo_resends = 0
         #: Every EMCY received (axis, error code), in order.
         self.emcy_log: list[tuple[str, int]] = []
         #: The bus-load budget computed at configure.
@@ -714,12 +716,24 @@ class CanHandleDriver(HandleHardware):
         and its code."""
         assert self._bus is not None
         self._send(cia402.SDO_RX_BASE + node, request)
-        deadline = time.monotonic() + self.pdo_timeout_s * self.settings.enable_timeout_cycles
+        now = time.monotonic()
+        deadline = now + self.pdo_timeout_s * self.settings.enable_timeout_cycles
+        # a request or its reply lost on the way is asked again (an SDO read or an expedited
+        # write is idempotent), every SDO_RESEND_S until the deadline
+        resend_at = now + SDO_RESEND_S
         obj = f"0x{variable.index:04X}:{variable.subindex:02X} ({variable.name})"
         while (remaining := deadline - time.monotonic()) > 0.0:
-            message = self._bus.recv(timeout=remaining)
+            message = self._bus.recv(timeout=min(remaining, max(resend_at - time.monotonic(),
+                                                                0.0)))
             if message is None:
-                break
+                now = time.monotonic()
+                if now >= deadline:
+                    break
+                if now >= resend_at:
+                    self.sdo_resends += 1
+                    self._send(cia402.SDO_RX_BASE + node, request)
+                    resend_at = now + SDO_RESEND_S
+                continue
             if message.arbitration_id == cia402.SDO_TX_BASE + node:
                 try:
                     reply = cia402.decode_sdo(bytes(message.data))
@@ -763,6 +777,9 @@ _TPDO1 = struct.Struct("<Hi")  # statusword, position actual value (counts)
 _RPDO1 = struct.Struct("<Hi")  # controlword, target position (counts)
 #: Statusword bits watched as events and their healthy values (9 remote and 12 "follows the
 #: target" are set when healthy, so they are flipped before comparing).
+#: An SDO request without a reply is sent again after this long, s (until the deadline).
+SDO_RESEND_S = 0.25
+
 _WARNING_BITS = 0x0080 | 0x0200 | 0x0800 | 0x1000 | 0x2000
 _WARNING_IDLE = 0x0200 | 0x1000
 _FOLLOWS_TARGET = 0x1000
