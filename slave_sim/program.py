@@ -48,6 +48,7 @@ from haptic.common.stage_times import StageTimes
 from haptic.common.trace import TraceRecorder
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from haptic.slave_sim.node import SlaveNode
+from haptic.slave_sim.pacing import MasterSamplePacing, PacingSettings
 from haptic.slave_sim.resync import ToolResync
 from haptic.slave_sim.supervisor import SlaveSupervisor
 from haptic.slave_sim.tick import SlaveTick
@@ -184,12 +185,15 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     # through the clay at a bounded speed
     tick_stages = SlaveTick(node, state, [supervisor], [guard], ToolResync(node))
     tick_stages.start()
+    # one node step per master sample, not per tick (slave_sim/pacing.py)
+    pacing = MasterSamplePacing(PacingSettings.from_config(options.config))
     stages = StageTimes(TICK_STAGES)
     path_every = max(1, args.trace_every)
     tool_path = ToolPath()  # bounded memory (slave_sim/tool_path.py)
     fh = tick_stages.handle_force_N  # the newest bounded handle message, updated in place
     yh = tick_stages.handle_position_m
     flags_box = {"max_force": 0.0, "ft": np.zeros(2), "engagement": 0.0, "removed": 0.0}
+    last_tick: dict[str, Any] = {"ticked": None}  # the node's last outputs, sent again
     run = None
     with StopSignals() as signals, Link(link_config) as link:
         harness = ProgramHarness("haptic-slave", "master", options, link, period_s, recording)
@@ -235,8 +239,14 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             inert.update(now_s, link.peer_alive and link.silence_s() < max_age_s, running,
                          supervisor.stop_reason())
             supervise_ns = clock()
-            # node: Ch2/Ct2, the tool and the clay
-            ticked = tick_stages.control()
+            # node: Ch2/Ct2, the tool and the clay, once per master sample while the tool
+            # runs (none while the master's next sample has not come, more after a gap)
+            steps = pacing.steps(running, (message.epoch, message.seq) if fresh else None)
+            ticked = last_tick["ticked"]
+            if steps or ticked is None:
+                for _ in range(max(steps, 1)):
+                    ticked = tick_stages.control()
+                last_tick["ticked"] = ticked
             out = ticked.out
             ft = out.tool_force_N[0]
             position = out.tool_position_m[0]
@@ -306,6 +316,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         slave_gain_k=node.model.ch1_gain_k * float((state.gain_ratio if state.gain_ratio is
                                                      not None else np.ones(1))[0]),
         **(phase_lock.summary() if phase_lock is not None else {"phase_lock_enabled": False}),
+        **pacing.summary(),
         **extra_summary,
     )
     traced = trace.arrays()

@@ -53,6 +53,17 @@ SLAVE_SCHEMA: Schema = {
     "device": Field("str", "Warp device: auto (cuda when present, else cpu), cpu, cuda, cuda:N.",
                     check=_device),
     "safety": SAFETY_SCHEMA,
+    "pacing": {
+        "follow_master_samples": Field(
+            "bool", "One node step per master sample, counted by sequence number (a tick "
+            "without a new sample waits, one after a gap catches up; slave_sim/pacing.py); "
+            "false: one node step per tick.",
+        ),
+        "max_steps_per_tick": Field(
+            "int", "The most node steps one tick takes to catch up with the master's samples.",
+            minimum=1, maximum=16,
+        ),
+    },
     "phase_lock": {
         "enabled": Field(
             "bool", "Keep the slave's ticks a set lag after the master's messages arrive "

@@ -111,6 +111,8 @@ def test_slave_config_section_is_validated() -> None:
     assert {k: v for k, v in config["slave"].items() if k != "safety"} == {
                                "scenario": "constant-rate", "environment": "scenario",
                                "clay_impl": "warp", "device": "auto",
+                               "pacing": {"follow_master_samples": True,
+                                          "max_steps_per_tick": 4},
                                "phase_lock": {"enabled": True, "margin_s": 3e-05}}
     assert override(config, "slave.device", "cuda:1")["slave"]["device"] == "cuda:1"
     with pytest.raises(ConfigError) as error:
