@@ -73,8 +73,11 @@ SLAVE_TRACE_COLUMNS = (
     "time_s", "handle_force_x_N", "handle_force_y_N", "handle_position_x_m",
     "handle_position_y_m", "tool_position_x_m", "tool_position_y_m", "tool_velocity_x_m_s",
     "tool_velocity_y_m_s", "tool_force_x_N", "tool_force_y_N", "engagement", "cutting",
-    "forces_enabled",
+    "forces_enabled", "sample_time_s",
 )
+#: ``time_s`` is the wall time since the loop's start; ``sample_time_s`` the slave's virtual
+#: world's own (node steps x Ts, slave_sim/pacing.py): the cut's figures are taken on it, so a
+#: master that falls behind real time slows the cut on the wall clock, not in the figures.
 
 
 def phase_lock_from(config: dict[str, Any], period_s: float) -> PhaseLock | None:
@@ -193,7 +196,9 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     fh = tick_stages.handle_force_N  # the newest bounded handle message, updated in place
     yh = tick_stages.handle_position_m
     flags_box = {"max_force": 0.0, "ft": np.zeros(2), "engagement": 0.0, "removed": 0.0}
-    last_tick: dict[str, Any] = {"ticked": None}  # the node's last outputs, sent again
+    # the node's last outputs (sent again while waiting for the master's next sample) and
+    # the virtual world's time, s (node steps x Ts)
+    last_tick: dict[str, Any] = {"ticked": None, "sample_time_s": 0.0}
     run = None
     with StopSignals() as signals, Link(link_config) as link:
         harness = ProgramHarness("haptic-slave", "master", options, link, period_s, recording)
@@ -247,6 +252,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 for _ in range(max(steps, 1)):
                     ticked = tick_stages.control()
                 last_tick["ticked"] = ticked
+                last_tick["sample_time_s"] += max(steps, 1) * period_s
             out = ticked.out
             ft = out.tool_force_N[0]
             position = out.tool_position_m[0]
@@ -275,7 +281,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             if trace.due():
                 trace.record((now_s, fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], position[0],
                               position[1], velocity[0], velocity[1], ft[0], ft[1], engagement,
-                              float(out.cutting[0]), float(running)))
+                              float(out.cutting[0]), float(running),
+                              last_tick["sample_time_s"]))
             else:
                 trace.skip()
             if recording is not None:
@@ -320,8 +327,10 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         **extra_summary,
     )
     traced = trace.arrays()
-    summary.update(cutting_figures(traced))
-    summary.update(steady_cut_fields(traced))
+    # the cut's figures on the virtual world's clock (SLAVE_TRACE_COLUMNS)
+    on_samples = {**traced, "time_s": traced["sample_time_s"]} if traced else traced
+    summary.update(cutting_figures(on_samples))
+    summary.update(steady_cut_fields(on_samples))
     if args.out is not None:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
