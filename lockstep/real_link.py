@@ -1,8 +1,8 @@
-"""A few sweep cells over the real Zenoh link: the lockstep's nodes, rig and operator, one
-lane, but the two delay lines replaced by two :class:`~haptic.common.link.Link` objects (master
-and slave side, in this process, over TCP on loopback) with the delay injected by the links'
-receive paths. The loop is paced in real time at Ts, since the injected delay is wall-clock
-time.
+"""A few sweep cells over the real Zenoh link: the lockstep's rig and operator and the
+programs' two ticks (supervisors, input guard and nodes as they ship), one lane, but the two
+delay lines replaced by two :class:`~haptic.common.link.Link` objects (master and slave side,
+in this process, over TCP on loopback) with the delay injected by the links' receive paths.
+The loop is paced in real time at Ts, since the injected delay is wall-clock time.
 
 The effective round trip is measured, not assumed: each side records how many ticks old the
 message it used was (the sender stamps one message per tick, its sequence number is the tick),
@@ -89,12 +89,13 @@ def run_cell(model: TeleopModel, gain_k: float, injected_round_trip_s: float,
     simulator = LockstepSimulator(model, load_scenario("constant-rate"),
                                   parse_operator_spec("constant:fx=0,fy=0"),
                                   np.array([gain_k]), "linear")
-    rig, master, slave = simulator.rig, simulator.master, simulator.slave
+    rig = simulator.rig
     start = np.zeros((1, 2))
     rig_state = rig.initial_state(start, np.random.default_rng(0))
-    master_state = master.activate(start)
-    slave_state = slave.initial_state(1, start)
-    command = master_state.last_command_m.copy()
+    # the programs' ticks (master/tick.py, slave_sim/tick.py: supervisors, input guard,
+    # resync and nodes as they ship), started in sync as the lockstep's lanes are
+    master_tick, slave_tick = simulator.ticks(start, start)
+    command = master_tick.state.last_command_m.copy()
     steps = int(round(duration_s / ts))
     handle_force = np.empty((steps, 2))
     lag_to_slave = np.zeros(steps)
@@ -114,7 +115,7 @@ def run_cell(model: TeleopModel, gain_k: float, injected_round_trip_s: float,
         slave_link.poll()
         first_seq = (master_link._seq, slave_link._seq)  # noqa: SLF001 - tick of seq 0
         tool_recv = np.zeros((1, 2))
-        handle_recv = np.zeros((1, 4))
+        enabled_at: int | None = None  # the first tick with the master's forces on
         origin = time.perf_counter()
         for k in range(steps):
             tick_time = origin + k * ts
@@ -125,30 +126,43 @@ def run_cell(model: TeleopModel, gain_k: float, injected_round_trip_s: float,
                 time.sleep(tick_time - now - SPIN_S)
             while time.perf_counter() < tick_time:
                 pass
-            master_link.poll()
+            now_s = k * ts
+            # master: read (the rig) -> poll -> supervise -> node -> send
+            message = master_link.poll()
             latest = master_link.latest
             if latest is not None:
-                tool_recv = np.array([latest.tool_force_N])
+                tool_recv = np.array([latest.tool_force_N])  # the newest, held (as lockstep)
                 lag_to_master[k] = k - (latest.seq - first_seq[1])
             else:
                 lag_to_master[k] = np.nan
             sample = rig.step(rig_state, command, tool_recv)
             fh = sample.handle_force_measured_N
-            if k < PULSE_SAMPLES:
+            # the sweep's pulse, from the first tick with forces on (the ticks enable them
+            # once both sides have seen each other's messages over the link)
+            if enabled_at is not None and k - enabled_at < PULSE_SAMPLES:
                 fh = fh + PULSE_FORCE_N
-            command = master.step(master_state, fh, sample.handle_position_m, tool_recv)
-            master_link.send_handle(tuple(fh[0]), tuple(sample.handle_position_m[0]))
-            slave_link.poll()
+            yh = sample.handle_position_m
+            master_tick.supervise(now_s, (message,), yh, silence_s=(master_link.silence_s(),))
+            used = master_tick.control(fh, yh)
+            command = used.command_m.copy()
+            if enabled_at is None and bool(used.enabled[0]):
+                enabled_at = k + 1
+            master_link.send_handle(tuple(used.handle_force_used_N[0].tolist()),
+                                    tuple(yh[0].tolist()), used.flags[0])
+            # slave: poll -> supervise -> node -> send
+            message = slave_link.poll()
             latest = slave_link.latest
             if latest is not None:
-                handle_recv = np.array([[*latest.handle_force_N, *latest.handle_position_m]])
                 lag_to_slave[k] = k - (latest.seq - first_seq[0])
             else:
                 lag_to_slave[k] = np.nan
-            out = slave.step(slave_state, handle_recv[:, :2], handle_recv[:, 2:])
-            ft = out.tool_force_N[0]
-            slave_link.send_tool(tuple(ft), tuple(out.tool_position_m[0]),
-                                 tuple(out.tool_velocity_m_s[0]), 0.0, 0.0)
+            slave_tick.supervise(now_s, (message,), (slave_link.silence_s(),))
+            ticked = slave_tick.control()
+            out = ticked.out
+            slave_link.send_tool(tuple(out.tool_force_N[0].tolist()),
+                                 tuple(out.tool_position_m[0].tolist()),
+                                 tuple(out.tool_velocity_m_s[0].tolist()), 0.0, 0.0,
+                                 ticked.flags[0])
             handle_force[k] = fh[0]
     settled = slice(steps // 4, None)
     measured = (np.nanmean(lag_to_slave[settled]) + np.nanmean(lag_to_master[settled]) - 1.0) * ts
