@@ -123,3 +123,86 @@ def test_removed_volume_may_be_zero_never_negative() -> None:
     assert decode(_tool(volume=0.0), KIND_TOOL).removed_volume_m3 == 0.0
     error = _refused(_tool(volume=-1e-15), KIND_TOOL)
     assert str(error) == "malformed: removed_volume_m3 -1e-15 is negative"
+
+
+# The schema-4 fields (#16, #19): handle gain_k and energy_J, tool energy_J and echo.
+def _handle4(gain_k: float = 13.0, energy_J: float = 0.0) -> bytes:
+    return msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, 1, 2, 3, 2,
+                          0.5, -0.5, 0.01, 0.02, gain_k, energy_J])
+
+
+def _tool4(energy_J: float = 0.0, echo: object = 0) -> bytes:
+    return msgpack.packb([SCHEMA_VERSION, KIND_TOOL, 1, 2, 3, 2,
+                          1.0, 2.0, 0.1, 0.2, 0.0, 0.0, 0.5, 1e-9, energy_J, echo])
+
+
+def _tool_state(echo: int = 0, energy_J: float = 0.0) -> ToolState:
+    return ToolState(1, 2, 3, Flags(2), (1.0, 2.0), (0.1, 0.2), (0.0, 0.0), 0.5, 1e-9,
+                     echo, energy_J=energy_J)
+
+
+def test_defaults_of_the_schema_4_fields_are_zero() -> None:
+    handle = HandleState(1, 2, 3, Flags(2), (0.0, 0.0), (0.0, 0.0))
+    tool = ToolState(1, 2, 3, Flags(2), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)
+    assert (handle.gain_k, handle.energy_J) == (0.0, 0.0)
+    assert (tool.echo_send_time_ns, tool.energy_J) == (0, 0.0)
+
+
+def test_handle_gain_and_energy_round_trip_in_their_places() -> None:
+    sent = HandleState(1, 2, 3, Flags(2), (0.5, -0.5), (0.01, 0.02), 13.25, energy_J=0.75)
+    got = decode(encode(sent), KIND_HANDLE)
+    assert got == sent
+    assert (got.gain_k, got.energy_J) == (13.25, 0.75)
+
+
+def test_tool_energy_and_echo_round_trip_in_their_places() -> None:
+    sent = _tool_state(echo=123_456_789, energy_J=0.5)
+    got = decode(encode(sent), KIND_TOOL)
+    assert got == sent
+    assert (got.echo_send_time_ns, got.energy_J) == (123_456_789, 0.5)
+
+
+@pytest.mark.parametrize("gain_k", [0.0, 1e-300, 13.0])
+def test_gain_k_may_be_zero_or_positive(gain_k: float) -> None:
+    assert decode(_handle4(gain_k=gain_k), KIND_HANDLE).gain_k == gain_k
+
+
+@pytest.mark.parametrize("gain_k", [-1e-300, -13.0])
+def test_negative_gain_k_is_refused(gain_k: float) -> None:
+    error = _refused(_handle4(gain_k=gain_k), KIND_HANDLE)
+    assert error.reason is DropReason.MALFORMED
+    assert str(error) == f"malformed: gain_k {gain_k} is negative"
+
+
+@pytest.mark.parametrize("energy_J", [0.0, 1e-300, 2.5])
+def test_energy_may_be_zero_or_positive_on_both_messages(energy_J: float) -> None:
+    assert decode(_handle4(energy_J=energy_J), KIND_HANDLE).energy_J == energy_J
+    assert decode(_tool4(energy_J=energy_J), KIND_TOOL).energy_J == energy_J
+
+
+@pytest.mark.parametrize("energy_J", [-1e-300, -2.5])
+def test_negative_energy_is_refused_on_both_messages(energy_J: float) -> None:
+    for payload, kind in ((_handle4(energy_J=energy_J), KIND_HANDLE),
+                          (_tool4(energy_J=energy_J), KIND_TOOL)):
+        error = _refused(payload, kind)
+        assert error.reason is DropReason.MALFORMED
+        assert str(error) == f"malformed: energy_J {energy_J} is negative"
+
+
+@pytest.mark.parametrize("echo", [0, 1, MAX_U63])
+def test_echo_accepts_0_to_max_u63_on_decode_and_encode(echo: int) -> None:
+    assert decode(_tool4(echo=echo), KIND_TOOL).echo_send_time_ns == echo
+    assert decode(encode(_tool_state(echo=echo)), KIND_TOOL).echo_send_time_ns == echo
+
+
+@pytest.mark.parametrize("echo", [-1, MAX_U63 + 1, 1.0, True])
+def test_echo_outside_u63_or_not_an_int_is_refused_on_decode(echo: object) -> None:
+    error = _refused(_tool4(echo=echo), KIND_TOOL)
+    assert error.reason is DropReason.MALFORMED
+    assert str(error) == f"malformed: echo_send_time_ns {echo!r}"
+
+
+@pytest.mark.parametrize("echo", [-1, MAX_U63 + 1])
+def test_echo_outside_u63_is_refused_on_encode(echo: int) -> None:
+    with pytest.raises(ValueError, match=f"echo_send_time_ns {echo} out of range"):
+        encode(_tool_state(echo=echo))
