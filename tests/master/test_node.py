@@ -258,3 +258,57 @@ def test_resume_ramps_forces_in_without_the_small_force_gate(paper_model) -> Non
         node.step(state, push, start, np.zeros((1, 2)))
         scales.append(state.force_scale[0])
     assert 0.0 < scales[10] < 0.2 and scales[-1] == 1.0
+
+
+def test_tdpa_node_matches_the_numpy_reference_port() -> None:
+    """The node's passivity port (``tdpa``) wired to the right buffers and limits: the same
+    commands and energy flows as the numpy reference, the peer's energy given to ``step``."""
+    from haptic.common.passivity import (
+        PassivityPort,
+        PassivitySettings,
+        master_step_reference,
+    )
+
+    config = load_config(None)
+    model = model_from_config(config).with_gain(13.0)
+    safety = dataclasses.replace(master_settings(config).safety, ramp_small_force_N=1e9,
+                                 ramp_small_samples=1, ramp_time_s=0.05)
+    settings = PassivitySettings(credit_max_J=0.002, master_keep_J=0.0005)
+    lanes = 4
+    start = np.zeros((lanes, 2))
+    tdpa = MasterNode.from_model(model, safety, settings)
+    paper = MasterNode.from_model(model, safety)
+    state = tdpa.activate(start)
+    assert np.isnan(state.peer_energy_J).all()  # no energy received yet
+    reference_state = paper.activate(start)
+    port = PassivityPort.create(settings, model.sample_period_s, lanes, settings.master_keep_J)
+    rng = np.random.default_rng(5)
+    position = np.zeros((lanes, 2))
+    peer = np.zeros(lanes)
+    acted = 0
+    for step in range(800):
+        force = rng.normal(0.0, 1.5, (lanes, 2))
+        force[0] = 0.0  # below the force floor
+        tool = rng.normal(0.0, 3.0, (lanes, 2))
+        given = None
+        if step % 7 == 0:
+            peer = peer + rng.random(lanes) * 1e-4
+            given = peer
+            port.receive(peer)
+        command = tdpa.step(state, force, position, tool, peer_energy_J=given)
+        paper.step(reference_state, force, position, tool)
+        master_step_reference(port, reference_state.inputs, reference_state.command_m,
+                              reference_state.last_command_m, reference_state.origin_m,
+                              reference_state.faulted, safety.force_limit_N,
+                              np.asarray(safety.workspace_min_m),
+                              np.asarray(safety.workspace_max_m))
+        np.testing.assert_allclose(command, reference_state.command_m, rtol=0, atol=1e-12)
+        position = position + 0.2 * (command - position)
+        acted += int(np.count_nonzero(state.passivity.correction_m))
+    np.testing.assert_array_equal(state.peer_energy_J, peer)
+    for name in ("tank_J", "sent_J", "peer_sent_J", "input_energy_J", "output_energy_J",
+                 "forgotten_energy_J", "dissipated_energy_J", "active_steps"):
+        np.testing.assert_allclose(getattr(state.passivity, name), getattr(port, name),
+                                   rtol=1e-9, atol=1e-12, err_msg=name)
+    assert acted > 20
+    assert state.passivity.active_steps[0] == 0
