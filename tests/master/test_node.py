@@ -312,3 +312,31 @@ def test_tdpa_node_matches_the_numpy_reference_port() -> None:
                                    rtol=1e-9, atol=1e-12, err_msg=name)
     assert acted > 20
     assert state.passivity.active_steps[0] == 0
+
+
+def test_gain_ratio_scales_the_compensator_inputs_not_the_used_forces() -> None:
+    """``gain_ratio`` (k/k0, 1 at activation) scales what Ch1 integrates: a lane at ratio
+    0.5 commands what a lane at ratio 1 commands for half the forces, and differs from a lane
+    at ratio 1 with the same forces; the forces reported as used are the unscaled ones."""
+    config = load_config(None)
+    model = model_from_config(config).with_gain(13.0)
+    safety = dataclasses.replace(master_settings(config).safety, ramp_small_force_N=1e9,
+                                 ramp_small_samples=1, ramp_time_s=0.01)
+    node = MasterNode.from_model(model, safety)
+    state = node.activate(np.zeros((3, 2)))
+    np.testing.assert_array_equal(state.gain_ratio, np.ones(3))
+    state.gain_ratio[0] = 0.5
+    rng = np.random.default_rng(9)
+    for _ in range(200):
+        force = rng.normal(0.0, 0.5, 2)
+        tool = rng.normal(0.0, 0.8, 2)
+        handle = np.array([force, force / 2, force])
+        tools = np.array([tool, tool / 2, tool])
+        command = node.step(state, handle, np.zeros((3, 2)), tools)
+        np.testing.assert_allclose(command[0], command[1], rtol=1e-9, atol=1e-15)
+        np.testing.assert_allclose(state.handle_force_used_N[0],
+                                   state.force_scale[0] * force, rtol=1e-12)
+        np.testing.assert_allclose(state.tool_force_used_N[0],
+                                   state.force_scale[0] * tool, rtol=1e-12)
+    assert not state.faulted.any()
+    assert np.abs(command[0] - command[2]).max() > 1e-6
