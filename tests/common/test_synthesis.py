@@ -314,3 +314,20 @@ def test_a_realisable_design_with_a_wide_coefficient_spread_is_accepted() -> Non
     ch1 = tf([22.9881, 733.8891], [1.0, 65.0493, 949.839, 3974.4837])
     assert expected_refusal(axis, ch1) is None
     synthesize_axis(axis, ch1)
+
+
+def test_add_zeroes_a_sum_at_64_ulps_of_its_terms_and_keeps_one_just_above() -> None:
+    """``_add``'s rounding threshold pinned at the value: |a + b| <= 64 eps (|a| + |b|)
+    is zeroed, at equality too; a sum just over it, or a scale-free large one, is kept."""
+    from haptic.common.synthesis import _add
+
+    at = _add(np.array([1.0 + 2.0**-46]), np.array([-(1.0 - 2.0**-46)]))
+    assert at[0] == 0.0  # 2^-45 == 64 eps * 2 exactly
+    above = _add(np.array([1.0 + 2.0**-46 + 2.0**-52]), np.array([-(1.0 - 2.0**-46)]))
+    assert above[0] == 2.0**-45 + 2.0**-52  # over 64 eps (under 65 eps) of the terms
+    scale = 2.0**40  # scale-free: the same two sums 2^40 times larger
+    big = _add(scale * np.array([1.0 + 2.0**-46, 1.0 + 2.0**-46 + 2.0**-52]),
+               -scale * np.array([1.0 - 2.0**-46, 1.0 - 2.0**-46]))
+    np.testing.assert_array_equal(big, [0.0, scale * (2.0**-45 + 2.0**-52)])
+    np.testing.assert_array_equal(_add(np.array([2.0, 0.0]), np.array([-2.0])), [2.0, -2.0])
+    np.testing.assert_array_equal(_add(np.array([0.0]), np.array([0.0])), [0.0])
