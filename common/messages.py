@@ -81,6 +81,10 @@ class Flags(enum.IntFlag):
     TDPA = 8
     """The sender runs the passivity layer (``[control] mode = "tdpa"``): its ``energy_J``
     is the energy it handed over. Both sides must agree (:func:`control_mismatch`)."""
+    WORK_AREA_STOP = 16
+    """Slave only: the work-area guard stopped the tool (it left the scenario's grid by more
+    than the margin); the master holds its handle while this is set, so the handle does not
+    run on alone (issue 16)."""
 
 
 class DropReason(enum.StrEnum):

@@ -429,7 +429,7 @@ class LockstepSimulator:
 
 
 #: Every combination of the flags by value (building an IntFlag from an int is slow).
-_FLAGS = {value: Flags(value) for value in range(8)}
+_FLAGS = {value: Flags(value) for value in range(2 * max(Flags))}
 
 
 class _Arrivals:

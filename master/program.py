@@ -270,7 +270,8 @@ def _run_linked_master(
                     inert.update(now_s, link.peer_alive and link.silence_s() < max_age_s,
                                  enabled and bool(tick_stages.state.forces_enabled[0]),
                                  gate_reason if enabled else "node faulted" if supervisor.faulted
-                                 else supervisor.stop_reason() if supervisor.input_faulted
+                                 else supervisor.stop_reason() if (supervisor.input_faulted
+                                                                   or supervisor.peer_held)
                                  else f"watchdog {supervisor.watchdog.state.value}: the resync "
                                  "does not complete")
                     magnitude = math.hypot(felt[0], felt[1])
@@ -348,7 +349,8 @@ def _run_linked_master(
         run, watchdog, loop.max_force_N, (watchdog.events, supervisor.events, loop.node_events,
                                           governor.events if governor is not None else []),
         hardware_faults=supervisor.hardware_faults[:50], node_faulted=supervisor.faulted,
-        stages=stages.summary(), **tool_guard.summary(), **inert_summary,
+        stages=stages.summary(), work_area_holds=supervisor.peer_stops,
+        **tool_guard.summary(), **inert_summary,
         **(governor.summary() if governor is not None else {}), **extra_summary)
     if loop_options.trace_path:
         trace.save(loop_options.trace_path)

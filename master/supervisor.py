@@ -14,6 +14,9 @@ the hardware's faults, the link's silence (s) and the slave's liveliness. Decisi
 - with a ``tool_guard`` (master/tool_guard.py), an implausible ``ToolState`` is not an input
   (the tick sees no message) and its fault turns forces off until it clears and the tool is
   in sync with the handle again;
+- the slave's work-area guard (``Flags.WORK_AREA_STOP``) holds the handle too (an event
+  ``handle_held`` and :attr:`peer_stops`), so the handle does not run on while the tool
+  stands; forces come back once the flag clears and the tool is in sync again (issue 16);
 - the safe state holds the handle where it was when forces went off (or at the start).
 
 :meth:`update` returns a :class:`Transition`: ``ACTIVATE`` the first time forces come on (the
@@ -71,6 +74,11 @@ class MasterSupervisor:
         if tool_guard is not None:
             tool_guard.events = self.events
         self._await_sync = False  # after a tool input fault: forces wait for the resync check
+        #: the slave's work-area guard stopped the tool: forces wait for the flag to clear
+        #: and the tool to be in sync again
+        self._await_peer = False
+        #: how many times the slave's work-area stop held the handle
+        self.peer_stops = 0
 
     def start(self, position_m: Any) -> None:
         """Hold the handle where it is at the start (m; non-finite values read as 0)."""
@@ -110,11 +118,21 @@ class MasterSupervisor:
         input_fault = guard is not None and guard.faulted
         if self._await_sync and not input_fault and synced:
             self._await_sync = False
+        peer_stop = self.tool is not None and Flags.WORK_AREA_STOP in self.tool.flags
+        if peer_stop and not self._await_peer:
+            self._await_peer = True
+            self.peer_stops += 1
+            self.events.append({"time_s": now_s, "kind": "handle_held",
+                                "reason": "the slave's work-area guard stopped the tool: "
+                                "the handle is held until the tool is back in sync"})
+        elif self._await_peer and not peer_stop and synced:
+            self._await_peer = False
         if faults:
             self.hardware_faults.extend(f"cycle {cycle}: {fault}" for fault in faults)
             if not self.faulted:
                 self._latch(now_s, "hardware: " + "; ".join(faults))
-        enabled = state is WatchdogState.OK and not self.faulted and not self._await_sync
+        enabled = (state is WatchdogState.OK and not self.faulted and not self._await_sync
+                   and not self._await_peer)
         if enabled == self.enabled:
             return Transition.NONE
         self.enabled = enabled
@@ -140,6 +158,11 @@ class MasterSupervisor:
         """A tool input fault holds the forces off (or its resync is still waiting)."""
         return self._await_sync
 
+    @property
+    def peer_held(self) -> bool:
+        """The slave's work-area stop holds the handle (until the tool is back in sync)."""
+        return self._await_peer
+
     def stop_reason(self) -> str:
         """Why forces are off (for the hardware's quick stop and the events)."""
         if self.faulted:
@@ -149,6 +172,8 @@ class MasterSupervisor:
             return "tool input fault"
         if self._await_sync:
             return "tool input fault: waiting for the tool at the handle"
+        if self._await_peer:
+            return "the slave's work-area guard stopped the tool: waiting for it at the handle"
         return f"watchdog {self.watchdog.state.value}"
 
     @property

@@ -102,7 +102,11 @@ class SlaveSupervisor:
         synced = self.in_sync(tool_x_m, tool_y_m)
         state = self.watchdog.update(now_s, fresh, silence_s, synced, peer_alive)
         watchdog_ok = state is WatchdogState.OK
-        if not (watchdog_ok and self.master_enabled):
+        # the master holds its handle while the tool is stopped (Flags.WORK_AREA_STOP): with
+        # a grid the stop lasts until the handle is back over it, not merely while the master
+        # holds; a watchdog resync cycle ends it
+        held_for_stop = self.outside and self.grid_m is not None
+        if not watchdog_ok or not (self.master_enabled or held_for_stop):
             self.outside = self.rejoining = False  # a resync cycle ends the work-area stop
         elif not (self.outside or self.rejoining) and not (
                 self.x_low_m <= tool_x_m <= self.x_high_m

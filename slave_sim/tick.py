@@ -167,5 +167,6 @@ class SlaveTick:
         cutting = out.cutting
         table = _FLAGS
         flags = [table[supervisor.ready, bool(cut)]
+                 | (Flags.WORK_AREA_STOP if supervisor.outside else Flags(0))
                  for supervisor, cut in zip(self.supervisors, cutting.tolist(), strict=True)]
         return SlaveTickOutput(out, running, flags)

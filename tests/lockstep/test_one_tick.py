@@ -120,3 +120,48 @@ def test_the_lockstep_watchdog_trips_on_a_silent_link_and_resyncs(paper_config,
     np.testing.assert_array_equal(held, np.broadcast_to(held[0], held.shape))
     assert watchdog.state is WatchdogState.OK  # back in sync at the end
     assert not result.diverged[0]
+
+
+def test_the_slaves_work_area_stop_reaches_the_master_tick_and_holds_the_handle(
+        paper_config, paper_model) -> None:
+    """Issue 16, on the shared ticks: the slave's tick flags its work-area stop
+    (WORK_AREA_STOP) and the master's tick, fed that message, holds the handle (its forces
+    off, SAFE_STATE on the wire) instead of running on alone."""
+    scenario = load_scenario("constant-rate")
+    ts = paper_model.sample_period_s
+    sup = LockstepSupervision.from_config(paper_config, scenario)
+    ratio = tuple(float(a.position_ratio_ah1) for a in paper_model.axes)
+    tool_start = np.asarray(scenario.tool.start_position_m, float)[None, :]
+    handle_start = tool_start / np.asarray(ratio)
+    x, y = float(tool_start[0, 0]), float(tool_start[0, 1])
+    # a work area that ends 1 mm short of the tool, on x: the guard stops it at once
+    area = (x - 0.05, x - 0.001, y - 0.05, y + 0.05)
+    grid = (x - 0.04, x - 0.002, y - 0.04, y + 0.04)
+    slave_node = SlaveNode(paper_model, scenario, "linear", device="cpu")
+    slave = SlaveTick(slave_node, slave_node.initial_state(1, tool_start),
+                      [SlaveSupervisor(ratio, sup.sync_tolerance_m, area,
+                                       sup.max_message_age_s, sup.resync_messages,
+                                       grid_m=grid)],
+                      [InputGuard(InputGuardSettings.from_config(paper_config), ts)])
+    slave.handle_position_m[...] = handle_start
+    slave.start(synced=True)
+    node = MasterNode.from_model(paper_model, master_settings(paper_config).safety)
+    master = MasterTick(node, [MasterSupervisor(ratio, sup.sync_tolerance_m,
+                                                sup.max_message_age_s, sup.resync_messages)])
+    master.start(handle_start, synced=True)
+    handle = HandleState(0, 0, 0, Flags.FORCES_ENABLED, (0.0, 0.0), tuple(handle_start[0]))
+    slave.supervise(0.0, [handle])
+    out = slave.control()
+    assert Flags.WORK_AREA_STOP in out.flags[0] and not out.running[0]
+    message = ToolState(0, 0, 0, out.flags[0], tuple(out.out.tool_force_N[0].tolist()),
+                        tuple(out.out.tool_position_m[0].tolist()),
+                        tuple(out.out.tool_velocity_m_s[0].tolist()), 0.0, 0.0)
+    master.supervise(ts, [message], handle_start)
+    used = master.control(np.zeros((1, 2)), handle_start)
+    assert not used.enabled[0] and Flags.SAFE_STATE in used.flags[0]
+    np.testing.assert_array_equal(used.handle_force_used_N[0], 0.0)
+    assert master.supervisors[0].peer_stops == 1
+    # the master holding does not end the slave's stop: the handle is still beyond the grid
+    held = HandleState(0, 1, int(ts * 1e9), used.flags[0], (0.0, 0.0), tuple(handle_start[0]))
+    slave.supervise(2 * ts, [held])
+    assert Flags.WORK_AREA_STOP in slave.control().flags[0]

@@ -259,3 +259,29 @@ def test_a_missing_handle_reading_never_goes_on_the_wire() -> None:
         sent = position_for_the_wire(missing, last)
         assert sent == last
         encode(HandleState(1, 1, 1, Flags.SAFE_STATE, (0.0, 0.0), sent))  # never raises
+
+
+def test_the_slaves_work_area_stop_holds_the_handle_until_the_tool_is_back_in_sync() -> None:
+    """Issue 16: the slave's work-area guard (Flags.WORK_AREA_STOP) holds the handle too,
+    with an event and a count; forces return only once the flag clears and the tool is at
+    Ah1 yh again, not merely when the flag clears."""
+    supervisor = make()
+    run_in_sync(supervisor, RESYNC)
+    assert supervisor.enabled
+    handle = (0.01, 0.02)
+    stopped = ToolState(1, 100, 0, Flags.SAFE_STATE | Flags.WORK_AREA_STOP, (0.0, 0.0),
+                        (0.05, 0.01), (0.0, 0.0), 0.0, 0.0)
+    assert supervisor.update(100 * PERIOD_S, stopped, handle) is Transition.HOLD
+    assert supervisor.peer_stops == 1
+    assert [e["kind"] for e in supervisor.events].count("handle_held") == 1
+    np.testing.assert_allclose(supervisor.hold_m, handle)
+    for i in range(1, 10):  # still stopped: held, counted once
+        supervisor.update((100 + i) * PERIOD_S, ToolState(
+            1, 100 + i, 0, stopped.flags, (0.0, 0.0), (0.05, 0.01), (0.0, 0.0), 0.0, 0.0),
+            handle)
+    assert not supervisor.enabled and supervisor.peer_stops == 1
+    # the flag clears but the tool is not yet at the handle: still held
+    supervisor.update(110 * PERIOD_S, tool(0.05, 0.01, seq=110), handle)
+    assert not supervisor.enabled
+    transitions = run_in_sync(supervisor, 2, start=111)
+    assert Transition.RESUME in transitions and supervisor.enabled

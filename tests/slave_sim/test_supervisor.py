@@ -179,3 +179,20 @@ def test_a_warm_start_runs_at_once_with_the_handle_where_it_is() -> None:
     assert supervisor.master_enabled and supervisor.running and supervisor.ready
     assert supervisor.update(0.0, False, (0.03, 0.02)) is Transition.NONE
     assert supervisor.running
+
+
+def test_a_work_area_stop_lasts_while_the_master_holds_until_the_handle_is_back() -> None:
+    """Issue 16: the master holds its handle on the slave's work-area stop; with a grid, that
+    hold does not end the stop (no stop/hold/resume cycle at the edge): the handle back over
+    the grid does."""
+    grid = (0.0, 0.19, 0.0, 0.04)
+    supervisor = SlaveSupervisor(RATIO, 0.001, AREA, MAX_AGE_S, RESYNC, grid_m=grid)
+    start(supervisor)
+    assert supervisor.update(0.1, True, (0.2 + 1e-4, 0.0)) is Transition.STOP
+    for i in range(10):  # the master holds (safe state), the handle still beyond the grid
+        supervisor.receive(handle(0.21, enabled=False, seq=30 + i))
+        supervisor.update(0.1 + (i + 1) * PERIOD_S, True, (0.2 + 1e-4, 0.0))
+        assert supervisor.outside and not supervisor.ready
+    supervisor.receive(handle(0.15, enabled=False, seq=40))  # the handle back over the grid
+    supervisor.update(0.2, True, (0.2 + 1e-4, 0.0))
+    assert not supervisor.outside and supervisor.ready
