@@ -1,4 +1,4 @@
-"""Per-message cost of authenticated sessions (issue 17, common/auth.py): the sender's tag
+"""Per-message cost of authenticated sessions (issue 17, common/wire/auth.py): the sender's tag
 (HMAC-SHA256 under the session key, 16 bytes), the receiver's verification, and the receive
 path's decode-and-order with and without it, per message, in us. Target: <= 5 us per message
 added on this machine (the tick is 542 us). Figures only; nothing is asserted.
@@ -16,10 +16,10 @@ import timeit
 
 import numpy as np
 
-from haptic.common.auth import SessionAuth, decode_hello
-from haptic.common.injection import InjectionConfig
-from haptic.common.messages import KIND_TOOL, Flags, ToolState, encode
-from haptic.common.receive import ReceivePath
+from haptic.common.wire.auth import SessionAuth, decode_hello
+from haptic.common.wire.injection import InjectionConfig
+from haptic.common.wire.messages import KIND_TOOL, Flags, ToolState, encode
+from haptic.common.wire.receive import ReceivePath
 
 
 def _per_call_us(function, n: int) -> float:

@@ -15,7 +15,7 @@ driver on
 
 For each: the CAN cycle (``hardware.read()``: SYNC sent to the last PDO received) and the
 whole control cycle (read + node step + operator display + RPDOs), back to back
-(``unpaced``) and paced at Ts by the programs' real-time runner (common/runner.py: sleep,
+(``unpaced``) and paced at Ts by the programs' real-time runner (common/runtime/runner.py: sleep,
 then spin the last ``[runner] spin_s``, 0.1 ms; re-anchored after a stall), with
 p50/p99/max, the overruns and the runner's period error.
 Figures are wall-clock on this machine (noisy: other programs on a 2-core machine move them
@@ -34,12 +34,12 @@ import uuid
 import numpy as np
 
 from haptic.common.config import load_config, override
-from haptic.common.model import model_from_config
-from haptic.common.runner import FreeRunningClock, RealTimeRunner
-from haptic.master.hardware import HandleHardware, create_hardware
+from haptic.common.model.teleop import model_from_config
+from haptic.common.runtime.runner import FreeRunningClock, RealTimeRunner
+from haptic.master.hardware.interface import HandleHardware, create_hardware
 from haptic.master.node import MasterNode
-from haptic.master.rig_model import RigModel
 from haptic.master.settings import master_settings
+from haptic.master.sim.rig_model import RigModel
 
 #: The simulated rigs: name -> (backend, configuration overrides).
 RIGS: dict[str, tuple[str, dict[str, object]]] = {
@@ -124,7 +124,7 @@ def _run_cycles(hardware: HandleHardware, node: MasterNode, cycles: int, pace: b
         if k + 1 >= cycles:
             runner.request_stop("cycles")
 
-    # the programs' runner (common/runner.py); unpaced, its ticks run back to back
+    # the programs' runner (common/runtime/runner.py); unpaced, its ticks run back to back
     free = None if pace else FreeRunningClock()
     runner = RealTimeRunner(period_s, step, spin_s=spin_s if pace else 0.0, show_status=False,
                             **({} if free is None else {"clock_ns": free.clock_ns,

@@ -35,8 +35,8 @@ import numpy as np
 
 from haptic.common.config import load_config
 from haptic.common.config.scenario import Scenario, load_scenario
-from haptic.common.model import model_from_config
-from haptic.slave_sim.clay import make_clay
+from haptic.common.model.teleop import model_from_config
+from haptic.slave_sim.clay.sim import make_clay
 from haptic.slave_sim.node import SlaveNode
 
 GRIDS = ((256, 64), (1024, 256), (2048, 512))

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from haptic.common.config import load_config
-from haptic.common.model import model_from_config
+from haptic.common.model.teleop import model_from_config
 from haptic.lockstep.sweep import SweepSettings, plot_heatmap, run_sweep, write_csv
 
 FULL_GAINS = (1.0, 3.0, 5.0, 8.0, 10.0, 13.0, 16.0, 19.0, 25.0, 30.0)

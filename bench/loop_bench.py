@@ -6,8 +6,8 @@ Runs, in one invocation on loopback:
    real-time priority, ``RingChannel``), one-way delay = round trip / 2 on
    :func:`time.perf_counter_ns`, 10000 round trips before and 10000 after the loop, pooled
    (the machine's noise drifts);
-2. the loop: two processes, each a :class:`~haptic.common.runner.RealTimeRunner` at Ts with a
-   :class:`~haptic.common.link.Link`, exchanging HandleState and ToolState every tick.
+2. the loop: two processes, each a :class:`~haptic.common.runtime.runner.RealTimeRunner` at Ts
+   with a :class:`~haptic.common.wire.link.Link`, exchanging HandleState and ToolState every tick.
 
 By default the two loop processes are the real programs: ``haptic-master`` on the ``model``
 handle backend (the rig block stepped in ``read()``, the regulating operator holding 3.6 N;
@@ -52,15 +52,15 @@ from typing import Any
 import numpy as np
 import zenoh
 
-from haptic.common.cli_options import add_run_options, run_options_from_args
 from haptic.common.config import exit_on_config_error
-from haptic.common.link import Link
-from haptic.common.messages import Flags
-from haptic.common.runner import RealTimeRunner, StopSignals
-from haptic.common.runner_config import place_other_threads, prioritise_zenoh_threads
-from haptic.common.stage_times import in_tick_order
-from haptic.common.summary import format_summary, make_summary, write_json_summary
-from haptic.common.watchdog import PeerWatchdog
+from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
+from haptic.common.runtime.runner import RealTimeRunner, StopSignals
+from haptic.common.runtime.runner_config import place_other_threads, prioritise_zenoh_threads
+from haptic.common.runtime.stage_times import in_tick_order
+from haptic.common.runtime.summary import format_summary, make_summary, write_json_summary
+from haptic.common.runtime.watchdog import PeerWatchdog
+from haptic.common.wire.link import Link
+from haptic.common.wire.messages import Flags
 
 PEER_WAIT_S = 10.0
 

@@ -22,7 +22,7 @@ source tree. Warp kernels compile into a private cache that is deleted at the en
 Usage::
 
     python bench/mutation_score.py                  # every module, a table and the time taken
-    python bench/mutation_score.py --module common/watchdog.py --survivors
+    python bench/mutation_score.py --module common/runtime/watchdog.py --survivors
     python bench/mutation_score.py --json           # {"modules": {path: {...}}, "total_score"}
 
 Adding a module is one line in :data:`MODULES`: its path and the tests that should catch its
@@ -65,29 +65,29 @@ _NODE_TESTS = ("tests/master/test_node_limits.py", "tests/master/test_node.py",
 #: The modules under mutation. Adding one is one line: its path and the tests that should
 #: catch its mutants.
 MODULES: dict[str, Target] = {
-    "common/watchdog.py": Target(("tests/common/test_watchdog.py",)),
+    "common/runtime/watchdog.py": Target(("tests/common/test_watchdog.py",)),
     "master/node.py": Target(_NODE_TESTS),
     "master/node_kernels.py": Target(_NODE_TESTS, every=3),
-    "common/messages.py": Target(("tests/common/test_message_limits.py",
+    "common/wire/messages.py": Target(("tests/common/test_message_limits.py",
                                   "tests/common/test_messages.py",
                                   "tests/common/test_receive.py")),
-    "common/receive.py": Target(("tests/common/test_receive_filter.py",
+    "common/wire/receive.py": Target(("tests/common/test_receive_filter.py",
                                  "tests/common/test_receive_limits.py",
                                  "tests/common/test_receive.py",
                                  "tests/common/test_message_limits.py",
                                  "tests/common/test_messages.py")),
-    "common/synthesis.py": Target(("tests/common/test_synthesis.py",)),
+    "common/model/synthesis.py": Target(("tests/common/test_synthesis.py",)),
     "master/supervisor.py": Target(("tests/master/test_supervisor.py",)),
     "slave_sim/supervisor.py": Target(("tests/slave_sim/test_supervisor.py",
                                        "tests/wire/test_supervisor_policy.py")),
     "slave_sim/input_guard.py": Target(("tests/slave_sim/test_input_guard_limits.py",
                                         "tests/wire/test_input_guard.py")),
-    "common/auth.py": Target(("tests/wire/test_auth_units.py", "tests/wire/test_auth.py")),
-    "common/clay_contact.py": Target(("tests/slave_sim/test_clay.py",
+    "common/wire/auth.py": Target(("tests/wire/test_auth_units.py", "tests/wire/test_auth.py")),
+    "common/model/clay_contact.py": Target(("tests/slave_sim/test_clay.py",
                                       "tests/lockstep/test_clay_analysis.py")),
-    "slave_sim/clay.py": Target(("tests/slave_sim/test_clay_limits.py",
+    "slave_sim/clay/sim.py": Target(("tests/slave_sim/test_clay_limits.py",
                                  "tests/slave_sim/test_clay.py")),
-    "slave_sim/clay_kernels.py": Target(("tests/slave_sim/test_clay_limits.py",
+    "slave_sim/clay/clay_kernels.py": Target(("tests/slave_sim/test_clay_limits.py",
                                          "tests/slave_sim/test_clay.py"), every=3),
 }
 
@@ -125,7 +125,8 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
      "read only after a fault, and every fault sets it to 0 first"),
     ("slave_sim/input_guard.py", "_send_ns: int = 0", "_send_ns: int = 1",
      "read only for a message of the same epoch as an admitted one, which set it"),
-    ("common/auth.py", "descriptor = os.open(file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)",
+    ("common/wire/auth.py",
+     "descriptor = os.open(file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)",
      "descriptor = os.open(file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 385)",
      "the os.chmod(file, 0o600) that follows sets the mode either way (it is there for a "
      "file that already existed)"),
@@ -138,7 +139,12 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
           ("_trip_code", "np.ndarray | None", "None", ""),
           ("_event_bits", "np.ndarray | None", "None", ""),
           ("_event_count", "np.ndarray | None", "None", ""),
-          ("_buffers", "tuple", "()", "  # keeps the Warp arrays alive"))),
+          ("_buffers", "tuple", "()", "  # keeps the Warp arrays alive"),
+          ("_passivity_kernel", "Any", "None", ""))),
+    *(("master/node.py", "if passivity is not None:", after,
+       "only when the passivity kernel's module is compiled: wp.launch loads it at activate if "
+       "it was not preloaded, and preloading it needlessly changes nothing")
+      for after in ("if passivity is None:", "if not passivity is not None:")),
     ("master/node.py", "if per_lane and matrices[0].shape[0] != lanes:",
      "if per_lane and matrices[ 1].shape[0] != lanes:",
      "A and B are both (lanes, ., .): either's shape[0] is the lane count"),
@@ -177,54 +183,55 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
      "code = TRIP_NON_FINITE_FORCE * 3", "TRIP_NON_FINITE_FORCE is 0: 0 * 3 == 0 * 2"),
     ("master/node_kernels.py", "code = TRIP_NON_FINITE_FORCE * 2",
      "code = TRIP_NON_FINITE_FORCE / 2", "TRIP_NON_FINITE_FORCE is 0: 0 / 2 == 0 * 2"),
-    ("common/messages.py", "_packer = msgpack.Packer(use_bin_type=True, use_single_float=False)",
+    ("common/wire/messages.py",
+     "_packer = msgpack.Packer(use_bin_type=True, use_single_float=False)",
      "_packer = msgpack.Packer(use_bin_type=False, use_single_float=False)",
      "use_bin_type only changes how bytes objects pack: a message packs none (integers and "
      "floats only)"),
-    ("common/synthesis.py",
+    ("common/model/synthesis.py",
      "return 0 if nonzero.size == 0 else len(polynomial) - 1 - int(nonzero[-1])",
      "return 1 if nonzero.size == 0 else len(polynomial) - 1 - int(nonzero[-1])",
      "only called on non-zero polynomials (the zero numerator returns earlier)"),
-    ("common/receive.py",
+    ("common/wire/receive.py",
      "seq_state = self._seq = _Sequence(message.epoch, message.seq, message.seq - 1, 0)",
      "seq_state = self._seq = _Sequence(message.epoch, message.seq, message.seq - 1, 1)",
      "the highest send time starts below any real one (ns since 1970) either way"),
-    ("common/receive.py", "delivery_ns = arrival_ns if arrival_ns > target_ns else target_ns",
+    ("common/wire/receive.py", "delivery_ns = arrival_ns if arrival_ns > target_ns else target_ns",
      "delivery_ns = arrival_ns if arrival_ns >= target_ns else target_ns",
      "when they are equal both branches give the same time"),
-    ("common/receive.py", "if send_ns > seq_state.highest_send_ns:",
+    ("common/wire/receive.py", "if send_ns > seq_state.highest_send_ns:",
      "if send_ns >= seq_state.highest_send_ns:", "when equal the assignment changes nothing"),
-    ("common/receive.py", "if not pending or pending[0][0] > now_ns:",
+    ("common/wire/receive.py", "if not pending or pending[0][0] > now_ns:",
      "if not pending or pending[0][ 1] > now_ns:",
      "an early exit only: the loop below checks the delivery time itself and returns None "
      "when nothing is due"),
-    ("common/receive.py", "newest_delivery_ns = 0", "newest_delivery_ns = 1",
+    ("common/wire/receive.py", "newest_delivery_ns = 0", "newest_delivery_ns = 1",
      "overwritten with the first message handed over; read only when there is one"),
-    ("common/receive.py", "if seq <= seq_state.delivered_seq:",
+    ("common/wire/receive.py", "if seq <= seq_state.delivered_seq:",
      "if seq < seq_state.delivered_seq:",
      "a sequence number is pending at most once (accept drops duplicates), so the one "
      "delivered is never pending again"),
-    ("common/receive.py", "delivered_seq: int = -1", "delivered_seq: int = - 2",
+    ("common/wire/receive.py", "delivered_seq: int = -1", "delivered_seq: int = - 2",
      "sequence numbers are >= 0: any negative start lies below all of them"),
-    ("common/messages.py",
+    ("common/wire/messages.py",
      "fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=True)",
      "fields = msgpack.unpackb(payload, use_list=True, raw=True, strict_map_key=True)",
      "no valid message holds a string: as str or as bytes, it is refused as not a number"),
-    ("common/messages.py",
+    ("common/wire/messages.py",
      "fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=True)",
      "fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=False)",
      "no valid message holds a map: whatever its keys, it is refused"),
-    ("slave_sim/clay.py", "@dataclass(eq=False)", "@dataclass(eq=True)",
+    ("slave_sim/clay/sim.py", "@dataclass(eq=False)", "@dataclass(eq=True)",
      "nothing compares or hashes clay states (identity is what the callers keep)"),
-    ("slave_sim/clay.py",
+    ("slave_sim/clay/sim.py",
      "contact_ready: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))",
      "contact_ready: np.ndarray = field(default_factory=lambda: np.zeros( 1, bool))",
      "every ClayState is made by _ClayBase._new_state, which sets contact_ready to "
      "zeros(lanes): the default is never used"),
-    ("slave_sim/clay.py", "state.direction = np.zeros((lanes, 2))",
+    ("slave_sim/clay/sim.py", "state.direction = np.zeros((lanes, 2))",
      "state.direction = np.zeros((lanes, 3))",
      "a third column nobody writes or reads: proxy_numpy and yield_numpy use columns 0 and 1"),
-    *(("slave_sim/clay.py", before, after, _CUDA) for before, after in (
+    *(("slave_sim/clay/sim.py", before, after, _CUDA) for before, after in (
         ('runtime["pinned"] = {name: wp.zeros((lanes, 2), dtype=wp.float64, device="cpu",',
          'runtime["pinned"] = {name: wp.zeros((lanes, 3), dtype=wp.float64, device="cpu",'),
         ('runtime["pinned"] = {name: wp.zeros((lanes, 2), dtype=wp.float64, device="cpu",\n'
@@ -234,7 +241,7 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
         ('wp.copy(rt["arrays"][name], rt["pinned"][name])\nfor launch in rt["launches"]:',
          "for launch in []:"),
         ("for name in self._OUTPUTS:", "for name in []:"))),
-    ("slave_sim/clay_kernels.py", "u = wp.clamp(t, wp.float64(0.0), wp.float64(1.0))",
+    ("slave_sim/clay/clay_kernels.py", "u = wp.clamp(t, wp.float64(0.0), wp.float64(1.0))",
      "u = wp.clamp(t, wp.float64(0.0), wp.float64( 2.0))",
      "the cut only reaches cells with distance < outer_radius = inner_radius + edge_width, "
      "where t = (distance - inner_radius) / edge_width < 1 (or an ulp above, where the "

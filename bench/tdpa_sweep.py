@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from haptic.common.config import load_config
-from haptic.common.model import model_from_config
+from haptic.common.model.teleop import model_from_config
 from haptic.lockstep.sweep import SweepSettings, run_sweep_grid
 
 FULL = dict(gains=(3.0, 13.0, 19.0),

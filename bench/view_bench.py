@@ -25,7 +25,7 @@ import urllib.request
 import uuid
 from pathlib import Path
 
-from haptic.common.run_recording import RunRecording
+from haptic.common.records.run_recording import RunRecording
 
 
 def recorder_figures(calls: int = 50_000) -> dict[str, float]:

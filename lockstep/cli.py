@@ -17,13 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from haptic.common.cli_options import add_retired_delay_option
 from haptic.common.config import ConfigError, exit_on_config_error, load_config
 from haptic.common.config.control_schema import passivity_settings
 from haptic.common.config.scenario import load_scenario
-from haptic.common.delay_profile import DelayProfileError, parse_delay_profile
-from haptic.common.injection import InjectionConfig
-from haptic.common.model import model_from_config
+from haptic.common.model.delay_profile import DelayProfileError, parse_delay_profile
+from haptic.common.model.teleop import model_from_config
+from haptic.common.runtime.cli_options import add_retired_delay_option
+from haptic.common.wire.injection import InjectionConfig
 from haptic.lockstep.simulator import (
     ENVIRONMENTS,
     TRANSPARENT_SAFETY,
@@ -32,8 +32,8 @@ from haptic.lockstep.simulator import (
     LockstepSupervision,
 )
 from haptic.master.margin_governor import governor_for
-from haptic.master.operator import parse_operator_spec
 from haptic.master.settings import master_settings
+from haptic.master.sim.operator import parse_operator_spec
 
 DEFAULT_GAINS = (1.0, 3.0, 5.0, 8.0, 10.0, 13.0, 16.0, 19.0, 25.0, 30.0)
 

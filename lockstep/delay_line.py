@@ -5,15 +5,15 @@ is the line's structural sample (0 for the handle line, 1 for the tool line: the
 force describes the end of its step, t_{j+1}; see docs/lockstep.md), ``d`` the lane's delay
 in whole samples and ``e_j`` the extra samples of the injected delay and jitter,
 ``ceil((delay_s + profile(j Ts) + jitter_j) / Ts)`` (``profile``: the injection's delay
-profile, :mod:`haptic.common.delay_profile`, with t = 0 at tick 0). The receiver at
+profile, :mod:`haptic.common.model.delay_profile`, with t = 0 at tick 0). The receiver at
 tick ``k`` reads the newest message it has (the largest ``j`` receivable by ``k``); a lost
 message is never receivable, so the receiver keeps the previous one; before the first
 message it reads the initial value.
 
-Jitter and loss follow :mod:`haptic.common.injection` (same distributions and bounds, the
+Jitter and loss follow :mod:`haptic.common.wire.injection` (same distributions and bounds, the
 same Gilbert-Elliott chain, ``preserve_order`` as a running maximum of the targets); the
 draws come from the seeded generator given here, vectorised over ticks and lanes, so they
-are not the same stream of numbers a real :class:`~haptic.common.injection.Impairment`
+are not the same stream of numbers a real :class:`~haptic.common.wire.injection.Impairment`
 would draw.
 """
 
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from haptic.common.injection import InjectionConfig
+from haptic.common.wire.injection import InjectionConfig
 
 
 def jitter_draws_s(config: InjectionConfig, shape: tuple[int, ...],

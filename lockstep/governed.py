@@ -1,7 +1,7 @@
 """The margin governor in lockstep: one governor per lane, fed the echo the delay lines imply.
 
 In the programs the tool message echoes the send time of the handle message the slave had
-used (common/messages.py). Here the delay lines say the same exactly: the tool message the
+used (common/wire/messages.py). Here the delay lines say the same exactly: the tool message the
 master reads at tick k was sent at tick ``j = tool_schedule[k]``, when the slave had the
 handle message of tick ``handle_schedule[j]``; the echo age is ``k - handle_schedule[j]``
 ticks. The governed gain goes to the master's compensator at once (``gain_ratio``) and

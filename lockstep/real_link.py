@@ -1,6 +1,6 @@
 """A few sweep cells over the real Zenoh link: the lockstep's rig and operator and the
 programs' two ticks (supervisors, input guard and nodes as they ship), one lane, but the two
-delay lines replaced by two :class:`~haptic.common.link.Link` objects (master and slave side,
+delay lines replaced by two :class:`~haptic.common.wire.link.Link` objects (master and slave side,
 in this process, over TCP on loopback) with the delay injected by the links' receive paths.
 The loop is paced in real time at Ts, since the injected delay is wall-clock time.
 
@@ -22,13 +22,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from haptic.common.config.scenario import load_scenario
-from haptic.common.injection import InjectionConfig
-from haptic.common.link import Link
-from haptic.common.link_config import LinkConfig
-from haptic.common.model import TeleopModel
+from haptic.common.model.teleop import TeleopModel
+from haptic.common.wire.injection import InjectionConfig
+from haptic.common.wire.link import Link
+from haptic.common.wire.link_config import LinkConfig
 from haptic.lockstep.simulator import LockstepSimulator
 from haptic.lockstep.sweep import PULSE_FORCE_N, PULSE_SAMPLES, analytic_margin_s
-from haptic.master.operator import parse_operator_spec
+from haptic.master.sim.operator import parse_operator_spec
 
 #: Sleep until this long before a tick's deadline, then spin (docs/link.md's pacing).
 SPIN_S = 0.0003

@@ -24,11 +24,11 @@ import numpy as np
 
 from haptic.common.analysis.report import AnalysisSettings, analyse
 from haptic.common.config.scenario import load_scenario
-from haptic.common.cutting import cutting_steadiness
-from haptic.common.model import TeleopModel, model_from_config
+from haptic.common.model.teleop import TeleopModel, model_from_config
+from haptic.common.records.cutting import cutting_steadiness
 from haptic.lockstep.simulator import TRANSPARENT_SAFETY, LockstepSimulator
 from haptic.lockstep.sweep import analytic_margin_s
-from haptic.master.operator import parse_operator_spec
+from haptic.master.sim.operator import parse_operator_spec
 
 GAINS = (3.0, 13.0, 19.0)
 #: Force above which the tool counts as in contact with the clay, N.
@@ -155,7 +155,7 @@ def constant_rate(model: TeleopModel, operator_spec: str, seed: int, duration_s:
 
 def steady_cut_rows(steadiness: Any) -> list[Row]:
     """The rows of issue 15's steady cut (the paper's Fig. 9 shows a steady 3.6 N at
-    38 mm/s): over the steady part of the cut (common/cutting.py) the force ripple (std |ft|
+    38 mm/s): over the steady part of the cut (common/records/cutting.py) the force ripple (std |ft|
     / mean) at most 10 %, no velocity reversal, mean force 3.6 +- 0.4 N, speed 34-42 mm/s."""
     ripple = steadiness.force_ripple_ratio
     reversals = steadiness.velocity_reversals

@@ -14,7 +14,7 @@ One tick k (period Ts), every lane at once (docs/lockstep.md derives the timing)
 
 With round-trip delay n samples split d1 = n // 2 to the slave and d2 = n - d1 back, this is
 exactly the loop :class:`~haptic.common.analysis.loop.AxisLoop` analyses with
-``sample_period_s`` = Ts at tau = n Ts, and the loop :mod:`haptic.common.linear_loop`
+``sample_period_s`` = Ts at tau = n Ts, and the loop :mod:`haptic.common.analysis.linear_loop`
 simulates (with the linear environment and the safety layer out of the way).
 
 Lanes may differ in the Ch1 gain k (the compensators are stacked per lane) and in their
@@ -32,23 +32,24 @@ from typing import Any
 import numpy as np
 
 from haptic.common.config.scenario import Scenario
-from haptic.common.drift import DriftCoupling
-from haptic.common.injection import InjectionConfig
-from haptic.common.lti import DiscreteLTI
-from haptic.common.messages import Flags, HandleState, ToolState
-from haptic.common.model import TeleopModel
-from haptic.common.passivity import PassivitySettings
+from haptic.common.model.drift import DriftCoupling
+from haptic.common.model.lti import DiscreteLTI
+from haptic.common.model.passivity import PassivitySettings
+from haptic.common.model.teleop import TeleopModel
+from haptic.common.model.work_area import shared_work_area, slave_work_area_m
+from haptic.common.wire.injection import InjectionConfig
+from haptic.common.wire.messages import Flags, HandleState, ToolState
 from haptic.lockstep.delay_line import DelayLine, source_schedule
 from haptic.lockstep.governed import GovernedLanes
 from haptic.lockstep.stacked import StackedLTI
 from haptic.master.margin_governor import MarginGovernor
 from haptic.master.node import MasterNode, master_compensator
-from haptic.master.operator import OperatorModel
-from haptic.master.rig_model import RigModel
-from haptic.master.settings import SafetySettings
+from haptic.master.settings import SafetySettings, with_work_area
+from haptic.master.sim.operator import OperatorModel
+from haptic.master.sim.rig_model import RigModel
 from haptic.master.supervisor import MasterSupervisor
 from haptic.master.tick import MasterTick
-from haptic.slave_sim.clay import ClayStepResult
+from haptic.slave_sim.clay.sim import ClayStepResult
 from haptic.slave_sim.environment import LinearEnvironment, make_environment
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from haptic.slave_sim.node import SlaveNode, slave_compensators
@@ -87,15 +88,12 @@ class LockstepSupervision:
     def from_config(cls, config: dict[str, Any], scenario: Scenario) -> LockstepSupervision:
         """The deployed programs' settings: ``[link]``'s watchdog, the slave's work area
         about the scenario's grid and ``[slave.safety]``."""
-        from haptic.slave_sim.program import DEFAULT_SYNC_TOLERANCE_M, WORK_AREA_MARGIN_M
+        from haptic.slave_sim.program import DEFAULT_SYNC_TOLERANCE_M
 
         watchdog = config["link"]["watchdog"]
         grid = scenario.grid
-        margin = WORK_AREA_MARGIN_M
         return cls(float(watchdog["max_message_age_s"]), int(watchdog["resync_messages"]),
-                   DEFAULT_SYNC_TOLERANCE_M,
-                   (grid.x_range_m[0] - margin, grid.x_range_m[1] + margin,
-                    grid.y_range_m[0] - margin, grid.y_range_m[1] + margin),
+                   DEFAULT_SYNC_TOLERANCE_M, slave_work_area_m(grid.x_range_m, grid.y_range_m),
                    InputGuardSettings.from_config(config),
                    (grid.x_range_m[0], grid.x_range_m[1], grid.y_range_m[0], grid.y_range_m[1]))
 
@@ -232,10 +230,17 @@ class LockstepSimulator:
         master_block, slave_block = stacked_compensators(model, self.gains_k)
         # passivity: None runs the paper's scheme, settings the TDPA layer (tdpa mode).
         self.passivity = passivity
-        self.master = MasterNode(master_block, safety, passivity)
+        # the work area both sides hold, as the programs do (common/model/work_area.py): the
+        # handle's workspace and the slave's work area, the tighter bound of each for both
+        self.work_area = shared_work_area(
+            [a.position_ratio_ah1 for a in model.axes], safety.workspace_min_m,
+            safety.workspace_max_m, supervision.work_area_m)
+        self.master = MasterNode(master_block, with_work_area(safety, self.work_area),
+                                 passivity)
         self.rig = RigModel.from_model(model, operator, force_noise_std_N)
         base = "linear" if environment == "linear" else "clay"
-        self.slave = SlaveNode(model, scenario, base, clay_impl, device, passivity, drift)
+        self.slave = SlaveNode(model, scenario, base, clay_impl, device, passivity, drift,
+                               (self.work_area.tool_low_m, self.work_area.tool_high_m))
         # The node synthesizes its compensators for the model's k; lanes use their own k.
         self.slave.compensators = slave_block
         if environment == "clay+linear":

@@ -1,7 +1,8 @@
 """A linear block with one set of matrices per lane, for sweeps where lanes differ in k.
 
-:class:`StackedLTI` has the interface the nodes use of a :class:`~haptic.common.lti.DiscreteLTI`
-(``step``, ``initial_state``, names, period) but its matrices have a leading lane axis, so
+:class:`StackedLTI` has the interface the nodes use of a
+:class:`~haptic.common.model.lti.DiscreteLTI` (``step``, ``initial_state``, names,
+period) but its matrices have a leading lane axis, so
 lanes with different compensators (different Ch1 gains) step together in one batched
 matrix product instead of one batch per gain.
 """
@@ -13,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haptic.common.lti import DiscreteLTI
+from haptic.common.model.lti import DiscreteLTI
 
 
 @dataclass(frozen=True, eq=False)

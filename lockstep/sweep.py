@@ -9,7 +9,7 @@ Modes:
   force pulse; the time domain and the analysis compute the same system.
 - ``clay``: the clay-cutting loop of the constant-rate scenario, the regulating operator
   cutting at 3.6 N; compared with the analysis of its linearisation about steady cutting,
-  the clay's damper in series with the proxy's coupling (common/clay_contact.py).
+  the clay's damper in series with the proxy's coupling (common/model/clay_contact.py).
 """
 
 from __future__ import annotations
@@ -22,16 +22,16 @@ import numpy as np
 
 from haptic.common.analysis.report import AnalysisSettings, axis_loop
 from haptic.common.analysis.stability import delay_margin
-from haptic.common.clay_contact import clay_impedance
 from haptic.common.config.scenario import load_scenario
-from haptic.common.injection import InjectionConfig
-from haptic.common.model import TeleopModel
-from haptic.common.passivity import MODES as CONTROL_MODES
-from haptic.common.passivity import PassivitySettings
-from haptic.common.synthesis import SynthesisError
+from haptic.common.model.clay_contact import clay_impedance
+from haptic.common.model.passivity import MODES as CONTROL_MODES
+from haptic.common.model.passivity import PassivitySettings
+from haptic.common.model.synthesis import SynthesisError
+from haptic.common.model.teleop import TeleopModel
+from haptic.common.wire.injection import InjectionConfig
 from haptic.lockstep.simulator import LockstepSimulator
 from haptic.lockstep.verdict import GROWTH_THRESHOLD, growth_verdict
-from haptic.master.operator import parse_operator_spec
+from haptic.master.sim.operator import parse_operator_spec
 
 MODES = ("linear", "clay")
 #: The test pulse of the linear mode: 1 N on both axes for 20 samples (10.8 ms).
@@ -70,7 +70,7 @@ class SweepSettings:
     jitter_s: float = 0.0
     loss_probability: float = 0.0
     seed: int = 0
-    #: "paper" (the paper's scheme) or "tdpa" (with the passivity layer, common/passivity.py).
+    #: "paper" (the paper's scheme) or "tdpa" (with the passivity layer, common/model/passivity.py).
     control: str = "paper"
     #: Loss in Gilbert-Elliott bursts of mean length BURST_LENGTH_MESSAGES at the same mean
     #: rate ``loss_probability``, instead of independent losses.
@@ -203,7 +203,7 @@ def _finite(value: float) -> float | None:
 def sweep_model(model: TeleopModel, mode: str) -> TeleopModel:
     """The model the analysis uses for ``mode``: as configured (linear) or with the clay
     linearised about steady cutting on both axes (clay: Tt = B s (K + b s) / (K + (B + b) s),
-    common/clay_contact.py)."""
+    common/model/clay_contact.py)."""
     if mode == "linear":
         return model
     if mode == "clay":

@@ -16,19 +16,21 @@ from pathlib import Path
 
 import zenoh
 
-from haptic.common.cli_options import add_run_options, run_options_from_args
+from haptic.common.analysis.preflight import add_preflight_options, run_preflight
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.config.control_schema import passivity_settings
-from haptic.common.failures import exit_on_link_error
-from haptic.common.model import model_from_config
-from haptic.common.preflight import add_preflight_options, run_preflight
-from haptic.common.program_harness import add_networked_options, check_networked_options
+from haptic.common.config.scenario import load_scenario, max_block_damping
+from haptic.common.model.teleop import model_from_config
+from haptic.common.model.work_area import work_area_from_config
+from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
+from haptic.common.runtime.failures import exit_on_link_error
+from haptic.common.runtime.program_harness import add_networked_options, check_networked_options
 from haptic.master.governor_setup import start_governor
-from haptic.master.hardware import HardwareError, create_hardware
+from haptic.master.hardware.interface import HardwareError, create_hardware
 from haptic.master.node import MasterNode
 from haptic.master.program import DEFAULT_SYNC_TOLERANCE_M, MasterLoopOptions, run_linked_master
 from haptic.master.runner import run_master
-from haptic.master.settings import master_settings
+from haptic.master.settings import master_settings, with_work_area
 
 #: Run length of the master-only mode when --duration is not given, s.
 NO_LINK_DEFAULT_DURATION_S = 1.0
@@ -98,14 +100,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_networked_options(args)
         settings = master_settings(options.config)
         model = model_from_config(options.config)
-        node = MasterNode.from_model(model, settings.safety,
+        # the handle stops where the slave's tool does (issue 16): the slave's scenario grid
+        # bounds the handle's workspace too, through Ah1
+        scenario = load_scenario(options.config["slave"]["scenario"])
+        area = work_area_from_config(options.config, scenario.grid.x_range_m,
+                                     scenario.grid.y_range_m)
+        node = MasterNode.from_model(model, with_work_area(settings.safety, area),
                                      passivity_settings(options.config))
     with exit_on_config_error():
         clay = None
         if args.analysis_environment == "clay":
-            from haptic.common.config.scenario import load_scenario, max_block_damping
-
-            clay = max_block_damping(load_scenario(options.config["slave"]["scenario"]))
+            clay = max_block_damping(scenario)
         analysis, refused = run_preflight(options.config, args, "haptic-master", side="master",
                                           clay_damping_N_s_per_m=clay)
     if refused is not None:
@@ -125,7 +130,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     with exit_on_link_error("haptic-master"):
         return run_linked_master(options, model, node, hardware, loop_options,
-                                 {"rig": settings.rig, "analysis": analysis.as_dict()})
+                                 {"rig": settings.rig, "analysis": analysis.as_dict(),
+                                  "work_area": area.describe()})
 
 
 def _main_alone(args: argparse.Namespace) -> int:

@@ -12,14 +12,14 @@ import argparse
 import sys
 from typing import Any, TextIO
 
-from haptic.common.link import Link
-from haptic.common.model import TeleopModel
-from haptic.common.preflight import (
+from haptic.common.analysis.preflight import (
     DEFAULT_ASSUMED_LINK_DELAY_S,
     EXIT_UNSTABLE,
     governor_enabled,
     round_trip_delay_s,
 )
+from haptic.common.model.teleop import TeleopModel
+from haptic.common.wire.link import Link
 from haptic.master.margin_governor import GovernorDecision, MarginGovernor, governor_for
 
 

@@ -5,14 +5,14 @@ A pure block (no I/O, no clock): :meth:`MarginGovernor.update` takes the time (s
 echo age (s), returns the gain k to use, and appends events.
 
 - **Round trip, measured.** Every tool message echoes the send time of the newest handle
-  message the slave had used (common/messages.py); ``now - echo`` of the newest tool message
+  message the slave had used (common/wire/messages.py); ``now - echo`` of the newest tool message
   the master has is the age of the loop's information: the round trip, the slave's wait for
   its next tick and the master's poll, all on the master's clock (no clock synchronisation).
   While no new tool message comes it keeps growing, so a delay that jumps is seen during the
   silence, before the first late message. It overestimates the analysis' tau by about one
   period (the loop's own sample), which errs on the safe side.
 - **tau*(k).** A table from the sampled-data analysis made at start
-  (common/margin_table.py). A gain k is *usable* at round trip ``rtt`` while
+  (common/analysis/margin_table.py). A gain k is *usable* at round trip ``rtt`` while
   ``rtt <= safety_factor * tau*(k)``.
 - **lower_k.** When the gain in use is not usable at the round trip now, the target becomes
   the largest table gain that is; k moves to it as a first-order lag (98 % in
@@ -37,10 +37,10 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
+from haptic.common.analysis.margin_table import MarginTable, build_margin_table, gain_scalable
 from haptic.common.config import ConfigError
 from haptic.common.config.governor_schema import GOVERNOR_ACTIONS
-from haptic.common.margin_table import MarginTable, build_margin_table, gain_scalable
-from haptic.common.model import TeleopModel
+from haptic.common.model.teleop import TeleopModel
 
 #: Relative distance at which the lag snaps k onto its target.
 _SNAP = 1e-4

@@ -1,7 +1,8 @@
 """The master node: the Ch1/Ct1 compensators behind a safety layer, vectorised over lanes.
 
-Per axis ``vh = Ch1 fh - Ct1 ft_recv`` (Tustin-discretised from :mod:`haptic.common.synthesis`,
-one MIMO block with inputs [fh_x, fh_y, ft_x, ft_y] and outputs [vh_x, vh_y]). The
+Per axis ``vh = Ch1 fh - Ct1 ft_recv`` (Tustin-discretised from
+:mod:`haptic.common.model.synthesis`, one MIMO block with inputs
+[fh_x, fh_y, ft_x, ft_y] and outputs [vh_x, vh_y]). The
 compensator runs as a position *offset* from the handle's position at activation: the
 command is ``origin + vh``, with the compensator state zero at activation, so the first
 command equals the current position (no jump). Ch1 = k/(s^2 + 10 s) has an integrator, so
@@ -42,10 +43,10 @@ from typing import Any
 
 import numpy as np
 
-from haptic.common.lti import DiscreteLTI, Path, combine, discretize
-from haptic.common.model import TeleopModel
-from haptic.common.passivity import PassivityPort, PassivitySettings
-from haptic.common.synthesis import synthesize
+from haptic.common.model.lti import DiscreteLTI, Path, combine, discretize
+from haptic.common.model.passivity import PassivityPort, PassivitySettings
+from haptic.common.model.synthesis import synthesize
+from haptic.common.model.teleop import TeleopModel
 from haptic.master import node_kernels as kernels
 from haptic.master import passivity_kernel
 from haptic.master.settings import SafetySettings
@@ -135,7 +136,7 @@ def _warp() -> Any:
 class MasterNode:
     """Compensator plus safety layer; :meth:`step` maps (fh, yh, ft_recv) to the command.
 
-    ``compensator``: one block for every lane (:class:`~haptic.common.lti.DiscreteLTI`) or
+    ``compensator``: one block for every lane (:class:`~haptic.common.model.lti.DiscreteLTI`) or
     one per lane (a stacked block whose ``A`` is (lanes, n, n), as the sweep uses).
     """
 

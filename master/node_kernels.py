@@ -215,7 +215,7 @@ def master_step_kernel(
 
     # The compensator: y = C x + D u, x' = A x + B u (frozen in faulted lanes). Its inputs
     # are scaled by the gain ratio k/k0 of the margin governor (the design is linear in k:
-    # common/margin_table.py); ``used`` reports the forces before that scale.
+    # common/analysis/margin_table.py); ``used`` reports the forces before that scale.
     u0 = scale * fhx
     u1 = scale * fhy
     u2 = scale * ftx

@@ -2,7 +2,7 @@
 adaptive conductance at the handle's port for every lane in one launch, after the node's own
 kernel (:mod:`haptic.master.node_kernels`) wrote the command.
 
-It computes exactly what :class:`haptic.common.passivity.PassivityPort` does on the master
+It computes exactly what :class:`haptic.common.model.passivity.PassivityPort` does on the master
 (``receive``, ``yield_command``, ``observe``), which stays the numpy reference:
 tests/master/test_passivity_kernel.py runs both on the same inputs. One lane of numpy calls
 cost 133 us a tick on the 2-core development VM (the node step with this kernel: 27 us, without
@@ -63,7 +63,7 @@ def master_passivity_kernel(
     active_steps: wp.array(dtype=wp.int64),
     limits: PassivityLimits,
 ):
-    """One period of one lane: receive, yield, observe (common/passivity.py)."""
+    """One period of one lane: receive, yield, observe (common/model/passivity.py)."""
     lane = wp.tid()
     zero = wp.float64(0.0)
     ts = limits.period_s

@@ -20,7 +20,7 @@ One tick at Ts (docs/programs.md):
    zero in the safe state), so that Ch2 at the slave sees the same force as Ch1 here.
 
 Each tick's stages (read, poll, supervise, node, write, send, telemetry) are timed; the
-summary's ``stages`` gives their p50/p99 (common/stage_times.py).
+summary's ``stages`` gives their p50/p99 (common/runtime/stage_times.py).
 """
 
 from __future__ import annotations
@@ -33,21 +33,21 @@ from typing import Any
 
 import numpy as np
 
-from haptic.common.cli_options import RunOptions
-from haptic.common.display import DisplayPublisher
-from haptic.common.inert import InertMonitor
-from haptic.common.link import Link
-from haptic.common.messages import Flags
-from haptic.common.model import TeleopModel
-from haptic.common.passivity_link import PassivityLink
-from haptic.common.program_harness import ProgramHarness, recording_for
-from haptic.common.run_recording import RunRecording
-from haptic.common.runner import StopSignals
-from haptic.common.runner_config import place_other_threads
-from haptic.common.stage_times import StageTimes
-from haptic.common.trace import TraceRecorder
+from haptic.common.model.teleop import TeleopModel
+from haptic.common.records.run_recording import RunRecording
+from haptic.common.records.trace import TraceRecorder
+from haptic.common.runtime.cli_options import RunOptions
+from haptic.common.runtime.display import DisplayPublisher
+from haptic.common.runtime.inert import InertMonitor
+from haptic.common.runtime.program_harness import ProgramHarness, recording_for
+from haptic.common.runtime.runner import StopSignals
+from haptic.common.runtime.runner_config import place_other_threads
+from haptic.common.runtime.stage_times import StageTimes
+from haptic.common.wire.link import Link
+from haptic.common.wire.messages import Flags
+from haptic.common.wire.passivity_link import PassivityLink
 from haptic.master.governor_setup import governor_step
-from haptic.master.hardware import HandleHardware, HardwareError
+from haptic.master.hardware.interface import HandleHardware, HardwareError
 from haptic.master.margin_governor import MarginGovernor
 from haptic.master.node import MasterNode
 from haptic.master.supervisor import MasterSupervisor, Transition
@@ -134,7 +134,7 @@ def run_linked_master(
     """Run the master against the slave until the duration ends or SIGINT/SIGTERM; returns
     the exit status (0; 1 for a hardware error, no slave within ``peer_wait_s``, or a fault
     that latched the safe state: a hardware fault or a trip of the node's safety layer).
-    With ``loop_options.record_path`` the run is recorded to MCAP (common/run_recording.py);
+    With ``loop_options.record_path`` the run is recorded to MCAP (common/records/run_recording.py);
     the file is closed properly on every way out."""
     # first: the recorder's, the hardware's and Zenoh's threads inherit these CPUs
     extra_summary = {**place_other_threads(options.runner), **(extra_summary or {})}

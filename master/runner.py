@@ -2,9 +2,9 @@
 
 This drives the handle without a slave (the received tool force is zero or comes from
 ``tool_force_source``); the networked program composes the same node with its supervisor
-(master/tick.py). The pacing is the real-time runner's (common/runner.py: sleep, spin the
+(master/tick.py). The pacing is the real-time runner's (common/runtime/runner.py: sleep, spin the
 last ``spin_s``, re-anchor after a stall); unpaced, its ticks run back to back
-(:class:`~haptic.common.runner.FreeRunningClock`).
+(:class:`~haptic.common.runtime.runner.FreeRunningClock`).
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from haptic.common.runner import FreeRunningClock, RealTimeRunner
-from haptic.master.hardware import HandleHardware
+from haptic.common.runtime.runner import FreeRunningClock, RealTimeRunner
+from haptic.master.hardware.interface import HandleHardware
 from haptic.master.node import MasterNode, SafetyEvent
 
 #: The runner's spin before each deadline when paced, s.

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import ipaddress
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from haptic.common.config import ConfigError
-from haptic.master.operator import OperatorModel, parse_operator_spec
+from haptic.common.model.work_area import SharedWorkArea
+from haptic.master.sim.operator import OperatorModel, parse_operator_spec
 
 
 @dataclass(frozen=True)
@@ -139,6 +140,12 @@ def safety_from_table(table: dict[str, Any], prefix: str = "master.safety") -> S
     if not safety.ramp_small_force_N < safety.force_trip_N:
         raise ConfigError(f"{prefix}.ramp_small_force_N", "must be < force_trip_N")
     return safety
+
+
+def with_work_area(safety: SafetySettings, area: SharedWorkArea) -> SafetySettings:
+    """``safety`` with its workspace box narrowed to the handle's side of the work area both
+    sides hold (common/model/work_area.py): the handle stops where the tool does."""
+    return replace(safety, workspace_min_m=area.handle_low_m, workspace_max_m=area.handle_high_m)
 
 
 def emulator_settings(table: dict[str, Any],

@@ -6,7 +6,7 @@ returns (docs/architecture.md, "one tick").
 Inputs per tick: the time (s), the fresh ``ToolState`` (or ``None``), the handle position (m),
 the hardware's faults, the link's silence (s) and the slave's liveliness. Decisions:
 
-- the watchdog (``common/watchdog.py``): forces only in ``ok``; leaving ``ok`` is a trip;
+- the watchdog (``common/runtime/watchdog.py``): forces only in ``ok``; leaving ``ok`` is a trip;
 - ``in_sync`` for the resync: the slave reports its forces enabled and |yt - Ah1 yh| is below
   the tolerance on both axes;
 - a hardware fault, or a trip of the node's safety layer (:meth:`note_node_fault`), latches
@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from haptic.common.messages import Flags, ToolState
-from haptic.common.watchdog import PeerWatchdog, WatchdogState
+from haptic.common.runtime.watchdog import PeerWatchdog, WatchdogState
+from haptic.common.wire.messages import Flags, ToolState
 from haptic.master.tool_guard import ToolInputGuard
 
 

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from haptic.common.messages import Flags, ToolState
+from haptic.common.wire.messages import Flags, ToolState
 from haptic.master.node import MasterNode, MasterNodeState
 from haptic.master.supervisor import MasterSupervisor, Transition
 

@@ -1,7 +1,7 @@
 """Bounds on what the master accepts from the slave: the tool's position and force.
 
 The slave bounds each received handle message (slave_sim/input_guard.py); the master does
-the same to each received :class:`~haptic.common.messages.ToolState` before its force reaches
+the same to each received :class:`~haptic.common.wire.messages.ToolState` before its force reaches
 Ct1 or its position the resync check, so a faulty (or forged, with the session's key) slave
 message cannot push the handle or fake a resync (``[master.tool_input]``):
 
@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from haptic.common.config import ConfigError
-from haptic.common.messages import ToolState
+from haptic.common.wire.messages import ToolState
 
 
 @dataclass(frozen=True)

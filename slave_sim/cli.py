@@ -11,13 +11,13 @@ from collections.abc import Sequence
 
 import zenoh
 
-from haptic.common.cli_options import add_run_options, run_options_from_args
+from haptic.common.analysis.preflight import add_preflight_options, run_preflight
 from haptic.common.config import exit_on_config_error, load_config, override
 from haptic.common.config.scenario import load_scenario, max_block_damping
-from haptic.common.failures import exit_on_link_error
-from haptic.common.preflight import add_preflight_options, run_preflight
-from haptic.common.program_harness import add_networked_options, check_networked_options
-from haptic.common.runner_config import place_other_threads
+from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
+from haptic.common.runtime.failures import exit_on_link_error
+from haptic.common.runtime.program_harness import add_networked_options, check_networked_options
+from haptic.common.runtime.runner_config import place_other_threads
 from haptic.slave_sim.input_guard import InputGuardSettings
 from haptic.slave_sim.node import SlaveNode
 from haptic.slave_sim.program import DEFAULT_SYNC_TOLERANCE_M, phase_lock_from, run_slave

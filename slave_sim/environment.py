@@ -14,8 +14,8 @@ import numpy as np
 
 from haptic.common.config import ConfigError
 from haptic.common.config.scenario import ENVIRONMENT_KINDS, Scenario
-from haptic.common.model import TeleopModel, polynomial_degree
-from haptic.slave_sim.clay import ClayStepResult, make_clay
+from haptic.common.model.teleop import TeleopModel, polynomial_degree
+from haptic.slave_sim.clay.sim import ClayStepResult, make_clay
 
 
 class LinearEnvironment:
@@ -65,7 +65,8 @@ class ClayEnvironment:
         self.clay = make_clay(scenario, sample_period_s, impl, device)
 
     def initial_state(self, lanes: int = 1) -> Any:
-        """Fresh workpieces for ``lanes`` lanes (a :class:`~haptic.slave_sim.clay.ClayState`)."""
+        """Fresh workpieces for ``lanes`` lanes
+        (a :class:`~haptic.slave_sim.clay.sim.ClayState`)."""
         return self.clay.initial_state(lanes)
 
     def step(self, state: Any, previous_xy: np.ndarray, position_xy: np.ndarray,

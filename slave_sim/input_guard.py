@@ -2,7 +2,7 @@
 
 The master bounds its own sensor (master/node.py: non-finite -> trip, |fh| beyond
 ``force_trip_N`` -> trip, saturation at ``force_limit_N``). The slave does the same to each
-received :class:`~haptic.common.messages.HandleState` before its force reaches Ch2, so a
+received :class:`~haptic.common.wire.messages.HandleState` before its force reaches Ch2, so a
 faulty or forged master message cannot push the tool harder or faster than the limits of
 ``[slave.safety]`` allow:
 
@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from haptic.common.config import ConfigError
-from haptic.common.messages import HandleState
+from haptic.common.wire.messages import HandleState
 
 
 @dataclass(frozen=True)

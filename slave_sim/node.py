@@ -15,17 +15,19 @@ in a :class:`SlaveState` the caller owns.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from haptic.common.config.scenario import Scenario, load_scenario
-from haptic.common.drift import DriftCoupling
-from haptic.common.lti import DiscreteLTI, Path, combine, discretize
-from haptic.common.model import TeleopModel, model_from_config
-from haptic.common.passivity import PassivityPort, PassivitySettings
-from haptic.common.synthesis import synthesize
+from haptic.common.model.drift import DriftCoupling
+from haptic.common.model.lti import DiscreteLTI, Path, combine, discretize
+from haptic.common.model.passivity import PassivityPort, PassivitySettings
+from haptic.common.model.synthesis import synthesize
+from haptic.common.model.teleop import TeleopModel, model_from_config
+from haptic.common.model.work_area import work_area_from_config
 from haptic.slave_sim.environment import make_environment
 from haptic.slave_sim.tool import POSITION_COLUMNS, VELOCITY_COLUMNS, tool_constants, tool_plant
 
@@ -68,10 +70,10 @@ class SlaveState:
     step_count: int = 0
     gain_ratio: np.ndarray | None = None
     """(lanes,) k/k0 the compensators' inputs are scaled by: the master's governed gain k
-    (HandleState.gain_k) over this node's; None: 1 (common/margin_table.py)."""
+    (HandleState.gain_k) over this node's; None: 1 (common/analysis/margin_table.py)."""
     #: The TDPA observer and controller of the tool's port (``tdpa`` mode), else None.
     passivity: PassivityPort | None = None
-    #: The paper mode's drift coupling filter (common/drift.py), else None.
+    #: The paper mode's drift coupling filter (common/model/drift.py), else None.
     drift: np.ndarray | None = None
 
     @property
@@ -120,9 +122,14 @@ class SlaveNode:
     def __init__(self, model: TeleopModel, scenario: Scenario, environment: str | None = None,
                  clay_impl: str = "warp", device: str = "auto",
                  passivity: PassivitySettings | None = None,
-                 drift: DriftCoupling | None = None) -> None:
+                 drift: DriftCoupling | None = None,
+                 tool_bounds_m: tuple[Sequence[float], Sequence[float]] | None = None) -> None:
         self.model = model
-        #: The paper mode's drift coupling (common/drift.py); None: off.
+        #: The wall the tool stays inside: (low (x, y), high (x, y)), m, the work area both
+        #: sides hold (common/model/work_area.py); None: no wall.
+        self.tool_bounds_m = None if tool_bounds_m is None else (
+            np.asarray(tool_bounds_m[0], float).copy(), np.asarray(tool_bounds_m[1], float).copy())
+        #: The paper mode's drift coupling (common/model/drift.py); None: off.
         self.drift = drift
         #: ``None``: the paper's scheme; else the TDPA layer's settings (``tdpa`` mode).
         self.passivity = passivity
@@ -150,8 +157,10 @@ class SlaveNode:
         from haptic.common.config.control_schema import drift_coupling, passivity_settings
 
         model = model_from_config(config)
+        area = work_area_from_config(config, scenario.grid.x_range_m, scenario.grid.y_range_m)
         return cls(model, scenario, environment, section["clay_impl"], section["device"],
-                   passivity_settings(config), drift_coupling(config, model.sample_period_s))
+                   passivity_settings(config), drift_coupling(config, model.sample_period_s),
+                   (area.tool_low_m, area.tool_high_m))
 
     def initial_state(self, lanes: int = 1, start_position_m: np.ndarray | None = None
                       ) -> SlaveState:
@@ -201,6 +210,8 @@ class SlaveNode:
         tool[...] = tool @ self._plant_a_t + actuator @ self._plant_b_t
         if halted:
             tool[state.halted] = held[state.halted]
+        if self.tool_bounds_m is not None:
+            self._hold_inside(tool)
         position = tool[:, POSITION_COLUMNS]
         velocity = tool[:, VELOCITY_COLUMNS]
         acceleration = (actuator - self._damping * velocity
@@ -228,10 +239,25 @@ class SlaveNode:
             tracking_error_m=position - self._position_ratio * handle_position_m,
         )
 
+    def _hold_inside(self, tool: np.ndarray) -> None:
+        """The work area's wall: a tool position past a bound is put back on it and its
+        velocity into the wall zeroed, as the master clamps its handle command to the same
+        box (times Ah1), so at a bound both sides stop at the same place."""
+        low, high = self.tool_bounds_m
+        position = tool[:, POSITION_COLUMNS]
+        below = position < low
+        above = position > high
+        if not (below.any() or above.any()):
+            return
+        velocity = tool[:, VELOCITY_COLUMNS]
+        velocity[(below & (velocity < 0.0)) | (above & (velocity > 0.0))] = 0.0
+        tool[:, POSITION_COLUMNS] = np.clip(position, low, high)
+        tool[:, VELOCITY_COLUMNS] = velocity
+
     def _passivity_force(self, state: SlaveState, port: PassivityPort, actuator: np.ndarray,
                          handle_position_m: np.ndarray, peer_energy_J: np.ndarray | None
                          ) -> np.ndarray:
-        """TDPA at the tool's port (common/passivity.py): the drift correction towards
+        """TDPA at the tool's port (common/model/passivity.py): the drift correction towards
         ``Ah1 yh`` where it adds no energy, then the adaptive damper on the tool."""
         if peer_energy_J is not None:
             port.receive(peer_energy_J)

@@ -14,7 +14,9 @@ One tick at Ts (docs/programs.md):
 4. ``link.send_tool(ft, yt, vt, engagement, removed volume, flags)``.
 
 A work-area guard stops the tool (until the next resync) when it gets more than
-:data:`WORK_AREA_MARGIN_M` outside the scenario's grid.
+:data:`~haptic.common.model.work_area.WORK_AREA_MARGIN_M` outside the scenario's grid;
+before that, the tool meets the wall of the work area both sides hold
+(common/model/work_area.py), where the handle's command is clamped too.
 
 At the end (duration, SIGINT or SIGTERM) the tool stops, the summary is printed (and written
 with ``--json-summary``), and with ``--out DIR`` the workpiece is saved as ``clay.npz`` and
@@ -32,20 +34,21 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.analysis.margin_table import gain_scalable
 from haptic.common.config import ConfigError
-from haptic.common.cutting import cutting_figures, steady_cut_fields
-from haptic.common.display import DisplayPublisher
-from haptic.common.inert import InertMonitor
-from haptic.common.link import Link
-from haptic.common.margin_table import gain_scalable
-from haptic.common.messages import Flags
-from haptic.common.passivity_link import PassivityLink
-from haptic.common.phase_lock import PhaseLock, PhaseLockSettings
-from haptic.common.program_harness import ProgramHarness, recording_for
-from haptic.common.run_recording import RunRecording
-from haptic.common.runner import StopSignals
-from haptic.common.stage_times import StageTimes
-from haptic.common.trace import TraceRecorder
+from haptic.common.model.work_area import slave_work_area_m, work_area_from_config
+from haptic.common.records.cutting import cutting_figures, steady_cut_fields
+from haptic.common.records.run_recording import RunRecording
+from haptic.common.records.trace import TraceRecorder
+from haptic.common.runtime.display import DisplayPublisher
+from haptic.common.runtime.inert import InertMonitor
+from haptic.common.runtime.program_harness import ProgramHarness, recording_for
+from haptic.common.runtime.runner import StopSignals
+from haptic.common.runtime.stage_times import StageTimes
+from haptic.common.wire.link import Link
+from haptic.common.wire.messages import Flags
+from haptic.common.wire.passivity_link import PassivityLink
+from haptic.common.wire.phase_lock import PhaseLock, PhaseLockSettings
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from haptic.slave_sim.node import SlaveNode
 from haptic.slave_sim.pacing import MasterSamplePacing, PacingSettings
@@ -56,8 +59,6 @@ from haptic.slave_sim.tool_path import ToolPath
 
 #: The stages of one tick, in order (the summary's ``stages``).
 TICK_STAGES = ("poll", "supervise", "node", "send", "telemetry")
-#: How far the tool may leave the scenario's grid before the work-area guard stops it, m.
-WORK_AREA_MARGIN_M = 0.01
 #: Default tolerance of the resync position check, m per axis.
 DEFAULT_SYNC_TOLERANCE_M = 0.001
 
@@ -101,7 +102,8 @@ def phase_lock_from(config: dict[str, Any], period_s: float) -> PhaseLock | None
 def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
               extra_summary: dict[str, Any]) -> int:
     """The networked slave loop; returns the exit status. With ``--record FILE`` the run is
-    recorded to MCAP (common/run_recording.py), the file closed properly on every way out."""
+    recorded to MCAP (common/records/run_recording.py), the file closed properly on every way
+    out."""
     with recording_for(getattr(args, "record", None), "slave", SLAVE_RECORD_COLUMNS,
                        node.sample_period_s, getattr(args, "record_every", 1)) as recording:
         return _run_slave(node, options, args, extra_summary, recording)
@@ -110,8 +112,8 @@ def run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
 def _record_clay(recording: RunRecording, state: Any, log_time_ns: int,
                  layout: bool) -> None:
     """The workpiece's layout (once) and its reduced height map into the recording."""
-    from haptic.common.heightmap_codec import reduction_factors
-    from haptic.slave_sim.clay_view import heights_message, workpiece_layout
+    from haptic.common.records.heightmap_codec import reduction_factors
+    from haptic.slave_sim.clay.clay_view import heights_message, workpiece_layout
 
     clay = state.environment
     grid = clay.workpiece.grid
@@ -134,8 +136,8 @@ def _display_publisher(link: Link, node: SlaveNode, state: Any,
     clay_source = layout = on_clay = None
     factors = (1, 1)
     if node.environment_kind == "clay":
-        from haptic.common.heightmap_codec import reduction_factors
-        from haptic.slave_sim.clay_view import workpiece_layout
+        from haptic.common.records.heightmap_codec import reduction_factors
+        from haptic.slave_sim.clay.clay_view import workpiece_layout
 
         clay = state.environment
         grid = clay.workpiece.grid
@@ -168,14 +170,14 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     phase_lock = phase_lock_from(options.config, period_s)
     link_config = options.link
     grid = node.scenario.grid
-    margin = WORK_AREA_MARGIN_M
     ratio = node.position_ratio
     supervisor = SlaveSupervisor(
         (float(ratio[0]), float(ratio[1])), args.sync_tolerance,
-        (grid.x_range_m[0] - margin, grid.x_range_m[1] + margin,
-         grid.y_range_m[0] - margin, grid.y_range_m[1] + margin),
+        slave_work_area_m(grid.x_range_m, grid.y_range_m),
         link_config.max_message_age_s, link_config.resync_messages,
         grid_m=(grid.x_range_m[0], grid.x_range_m[1], grid.y_range_m[0], grid.y_range_m[1]))
+    area = work_area_from_config(options.config, grid.x_range_m, grid.y_range_m)
+    supervisor.events.append({"time_s": 0.0, "kind": "work_area", "reason": area.describe()})
     watchdog = supervisor.watchdog
     guard = InputGuard(InputGuardSettings.from_config(options.config), period_s,
                        events=supervisor.events)
@@ -195,7 +197,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     tool_path = ToolPath()  # bounded memory (slave_sim/tool_path.py)
     fh = tick_stages.handle_force_N  # the newest bounded handle message, updated in place
     yh = tick_stages.handle_position_m
-    flags_box = {"max_force": 0.0, "ft": np.zeros(2), "engagement": 0.0, "removed": 0.0}
+    flags_box = {"max_force": 0.0, "ft": np.zeros(2), "engagement": 0.0, "removed": 0.0,
+                 "running_gap": None}
     # the node's last outputs (sent again while waiting for the master's next sample) and
     # the virtual world's time, s (node steps x Ts)
     last_tick: dict[str, Any] = {"ticked": None, "sample_time_s": 0.0}
@@ -254,6 +257,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 last_tick["ticked"] = ticked
                 last_tick["sample_time_s"] += max(steps, 1) * period_s
             out = ticked.out
+            if running:  # yt - Ah1 yh while the tool runs (a stopped tool is re-placed)
+                flags_box["running_gap"] = out.tracking_error_m[0]
             ft = out.tool_force_N[0]
             position = out.tool_position_m[0]
             velocity = out.tool_velocity_m_s[0]
@@ -315,10 +320,16 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             f"{flags_box['engagement']:.2f}{inert.status()}"), signals, stop_safely)
         guard_summary = {**guard.summary(), **inert.summary(run.elapsed_s)}
     final = state.tool_position_m()[0]
+    # yt - Ah1 yh at the last tick the tool ran: once the master stops (its last message
+    # has SAFE_STATE), the stopped tool is re-placed at the handle, which would read 0
+    gap = flags_box["running_gap"]
+    if gap is None:  # the tool never ran: the gap it was left with
+        gap = node.tracking_error_m(state, state.handle_position_m)[0]
     summary = harness.summary(
         run, watchdog, flags_box["max_force"], (watchdog.events, supervisor.events),
         removed_volume_m3=flags_box["removed"],
-        final_tool_position_m=[float(final[0]), float(final[1])], stages=stages.summary(),
+        final_tool_position_m=[float(final[0]), float(final[1])],
+        final_position_gap_m=[float(gap[0]), float(gap[1])], stages=stages.summary(),
         **guard_summary,
         slave_gain_k=node.model.ch1_gain_k * float((state.gain_ratio if state.gain_ratio is
                                                      not None else np.ones(1))[0]),

@@ -8,7 +8,7 @@ Per tick, in two steps (the tool may be moved to the handle between them):
 1. :meth:`follows_handle` (fresh message?): while the tool is not running and not stopped by
    the work-area guard, every fresh message re-places it at the handle (``SlaveNode.resync``);
 2. :meth:`update` (time, fresh?, the tool's position, the link's silence, the master's
-   liveliness): the watchdog (``common/watchdog.py``) with ``in_sync`` = |yt - Ah1 yh| below
+   liveliness): the watchdog (``common/runtime/watchdog.py``) with ``in_sync`` = |yt - Ah1 yh| below
    the tolerance on both axes; the tool runs only with the watchdog ``ok`` and the master's
    forces enabled; the work-area guard stops the tool (until the next resync cycle) when it
    gets more than the margin outside the work area; with ``grid_m`` given, once the handle is
@@ -24,8 +24,8 @@ from __future__ import annotations
 import enum
 from typing import Any
 
-from haptic.common.messages import Flags, HandleState
-from haptic.common.watchdog import PeerWatchdog, WatchdogState
+from haptic.common.runtime.watchdog import PeerWatchdog, WatchdogState
+from haptic.common.wire.messages import Flags, HandleState
 
 
 class Transition(enum.Enum):
@@ -150,7 +150,7 @@ class SlaveSupervisor:
         return transition
 
     def stop_reason(self) -> str:
-        """Why the tool is not running now (for the inert monitor, common/inert.py)."""
+        """Why the tool is not running now (for the inert monitor, common/runtime/inert.py)."""
         if self.outside:
             return "the tool is stopped by the work-area guard"
         if self.rejoining:

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haptic.common.margin_table import follow_gain
-from haptic.common.messages import Flags, HandleState
+from haptic.common.analysis.margin_table import follow_gain
+from haptic.common.wire.messages import Flags, HandleState
 from haptic.slave_sim.input_guard import InputGuard
 from haptic.slave_sim.node import SlaveNode, SlaveOutputs, SlaveState
 from haptic.slave_sim.resync import ToolResync
@@ -85,7 +85,7 @@ class SlaveTick:
     def follow_gain(self, nominal_k: float, scalable: bool) -> None:
         """Follow the master's governed k (``HandleState.gain_k``, never above
         ``nominal_k``): the node's inputs are scaled by k/k0 per lane (``state.gain_ratio``);
-        ``scalable``: the model's compensators are linear in k (common/margin_table.py)."""
+        ``scalable``: the model's compensators are linear in k (common/analysis/margin_table.py)."""
         self._gain = (float(nominal_k), bool(scalable))
         self.state.gain_ratio = np.ones(self.lanes)
 

@@ -13,8 +13,8 @@ import control
 import numpy as np
 
 from haptic.common.config import ConfigError
-from haptic.common.lti import DiscreteLTI
-from haptic.common.model import TeleopModel
+from haptic.common.model.lti import DiscreteLTI
+from haptic.common.model.teleop import TeleopModel
 
 #: Tool state columns: x position (m), x velocity (m/s), y position (m), y velocity (m/s).
 TOOL_STATE_NAMES = ("yt_x", "dyt_x", "yt_y", "dyt_y")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from haptic.common.config import load_config
-from haptic.common.model import TeleopModel, model_from_config
+from haptic.common.model.teleop import TeleopModel, model_from_config
 
 
 @pytest.fixture(scope="session")

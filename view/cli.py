@@ -15,10 +15,12 @@ from collections.abc import Sequence
 import zenoh
 
 from haptic.common.config import exit_on_config_error, load_config, override
-from haptic.common.failures import LinkOpenError, exit_on_link_error
-from haptic.common.link import zenoh_config
-from haptic.common.link_config import link_config_from, split_endpoints
-from haptic.common.runner import StopSignals
+from haptic.common.config.link_schema import split_endpoints
+from haptic.common.runtime.failures import exit_on_link_error
+from haptic.common.runtime.runner import StopSignals
+from haptic.common.wire.errors import LinkOpenError
+from haptic.common.wire.link import zenoh_config
+from haptic.common.wire.link_config import link_config_from
 from haptic.view.server import DEFAULT_MAX_RATE_HZ, ViewServer
 from haptic.view.source import ZenohSource
 from haptic.view.state import ViewState

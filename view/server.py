@@ -16,7 +16,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from typing import Any
 
-from haptic.common.summary import json_safe
+from haptic.common.runtime.summary import json_safe
 from haptic.view.state import ViewState
 
 #: Default frame cap per browser, Hz.

@@ -18,8 +18,8 @@ from typing import Any
 
 import zenoh
 
-from haptic.common.display import decode_clay
-from haptic.common.failures import LinkOpenError, one_line
+from haptic.common.runtime.display import decode_clay
+from haptic.common.wire.errors import LinkOpenError, one_line
 from haptic.view.state import ViewState
 
 

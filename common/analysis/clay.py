@@ -1,5 +1,5 @@
 """Stability of the whole loop cutting clay, per block: the clay linearised about steady
-cutting (common/clay_contact.py) as the environment impedance Tt of each axis, analysed
+cutting (common/model/clay_contact.py) as the environment impedance Tt of each axis, analysed
 like any other Tt (docs/clay.md, "Choosing k for a workpiece").
 
 For each block of damping B: is the loop stable at the chosen k and round-trip delay, its
@@ -14,12 +14,12 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from haptic.common.analysis.report import AnalysisSettings, analyse
-from haptic.common.clay_contact import (
+from haptic.common.model.clay_contact import (
     COUPLING_DAMPING_N_S_PER_M,
     COUPLING_STIFFNESS_N_PER_M,
     clay_impedance,
 )
-from haptic.common.model import TeleopModel
+from haptic.common.model.teleop import TeleopModel
 
 
 @dataclass(frozen=True)

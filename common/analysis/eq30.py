@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from haptic.common.model import AxisModel, evaluate_tf
+from haptic.common.model.teleop import AxisModel, evaluate_tf
 
 
 @dataclass(frozen=True)

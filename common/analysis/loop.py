@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from haptic.common.model import AxisModel, evaluate_tf, tf, tf_coefficients
-from haptic.common.synthesis import AxisCompensators, minimal_tf
+from haptic.common.model.synthesis import AxisCompensators, minimal_tf
+from haptic.common.model.teleop import AxisModel, evaluate_tf, tf, tf_coefficients
 
 #: Real part (1/s) of the line s = sigma + j w the argument principle walks along; keeps the
 #: integrators of Ch1 and Gt (poles at s = 0) outside the counted region.
@@ -79,7 +79,7 @@ class AxisLoop:
         drift: tuple[float, float] | None = None,
     ) -> None:
         """``drift``: the paper mode's drift coupling (kp N/m, wc rad/s) at the slave,
-        ``vt += kp wc/(s + wc) (Ah1 yh_recv - yt)`` (common/drift.py); None: the paper's
+        ``vt += kp wc/(s + wc) (Ah1 yh_recv - yt)`` (common/model/drift.py); None: the paper's
         loop exactly."""
         self.axis = axis
         self.drift = drift

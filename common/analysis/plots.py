@@ -13,8 +13,8 @@ import numpy as np  # noqa: E402
 
 from haptic.common.analysis.report import Analysis, AnalysisSettings, axis_loop  # noqa: E402
 from haptic.common.analysis.stability_map import StabilityMap  # noqa: E402
-from haptic.common.model import TeleopModel, evaluate_tf  # noqa: E402
-from haptic.common.synthesis import synthesize  # noqa: E402
+from haptic.common.model.synthesis import synthesize  # noqa: E402
+from haptic.common.model.teleop import TeleopModel, evaluate_tf  # noqa: E402
 
 
 def plot_nyquist(model: TeleopModel, analysis: Analysis, settings: AnalysisSettings,

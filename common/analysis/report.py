@@ -19,8 +19,8 @@ from haptic.common.analysis.stability import (
     is_stable,
     max_delayed_ratio,
 )
-from haptic.common.model import AxisModel, TeleopModel
-from haptic.common.synthesis import SynthesisError, synthesize_axis
+from haptic.common.model.synthesis import SynthesisError, synthesize_axis
+from haptic.common.model.teleop import AxisModel, TeleopModel
 
 #: Bisection steps when searching a gain boundary (relative resolution about 2^-30).
 GAIN_BISECTION_STEPS = 30
@@ -36,7 +36,7 @@ class AnalysisSettings:
     max_delay_s: float = 1.0
     max_gain_k: float = 200.0
     sample_period_s: float | None = None  # None: continuous model; else sampled at this Ts
-    #: The paper mode's drift coupling (kp N/m, wc rad/s) in the loop (common/drift.py);
+    #: The paper mode's drift coupling (kp N/m, wc rad/s) in the loop (common/model/drift.py);
     #: None: the paper's loop exactly.
     drift: tuple[float, float] | None = None
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from haptic.common.analysis.report import AnalysisSettings, axis_loop
 from haptic.common.analysis.stability import delay_margin, is_stable
-from haptic.common.model import TeleopModel
+from haptic.common.model.teleop import TeleopModel
 
 
 @dataclass(frozen=True)

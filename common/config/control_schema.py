@@ -6,8 +6,8 @@ from __future__ import annotations
 from typing import Any
 
 from haptic.common.config.loader import Field, Schema
-from haptic.common.drift import DriftCoupling
-from haptic.common.passivity import MODES, PassivitySettings
+from haptic.common.model.drift import DriftCoupling
+from haptic.common.model.passivity import MODES, PassivitySettings
 
 CONTROL_SCHEMA: Schema = {
     "mode": Field("str", "\"paper\": the paper's scheme as published; \"tdpa\": with the "

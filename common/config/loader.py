@@ -24,15 +24,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from haptic.common.model.errors import ConfigError
+
 CONFIG_ERROR_EXIT_STATUS = 2
-
-
-class ConfigError(ValueError):
-    """An invalid configuration; ``key`` is the dotted name of the offending key."""
-
-    def __init__(self, key: str, message: str) -> None:
-        super().__init__(f"{key}: {message}" if key else message)
-        self.key = key
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,8 @@ CAN_SCHEMA: Schema = {
     "force_offset_count": Field("float_list", "Sensor offset per channel (x, y), counts.",
                                 check=_pair),
     "x_eds_file": Field("str", "EDS or DCF file of the x drive (configure() maps its PDOs "
-                        "from it); empty for the packaged master/eds/haptic_cia402_drive.eds."),
+                        "from it); empty for the packaged "
+                        "master/hardware/eds/haptic_cia402_drive.eds."),
     "y_eds_file": Field("str", "EDS or DCF file of the y drive; empty for the packaged one."),
     "master_node_id": Field("int", "Node id of the master's heartbeat (the drives consume "
                             "it).", minimum=1, maximum=127),

@@ -9,12 +9,12 @@ from typing import Any
 
 from haptic.common.config.control_schema import CONTROL_SCHEMA
 from haptic.common.config.governor_schema import GOVERNOR_SCHEMA
+from haptic.common.config.link_schema import LINK_SCHEMA
 from haptic.common.config.loader import Field, Schema
 from haptic.common.config.lockstep_schema import LOCKSTEP_SCHEMA
 from haptic.common.config.master_schema import MASTER_SCHEMA
+from haptic.common.config.runner_schema import RUNNER_SCHEMA
 from haptic.common.config.slave_schema import SLAVE_SCHEMA
-from haptic.common.link_config import LINK_SCHEMA
-from haptic.common.runner_config import RUNNER_SCHEMA
 
 
 def _leading_nonzero(coefficients: list[float]) -> str | None:
@@ -126,7 +126,7 @@ ANALYSIS_SCHEMA: Schema = {
     ),
 }
 
-#: [supervision]: no silent inert sessions (common/inert.py).
+#: [supervision]: no silent inert sessions (common/runtime/inert.py).
 SUPERVISION_SCHEMA: Schema = {
     "inert_after_s": Field(
         "float", "A side whose peer is present but whose forces are off this long says so "

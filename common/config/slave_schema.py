@@ -63,11 +63,16 @@ SLAVE_SCHEMA: Schema = {
             "int", "The most node steps one tick takes to catch up with the master's samples.",
             minimum=1, maximum=16,
         ),
+        "max_backlog_samples": Field(
+            "int", "The most master samples owed to later ticks when one tick cannot take them "
+            "all (each delays the tool by Ts); beyond, they are given up and counted.",
+            minimum=0, maximum=1024,
+        ),
     },
     "phase_lock": {
         "enabled": Field(
             "bool", "Keep the slave's ticks a set lag after the master's messages arrive "
-            "(common/phase_lock.py); false: the loop ticks free-running.",
+            "(common/wire/phase_lock.py); false: the loop ticks free-running.",
         ),
         "margin_s": Field(
             "float", "The slave's spin before its tick starts this long after the master's "

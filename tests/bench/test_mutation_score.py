@@ -27,7 +27,7 @@ def bench():
 
 def test_module_names_follow_the_package_dir_mapping(bench) -> None:
     assert bench.module_name("master/node.py") == "haptic.master.node"
-    assert bench.module_name("common/watchdog.py") == "haptic.common.watchdog"
+    assert bench.module_name("common/runtime/watchdog.py") == "haptic.common.runtime.watchdog"
     assert bench.module_name("common/analysis/loop.py") == "haptic.common.analysis.loop"
 
 
@@ -40,8 +40,8 @@ def test_every_configured_module_and_test_exists(bench) -> None:
 
 
 def test_mutants_are_one_line_changes_that_compile_and_skip_annotations(bench) -> None:
-    found = bench.mutants("common/watchdog.py")
-    original = (BENCH.parents[1] / "common/watchdog.py").read_text().splitlines()
+    found = bench.mutants("common/runtime/watchdog.py")
+    original = (BENCH.parents[1] / "common/runtime/watchdog.py").read_text().splitlines()
     assert len(found) > 30
     for mutant in found:
         lines = mutant.source.splitlines()

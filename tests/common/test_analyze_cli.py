@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from haptic.common.analyze_cli import main
+from haptic.common.analysis.cli import main
 
 REQUIRED_KEYS = {"k", "delay_s", "stable", "delay_margin_s", "k_max", "k_max_delay_independent",
                  "eq30_satisfied", "eq30_worst_ratio"}
@@ -61,7 +61,7 @@ def test_plots_are_written(tmp_path: Path) -> None:
 def test_bad_config_is_one_line_and_exit_2(tmp_path: Path, text: str, key: str) -> None:
     path = tmp_path / "bad.toml"
     path.write_text(text)
-    run = subprocess.run([sys.executable, "-m", "haptic.common.analyze_cli", "--config",
+    run = subprocess.run([sys.executable, "-m", "haptic.common.analysis.cli", "--config",
                           str(path)], capture_output=True, text=True, timeout=120)
     assert run.returncode == 2
     lines = run.stderr.strip().splitlines()

@@ -6,9 +6,9 @@ import argparse
 
 import pytest
 
-from haptic.common.cli_options import add_run_options, run_options_from_args
 from haptic.common.config import ConfigError, exit_on_config_error, load_config
-from haptic.common.link_config import LinkConfig, link_config_from
+from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
+from haptic.common.wire.link_config import LinkConfig, link_config_from
 
 
 def parse(argv: list[str], side: str = "slave", config_file=None):
@@ -121,7 +121,8 @@ def test_link_config_checks_itself():
 
 
 def _parsers():
-    from haptic.common import analyze_cli, session
+    from haptic.common.analysis import cli as analyze_cli
+    from haptic.common.launch import cli as session
     from haptic.lockstep import cli as lockstep_cli
     from haptic.master import cli as master_cli
     from haptic.slave_sim import cli as slave_cli

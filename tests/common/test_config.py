@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from haptic.common.config import ConfigError, load_config, override, to_toml
-from haptic.common.model import model_from_config
+from haptic.common.model.teleop import model_from_config
 
 
 def write(tmp_path: Path, text: str) -> Path:
@@ -89,7 +89,7 @@ def test_a_file_sets_any_subset_of_a_tables_keys(tmp_path: Path, paper_config: d
 
 
 def test_print_config_shows_the_merged_configuration(tmp_path: Path, capsys) -> None:
-    from haptic.common.analyze_cli import main
+    from haptic.common.analysis.cli import main
 
     path = write(tmp_path, "[model.ch1]\ngain_k = 7.5\n")
     assert main(["--config", str(path), "--print-config"]) == 0

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from haptic.common.config import ConfigError, load_config, override
-from haptic.common.delay_profile import DelayProfileError, parse_delay_profile
-from haptic.common.injection import Impairment, InjectionConfig
-from haptic.common.link_config import link_config_from
+from haptic.common.model.delay_profile import DelayProfileError, parse_delay_profile
+from haptic.common.wire.injection import Impairment, InjectionConfig
+from haptic.common.wire.link_config import link_config_from
 from haptic.lockstep.delay_line import source_schedule
 
 MS = 1_000_000

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from haptic.common.histogram import LogHistogram
+from haptic.common.records.histogram import LogHistogram
 
 
 def test_percentiles_match_numpy_within_the_bin_width():

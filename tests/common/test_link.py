@@ -16,10 +16,10 @@ import uuid
 
 import pytest
 
-from haptic.common.injection import InjectionConfig
-from haptic.common.link import Link
-from haptic.common.link_config import LinkConfig
-from haptic.common.messages import Flags, HandleState, ToolState
+from haptic.common.wire.injection import InjectionConfig
+from haptic.common.wire.link import Link
+from haptic.common.wire.link_config import LinkConfig
+from haptic.common.wire.messages import Flags, HandleState, ToolState
 
 WAIT_S = 10.0
 
@@ -99,7 +99,7 @@ def first_message(link: Link):
 
 @pytest.mark.parametrize("stamped", [True, False])
 def test_delivery_time_is_a_measurement_only_with_an_arrival_stamp(stamped, monkeypatch):
-    import haptic.common.link as link_module
+    import haptic.common.wire.link as link_module
 
     if not stamped:  # as with a Zenoh without timestamp stacks
         monkeypatch.setattr(link_module, "_RECEIVE_POINT", None)
@@ -205,9 +205,9 @@ def test_closed_link_refuses_io():
 CHILD = textwrap.dedent(
     """
     import json, sys
-    from haptic.common.link import Link
-    from haptic.common.link_config import LinkConfig
-    from haptic.common.runner import RealTimeRunner
+    from haptic.common.wire.link import Link
+    from haptic.common.wire.link_config import LinkConfig
+    from haptic.common.runtime.runner import RealTimeRunner
     config = LinkConfig(side="master", key_prefix=sys.argv[2], listen=(sys.argv[3],))
     with Link(config) as link:
         def step(tick, now):

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptic.common.lti import Path, combine, discretize
-from haptic.common.model import evaluate_tf, tf
+from haptic.common.model.lti import Path, combine, discretize
+from haptic.common.model.teleop import evaluate_tf, tf
 
 
 def discrete_response(block, omega: np.ndarray) -> np.ndarray:

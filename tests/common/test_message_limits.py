@@ -8,7 +8,7 @@ import dataclasses
 import msgpack
 import pytest
 
-from haptic.common.messages import (
+from haptic.common.wire.messages import (
     KIND_HANDLE,
     KIND_TOOL,
     SCHEMA_VERSION,

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptic.common.messages import (
+from haptic.common.wire.messages import (
     KIND_HANDLE,
     KIND_TOOL,
     SCHEMA_VERSION,
@@ -155,7 +155,7 @@ def test_decode_of_random_msgpack_structures_raises_only_decode_error(value):
 
 
 def test_energy_travels_and_a_control_mismatch_is_named() -> None:
-    from haptic.common.messages import control_mismatch
+    from haptic.common.wire.messages import control_mismatch
 
     message = HandleState(1, 2, 3, Flags.TDPA | Flags.FORCES_ENABLED, (1.0, 2.0), (0.1, 0.2),
                           energy_J=0.125)

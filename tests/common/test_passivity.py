@@ -1,13 +1,13 @@
-"""The TDPA layer (common/passivity.py): the observer's accounting, the controllers dissipating
-exactly the excess, and each pitfall of issue 16 (velocity floor and damper cap, credit spent
-in bursts, bursts out of the controller)."""
+"""The TDPA layer (common/model/passivity.py): the observer's accounting, the controllers
+dissipating exactly the excess, and each pitfall of issue 16 (velocity floor and damper cap,
+credit spent in bursts, bursts out of the controller)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from haptic.common.passivity import PassivityPort, PassivitySettings
+from haptic.common.model.passivity import PassivityPort, PassivitySettings
 
 TS = 0.00054
 
@@ -131,9 +131,9 @@ def test_two_port_passivity_in_a_delayed_lockstep_run() -> None:
     than the deficits the floors leave (a few millijoules)."""
     from haptic.common.config import load_config
     from haptic.common.config.scenario import load_scenario
-    from haptic.common.model import model_from_config
+    from haptic.common.model.teleop import model_from_config
     from haptic.lockstep.simulator import LockstepSimulator
-    from haptic.master.operator import parse_operator_spec
+    from haptic.master.sim.operator import parse_operator_spec
 
     model = model_from_config(load_config(None))
     delay = int(round(0.1 / model.sample_period_s))

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import pytest
 
-from haptic.common.phase_lock import PhaseLock, PhaseLockSettings
-from haptic.common.runner import RealTimeRunner
+from haptic.common.runtime.runner import RealTimeRunner
+from haptic.common.wire.phase_lock import PhaseLock, PhaseLockSettings
 
 PERIOD_S = 0.00054
 PERIOD_NS = 540_000

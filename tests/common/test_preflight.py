@@ -7,14 +7,14 @@ import io
 
 import pytest
 
-from haptic.common.config import load_config, override
-from haptic.common.preflight import (
+from haptic.common.analysis.preflight import (
     EXIT_UNSTABLE,
     add_preflight_options,
     check_stability,
     round_trip_delay_s,
     run_preflight,
 )
+from haptic.common.config import load_config, override
 
 
 def _args(*argv: str) -> argparse.Namespace:

@@ -13,15 +13,15 @@ from typing import Any
 
 import pytest
 
-from haptic.common import realtime
-from haptic.common.realtime import (
+from haptic.common.runtime import realtime
+from haptic.common.runtime.realtime import (
     TIGHT_TIMER_SLACK_NS,
     AppliedScheduling,
     LoopThreadScheduling,
     OsScheduling,
     RealtimeSettings,
 )
-from haptic.common.runner import RealTimeRunner
+from haptic.common.runtime.runner import RealTimeRunner
 
 SCHED_OTHER = getattr(os, "SCHED_OTHER", 0)
 SCHED_FIFO = getattr(os, "SCHED_FIFO", 1)
@@ -464,7 +464,7 @@ def _named_thread(name: str, stop: threading.Event, ready: dict[str, int]) -> th
 
 @pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="needs Linux /proc")
 def test_raise_threads_selects_threads_by_name_and_reports_refusals():
-    from haptic.common.realtime import raise_threads
+    from haptic.common.runtime.realtime import raise_threads
 
     stop = threading.Event()
     ids: dict[str, int] = {}
@@ -491,7 +491,7 @@ def test_raise_threads_selects_threads_by_name_and_reports_refusals():
 
 
 def test_raise_threads_rejects_a_priority_out_of_range():
-    from haptic.common.realtime import raise_threads
+    from haptic.common.runtime.realtime import raise_threads
 
     with pytest.raises(ValueError):
         raise_threads(0, ("rx-",), ThreadRecorder())

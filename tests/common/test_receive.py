@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptic.common.injection import InjectionConfig
-from haptic.common.messages import (
+from haptic.common.wire.injection import InjectionConfig
+from haptic.common.wire.messages import (
     KIND_HANDLE,
     KIND_TOOL,
     SCHEMA_VERSION,
@@ -20,7 +20,7 @@ from haptic.common.messages import (
     HandleState,
     encode,
 )
-from haptic.common.receive import ReceivePath
+from haptic.common.wire.receive import ReceivePath
 
 MS = 1_000_000
 T0 = 1_700_000_000_000_000_000  # a CLOCK_REALTIME-like origin, ns

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptic.common.injection import InjectionConfig
-from haptic.common.messages import (
+from haptic.common.wire.injection import InjectionConfig
+from haptic.common.wire.messages import (
     KIND_HANDLE,
     KIND_TOOL,
     DropReason,
@@ -17,7 +17,7 @@ from haptic.common.messages import (
     ToolState,
     encode,
 )
-from haptic.common.receive import ReceivePath
+from haptic.common.wire.receive import ReceivePath
 
 MS = 1_000_000
 T0 = 1_700_000_000_000_000_000

@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from haptic.common.injection import InjectionConfig
-from haptic.common.messages import KIND_HANDLE, Flags, HandleState, encode
-from haptic.common.receive import ReceivePath
+from haptic.common.wire.injection import InjectionConfig
+from haptic.common.wire.messages import KIND_HANDLE, Flags, HandleState, encode
+from haptic.common.wire.receive import ReceivePath
 
 MS = 1_000_000
 T0 = 1_700_000_000_000_000_000

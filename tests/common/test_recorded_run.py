@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from haptic.common.recording import read_recording
-from haptic.view import replay_cli as replay
+from haptic.common.records.recording import read_recording
+from haptic.view.replay import cli as replay
 
 WAIT_S = 60.0
 
@@ -107,7 +107,7 @@ def test_recorded_run_and_replay(recorded_run, tmp_path: Path, capsys) -> None:
 
 
 def test_replay_into_the_view_state(recorded_run) -> None:
-    from haptic.view.replay import play
+    from haptic.view.replay.playback import play
     from haptic.view.state import ViewState
 
     files, _ = recorded_run

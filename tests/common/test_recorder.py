@@ -13,8 +13,8 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
-from haptic.common.recorder import McapRecorder
-from haptic.common.recording import read_recording
+from haptic.common.records.recorder import McapRecorder
+from haptic.common.records.recording import read_recording
 
 
 def test_round_trip_every_channel_and_count(tmp_path: Path) -> None:
@@ -61,7 +61,7 @@ def test_full_queue_drops_and_counts(tmp_path: Path) -> None:
 
 WRITER = textwrap.dedent("""
     import sys, time
-    from haptic.common.recorder import McapRecorder
+    from haptic.common.records.recorder import McapRecorder
     recorder = McapRecorder(sys.argv[1], "slave", chunk_size=4096).open()
     recorder.add_channel("/slave/state", ("time_s", "tool_force_x_N"))
     i = 0

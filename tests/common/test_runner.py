@@ -12,7 +12,7 @@ import textwrap
 
 import pytest
 
-from haptic.common.runner import FreeRunningClock, RealTimeRunner, StopSignals
+from haptic.common.runtime.runner import FreeRunningClock, RealTimeRunner, StopSignals
 
 PERIOD_NS = 540_000
 
@@ -146,7 +146,7 @@ def test_invalid_arguments():
 CHILD = textwrap.dedent(
     """
     import json, sys
-    from haptic.common.runner import RealTimeRunner, StopSignals
+    from haptic.common.runtime.runner import RealTimeRunner, StopSignals
     first = []
     def step(tick, now):
         if tick == 0:
@@ -183,7 +183,7 @@ def test_signal_ends_the_run_cleanly(tmp_path, signum):
 CHILD_WAITING = textwrap.dedent(
     """
     import json, sys, time
-    from haptic.common.runner import RealTimeRunner, StopSignals
+    from haptic.common.runtime.runner import RealTimeRunner, StopSignals
     with StopSignals() as signals:
         print("ready", flush=True)
         while not signals.requested:  # waiting for a peer that never comes

@@ -8,10 +8,11 @@ import os
 
 import pytest
 
-from haptic.common.cli_options import add_run_options, run_options_from_args
 from haptic.common.config import ConfigError, exit_on_config_error, load_config
-from haptic.common.realtime import RealtimeSettings
-from haptic.common.runner_config import RunnerSettings, parse_cpus, runner_settings_from
+from haptic.common.config.runner_schema import parse_cpus
+from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
+from haptic.common.runtime.realtime import RealtimeSettings
+from haptic.common.runtime.runner_config import RunnerSettings, runner_settings_from
 
 VALID = {
     "spin_s": "0.0002",
@@ -187,7 +188,7 @@ def test_bad_flags_name_the_flag(argv, named, capsys):
 
 
 def test_zenoh_thread_priority_must_stay_below_the_loop(tmp_path):
-    from haptic.common.runner_config import runner_settings_from
+    from haptic.common.runtime.runner_config import runner_settings_from
 
     config = load_config(None)
     config["runner"]["realtime_priority"] = 40
@@ -200,13 +201,13 @@ def test_zenoh_thread_priority_must_stay_below_the_loop(tmp_path):
 
 
 def test_prioritise_zenoh_threads_is_off_by_default():
-    from haptic.common.runner_config import prioritise_zenoh_threads, runner_settings_from
+    from haptic.common.runtime.runner_config import prioritise_zenoh_threads, runner_settings_from
 
     assert prioritise_zenoh_threads(runner_settings_from(load_config(None))) == {}
 
 
 def test_place_other_threads_is_off_by_default():
-    from haptic.common.runner_config import place_other_threads
+    from haptic.common.runtime.runner_config import place_other_threads
 
     assert place_other_threads(runner_settings_from(load_config(None))) == {}
 
@@ -215,7 +216,7 @@ def test_place_other_threads_is_off_by_default():
 def test_place_other_threads_pins_the_thread_and_what_it_starts_next():
     import threading
 
-    from haptic.common.runner_config import place_other_threads
+    from haptic.common.runtime.runner_config import place_other_threads
 
     allowed = sorted(os.sched_getaffinity(0))
     config = load_config(None)

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from haptic.common.stage_times import StageTimes, format_stages, in_tick_order
+from haptic.common.runtime.stage_times import StageTimes, format_stages, in_tick_order
 
 
 def test_stages_are_the_differences_between_consecutive_marks() -> None:

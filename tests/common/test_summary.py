@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from haptic.common.summary import (
+from haptic.common.runtime.summary import (
     REQUIRED_SUMMARY_KEYS,
     format_summary,
     make_summary,
@@ -39,7 +39,7 @@ def test_missing_keys_are_refused():
 
 
 def test_events_beyond_the_cap_are_counted_not_kept():
-    from haptic.common.summary import MAX_SUMMARY_EVENTS
+    from haptic.common.runtime.summary import MAX_SUMMARY_EVENTS
 
     events = [{"time_s": float(i), "kind": "saturate", "reason": "x"}
               for i in range(MAX_SUMMARY_EVENTS + 5)]

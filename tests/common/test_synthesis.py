@@ -10,8 +10,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from haptic.common.analysis.loop import AxisLoop
-from haptic.common.model import AxisModel, evaluate_tf, polynomial_degree, tf, tf_coefficients
-from haptic.common.synthesis import SynthesisError, synthesize, synthesize_axis
+from haptic.common.model.synthesis import SynthesisError, synthesize, synthesize_axis
+from haptic.common.model.teleop import (
+    AxisModel,
+    evaluate_tf,
+    polynomial_degree,
+    tf,
+    tf_coefficients,
+)
 
 OMEGA = np.geomspace(0.05, 2000.0, 60)
 
@@ -283,7 +289,7 @@ def test_compensators_are_immutable(paper_model) -> None:
 
 
 def test_cancel_common_roots_of_zero_and_of_shared_integrators() -> None:
-    from haptic.common.synthesis import cancel_common_roots
+    from haptic.common.model.synthesis import cancel_common_roots
 
     num, den = cancel_common_roots(np.array([0.0, 0.0]), np.array([2.0, 4.0]))
     assert num.tolist() == [0.0] and den.tolist() == [1.0]
@@ -294,7 +300,7 @@ def test_cancel_common_roots_of_zero_and_of_shared_integrators() -> None:
 
 
 def test_a_pole_at_the_rhp_tolerance_is_marginal_not_unstable() -> None:
-    from haptic.common.synthesis import RHP_TOLERANCE, _rhp_poles
+    from haptic.common.model.synthesis import RHP_TOLERANCE, _rhp_poles
 
     assert _rhp_poles(tf([1.0], [1.0, -RHP_TOLERANCE])).size == 0  # exactly at it: marginal
     assert _rhp_poles(tf([1.0], [1.0, -2.0 * RHP_TOLERANCE])).size == 1
@@ -304,7 +310,7 @@ def test_a_pole_at_the_rhp_tolerance_is_marginal_not_unstable() -> None:
 
 def test_a_realisable_design_with_a_wide_coefficient_spread_is_accepted() -> None:
     """A relative cleaning threshold once dropped the compensators' leading 1 here (the
-    synthesis now judges cancellations per coefficient: common/synthesis.py ``_add``)."""
+    synthesis now judges cancellations per coefficient: common/model/synthesis.py ``_add``)."""
     # Gh with poles near 200 rad/s: its denominator's coefficients span 1 to 6.6e8, the
     # compensators' about 1e17. Found by the property test (seed 490 of the wider generator).
     gh = ([1.0, 103.6636, 3299.2811, 30688.0114, 3236.4419],
@@ -319,7 +325,7 @@ def test_a_realisable_design_with_a_wide_coefficient_spread_is_accepted() -> Non
 def test_add_zeroes_a_sum_at_64_ulps_of_its_terms_and_keeps_one_just_above() -> None:
     """``_add``'s rounding threshold pinned at the value: |a + b| <= 64 eps (|a| + |b|)
     is zeroed, at equality too; a sum just over it, or a scale-free large one, is kept."""
-    from haptic.common.synthesis import _add
+    from haptic.common.model.synthesis import _add
 
     at = _add(np.array([1.0 + 2.0**-46]), np.array([-(1.0 - 2.0**-46)]))
     assert at[0] == 0.0  # 2^-45 == 64 eps * 2 exactly

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from haptic.common.trace import TraceRecorder
+from haptic.common.records.trace import TraceRecorder
 
 
 def test_every_nth_sample_is_kept_and_saved(tmp_path) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from haptic.common.watchdog import PeerWatchdog, WatchdogState
+from haptic.common.runtime.watchdog import PeerWatchdog, WatchdogState
 
 AGE = 0.03
 
@@ -195,7 +195,7 @@ def test_invalid_ages(age):
 def test_both_sides_watch_with_the_shipped_30_ms(paper_config, side):
     """The age each program gives its watchdog: link.watchdog.max_message_age_s, 30 ms as
     shipped, the same on both sides."""
-    from haptic.common.link_config import link_config_from
+    from haptic.common.wire.link_config import link_config_from
 
     config = link_config_from(paper_config, side)
     assert config.max_message_age_s == 0.03

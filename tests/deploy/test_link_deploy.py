@@ -12,8 +12,8 @@ import uuid
 from pathlib import Path
 
 from haptic.common.config import load_config
-from haptic.common.link import Link
-from haptic.common.link_config import link_config_from
+from haptic.common.wire.link import Link
+from haptic.common.wire.link_config import link_config_from
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 
@@ -42,7 +42,7 @@ def free_port() -> int:
 def test_client_mode_through_the_python_router():
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = subprocess.Popen(
-        [sys.executable, "-m", "haptic.common.router", "--listen", endpoint],
+        [sys.executable, "-m", "haptic.common.wire.router.cli", "--listen", endpoint],
         stderr=subprocess.PIPE, text=True,
     )
     try:

@@ -17,9 +17,9 @@ import pytest
 import zenoh
 
 from haptic.common.config import load_config
-from haptic.common.link import Link, zenoh_config
-from haptic.common.link_config import link_config_from
-from haptic.common.router import router_config
+from haptic.common.wire.link import Link, zenoh_config
+from haptic.common.wire.link_config import link_config_from
+from haptic.common.wire.router.cli import router_config
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 ZENOH = DEPLOY / "zenoh"
@@ -116,7 +116,7 @@ def drain(link: Link, seconds: float) -> list:
 def test_router_tls_and_access_control_on_one_host(certs):
     endpoint = f"tls/localhost:{free_port()}"
     router = subprocess.Popen(
-        [sys.executable, "-m", "haptic.common.router", "--zenoh-config",
+        [sys.executable, "-m", "haptic.common.wire.router.cli", "--zenoh-config",
          str(ZENOH / "router.json5"),
          "--listen", endpoint, *[a for k, v in certs.tls_overrides("router")
                                  for a in ("--zenoh-set", f"{k}={v}")]],
@@ -216,11 +216,12 @@ def test_direct_peers_tls_and_access_control_on_one_host(certs):
 
 
 def test_router_cli_rejects_a_bad_override_and_the_old_wrapper_runs(tmp_path):
-    bad = subprocess.run([sys.executable, "-m", "haptic.common.router", "--zenoh-set", "oops"],
-                         capture_output=True, text=True, timeout=60)
+    bad = subprocess.run(
+        [sys.executable, "-m", "haptic.common.wire.router.cli", "--zenoh-set", "oops"],
+        capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "KEY=VALUE" in bad.stderr
     missing = subprocess.run(
-        [sys.executable, "-m", "haptic.common.router", "--zenoh-config",
+        [sys.executable, "-m", "haptic.common.wire.router.cli", "--zenoh-config",
          str(tmp_path / "no.json5")],
         capture_output=True, text=True, timeout=60)
     assert missing.returncode == 2 and missing.stderr.startswith("haptic-router:")

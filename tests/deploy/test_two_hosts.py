@@ -50,8 +50,8 @@ PROBE = r'''
 counts the peer's messages, send publishes this side's; prints one JSON line."""
 import json, sys, time
 from haptic.common.config import load_config
-from haptic.common.link import Link
-from haptic.common.link_config import link_config_from
+from haptic.common.wire.link import Link
+from haptic.common.wire.link_config import link_config_from
 role, side, endpoint, seconds, overrides, zfile = sys.argv[1:7]
 config = link_config_from(load_config(), side, mode="client", connect=(endpoint,), listen=(),
                           key_prefix="haptic/rig-1", zenoh_config_file=zfile or None,
@@ -228,7 +228,7 @@ def test_session_and_access_control_through_the_router(network, certs, tmp_path)
     try:
         router = processes.start(
             "router",
-            ["-m", "haptic.common.router", "--zenoh-config", str(ZENOH / "router.json5"),
+            ["-m", "haptic.common.wire.router.cli", "--zenoh-config", str(ZENOH / "router.json5"),
              *[arg for host in ("rig", "remote") for arg in ("--listen", ROUTER_FOR[host])],
              *zenoh_set(certs.tls_overrides("router"))],
             stderr=subprocess.PIPE,

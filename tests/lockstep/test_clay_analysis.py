@@ -1,4 +1,4 @@
-"""The clay linearised about steady cutting (common/clay_contact.py) against the simulated
+"""The clay linearised about steady cutting (common/model/clay_contact.py) against the simulated
 clay loop: below the predicted delay margin the cut's oscillation decays, above it it does
 not; and the per-block analysis of ``haptic-analyze --environment clay``."""
 
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from haptic.common.analysis.clay import clay_block_stability, clay_model, workpiece_bounds
+from haptic.common.analysis.cli import main as analyze_main
 from haptic.common.analysis.report import AnalysisSettings, analyse
-from haptic.common.analyze_cli import main as analyze_main
-from haptic.common.clay_contact import clay_impedance, passivity_margin_N_s_per_m
 from haptic.common.config.scenario import load_scenario
+from haptic.common.model.clay_contact import clay_impedance, passivity_margin_N_s_per_m
 from haptic.lockstep.simulator import TRANSPARENT_SAFETY, LockstepSimulator
 from haptic.lockstep.sweep import (
     CLAY_GROWTH_THRESHOLD,
@@ -22,7 +22,7 @@ from haptic.lockstep.sweep import (
     sweep_model,
 )
 from haptic.lockstep.verdict import growth_verdict
-from haptic.master.operator import parse_operator_spec
+from haptic.master.sim.operator import parse_operator_spec
 
 
 def test_clay_impedance_is_b_s_at_low_frequency_and_softer_above() -> None:

@@ -1,5 +1,5 @@
 """A constant-rate cut in the lockstep loop is steady (issue 15): the ripple and reversal
-figures of common/cutting.py on a short cut, and on the instantaneous law that chattered."""
+figures of common/records/cutting.py on a short cut, and on the instantaneous law that chattered."""
 
 from __future__ import annotations
 
@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from haptic.common.config.scenario import load_scenario
-from haptic.common.cutting import cutting_steadiness, steady_cut_fields
+from haptic.common.records.cutting import cutting_steadiness, steady_cut_fields
 from haptic.lockstep.simulator import TRANSPARENT_SAFETY, LockstepSimulator
-from haptic.master.operator import parse_operator_spec
-from haptic.slave_sim.clay import make_clay
+from haptic.master.sim.operator import parse_operator_spec
+from haptic.slave_sim.clay.sim import make_clay
 
 
 def _cut(paper_config, paper_model, coupling: dict | None = None):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from haptic.common.injection import InjectionConfig
+from haptic.common.wire.injection import InjectionConfig
 from haptic.lockstep.delay_line import DelayLine, source_schedule
 
 TS = 0.001

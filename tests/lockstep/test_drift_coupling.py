@@ -1,4 +1,4 @@
-"""The paper mode's drift coupling (common/drift.py): off it is not there at all; on, the
+"""The paper mode's drift coupling (common/model/drift.py): off it is not there at all; on, the
 sampled analysis's delay margin with it is the lockstep's (the coupling is in the analysed
 loop), and it pulls the tool to the handle."""
 
@@ -12,11 +12,11 @@ from haptic.common.analysis.stability import delay_margin
 from haptic.common.config import load_config
 from haptic.common.config.control_schema import drift_coupling
 from haptic.common.config.scenario import load_scenario
-from haptic.common.drift import DriftCoupling
-from haptic.common.model import model_from_config
+from haptic.common.model.drift import DriftCoupling
+from haptic.common.model.teleop import model_from_config
 from haptic.lockstep.simulator import LockstepSimulator
 from haptic.lockstep.verdict import growth_verdict
-from haptic.master.operator import parse_operator_spec
+from haptic.master.sim.operator import parse_operator_spec
 from haptic.slave_sim.node import SlaveNode
 
 STRONG = (10000.0, 50.0)  # kp N/m, wc rad/s: strong enough to move the margin by samples

@@ -8,14 +8,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from haptic.common.analysis.margin_table import build_margin_table
 from haptic.common.config.scenario import load_scenario
-from haptic.common.delay_profile import parse_delay_profile
-from haptic.common.injection import InjectionConfig
-from haptic.common.margin_table import build_margin_table
+from haptic.common.model.delay_profile import parse_delay_profile
+from haptic.common.wire.injection import InjectionConfig
 from haptic.lockstep.simulator import LockstepSimulator
 from haptic.lockstep.verdict import growth_verdict
 from haptic.master.margin_governor import GovernorSettings, MarginGovernor
-from haptic.master.operator import parse_operator_spec
+from haptic.master.sim.operator import parse_operator_spec
 
 DURATION_S = 6.0
 STEP_AT_S = 3.0

@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 
 from haptic.common.config.scenario import load_scenario
-from haptic.common.injection import InjectionConfig
-from haptic.common.messages import Flags, HandleState, ToolState
-from haptic.common.watchdog import WatchdogState
+from haptic.common.runtime.watchdog import WatchdogState
+from haptic.common.wire.injection import InjectionConfig
+from haptic.common.wire.messages import Flags, HandleState, ToolState
 from haptic.lockstep.simulator import LockstepSimulator, LockstepSupervision
 from haptic.master.node import MasterNode
-from haptic.master.operator import parse_operator_spec
-from haptic.master.rig_model import RigModel
 from haptic.master.settings import master_settings
+from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.sim.rig_model import RigModel
 from haptic.master.supervisor import MasterSupervisor
 from haptic.master.tick import MasterTick
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings

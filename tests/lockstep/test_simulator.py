@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from haptic.common.analysis.linear_loop import LinearLoopSimulator
 from haptic.common.config.scenario import load_scenario
-from haptic.common.injection import InjectionConfig
-from haptic.common.linear_loop import LinearLoopSimulator
-from haptic.common.synthesis import synthesize_axis
+from haptic.common.model.synthesis import synthesize_axis
+from haptic.common.wire.injection import InjectionConfig
 from haptic.lockstep.simulator import LockstepSimulator
-from haptic.master.operator import parse_operator_spec
+from haptic.master.sim.operator import parse_operator_spec
 
 
 def _linear(model, gains):
@@ -20,7 +20,7 @@ def _linear(model, gains):
 
 
 def test_lockstep_equals_the_reference_linear_loop(paper_model) -> None:
-    """Same traces as common/linear_loop.py (up to rounding) on both axes: the rig, the
+    """Same traces as common/analysis/linear_loop.py (up to rounding) on both axes: the rig, the
     nodes and the delay lines form exactly the loop the --sampled-analysis analysis counts."""
     ts = paper_model.sample_period_s
     delays = np.array([0, 1, 3, 14, 15])

@@ -16,15 +16,15 @@ import numpy as np
 import pytest
 
 from haptic.common.config import load_config, override
-from haptic.master import cia402
-from haptic.master.bus_load import bus_load, classic_frame_bits
-from haptic.master.can_driver import CanHandleDriver
-from haptic.master.canopen_setup import PlanError, interpolation_period
-from haptic.master.cia402 import DriveState
-from haptic.master.drive_device import packaged_eds_path
-from haptic.master.hardware import HardwareError, LifecycleState, create_hardware
+from haptic.master.hardware import cia402
+from haptic.master.hardware.bus_load import bus_load, classic_frame_bits
+from haptic.master.hardware.can_driver import CanHandleDriver
+from haptic.master.hardware.canopen_setup import PlanError, interpolation_period
+from haptic.master.hardware.cia402 import DriveState
+from haptic.master.hardware.drive_device import packaged_eds_path
+from haptic.master.hardware.interface import HardwareError, LifecycleState, create_hardware
 from haptic.master.settings import master_settings
-from haptic.master.sim_rig import (
+from haptic.master.sim.sim_rig import (
     NMT_OPERATIONAL_STATE,
     NMT_PRE_OPERATIONAL_STATE,
     SimulatedCanRig,
@@ -427,7 +427,7 @@ def _write(device, replies: _Replies, index: int, subindex: int, value: int) -> 
 
 
 def test_the_emulated_drive_enforces_the_cia301_pdo_rules() -> None:
-    from haptic.master.drive_device import DriveObjects, DriveRuntime
+    from haptic.master.hardware.drive_device import DriveObjects, DriveRuntime
 
     replies = _Replies()
     device = DriveObjects(3, None, replies, DriveRuntime(3), lambda: 0)

@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from haptic.master import cia402
-from haptic.master.cia402 import DriveState
+from haptic.master.hardware import cia402
+from haptic.master.hardware.cia402 import DriveState
 
 
 def test_object_dictionary_has_the_csp_objects_with_their_types() -> None:

@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from haptic.master.force_sensor import (
+from haptic.master.hardware.force_sensor import (
     STATUS_INVALID,
     STATUS_OK,
     ForceSample,

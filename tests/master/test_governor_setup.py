@@ -9,9 +9,9 @@ import io
 
 import pytest
 
+from haptic.common.analysis.preflight import EXIT_UNSTABLE, round_trip_delay_s
 from haptic.common.config import ConfigError, override
-from haptic.common.model import model_from_config
-from haptic.common.preflight import EXIT_UNSTABLE, round_trip_delay_s
+from haptic.common.model.teleop import model_from_config
 from haptic.master.governor_setup import start_governor
 
 

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from haptic.common.margin_table import build_margin_table, gain_scalable, table_from_pairs
+from haptic.common.analysis.margin_table import build_margin_table, gain_scalable, table_from_pairs
 from haptic.master.margin_governor import GovernorSettings, MarginGovernor
 
 TS = 0.00054

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from haptic.common.config import load_config
-from haptic.common.model import model_from_config
-from haptic.common.synthesis import synthesize
+from haptic.common.model.synthesis import synthesize
+from haptic.common.model.teleop import model_from_config
 from haptic.master.node import MasterNode, master_compensator
 from haptic.master.settings import SafetySettings, master_settings
 
@@ -263,7 +263,7 @@ def test_resume_ramps_forces_in_without_the_small_force_gate(paper_model) -> Non
 def test_tdpa_node_matches_the_numpy_reference_port() -> None:
     """The node's passivity port (``tdpa``) wired to the right buffers and limits: the same
     commands and energy flows as the numpy reference, the peer's energy given to ``step``."""
-    from haptic.common.passivity import (
+    from haptic.common.model.passivity import (
         PassivityPort,
         PassivitySettings,
         master_step_reference,

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from haptic.common.config import load_config
-from haptic.common.lti import DiscreteLTI
+from haptic.common.model.lti import DiscreteLTI
 from haptic.lockstep.stacked import StackedLTI
 from haptic.master.node import (
     AXES,

@@ -357,7 +357,7 @@ def test_a_stacked_compensator_needs_one_lane_each(paper_model) -> None:
 def test_the_kernel_steps_a_general_coupled_block(block) -> None:
     """Every entry of A, B, C and D counts (the paper's block is diagonal per axis, so its
     cross terms are zero): a random stable coupled block gives its own exact response."""
-    from haptic.common.lti import DiscreteLTI
+    from haptic.common.model.lti import DiscreteLTI
 
     rng = np.random.default_rng(5)
     n = 3

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from haptic.common.config import load_config
-from haptic.common.model import model_from_config
+from haptic.common.model.teleop import model_from_config
 from haptic.master.node import MasterNode
-from haptic.master.operator import parse_operator_spec
-from haptic.master.rig_model import RigModel
 from haptic.master.settings import master_settings
+from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.sim.rig_model import RigModel
 
 
 def test_regulating_operator_holds_the_cutting_force_against_a_damper() -> None:

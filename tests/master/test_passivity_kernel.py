@@ -1,5 +1,5 @@
 """The master's passivity kernel (master/passivity_kernel.py) against its numpy reference
-(common/passivity.py): the same node, the same inputs, the same energy flows and commands."""
+(common/model/passivity.py): the same node, the same inputs, the same energy flows and commands."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from dataclasses import replace
 import numpy as np
 
 from haptic.common.config import load_config
-from haptic.common.model import model_from_config
-from haptic.common.passivity import PassivityPort, PassivitySettings, master_step_reference
+from haptic.common.model.passivity import PassivityPort, PassivitySettings, master_step_reference
+from haptic.common.model.teleop import model_from_config
 from haptic.master.node import MasterNode
 from haptic.master.settings import master_settings
 

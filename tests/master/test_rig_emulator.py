@@ -20,19 +20,19 @@ import numpy as np
 import pytest
 
 from haptic.common.config import load_config, override, to_toml
-from haptic.common.model import model_from_config
-from haptic.master import cia402
-from haptic.master.can_driver import CanHandleDriver
-from haptic.master.canopen_setup import configuration_steps
-from haptic.master.cia402 import DriveState
-from haptic.master.drive_device import load_drive_dictionary
-from haptic.master.hardware import HardwareError, LifecycleState, create_hardware
+from haptic.common.model.teleop import model_from_config
+from haptic.master.hardware import cia402
+from haptic.master.hardware.can_driver import CanHandleDriver
+from haptic.master.hardware.canopen_setup import configuration_steps
+from haptic.master.hardware.cia402 import DriveState
+from haptic.master.hardware.drive_device import load_drive_dictionary
+from haptic.master.hardware.interface import HardwareError, LifecycleState, create_hardware
 from haptic.master.node import MasterNode
-from haptic.master.rig_emulator import READY_PREFIX, EmulatedRigHardware
-from haptic.master.rig_sim_cli import main as rig_sim_main
 from haptic.master.runner import run_master
 from haptic.master.settings import master_settings
-from haptic.master.sim_rig import (
+from haptic.master.sim.cli import main as rig_sim_main
+from haptic.master.sim.rig_emulator import READY_PREFIX, EmulatedRigHardware
+from haptic.master.sim.sim_rig import (
     OPERATOR_DISPLAY_ID,
     SimulatedCanRig,
     decode_operator_display,
@@ -346,7 +346,7 @@ def test_a_bad_config_file_exits_2_naming_the_key(tmp_path, capsys) -> None:
 
 
 def _start_emulator(*argv: str) -> tuple[subprocess.Popen, str]:
-    process = subprocess.Popen([sys.executable, "-m", "haptic.master.rig_sim_cli", *argv],
+    process = subprocess.Popen([sys.executable, "-m", "haptic.master.sim.cli", *argv],
                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     assert process.stdout is not None
     ready = process.stdout.readline()
@@ -386,7 +386,7 @@ def test_the_emulator_ends_after_its_duration_and_when_its_parent_is_gone(tmp_pa
     # A parent that starts an emulator watching it, prints its PID and exits (SIGKILL-like:
     # no cleanup): the emulator notices and ends by itself.
     script = ("import os, subprocess, sys\n"
-              "child = subprocess.Popen([sys.executable, '-m', 'haptic.master.rig_sim_cli',"
+              "child = subprocess.Popen([sys.executable, '-m', 'haptic.master.sim.cli',"
               f" '--can-channel', {str(tmp_path / 'orphan')!r}, '--parent-pid',"
               " str(os.getpid())], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,"
               " text=True)\n"

@@ -1,8 +1,8 @@
 """The rig's and the operator's Warp kernels against an independent numpy oracle.
 
 The oracle below is the rig block and the three operator models written with numpy array
-calls, as :mod:`haptic.master.rig_model` and :mod:`haptic.master.operator` document them (the
-implementation the kernels replaced). Random targets (some non-finite), tool forces (some
+calls, as :mod:`haptic.master.sim.rig_model` and :mod:`haptic.master.sim.operator` document them
+(the implementation the kernels replaced). Random targets (some non-finite), tool forces (some
 NaN or infinite) and every operator kind must give the same samples and states.
 """
 
@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from haptic.common.config import load_config
-from haptic.common.model import model_from_config
-from haptic.master.operator import OperatorModel, parse_operator_spec
-from haptic.master.rig_model import RigModel
+from haptic.common.model.teleop import model_from_config
+from haptic.master.sim.operator import OperatorModel, parse_operator_spec
+from haptic.master.sim.rig_model import RigModel
 
 
 class ReferenceOperator:

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from haptic.common.config import load_config
-from haptic.common.lti import discretize
-from haptic.common.model import model_from_config
-from haptic.master.operator import parse_operator_spec
-from haptic.master.rig_model import RigModel
+from haptic.common.model.lti import discretize
+from haptic.common.model.teleop import model_from_config
+from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.sim.rig_model import RigModel
 
 
 @pytest.fixture(scope="module")

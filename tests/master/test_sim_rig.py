@@ -10,10 +10,10 @@ import pytest
 import scipy.signal
 
 from haptic.common.config import load_config, override
-from haptic.common.model import model_from_config
-from haptic.master.can_driver import CanHandleDriver
-from haptic.master.cia402 import DriveState
-from haptic.master.hardware import (
+from haptic.common.model.teleop import model_from_config
+from haptic.master.hardware.can_driver import CanHandleDriver
+from haptic.master.hardware.cia402 import DriveState
+from haptic.master.hardware.interface import (
     HandleHardware,
     HardwareError,
     LifecycleState,
@@ -21,10 +21,10 @@ from haptic.master.hardware import (
     hardware_names,
 )
 from haptic.master.node import MasterNode
-from haptic.master.rig_model import RigModel
 from haptic.master.runner import run_master
 from haptic.master.settings import master_settings
-from haptic.master.sim_rig import NMT_OPERATIONAL_STATE, SimulatedCanRig, SimulatedRigHardware
+from haptic.master.sim.rig_model import RigModel
+from haptic.master.sim.sim_rig import NMT_OPERATIONAL_STATE, SimulatedCanRig, SimulatedRigHardware
 
 
 def _config(operator: str = "constant:fx=0,fy=0", **overrides):

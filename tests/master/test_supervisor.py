@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from haptic.common.messages import Flags, ToolState
+from haptic.common.wire.messages import Flags, ToolState
 from haptic.master.supervisor import MasterSupervisor, Transition
 
 PERIOD_S = 0.00054
@@ -250,7 +250,7 @@ def _timed_tool(x_m: float, y_m: float, seq: int) -> ToolState:
 def test_a_missing_handle_reading_never_goes_on_the_wire() -> None:
     """A missed PDO reads NaN on an axis: the master sends the last measured position (the
     node trips on the NaN itself); a finite reading goes out as it is."""
-    from haptic.common.messages import HandleState, encode
+    from haptic.common.wire.messages import HandleState, encode
     from haptic.master.program import position_for_the_wire
 
     last = (0.01, 0.02)

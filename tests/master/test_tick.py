@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from haptic.common.messages import Flags, ToolState
+from haptic.common.wire.messages import Flags, ToolState
 from haptic.master.node import MasterNode
 from haptic.master.settings import master_settings
 from haptic.master.supervisor import MasterSupervisor, Transition

@@ -11,7 +11,7 @@ from pathlib import Path
 import can
 import pytest
 
-from haptic.master.unix_can import RESCAN_S, UnixDatagramBus
+from haptic.master.hardware.unix_can import RESCAN_S, UnixDatagramBus
 
 
 @pytest.fixture

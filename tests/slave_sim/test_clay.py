@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from haptic.common.config.scenario import load_scenario
-from haptic.slave_sim.clay import NumpyClay, WarpClay, make_clay, resolve_device
+from haptic.slave_sim.clay.sim import NumpyClay, WarpClay, make_clay, resolve_device
 
 SAMPLE_PERIOD_S = 0.00054
 SPEED_M_S = 0.04

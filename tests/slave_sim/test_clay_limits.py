@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from haptic.common.config.scenario import load_scenario
-from haptic.slave_sim.clay import (
+from haptic.slave_sim.clay.sim import (
     MIN_DISPLACEMENT_M,
     NumpyClay,
     WarpClay,

@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 
 from haptic.common.config.scenario import load_scenario
-from haptic.common.display import decode_clay, encode_clay
-from haptic.common.heightmap_codec import (
+from haptic.common.records.heightmap_codec import (
     downsample_heights,
     heights_from_bytes,
     heights_to_bytes,
     reduction_factors,
 )
-from haptic.slave_sim.clay_view import workpiece_layout
-from haptic.slave_sim.workpiece import build_workpiece
+from haptic.common.runtime.display import decode_clay, encode_clay
+from haptic.slave_sim.clay.clay_view import workpiece_layout
+from haptic.slave_sim.clay.workpiece import build_workpiece
 
 
 def test_block_mean_and_factors() -> None:

@@ -9,7 +9,7 @@ import math
 import pytest
 
 from haptic.common.config import ConfigError, load_config, override
-from haptic.common.messages import Flags, HandleState
+from haptic.common.wire.messages import Flags, HandleState
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 
 PERIOD_S = 0.0005

@@ -8,8 +8,8 @@ from scipy.linalg import expm
 
 from haptic.common.config import ConfigError, load_config, override
 from haptic.common.config.scenario import load_scenario
-from haptic.common.model import evaluate_tf, model_from_config
-from haptic.common.synthesis import synthesize
+from haptic.common.model.synthesis import synthesize
+from haptic.common.model.teleop import evaluate_tf, model_from_config
 from haptic.slave_sim.node import SlaveNode, slave_compensators
 from haptic.slave_sim.tool import tool_plant
 

@@ -1,5 +1,5 @@
 """The slave's [slave.phase_lock] table and its flags: validated at start, one-line errors.
-The lock's lag is the runner's spin plus the margin (common/phase_lock.py)."""
+The lock's lag is the runner's spin plus the margin (common/wire/phase_lock.py)."""
 
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from haptic.common.config.scenario import load_scenario
-from haptic.common.model import model_from_config
+from haptic.common.model.teleop import model_from_config
 from haptic.slave_sim.node import SlaveNode
 from haptic.slave_sim.resync import (
     MAX_STEP_PERIODS,

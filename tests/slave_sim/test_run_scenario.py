@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from haptic.slave_sim.run_scenario import main
+from haptic.slave_sim.scenario.cli import main
 
 
 def test_runs_a_scenario_and_writes_the_workpiece(tmp_path, capsys) -> None:

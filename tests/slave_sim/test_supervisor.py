@@ -3,7 +3,7 @@ only with the watchdog ok and the master's forces on, and the work-area guard st
 
 from __future__ import annotations
 
-from haptic.common.messages import Flags, HandleState
+from haptic.common.wire.messages import Flags, HandleState
 from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
 
 PERIOD_S = 0.00054

@@ -1,6 +1,6 @@
 """Attack scripts (issue 17): what a faulty or hostile process on the host or LAN sends.
 
-Each is a function over a :class:`haptic.common.link.Link` (or raw Zenoh puts) so tests can run
+Each is a function over a :class:`haptic.common.wire.link.Link` (or raw Zenoh puts) so tests can run
 them against the real programs; ``python -m tests.wire.attacks --help`` runs them by hand.
 """
 
@@ -13,8 +13,8 @@ from collections.abc import Callable
 
 import zenoh
 
-from haptic.common.link import Link
-from haptic.common.messages import (
+from haptic.common.wire.link import Link
+from haptic.common.wire.messages import (
     KIND_HANDLE,
     KIND_TOOL,
     SCHEMA_VERSION,

@@ -1,4 +1,4 @@
-"""Authenticated sessions (issue 17, common/auth.py) over real Zenoh on loopback: a forged
+"""Authenticated sessions (issue 17, common/wire/auth.py) over real Zenoh on loopback: a forged
 peer, a replaying peer, an explicit re-pairing, mismatched peers refused at start."""
 
 from __future__ import annotations
@@ -12,7 +12,8 @@ import msgpack
 import pytest
 import zenoh
 
-from haptic.common.auth import (
+from haptic.common.config import ConfigError, load_config, override
+from haptic.common.wire.auth import (
     KIND_HELLO,
     SessionAuth,
     decode_hello,
@@ -20,11 +21,10 @@ from haptic.common.auth import (
     load_key_file,
     write_key_file,
 )
-from haptic.common.config import ConfigError, load_config, override
-from haptic.common.failures import LinkOpenError
-from haptic.common.link import Link
-from haptic.common.link_config import LinkConfig, link_config_from
-from haptic.common.messages import KIND_TOOL, SCHEMA_VERSION, ToolState
+from haptic.common.wire.errors import LinkOpenError
+from haptic.common.wire.link import Link
+from haptic.common.wire.link_config import LinkConfig, link_config_from
+from haptic.common.wire.messages import KIND_TOOL, SCHEMA_VERSION, ToolState
 from tests.wire.attacks import forged_payload
 
 WAIT_S = 15.0

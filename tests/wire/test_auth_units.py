@@ -1,4 +1,4 @@
-"""common/auth.py pinned by value without a network: the key file's rules, the hello's
+"""common/wire/auth.py pinned by value without a network: the key file's rules, the hello's
 fields and tag, every reason a hello is refused (and which ones count), the session key
 recomputed from its definition, and the data tags."""
 
@@ -12,7 +12,8 @@ import stat
 import msgpack
 import pytest
 
-from haptic.common.auth import (
+from haptic.common.config import ConfigError
+from haptic.common.wire.auth import (
     HELLO_MAX_AGE_S,
     HELLO_PERIOD_S,
     KEY_BYTES,
@@ -27,8 +28,7 @@ from haptic.common.auth import (
     load_key_file,
     write_key_file,
 )
-from haptic.common.config import ConfigError
-from haptic.common.messages import SCHEMA_VERSION
+from haptic.common.wire.messages import SCHEMA_VERSION
 
 PSK = bytes(range(32))
 NOW_NS = 1_700_000_000_000_000_000

@@ -12,9 +12,10 @@ import uuid
 import pytest
 
 from haptic.common.config import CONFIG_ERROR_EXIT_STATUS
-from haptic.common.failures import LINK_ERROR_EXIT_STATUS, LinkOpenError, one_line
-from haptic.common.link import Link
-from haptic.common.link_config import LinkConfig
+from haptic.common.runtime.failures import LINK_ERROR_EXIT_STATUS
+from haptic.common.wire.errors import LinkOpenError, one_line
+from haptic.common.wire.link import Link
+from haptic.common.wire.link_config import LinkConfig
 
 BINARY = bytes(range(256)) * 8
 
@@ -33,12 +34,12 @@ def binary_file(tmp_path):
 
 
 def _program_mains():
-    from haptic.common import analyze_cli
+    from haptic.common.analysis import cli as analyze_cli
     from haptic.lockstep import cli as lockstep_cli
     from haptic.master import cli as master_cli
-    from haptic.master import rig_sim_cli
+    from haptic.master.sim import cli as rig_sim_cli
     from haptic.slave_sim import cli as slave_cli
-    from haptic.slave_sim import run_scenario
+    from haptic.slave_sim.scenario import cli as run_scenario
     from haptic.view import cli as view_cli
 
     return {
@@ -77,7 +78,7 @@ def test_binary_scenario_file_is_a_config_error(tmp_path):
 
 
 def test_replay_refuses_a_file_that_is_not_mcap(tmp_path, capsys):
-    from haptic.view.replay_cli import main
+    from haptic.view.replay.cli import main
 
     for name, data in (("junk.mcap", BINARY), ("text.mcap", b"hello"), ("empty.mcap", b"")):
         path = tmp_path / name

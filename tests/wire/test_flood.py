@@ -11,9 +11,9 @@ import uuid
 
 import zenoh
 
-from haptic.common.link import Link
-from haptic.common.link_config import LinkConfig
-from haptic.common.messages import KIND_TOOL
+from haptic.common.wire.link import Link
+from haptic.common.wire.link_config import LinkConfig
+from haptic.common.wire.messages import KIND_TOOL
 from tests.wire.attacks import flood, forged_payload
 
 

@@ -1,4 +1,4 @@
-"""No silent inert sessions (issue 17, common/inert.py)."""
+"""No silent inert sessions (issue 17, common/runtime/inert.py)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import sys
 
 import pytest
 
-from haptic.common.inert import InertMonitor
-from haptic.common.session import inert_flag
+from haptic.common.launch.cli import inert_flag
+from haptic.common.runtime.inert import InertMonitor
 
 
 def test_monitor_flags_forces_off_with_the_peer_present() -> None:
@@ -35,7 +35,7 @@ def test_waiting_for_a_peer_is_not_inert() -> None:
 
 def _session(out, *extra: str) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "haptic.common.session", "--duration", "4", "--rig", "model",
+        [sys.executable, "-m", "haptic.common.launch.cli", "--duration", "4", "--rig", "model",
          "--out", str(out), *extra], capture_output=True, text=True, timeout=300)
 
 

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from haptic.common.config import ConfigError, load_config, override
-from haptic.common.link import Link
-from haptic.common.link_config import LinkConfig
-from haptic.common.messages import Flags, HandleState
+from haptic.common.wire.link import Link
+from haptic.common.wire.link_config import LinkConfig
+from haptic.common.wire.messages import Flags, HandleState
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from tests.wire.attacks import steady_master
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from haptic.common.recording import read_recording
+from haptic.common.records.recording import read_recording
 
 WAIT_S = 60.0
 

@@ -16,12 +16,12 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from haptic.common.recorder import McapRecorder
-from haptic.common.recording import read_recording
+from haptic.common.records.recorder import McapRecorder
+from haptic.common.records.recording import read_recording
 
 WRITER = textwrap.dedent("""
     import sys, time
-    from haptic.common.recorder import McapRecorder
+    from haptic.common.records.recorder import McapRecorder
     recorder = McapRecorder(sys.argv[1], "master", chunk_size=4096).open()
     recorder.add_channel("/master/state", ("time_s", "handle_force_x_N"))
     i = 0

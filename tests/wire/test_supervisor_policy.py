@@ -4,7 +4,7 @@ the grid (the resync policy), without waiting for a watchdog cycle."""
 
 from __future__ import annotations
 
-from haptic.common.messages import Flags, HandleState
+from haptic.common.wire.messages import Flags, HandleState
 from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
 
 PERIOD_S = 0.00054

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from haptic.common.config import ConfigError, load_config, override
-from haptic.common.link import Link
-from haptic.common.link_config import LinkConfig
-from haptic.common.messages import Flags, ToolState
+from haptic.common.wire.link import Link
+from haptic.common.wire.link_config import LinkConfig
+from haptic.common.wire.messages import Flags, ToolState
 from haptic.master.supervisor import MasterSupervisor, Transition
 from haptic.master.tool_guard import ToolGuardSettings, ToolInputGuard
 from tests.wire.attacks import steady_slave

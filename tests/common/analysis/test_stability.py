@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from haptic.common.analysis.linear_loop import LinearLoopSimulator, growth_ratio
 from haptic.common.analysis.loop import AxisLoop
 from haptic.common.analysis.report import AnalysisSettings, analyse
 from haptic.common.analysis.stability import (
@@ -14,9 +15,8 @@ from haptic.common.analysis.stability import (
     is_stable,
     unstable_root_count,
 )
-from haptic.common.linear_loop import LinearLoopSimulator, growth_ratio
-from haptic.common.model import TeleopModel, tf_coefficients
-from haptic.common.synthesis import synthesize_axis
+from haptic.common.model.synthesis import synthesize_axis
+from haptic.common.model.teleop import TeleopModel, tf_coefficients
 
 GRID = FrequencyGrid(20000.0)
 

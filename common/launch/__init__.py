@@ -1,0 +1,1 @@
+"""Launching a whole session (haptic-session): both programs, one command."""

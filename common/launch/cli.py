@@ -1,0 +1,381 @@
+"""``haptic-session``: one teleoperation session on this machine, end to end.
+
+Starts ``haptic-slave`` and ``haptic-master`` as two child processes talking over Zenoh on
+loopback (a fresh key prefix and TCP port, so sessions and tests never cross), by default the
+paper's constant-cutting-rate experiment: simulated rig, the regulating operator holding a
+3.6 N cutting force, the ``constant-rate`` clay scenario, 4 s. Waits for both, then prints a
+combined summary (rates, period error, overruns, link delay and loss, forces, the cut, the
+watchdog) and writes a report directory (``--out``, default ``out/session``):
+
+- ``report.md``: the combined summary and both JSON summaries;
+- ``master.json``, ``slave.json``: the programs' ``--json-summary`` files;
+- ``clay.png``, ``clay.npz``: the cut workpiece with the tool path;
+- ``master_trace.npz``, ``slave_trace.npz``: every 10th tick of each side;
+- ``session.png``: handle and tool force against time, tool velocity against position.
+
+Children are ended by their own PID (SIGTERM, then SIGKILL after a grace period) on timeout
+or Ctrl-C, and always reaped. Exit status 0 when both programs exited 0 and wrote their
+summaries; otherwise 1 (or the first non-zero child status, e.g. 3 for the analysis refusal).
+"""
+
+from __future__ import annotations
+
+import argparse
+import atexit
+import json
+import math
+import shlex
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from haptic.common.runtime.cli_options import add_retired_delay_option
+from haptic.common.wire.auth import write_key_file
+
+DEFAULT_OPERATOR = "regulate:fx=3.6,onset=0.2,max=5"
+#: Seconds a child gets after SIGTERM before SIGKILL.
+TERM_GRACE_S = 3.0
+#: Start-up allowance on top of the duration (Python, Warp and Zenoh start, the peer wait), s.
+START_ALLOWANCE_S = 40.0
+
+
+#: The largest position gap |yt - Ah1 yh| at the end of a session (issue 16), m.
+GAP_TARGET_M = 0.001
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 nobody listens on right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="haptic-session", description=__doc__.split("\n")[0])
+    parser.add_argument("--duration", type=float, default=4.0, metavar="S",
+                        help="run length of the loops, s (default 4)")
+    parser.add_argument("--out", type=Path, default=Path("out/session"), metavar="DIR",
+                        help="report directory (default out/session)")
+    parser.add_argument("--config", metavar="FILE", help="TOML configuration for both programs")
+    parser.add_argument("--scenario", default="constant-rate", help="slave scenario")
+    parser.add_argument("--operator", default=DEFAULT_OPERATOR, help="simulated operator spec")
+    parser.add_argument("--rig", default="sim", choices=("sim", "model"),
+                        help="the master's simulated handle: sim (emulated CAN drives and "
+                        "sensor, default) or model (the rig block, no bus)")
+    parser.add_argument("--k", type=float, help="gain k of Ch1 (both programs)")
+    parser.add_argument("--one-way-delay", dest="delay", type=float, metavar="S",
+                        help="one-way delay injected in each direction, s")
+    add_retired_delay_option(parser)
+    parser.add_argument("--allow-unstable", action="store_true",
+                        help="pass --allow-unstable to both programs")
+    parser.add_argument("--governor", action="store_true",
+                        help="the master's margin governor (docs/governor.md); delay profiles "
+                        "come from --config ([link.<side>.injection] delay_profile)")
+    parser.add_argument("--master-args", default="", help="extra master arguments (one string)")
+    parser.add_argument("--slave-args", default="", help="extra slave arguments (one string)")
+    return parser
+
+
+def _end(process: subprocess.Popen) -> None:
+    """SIGTERM, wait, SIGKILL: by this child's own PID; always reaped."""
+    if process.poll() is None:
+        process.send_signal(signal.SIGTERM)
+        try:
+            process.wait(timeout=TERM_GRACE_S)
+        except subprocess.TimeoutExpired:
+            process.kill()
+    process.wait()
+
+
+def _session_key() -> Path:
+    """A fresh pre-shared key for this session's two programs (common/wire/auth.py), in a private
+    directory removed when the session ends: no other process can join the pair."""
+    directory = tempfile.mkdtemp(prefix="haptic-session-")
+    atexit.register(shutil.rmtree, directory, True)
+    return write_key_file(Path(directory) / "session.key")
+
+
+def run_session(args: argparse.Namespace) -> int:
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    prefix = f"haptic/session-{uuid.uuid4().hex[:8]}"
+    common = ["--key-prefix", prefix, "--no-status", "--peer-wait", "30",
+              "--session-key", str(_session_key())]
+    if args.config:
+        common += ["--config", args.config]
+    if args.k is not None:
+        common += ["--k", repr(args.k)]
+    if args.delay is not None:
+        # each side injects it on what it receives; each side's analysis counts both
+        common += ["--one-way-delay", repr(args.delay), "--peer-one-way-delay", repr(args.delay)]
+    if args.allow_unstable:
+        common.append("--allow-unstable")
+    if args.governor:
+        common.append("--governor")
+    files = {"master": out / "master.json", "slave": out / "slave.json"}
+    for path in files.values():
+        path.unlink(missing_ok=True)
+    # The slave runs a little longer; the session stops it as soon as the master is done.
+    commands = {
+        "slave": [sys.executable, "-m", "haptic.slave_sim.cli", *common,
+                  "--duration", repr(args.duration + 5.0), "--connect", endpoint,
+                  "--scenario", args.scenario, "--out", str(out),
+                  "--json-summary", str(files["slave"]), *shlex.split(args.slave_args)],
+        "master": [sys.executable, "-m", "haptic.master.cli", *common,
+                   "--duration", repr(args.duration), "--listen", endpoint, "--rig", args.rig,
+                   "--operator", args.operator, "--out", str(out),
+                   "--json-summary", str(files["master"]), *shlex.split(args.master_args)],
+    }
+    print(f"haptic-session: {args.scenario}, rig {args.rig}, operator {args.operator}, "
+          f"{args.duration:g} s, "
+          f"Zenoh on {endpoint}, key prefix {prefix}", flush=True)
+    processes: dict[str, subprocess.Popen] = {}
+    statuses: dict[str, int | None] = {}
+    try:
+        for side in ("slave", "master"):
+            processes[side] = subprocess.Popen(commands[side])
+        deadline = time.monotonic() + args.duration + START_ALLOWANCE_S
+        master = processes["master"]
+        while master.poll() is None and time.monotonic() < deadline:
+            if processes["slave"].poll() is not None:
+                break
+            time.sleep(0.05)
+        if master.poll() is None and processes["slave"].poll() is not None:
+            # the slave died: give the master a moment, then stop it
+            time.sleep(0.5)
+        _end(master)
+        _end(processes["slave"])
+    except KeyboardInterrupt:
+        print("haptic-session: interrupted; stopping the programs", file=sys.stderr)
+        return 130
+    finally:
+        for process in processes.values():
+            _end(process)
+        statuses = {side: p.returncode for side, p in processes.items()}
+    failed = {side: code for side, code in statuses.items() if code != 0}
+    if failed:
+        for side, code in failed.items():
+            print(f"haptic-session: {side} exited with status {code}", file=sys.stderr)
+        first = next(iter(failed.values()))
+        return first if first and first > 0 else 1
+    summaries = {}
+    for side, path in files.items():
+        if not path.is_file():
+            print(f"haptic-session: {side} wrote no summary", file=sys.stderr)
+            return 1
+        summaries[side] = json.loads(path.read_text())
+    text = combined_summary(summaries["master"], summaries["slave"]) + inert_flag(summaries)
+    print(text)
+    plot = _plot(out)
+    _report(out, args, text, summaries, plot)
+    print(f"haptic-session: report in {out}/report.md")
+    return 0
+
+
+def inert_flag(summaries: dict[str, dict[str, Any]]) -> str:
+    """The report's flag for a session that was inert (common/runtime/inert.py): a side whose peer
+    was there but whose forces stayed off; empty when neither was."""
+    lines = [f"\n  INERT SESSION: {side} forces off {summary.get('inert_time_s', 0.0):.1f} s "
+             f"with the peer present ({summary.get('inert_reason')})"
+             for side, summary in summaries.items() if summary.get("inert")]
+    return "".join(lines)
+
+
+def _us(value: Any) -> str:
+    return "n/a" if value is None or not math.isfinite(value) else f"{value * 1e6:.1f} us"
+
+
+def _trips(summary: dict[str, Any]) -> tuple[int, int]:
+    """(trips during the run, trips at its end): a last trip with no return of the peer
+    after it, in the last 1.5 s of this side's run, is the peer stopping first."""
+    end = summary.get("duration_s") or 0.0
+    events = summary.get("events", [])
+    trips = [i for i, e in enumerate(events) if e.get("kind") == "trip"]
+    if not trips:
+        return 0, 0
+    last = trips[-1]
+    returned = any(e.get("kind") == "peer_returned" for e in events[last:])
+    if not returned and events[last]["time_s"] >= end - 1.5:
+        return len(trips) - 1, 1
+    return len(trips), 0
+
+
+#: The loop targets a session is held to (docs/programs.md): rate within 0.4 % of 1/Ts
+#: (1845 Hz at Ts = 0.54 ms), overruns at most 0.1 %, period error p99 at most 50 us, no
+#: watchdog trip while the peer runs.
+MIN_RATE_RATIO = 0.996
+MAX_OVERRUN_RATIO = 0.001
+MAX_PERIOD_ERROR_P99_S = 50e-6
+REAL_TIME_TARGETS = ("rate >= 99.6 % of 1/Ts, overruns <= 0.1 %, period error p99 <= 50 us, "
+                     "no watchdog trip during the run")
+
+
+def real_time_misses(master: dict[str, Any], slave: dict[str, Any]) -> list[str]:
+    """The loop targets each side missed, one short text each (empty: real time)."""
+    misses = []
+    for name, s in (("master", master), ("slave", slave)):
+        target_hz = 1.0 / s["period_s"] if s.get("period_s") else math.nan
+        if not s["rate_hz"] >= MIN_RATE_RATIO * target_hz:
+            misses.append(f"{name} rate {s['rate_hz']:.1f} Hz < {MIN_RATE_RATIO * target_hz:.1f}")
+        if not s["overrun_ratio"] <= MAX_OVERRUN_RATIO:
+            misses.append(f"{name} overruns {s['overrun_ratio'] * 100:.2f} % > "
+                          f"{MAX_OVERRUN_RATIO * 100:g} %")
+        error = s.get("period_p99_error_s")
+        if error is None or not error <= MAX_PERIOD_ERROR_P99_S:
+            misses.append(f"{name} period error p99 {_us(error)} > "
+                          f"{MAX_PERIOD_ERROR_P99_S * 1e6:g} us")
+        during, _ = _trips(s)
+        if during:
+            misses.append(f"{name} watchdog tripped {during}x during the run")
+    return misses
+
+
+def combined_summary(master: dict[str, Any], slave: dict[str, Any]) -> str:
+    """The session's lines: both loops, both link directions, forces, the cut, the watchdog."""
+    from haptic.common.runtime.stage_times import format_stages
+
+    lines = ["session summary"]
+    for name, s in (("master", master), ("slave", slave)):
+        lines.append(
+            f"  {name:6s} {s['steps']} steps  rate {s['rate_hz']:.1f} Hz  period error p99 "
+            f"{_us(s['period_p99_error_s'])}  overruns {s['overruns']} "
+            f"({s['overrun_ratio'] * 100:.3f} %)"
+        )
+    for name, s in (("master", master), ("slave", slave)):
+        if s.get("stages"):
+            lines.append(f"  {name:6s} step p50 {_us(s.get('step_p50_s'))}  p99 "
+                         f"{_us(s.get('step_p99_s'))}; " + format_stages(s["stages"]))
+    misses = real_time_misses(master, slave)
+    lines.append("  real time: " + ("met (" + REAL_TIME_TARGETS + ")" if not misses
+                                    else "MISSED: " + "; ".join(misses)))
+    for name, s in (("master -> slave", slave), ("slave -> master", master)):
+        loss = s.get("loss_ratio")
+        loss_text = "n/a" if loss is None else f"{loss * 100:.3f} %"
+        lines.append(f"  link {name}: one-way p50 {_us(s['link_one_way_delay_p50_s'])}  p99 "
+                     f"{_us(s['link_one_way_delay_p99_s'])}  loss {loss_text}")
+    lines.append(f"  max |force|: reflected to the operator {master['max_abs_force_N']:.2f} N,"
+                 f" tool on the clay {slave['max_abs_force_N']:.2f} N")
+    cut = slave.get("cut_mean_force_N")
+    if cut is not None:
+        lines.append(
+            f"  in the clay ({slave.get('scenario', '?')}): {slave['cutting_time_s']:.2f} s "
+            f"from the first to the last removal, removed "
+            f"{slave.get('removed_volume_m3', 0.0) * 1e6:.2f} cm^3"
+        )
+        lines.append(
+            f"    mean over the cut: tool force |ft| {cut:.2f} N, handle force "
+            f"{slave['cut_mean_handle_force_N']:.2f} N, speed "
+            f"{slave['cut_mean_speed_m_s'] * 1e3:.1f} mm/s (paper, Fig. 9: 3.6 N at 38 mm/s)"
+        )
+        lines.append(
+            f"    while removing clay: |ft| {slave['cutting_mean_force_N']:.2f} N, speed "
+            f"{slave['cutting_mean_speed_m_s'] * 1e3:.1f} mm/s"
+        )
+        ripple = slave.get("cutting_force_ripple_ratio")
+        if ripple is not None:
+            lines.append(
+                f"    steady part ({slave['steady_cut_start_s']:.2f}-"
+                f"{slave['steady_cut_end_s']:.2f} s): |ft| {slave['steady_cut_force_N']:.2f} N, "
+                f"speed {slave['steady_cut_speed_m_s'] * 1e3:.1f} mm/s, force ripple "
+                f"{ripple * 100:.1f} % (std/mean), velocity reversals "
+                f"{slave['cutting_velocity_reversals']}"
+            )
+    else:
+        lines.append("  the tool did not cut clay")
+    gap = slave.get("final_position_gap_m")
+    if gap is not None:
+        lines.append(f"  position gap at the end |yt - Ah1 yh|: x {abs(gap[0]) * 1e3:.2f} mm, "
+                     f"y {abs(gap[1]) * 1e3:.2f} mm (target <= {GAP_TARGET_M * 1e3:g} mm)")
+    if master.get("work_area"):
+        lines.append(f"  work area: {master['work_area']}")
+    m_during, m_end = _trips(master)
+    s_during, s_end = _trips(slave)
+    lines.append(
+        f"  watchdog trips during the run: master {m_during}, slave {s_during} "
+        f"(at the end, a side seeing its peer stop first: master {m_end}, slave {s_end})"
+    )
+    analysis = master.get("analysis") or {}
+    if analysis:
+        margin = analysis.get("delay_margin_s")
+        margin_text = ("none (stable for every delay)" if margin is None
+                       else f"{margin * 1e3:.2f} ms")
+        lines.append(f"  analysis: k = {analysis['k']:g}, round trip "
+                     f"{analysis['round_trip_delay_s'] * 1e3:.2f} ms, "
+                     f"{'stable' if analysis['stable'] else 'UNSTABLE'}, delay margin "
+                     f"{margin_text}")
+    return "\n".join(lines)
+
+
+def _plot(out: Path) -> Path | None:
+    """Forces against time, tool velocity against position, from the two traces."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        import numpy as np
+
+        slave = np.load(out / "slave_trace.npz")
+        master = np.load(out / "master_trace.npz")
+    except (OSError, ImportError) as error:
+        print(f"haptic-session: no plot ({error})", file=sys.stderr)
+        return None
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 7))
+    ax1.plot(master["time_s"], master["handle_force_x_N"], label="handle force fh_x (master)")
+    ax1.plot(slave["time_s"], slave["tool_force_x_N"], label="tool force ft_x (slave)",
+             alpha=0.8)
+    ax1.axhline(3.6, color="k", lw=0.6, ls="--", label="3.6 N (paper)")
+    ax1.set_xlabel("time since each loop's start, s")
+    ax1.set_ylabel("force, N")
+    ax1.legend(loc="upper left", fontsize=8)
+    ax1.grid(alpha=0.3)
+    ax2.plot(slave["tool_position_x_m"] * 1e3, slave["tool_velocity_x_m_s"] * 1e3, lw=0.7)
+    ax2.axhline(38.0, color="k", lw=0.6, ls="--", label="38 mm/s (paper)")
+    ax2.set_xlabel("tool position x, mm")
+    ax2.set_ylabel("tool velocity x, mm/s")
+    ax2.legend(loc="upper left", fontsize=8)
+    ax2.grid(alpha=0.3)
+    fig.tight_layout()
+    path = out / "session.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _report(out: Path, args: argparse.Namespace, text: str, summaries: dict[str, Any],
+            plot: Path | None) -> None:
+    parts = [
+        "# haptic-session report", "",
+        f"Scenario `{args.scenario}`, operator `{args.operator}`, {args.duration:g} s, both "
+        "programs on loopback over Zenoh.", "",
+        "```", text, "```", "",
+    ]
+    for name in ("clay.png", "session.png"):
+        if (out / name).is_file():
+            parts += [f"![{name}]({name})", ""]
+    for side in ("master", "slave"):
+        parts += [f"## {side} summary (`{side}.json`)", "", "```json",
+                  json.dumps(summaries[side], indent=2, sort_keys=True), "```", ""]
+    (out / "report.md").write_text("\n".join(parts))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if not (math.isfinite(args.duration) and args.duration > 0.0):
+        print(f"config error: --duration: must be > 0 s (got {args.duration:g})",
+              file=sys.stderr)
+        return 2
+    return run_session(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,221 @@
+"""Display-rate publications for the live view (``haptic-view``), off the control loop.
+
+A :class:`DisplayPublisher` owns a thread on the program's Zenoh session that publishes, at
+display rates:
+
+- ``<prefix>/view/<side>`` (JSON, ``state_rate_hz``): the side's newest state (master: handle
+  force and position, the felt force; slave: tool force, position, velocity, engagement,
+  removed volume), which the loop hands over with :meth:`offer_state` every
+  :meth:`state_every` ticks. The view never subscribes to the loops' own 1850 Hz keys, so
+  the loops' publishers gain no subscriber;
+- ``<prefix>/status/<side>`` (JSON, ``status_rate_hz``): the side's link statistics, watchdog
+  state and safety events. The loop hands the latest figures over with :meth:`offer_status`
+  at its own status rate (a reference swap, no copy, no I/O in the loop);
+- ``<prefix>/clay`` (slave only, ``clay_rate_hz``): the clay's height map reduced to at most
+  256 x 64 cells as uint16 micrometres (:mod:`haptic.slave_sim.clay.clay_view`), after a JSON
+  header line with the layout's size. The heights are read through ``clay_source``, a
+  callable the thread calls (on a CPU clay it returns a view of the live array; the thread
+  reduces it with numpy, which releases the GIL). A publication is skipped while the
+  previous one is still running, so the thread never queues work.
+
+The thread measures its own cost (:attr:`figures`): publications made and the mean and
+largest time one took, s.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from haptic.common.runtime.summary import json_safe
+
+#: Default rates, Hz.
+DEFAULT_STATE_RATE_HZ = 60.0
+DEFAULT_STATUS_RATE_HZ = 5.0
+DEFAULT_CLAY_RATE_HZ = 10.0
+
+
+def encode_clay(layout: dict[str, Any], heights_bytes: bytes, sequence: int) -> bytes:
+    """The ``<prefix>/clay`` payload: a JSON header line then the uint16 heights."""
+    header = {"cells_x": layout["cells_x"], "cells_y": layout["cells_y"], "seq": sequence}
+    return json.dumps(header).encode() + b"\n" + heights_bytes
+
+
+def decode_clay(payload: bytes) -> tuple[dict[str, Any], bytes]:
+    """Inverse of :func:`encode_clay`: ``(header, heights bytes)``."""
+    newline = payload.index(b"\n")
+    return json.loads(payload[:newline]), payload[newline + 1:]
+
+
+class EventCursor:
+    """The events each source list gained since the last call (items with ``as_dict()`` or
+    dicts)."""
+
+    def __init__(self) -> None:
+        self._seen: dict[int, int] = {}
+
+    def new(self, sources: Any) -> list[dict[str, Any]]:
+        result: list[dict[str, Any]] = []
+        for source in sources:
+            key = id(source)
+            seen = self._seen.get(key, 0)
+            if len(source) > seen:
+                result.extend(item.as_dict() if hasattr(item, "as_dict") else dict(item)
+                              for item in source[seen:])
+                self._seen[key] = len(source)
+        return result
+
+
+class DisplayPublisher:
+    """Publishes a side's status (and the slave's clay) for the live view; see the module
+    docstring. ``session``: the program's open Zenoh session; ``key_prefix``: the rig's
+    prefix; ``clay_source``: returns the (cells_y, cells_x) height map in m, or None;
+    ``layout``: the workpiece layout of :func:`haptic.slave_sim.clay.clay_view.workpiece_layout`
+    (published once as ``<prefix>/workpiece`` and again every second for late viewers);
+    ``on_clay(time_ns, reduced heights m)``: called in the thread after each clay
+    publication (the slave records the map from it)."""
+
+    def __init__(self, session: Any, key_prefix: str, side: str, *,
+                 status_rate_hz: float = DEFAULT_STATUS_RATE_HZ,
+                 clay_rate_hz: float = DEFAULT_CLAY_RATE_HZ,
+                 clay_source: Callable[[], np.ndarray] | None = None,
+                 layout: dict[str, Any] | None = None,
+                 factors: tuple[int, int] = (1, 1),
+                 on_clay: Callable[[int, np.ndarray], None] | None = None) -> None:
+        self._session = session
+        self._prefix = key_prefix
+        self.side = side
+        self._status_period_s = 1.0 / status_rate_hz
+        self._clay_period_s = 1.0 / clay_rate_hz
+        self._clay_source = clay_source
+        self._layout = layout
+        # encoded once: the layout lists every reduced cell, and json.dumps of it holds the
+        # GIL for about 1.5 ms, which stalled the slave's loop once a second
+        self._layout_bytes = json.dumps(layout).encode() if layout is not None else b""
+        self._factors = factors
+        self._on_clay = on_clay
+        self._status: dict[str, Any] | None = None
+        self._state: dict[str, Any] | None = None
+        self._state_period_s = 1.0 / DEFAULT_STATE_RATE_HZ
+        self._events: list[dict[str, Any]] = []
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.publications = 0
+        self.clay_publications = 0
+        self.busy_s = 0.0
+        self.max_busy_s = 0.0
+
+    def state_every(self, period_s: float) -> int:
+        """Ticks of ``period_s`` between two :meth:`offer_state` calls."""
+        return max(1, round(self._state_period_s / period_s))
+
+    def offer_state(self, state: dict[str, Any]) -> None:
+        """From the loop: the side's newest state (a reference swap)."""
+        self._state = state
+
+    def offer_status(self, figures: dict[str, Any], new_events: list[dict[str, Any]]) -> None:
+        """From the loop: the newest link figures and any new events (kept for the next
+        publication)."""
+        self._status = figures
+        if new_events:
+            self._events = (self._events + new_events)[-50:]
+
+    def start(self) -> DisplayPublisher:
+        self._thread = threading.Thread(target=self._run, name=f"display-{self.side}",
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+            self._thread = None
+
+    def __enter__(self) -> DisplayPublisher:
+        return self.start()
+
+    def __exit__(self, *_exc: object) -> None:
+        self.stop()
+
+    @property
+    def figures(self) -> dict[str, Any]:
+        """The publisher's cost: publications, mean and largest time one took (s)."""
+        count = self.publications
+        return {"display_publications": count, "display_clay_publications":
+                self.clay_publications,
+                "display_mean_cost_s": self.busy_s / count if count else 0.0,
+                "display_max_cost_s": self.max_busy_s}
+
+    def _run(self) -> None:
+        session = self._session
+        status_key = f"{self._prefix}/status/{self.side}"
+        state_key = f"{self._prefix}/view/{self.side}"
+        sent_state: dict[str, Any] | None = None
+        next_state = time.monotonic()
+        clay_key = f"{self._prefix}/clay"
+        layout_key = f"{self._prefix}/workpiece"
+        next_status = next_clay = next_layout = time.monotonic()
+        sequence = 0
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if now >= next_state:
+                next_state = now + self._state_period_s
+                state = self._state
+                if state is not None and state is not sent_state:
+                    sent_state = state
+                    started = time.perf_counter()
+                    state["time_ns"] = time.time_ns()
+                    self._put(session, state_key, json.dumps(json_safe(state)).encode())
+                    self._account(time.perf_counter() - started)
+            if now >= next_status:
+                next_status = now + self._status_period_s
+                status = self._status
+                if status is not None:
+                    started = time.perf_counter()
+                    payload = {"side": self.side, "time_ns": time.time_ns(),
+                               "link": status, "events": self._events}
+                    self._put(session, status_key,
+                              json.dumps(json_safe(payload)).encode())
+                    self._account(time.perf_counter() - started)
+            if self._clay_source is not None and self._layout is not None:
+                if now >= next_layout:
+                    next_layout = now + 1.0
+                    self._put(session, layout_key, self._layout_bytes)
+                if now >= next_clay:
+                    next_clay = now + self._clay_period_s
+                    started = time.perf_counter()
+                    from haptic.common.records.heightmap_codec import (
+                        downsample_heights,
+                        heights_to_bytes,
+                    )
+
+                    heights = self._clay_source()
+                    if heights is not None:
+                        reduced = downsample_heights(heights, self._factors)
+                        data = heights_to_bytes(reduced)
+                        sequence += 1
+                        self._put(session, clay_key, encode_clay(self._layout, data, sequence))
+                        self.clay_publications += 1
+                        self._account(time.perf_counter() - started)
+                        if self._on_clay is not None:
+                            self._on_clay(time.time_ns(), reduced)
+            self._stop.wait(min(0.005, self._state_period_s))
+
+    def _account(self, cost_s: float) -> None:
+        self.publications += 1
+        self.busy_s += cost_s
+        if cost_s > self.max_busy_s:
+            self.max_busy_s = cost_s
+
+    @staticmethod
+    def _put(session: Any, key: str, payload: bytes) -> None:
+        try:
+            session.put(key, payload)
+        except Exception:  # noqa: BLE001 - a display publication may fail; the loop goes on
+            pass

@@ -1,0 +1,230 @@
+"""Authenticated sessions on the link: a pre-shared key, a per-session key, a tag per message.
+
+Without a key (``[link.security] session_key_file = ""``) the link trusts every message on
+its keys (one trusted host; README, Security). With one, only the paired peer's messages move
+anything:
+
+**Pairing.** Each side draws a random 16-byte nonce and its epoch once per run, and publishes a
+*hello* on ``<prefix>/pair/<side>`` every :data:`HELLO_PERIOD_S` (and at once after pairing
+with a new peer)::
+
+    msgpack [SCHEMA_VERSION, KIND_HELLO, side, epoch, nonce, time_ns, authenticated] + tag
+
+the tag being HMAC-SHA256(pre-shared key, hello)[:16] (no tag without a key). A hello is
+accepted only with a valid tag, from the peer's side, at most :data:`HELLO_MAX_AGE_S` old and
+newer than the hello the current pairing came from; a replayed old hello changes nothing. A
+hello with a new (epoch, nonce) is an explicit re-pairing (the peer restarted): both sides
+derive the session key::
+
+    K = HMAC-SHA256(psk, "haptic-teleop/2/session" | master nonce | slave nonce |
+                    master epoch (4 bytes) | slave epoch (4 bytes))
+
+so every run has its own key, and nothing recorded in an earlier run verifies in this one.
+
+**Messages.** Every data message carries HMAC-SHA256(K, message)[:16] after its msgpack body:
+the tag covers the version, kind, epoch, sequence number, send time, flags and payload. The
+receiver drops a message that does not verify (``unauthenticated``), one that comes before
+any pairing or from another epoch than the paired one (``unpaired``; a new epoch comes only
+from an authenticated hello, never from a message's newer send time), and, as before, one
+whose sequence number is not above the highest seen (a replay: ``out_of_order``).
+
+The pre-shared key file holds 64 hex digits (32 bytes) and must not be readable by group or
+others (``chmod 600``); :func:`write_key_file` makes one (``haptic-session`` does, per run).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import os
+import secrets
+import stat
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import msgpack
+
+from haptic.common.config import ConfigError
+from haptic.common.wire.messages import SCHEMA_VERSION
+
+TAG_BYTES = 16
+KEY_BYTES = 32
+NONCE_BYTES = 16
+KIND_HELLO = 3
+HELLO_PERIOD_S = 0.1
+HELLO_MAX_AGE_S = 5.0
+_SIDE_CODE = {"master": 1, "slave": 2}
+_SESSION_LABEL = b"haptic-teleop/2/session"
+
+
+def load_key_file(path: str | Path, key: str = "link.security.session_key_file") -> bytes:
+    """The 32-byte pre-shared key in ``path`` (64 hex digits). Raises :class:`ConfigError`
+    naming ``key`` for a missing, unreadable, malformed or group/world-readable file."""
+    file = Path(path)
+    try:
+        mode = file.stat().st_mode
+        text = file.read_bytes().decode("ascii").strip()
+    except OSError as error:
+        raise ConfigError(key, f"cannot read {path}: {error.strerror}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(key, f"{path} is not 64 hex digits") from None
+    if mode & (stat.S_IRWXG | stat.S_IRWXO):
+        raise ConfigError(key, f"{path} is readable by others (mode {stat.S_IMODE(mode):o}); "
+                          "chmod 600 it")
+    try:
+        secret = bytes.fromhex(text)
+    except ValueError:
+        secret = b""
+    if len(secret) != KEY_BYTES:
+        raise ConfigError(key, f"{path} is not 64 hex digits (a 32-byte key)")
+    return secret
+
+
+def write_key_file(path: str | Path) -> Path:
+    """Write a fresh random pre-shared key to ``path`` (mode 600); returns the path."""
+    file = Path(path)
+    descriptor = os.open(file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(descriptor, "w") as stream:
+        stream.write(secrets.token_hex(KEY_BYTES) + "\n")
+    os.chmod(file, 0o600)
+    return file
+
+
+def _mac(key: bytes, data: bytes) -> bytes:
+    return hmac.new(key, data, hashlib.sha256).digest()[:TAG_BYTES]
+
+
+@dataclass(frozen=True)
+class Hello:
+    """A decoded hello: the sender's side, epoch, nonce, CLOCK_REALTIME time (ns) and whether
+    it authenticates; ``version`` is its wire schema version."""
+
+    version: int
+    side: str
+    epoch: int
+    nonce: bytes
+    time_ns: int
+    authenticated: bool
+
+
+class HelloError(ValueError):
+    """A hello that is not one (malformed) or that does not verify."""
+
+
+def encode_hello(side: str, epoch: int, nonce: bytes, time_ns: int,
+                 psk: bytes | None) -> bytes:
+    """A hello of ``side`` (tagged with the pre-shared key ``psk`` when given)."""
+    body = msgpack.packb([SCHEMA_VERSION, KIND_HELLO, _SIDE_CODE[side], int(epoch), nonce,
+                          int(time_ns), psk is not None], use_bin_type=True)
+    return body + _mac(psk, body) if psk is not None else body
+
+
+def decode_hello(payload: bytes, psk: bytes | None) -> Hello:
+    """Parse a hello; with ``psk`` its tag must verify. Raises :class:`HelloError`. A hello of
+    another schema version decodes as far as its version (so the caller can say so)."""
+    if len(payload) > 256:
+        raise HelloError("too long")
+    try:
+        unpacker = msgpack.Unpacker(raw=False)
+        unpacker.feed(payload)
+        fields = unpacker.unpack()
+        body_length = unpacker.tell()
+    except Exception:  # noqa: BLE001 - msgpack raises many types for corrupt input
+        raise HelloError("not msgpack") from None
+    if not isinstance(fields, list) or len(fields) < 2 or fields[1] != KIND_HELLO:
+        raise HelloError("not a hello")
+    version = fields[0]
+    if version != SCHEMA_VERSION:
+        return Hello(version if isinstance(version, int) else -1, "", 0, b"", 0, False)
+    if len(fields) != 7:
+        raise HelloError("wrong shape")
+    _, _, side_code, epoch, nonce, time_ns, authenticated = fields
+    sides = {v: k for k, v in _SIDE_CODE.items()}
+    if (side_code not in sides or not isinstance(epoch, int) or not 0 <= epoch < 2**32
+            or not isinstance(nonce, bytes) or len(nonce) != NONCE_BYTES
+            or not isinstance(time_ns, int) or not isinstance(authenticated, bool)):
+        raise HelloError("bad field")
+    tag = payload[body_length:]
+    if authenticated and psk is not None:
+        if len(tag) != TAG_BYTES or not hmac.compare_digest(tag, _mac(psk, payload[:body_length])):
+            raise HelloError("tag does not verify")
+    elif tag and not authenticated:
+        raise HelloError("trailing bytes")
+    # without a psk an authenticated hello is returned unverified: the caller can only
+    # report the mismatch, never pair on it
+    return Hello(version, sides[side_code], epoch, nonce, time_ns, authenticated)
+
+
+class SessionAuth:
+    """One side's pairing state and message tags (not thread-safe: the loop's thread).
+
+    ``psk``: the pre-shared key (32 bytes); ``side``: ``master`` or ``slave``; ``epoch``:
+    this run's epoch.
+    """
+
+    def __init__(self, psk: bytes, side: str, epoch: int) -> None:
+        if len(psk) != KEY_BYTES:
+            raise ValueError("the pre-shared key must be 32 bytes")
+        self._psk = psk
+        self.side = side
+        self.peer_side = "slave" if side == "master" else "master"
+        self.epoch = epoch
+        self.nonce = secrets.token_bytes(NONCE_BYTES)
+        self.peer: Hello | None = None
+        self._peer_time_ns = 0
+        self._mac: Any = None
+        self.pairings = 0
+        self.rejected_hellos = 0
+
+    @property
+    def paired(self) -> bool:
+        return self._mac is not None
+
+    @property
+    def peer_epoch(self) -> int | None:
+        return None if self.peer is None else self.peer.epoch
+
+    def hello(self, now_ns: int) -> bytes:
+        """This side's hello, stamped ``now_ns`` (CLOCK_REALTIME)."""
+        return encode_hello(self.side, self.epoch, self.nonce, now_ns, self._psk)
+
+    def accept_hello(self, hello: Hello, now_ns: int) -> bool:
+        """Take a verified hello (:func:`decode_hello` with the psk); True when it paired this
+        side with a new peer run (re-derived the session key)."""
+        if (hello.side != self.peer_side or not hello.authenticated
+                or abs(now_ns - hello.time_ns) > HELLO_MAX_AGE_S * 1e9
+                or hello.time_ns <= self._peer_time_ns):
+            self.rejected_hellos += hello.side != self.peer_side or not hello.authenticated \
+                or hello.time_ns < self._peer_time_ns
+            return False
+        self._peer_time_ns = hello.time_ns
+        current = self.peer
+        if current is not None and (current.epoch, current.nonce) == (hello.epoch, hello.nonce):
+            return False  # the same peer run, a later hello: nothing changes
+        self.peer = hello
+        master, slave = (self, hello) if self.side == "master" else (hello, self)
+        session_key = hmac.new(
+            self._psk, _SESSION_LABEL + master.nonce + slave.nonce
+            + master.epoch.to_bytes(4, "big") + slave.epoch.to_bytes(4, "big"),
+            hashlib.sha256).digest()
+        self._mac = hmac.new(session_key, digestmod=hashlib.sha256)
+        self.pairings += 1
+        return True
+
+    def tag(self, body: bytes) -> bytes:
+        """The 16-byte tag of a data message under the session key (paired only)."""
+        mac = self._mac.copy()
+        mac.update(body)
+        return mac.digest()[:TAG_BYTES]
+
+    def verify(self, payload: bytes) -> bytes | None:
+        """The body of a tagged data message when its tag verifies, else None."""
+        if self._mac is None or len(payload) <= TAG_BYTES:
+            return None
+        body = payload[:-TAG_BYTES]
+        mac = self._mac.copy()
+        mac.update(body)
+        if hmac.compare_digest(mac.digest()[:TAG_BYTES], payload[-TAG_BYTES:]):
+            return body
+        return None

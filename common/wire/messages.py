@@ -1,0 +1,326 @@
+"""The wire schema of the master-slave link: the one module that owns it.
+
+Every message is a msgpack array (compact: no field names on the wire)::
+
+    [version, kind, epoch, seq, send_time_ns, flags, *payload]
+
+``version``
+    :data:`SCHEMA_VERSION`; a receiver drops any other value (``unknown_version``), and a
+    peer of another version is refused at start (common/wire/link.py). Version 2 (issue 17) adds
+    the pairing hello (common/wire/auth.py) and, on an authenticated link, a 16-byte tag after
+    the msgpack body; version 3 (issue 16) the handle's ``gain_k`` and the tool's
+    ``echo_send_time_ns``; version 4 (issue 16) ``energy_J`` in both payloads and the
+    :attr:`Flags.TDPA` bit.
+``kind``
+    :data:`KIND_HANDLE` (master to slave, :class:`HandleState`) or :data:`KIND_TOOL` (slave to
+    master, :class:`ToolState`).
+``epoch``
+    a number the sender draws once per run (unsigned 32 bit); a new epoch tells the receiver the
+    peer restarted, so its sequence numbers start again.
+``seq``
+    the sender's message counter within the epoch (unsigned 63 bit), +1 per message.
+``send_time_ns``
+    the sender's ``CLOCK_REALTIME`` (:func:`time.time_ns`) when the message was handed to
+    Zenoh, ns; always a msgpack uint64 (``0xcf`` and 8 big-endian bytes), so a sender can
+    encode everything else first and stamp the time last (:func:`encode_around_send_time`).
+``flags``
+    a bit field of :class:`Flags`.
+payload, :class:`HandleState` (5 floats)
+    ``handle_force_N`` x, y; ``handle_position_m`` x, y; ``gain_k``, the Ch1 gain k the
+    master's compensator uses now (> 0; 0: not said, the slave uses its configured k): the
+    margin governor (master/margin_governor.py) lowers it and the slave follows;
+    ``energy_J`` (>= 0).
+payload, :class:`ToolState` (9 floats and an integer)
+    ``tool_force_N`` x, y; ``tool_position_m`` x, y; ``tool_velocity_m_s`` x, y;
+    ``clay_engagement`` (0..1); ``removed_volume_m3`` (>= 0); ``energy_J`` (>= 0);
+    ``echo_send_time_ns``, the ``send_time_ns`` of the newest handle message the slave had
+    used when it sent this one (0: none yet), so the master measures the loop's round trip
+    on its own clock.
+
+``energy_J`` is the sender's cumulative energy handed to the peer by the passivity layer
+(common/model/passivity.py, ``[control] mode = "tdpa"``), J; monotone, so a lost message only
+delays it. A sender in the paper's scheme sends 0 and leaves :attr:`Flags.TDPA` clear.
+
+:func:`decode` never lets an exception other than :class:`DecodeError` escape; the error's
+``reason`` (a :class:`DropReason`) says which counter the receiver charges.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+
+SCHEMA_VERSION = 4
+KIND_HANDLE = 1
+KIND_TOOL = 2
+
+_HEADER_LENGTH = 6
+_HANDLE_FLOATS = 6
+_TOOL_FLOATS = 9
+_TOOL_VALUES = _TOOL_FLOATS + 1  # the floats and the echoed send time
+_MAX_U32 = 2**32 - 1
+_MAX_U63 = 2**63 - 1
+_MAX_FLAGS = 0xFF
+_MAX_PAYLOAD_BYTES = 1024
+
+
+class Flags(enum.IntFlag):
+    """Status bits carried in every message."""
+
+    SAFE_STATE = 1
+    """The sender is in its safe state (master: handle held, no reflected force; slave: tool
+    stopped)."""
+    FORCES_ENABLED = 2
+    """The sender applies forces (it is past the watchdog's re-synchronisation)."""
+    IN_CONTACT = 4
+    """Slave only: the tool touches the clay."""
+    TDPA = 8
+    """The sender runs the passivity layer (``[control] mode = "tdpa"``): its ``energy_J``
+    is the energy it handed over. Both sides must agree (:func:`control_mismatch`)."""
+    WORK_AREA_STOP = 16
+    """Slave only: the work-area guard stopped the tool (it left the scenario's grid by more
+    than the margin); the master holds its handle while this is set, so the handle does not
+    run on alone (issue 16)."""
+
+
+class DropReason(enum.StrEnum):
+    """Why a received message was dropped; each has its own counter in the link statistics."""
+
+    MALFORMED = "malformed"
+    UNKNOWN_VERSION = "unknown_version"
+    WRONG_KIND = "wrong_kind"
+    NON_FINITE = "non_finite"
+    STALE = "stale"
+    OUT_OF_ORDER = "out_of_order"
+    INJECTED_LOSS = "injected_loss"
+    UNAUTHENTICATED = "unauthenticated"
+    """Authenticated link: the tag does not verify under the session key (common/wire/auth.py)."""
+    UNPAIRED = "unpaired"
+    """Authenticated link: no pairing yet, or an epoch other than the paired peer's."""
+
+
+class DecodeError(ValueError):
+    """A payload that is not a valid message of the expected kind."""
+
+    def __init__(self, reason: DropReason, detail: str, version: int | None = None) -> None:
+        super().__init__(f"{reason.value}: {detail}")
+        self.reason = reason
+        self.version = version
+        """``unknown_version``: the message's version."""
+
+
+@dataclass(frozen=True, slots=True)
+class HandleState:
+    """Master to slave: the operator's force on the handle and the handle's position.
+
+    Forces in N, positions in m, each as an (x, y) pair; ``send_time_ns`` is CLOCK_REALTIME, ns;
+    ``energy_J`` the passivity layer's handed-over energy (J, cumulative).
+    """
+
+    epoch: int
+    seq: int
+    send_time_ns: int
+    flags: Flags
+    handle_force_N: tuple[float, float]
+    handle_position_m: tuple[float, float]
+    gain_k: float = 0.0
+    """The Ch1 gain k the master's compensator uses (0: not said)."""
+    energy_J: float = 0.0
+    """The master's cumulative energy handed to the slave (tdpa), J."""
+
+    KIND = KIND_HANDLE
+
+    @property
+    def safe_state(self) -> bool:
+        return bool(self.flags & Flags.SAFE_STATE)
+
+    @property
+    def forces_enabled(self) -> bool:
+        return bool(self.flags & Flags.FORCES_ENABLED)
+
+
+@dataclass(frozen=True, slots=True)
+class ToolState:
+    """Slave to master: the tool's force on the clay, its motion, and the clay's status.
+
+    ``tool_force_N`` is the force the tool applies to the clay (N, x and y; the clay pushes
+    back with its negative), ``tool_position_m`` (m), ``tool_velocity_m_s`` (m/s);
+    ``clay_engagement`` is the fraction of the tool's cutting edge inside clay (0..1) and
+    ``removed_volume_m3`` the clay volume removed since the start (m^3); ``energy_J`` the
+    passivity layer's handed-over energy (J, cumulative).
+    """
+
+    epoch: int
+    seq: int
+    send_time_ns: int
+    flags: Flags
+    tool_force_N: tuple[float, float]
+    tool_position_m: tuple[float, float]
+    tool_velocity_m_s: tuple[float, float]
+    clay_engagement: float
+    removed_volume_m3: float
+    echo_send_time_ns: int = 0
+    """``send_time_ns`` of the newest handle message the slave had used (0: none)."""
+    energy_J: float = 0.0
+    """The slave's cumulative energy handed to the master (tdpa), J."""
+
+    KIND = KIND_TOOL
+
+    @property
+    def safe_state(self) -> bool:
+        return bool(self.flags & Flags.SAFE_STATE)
+
+    @property
+    def forces_enabled(self) -> bool:
+        return bool(self.flags & Flags.FORCES_ENABLED)
+
+    @property
+    def in_contact(self) -> bool:
+        return bool(self.flags & Flags.IN_CONTACT)
+
+
+Message = HandleState | ToolState
+
+_packer = msgpack.Packer(use_bin_type=True, use_single_float=False)
+
+
+def encode_around_send_time(message: Message) -> tuple[bytes, bytes]:
+    """The msgpack bytes of ``message`` before and after its send time: the payload is
+    ``before + send_time_bytes(t) + after`` for any send time ``t``. The sender stamps the
+    time last, so the measured one-way delay starts when the message goes to Zenoh, not
+    before its encoding. Raises ``ValueError`` for a non-finite value."""
+    tail: tuple[int, ...] = ()
+    if isinstance(message, HandleState):
+        floats = (*message.handle_force_N, *message.handle_position_m, message.gain_k,
+                  message.energy_J)
+    elif isinstance(message, ToolState):
+        floats = (
+            *message.tool_force_N,
+            *message.tool_position_m,
+            *message.tool_velocity_m_s,
+            message.clay_engagement,
+            message.removed_volume_m3,
+            message.energy_J,
+        )
+        echo = int(message.echo_send_time_ns)
+        if not 0 <= echo <= _MAX_U63:
+            raise ValueError(f"echo_send_time_ns {echo} out of range")
+        tail = (echo,)
+    else:
+        raise TypeError(f"not a message: {type(message).__name__}")
+    values = [float(v) for v in floats]
+    if not all(map(math.isfinite, values)):
+        raise ValueError(f"non-finite value in {type(message).__name__}: {values}")
+    pack = _packer.pack
+    before = b"".join((
+        _packer.pack_array_header(6 + len(values) + len(tail)),
+        pack(SCHEMA_VERSION),
+        pack(message.KIND),
+        pack(int(message.epoch)),
+        pack(int(message.seq)),
+    ))
+    after = b"".join((pack(int(message.flags)), *map(pack, values), *map(pack, tail)))
+    return before, after
+
+
+def send_time_bytes(send_time_ns: int) -> bytes:
+    """The send time as a msgpack uint64 (9 bytes), ns since the epoch of CLOCK_REALTIME."""
+    return b"\xcf" + int(send_time_ns).to_bytes(8, "big")
+
+
+def encode(message: Message) -> bytes:
+    """The msgpack bytes of ``message``. Raises ``ValueError`` for a non-finite value."""
+    before, after = encode_around_send_time(message)
+    return before + send_time_bytes(message.send_time_ns) + after
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _floats(values: list[Any]) -> list[float]:
+    for value in values:
+        if not isinstance(value, float | int) or isinstance(value, bool):
+            raise DecodeError(DropReason.MALFORMED, f"payload value {value!r} is not a number")
+    result = [float(v) for v in values]
+    if not all(map(math.isfinite, result)):
+        raise DecodeError(DropReason.NON_FINITE, f"non-finite payload {result}")
+    return result
+
+
+def decode(payload: bytes, expected_kind: int) -> Message:
+    """Parse and validate one message of ``expected_kind``.
+
+    Raises :class:`DecodeError` (and nothing else) with reason ``malformed`` (not msgpack,
+    wrong shape or types, values out of range), ``unknown_version``, ``wrong_kind`` or
+    ``non_finite``.
+    """
+    if len(payload) > _MAX_PAYLOAD_BYTES:
+        raise DecodeError(DropReason.MALFORMED, f"{len(payload)} bytes is too long")
+    try:
+        fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=True)
+    except Exception as error:  # msgpack raises many types for corrupt input
+        raise DecodeError(DropReason.MALFORMED, f"not msgpack: {type(error).__name__}") from None
+    if not isinstance(fields, list) or len(fields) < _HEADER_LENGTH:
+        raise DecodeError(DropReason.MALFORMED, "not an array with a header")
+    version, kind, epoch, seq, send_time_ns, flags = fields[:_HEADER_LENGTH]
+    if not _is_int(version):
+        raise DecodeError(DropReason.MALFORMED, f"version {version!r} is not an integer")
+    if version != SCHEMA_VERSION:
+        raise DecodeError(DropReason.UNKNOWN_VERSION, f"version {version}", version)
+    if not _is_int(kind):
+        raise DecodeError(DropReason.MALFORMED, f"kind {kind!r} is not an integer")
+    if kind != expected_kind:
+        raise DecodeError(DropReason.WRONG_KIND, f"kind {kind}, expected {expected_kind}")
+    if not (_is_int(epoch) and 0 <= epoch <= _MAX_U32):
+        raise DecodeError(DropReason.MALFORMED, f"epoch {epoch!r}")
+    if not (_is_int(seq) and 0 <= seq <= _MAX_U63):
+        raise DecodeError(DropReason.MALFORMED, f"seq {seq!r}")
+    if not (_is_int(send_time_ns) and 0 <= send_time_ns <= _MAX_U63):
+        raise DecodeError(DropReason.MALFORMED, f"send_time_ns {send_time_ns!r}")
+    if not (_is_int(flags) and 0 <= flags <= _MAX_FLAGS):
+        raise DecodeError(DropReason.MALFORMED, f"flags {flags!r}")
+    body = fields[_HEADER_LENGTH:]
+    if kind == KIND_HANDLE:
+        if len(body) != _HANDLE_FLOATS:
+            raise DecodeError(DropReason.MALFORMED, f"handle payload has {len(body)} values")
+        v = _floats(body)
+        if v[4] < 0.0:
+            raise DecodeError(DropReason.MALFORMED, f"gain_k {v[4]} is negative")
+        if v[5] < 0.0:
+            raise DecodeError(DropReason.MALFORMED, f"energy_J {v[5]} is negative")
+        return HandleState(
+            epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3]), v[4],
+            energy_J=v[5],
+        )
+    if len(body) != _TOOL_VALUES:
+        raise DecodeError(DropReason.MALFORMED, f"tool payload has {len(body)} values")
+    echo = body[_TOOL_FLOATS]
+    if not (_is_int(echo) and 0 <= echo <= _MAX_U63):
+        raise DecodeError(DropReason.MALFORMED, f"echo_send_time_ns {echo!r}")
+    v = _floats(body[:_TOOL_FLOATS])
+    if not 0.0 <= v[6] <= 1.0:
+        raise DecodeError(DropReason.MALFORMED, f"clay_engagement {v[6]} outside 0..1")
+    if v[7] < 0.0:
+        raise DecodeError(DropReason.MALFORMED, f"removed_volume_m3 {v[7]} is negative")
+    if v[8] < 0.0:
+        raise DecodeError(DropReason.MALFORMED, f"energy_J {v[8]} is negative")
+    return ToolState(
+        epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3]), (v[4], v[5]),
+        v[6], v[7], echo, energy_J=v[8],
+    )
+
+
+def control_mismatch(own_mode: str, message: Message) -> str | None:
+    """Why a peer's message shows it runs another control mode than ``own_mode`` ("paper"
+    or "tdpa"), or None: a tdpa side paired with a paper side would wait for energy that
+    never comes (and a paper side would ignore it), so the programs refuse the pairing."""
+    peer = "tdpa" if message.flags & Flags.TDPA else "paper"
+    if peer == own_mode:
+        return None
+    return (f"the peer runs [control] mode = \"{peer}\", this side \"{own_mode}\"; "
+            "set the same mode on both sides")

@@ -1,0 +1,168 @@
+"""The handle hardware interface (ros2_control style) and the registry of backends by name.
+
+Lifecycle states and their meaning:
+
+- ``unconfigured``: no communication;
+- ``inactive`` (after :meth:`HandleHardware.configure`): the bus is up and the drives are
+  set up; ``read()`` gives states, ``write()`` sends no motion command;
+- ``active`` (after :meth:`HandleHardware.activate`): the drives are enabled and commands
+  are accepted; on activation the command is set to the current position (no jump);
+- ``deactivate()`` returns to ``inactive`` (drives disabled), ``cleanup()`` to
+  ``unconfigured`` (bus closed).
+
+``read()`` only updates state (one control cycle's sample), ``write()`` only sends the
+commands. A backend is chosen by name (``[master] rig``, ``haptic-master --rig``) through
+:func:`create_hardware`, never by a flag tested in control code.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any
+
+import numpy as np
+
+
+class LifecycleState(Enum):
+    """ros2_control-style lifecycle states of a hardware component."""
+
+    UNCONFIGURED = "unconfigured"
+    INACTIVE = "inactive"
+    ACTIVE = "active"
+
+
+class HardwareError(RuntimeError):
+    """A lifecycle transition failed (no reply, a drive would not enable, a bad SDO)."""
+
+
+@dataclass(frozen=True)
+class HandleReading:
+    """One cycle's sample of the handle (x, y).
+
+    ``force_N``: the operator's force on the sensor, N; ``position_m``: the handle position
+    from the encoders, m. A value the cycle did not deliver is NaN. ``faults`` lists what
+    went wrong this cycle (a missing PDO, a drive fault, an EMCY); empty when healthy.
+    ``cycle`` counts SYNCs since configure. ``events`` lists what changed without being a
+    fault (a drive's statusword warning bits, once per change).
+    """
+
+    force_N: np.ndarray
+    position_m: np.ndarray
+    cycle: int
+    faults: tuple[str, ...] = ()
+    events: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        """True when the cycle reported no fault."""
+        return not self.faults
+
+
+class HandleHardware(ABC):
+    """The handle: two position-servoed axes and a two-channel force sensor."""
+
+    @property
+    @abstractmethod
+    def lifecycle_state(self) -> LifecycleState:
+        """The current lifecycle state."""
+
+    @abstractmethod
+    def configure(self) -> None:
+        """unconfigured -> inactive: open the bus, set the drives up; raise
+        :class:`HardwareError` on failure."""
+
+    @abstractmethod
+    def activate(self) -> None:
+        """inactive -> active: enable the drives holding the current position."""
+
+    @abstractmethod
+    def deactivate(self) -> None:
+        """active -> inactive: disable the drives (the lead screws hold the handle)."""
+
+    @abstractmethod
+    def cleanup(self) -> None:
+        """-> unconfigured: close the bus (safe to call in any state)."""
+
+    @abstractmethod
+    def read(self) -> HandleReading:
+        """One control cycle's sample (a SYNC on the CAN backends)."""
+
+    @abstractmethod
+    def write(self, position_command_m: np.ndarray) -> None:
+        """Send the axis position commands (x, y), m; ignored unless active."""
+
+    def stop_motion(self, reason: str) -> None:
+        """The master's own safety trip (``reason``: the watchdog, the node's safety layer, a
+        tool input fault): forces are off and the program commands the hold position; a rig
+        whose drives can stop themselves does so too (CiA 402 quick stop), and reports each
+        drive's transition as an event (or a fault when it does not take it) in the next
+        readings. The default does nothing more than the commanded hold. Never raises."""
+        del reason
+
+    def resume_motion(self) -> None:
+        """Forces come back after :meth:`stop_motion`: the drives are re-enabled holding where
+        they are (target = actual position) before the loop commands them again; a failure is
+        a fault in the next reading (the drives stay stopped). The default does nothing.
+        Never raises."""
+        return None
+
+    def present_tool_force(self, tool_force_N: np.ndarray) -> None:
+        """The tool force (N, x and y) the master is reflecting this cycle. Real hardware
+        ignores it (the operator feels it through the handle); a simulated rig hands it to
+        its operator model. Not a command: it never moves anything."""
+        del tool_force_N
+
+    def present_forces_enabled(self, enabled: bool) -> None:
+        """Whether the master's forces are enabled (the rig's ready lamp). Real hardware may
+        show it to the operator; a simulated rig's operator grasps the handle, and the clock
+        of its script starts, the first time it comes on (a real operator waits for the lamp
+        too). Not a command: it never moves anything."""
+        del enabled
+
+    def __enter__(self) -> HandleHardware:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.cleanup()
+
+
+HardwareFactory = Callable[[dict[str, Any]], HandleHardware]
+_REGISTRY: dict[str, HardwareFactory] = {}
+
+
+def register_hardware(name: str) -> Callable[[HardwareFactory], HardwareFactory]:
+    """Decorator: register a factory ``factory(config) -> HandleHardware`` under ``name``."""
+
+    def decorate(factory: HardwareFactory) -> HardwareFactory:
+        _REGISTRY[name] = factory
+        return factory
+
+    return decorate
+
+
+def _load_builtin_backends() -> None:
+    # The built-in backends register themselves on import.
+    import haptic.master.hardware.can_driver  # noqa: F401
+    import haptic.master.sim.model_rig  # noqa: F401
+    import haptic.master.sim.rig_emulator  # noqa: F401
+    import haptic.master.sim.sim_rig  # noqa: F401
+
+
+def hardware_names() -> tuple[str, ...]:
+    """Names of the registered backends."""
+    _load_builtin_backends()
+    return tuple(sorted(_REGISTRY))
+
+
+def create_hardware(name: str, config: dict[str, Any]) -> HandleHardware:
+    """The backend registered as ``name``, built from a validated configuration."""
+    _load_builtin_backends()
+    try:
+        factory = _REGISTRY[name]
+    except KeyError:
+        raise KeyError(f"no handle hardware named {name!r}; known: "
+                       f"{', '.join(sorted(_REGISTRY))}") from None
+    return factory(config)

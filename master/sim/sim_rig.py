@@ -1,0 +1,709 @@
+"""The simulated rig: two CiA 402 drives and the force sensor as CAN frame logic.
+
+:class:`SimulatedCanRig` runs the pure :class:`~haptic.master.sim.rig_model.RigModel` and speaks
+the real frames (NMT, SDO, RPDO1/TPDO1, SYNC, EMCY, heartbeat, the sensor's DBC frame), so the
+CAN driver (:class:`~haptic.master.hardware.can_driver.CanHandleDriver`) runs unchanged against it.
+Each drive is a conformant CiA 301/402 device (:mod:`haptic.master.hardware.drive_device`: canopen's
+``LocalNode`` with the object dictionary of its EDS, PDOs as configured by SDO, heartbeat
+producer and consumer, RPDO deadline, following error window, quick stop); the driver
+configures it from scratch as it would a real drive. The
+devices are stepped by the driver's SYNC frames, one model step per SYNC, so a run is
+deterministic whatever the thread or process timing: RPDOs are synchronous (transmission
+type 1), a controlword or target received in cycle k is applied at SYNC k+1, then the model
+advances, then each drive answers with TPDO1 and the sensor with its frame sampled at that
+SYNC.
+
+The frame logic does not care who feeds it frames. :meth:`SimulatedCanRig.start` serves
+python-can's ``virtual`` bus from a background thread of this process (backend
+``sim-inproc``: the tests that inject faults use it); :mod:`haptic.master.sim.rig_emulator`
+serves a bus that crosses processes from its own process, ``haptic-rig-sim`` (backend
+``sim``, as a real rig's drives are separate devices). Both call :meth:`SimulatedCanRig.serve`.
+
+The operator display frame (simulated rigs only, :data:`OPERATOR_DISPLAY_ID`) carries the
+tool force the master reflects to the simulated operator, who feels it. It is also the last
+frame the ``sim`` backend sends in a cycle, so on it the devices prepare their answer to the
+next SYNC (model step and frames), and the SYNC itself only sends the prepared frames; any
+later frame that changes an input (RPDO, NMT, SDO, fault injection) discards the prepared
+answer, which is then computed at the SYNC as before. The answer is the same either way.
+
+Faults can be injected for tests and drills: a drive fault (EMCY, statusword Fault), lost
+frames, an invalid or overloaded sensor sample.
+"""
+
+from __future__ import annotations
+
+import copy
+import struct
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import can
+import numpy as np
+
+from haptic.common.model.teleop import model_from_config
+from haptic.master.hardware import cia402
+from haptic.master.hardware.can_driver import CanHandleDriver
+from haptic.master.hardware.cia402 import DriveState
+from haptic.master.hardware.drive_device import (
+    EMCY_FOLLOWING_ERROR,
+    EMCY_HEARTBEAT,
+    EMCY_RPDO_TIMEOUT,
+    EMCY_SYNC_LENGTH,
+    SW_FOLLOWING_ERROR,
+    SW_WARNING,
+    DriveObjects,
+    DriveRuntime,
+)
+from haptic.master.hardware.force_sensor import (
+    STATUS_OK,
+    STATUS_OVERLOAD,
+    ForceSample,
+    ForceSensorCodec,
+    load_database,
+)
+from haptic.master.hardware.interface import (
+    HandleHardware,
+    HandleReading,
+    LifecycleState,
+    register_hardware,
+)
+from haptic.master.settings import CanSettings, master_settings
+from haptic.master.sim.rig_model import RigModel, RigSample, RigState
+
+#: COB-ID of the emulator-only operator display frame: the tool force (N) the master reflects,
+#: for the simulated operator. A 29-bit (extended) identifier, outside CANopen's 11-bit
+#: COB-IDs, so no CiA 301/402 device sends, answers or filters for it; only the simulated
+#: rigs read it, and the ``can`` backend never sends it. Payload: 8 bytes, x then y as
+#: little-endian IEEE float32, N.
+OPERATOR_DISPLAY_ID = 0x1FFFF000
+_DISPLAY_PAYLOAD = struct.Struct("<ff")
+#: COB-ID of the emulator-only ready-lamp frame (29-bit, like the display frame): one byte,
+#: 1 when the master's forces are enabled. The simulated operator grasps the handle, and the
+#: clock of its script starts, at the first 1 (a real operator waits for the lamp too).
+OPERATOR_READY_ID = 0x1FFFF001
+
+
+def encode_operator_display(tool_force_N: np.ndarray) -> bytes:
+    """The operator display frame's payload for a tool force (N, x and y)."""
+    force = np.asarray(tool_force_N, float).reshape(2)
+    return _DISPLAY_PAYLOAD.pack(float(force[0]), float(force[1]))
+
+
+def decode_operator_display(data: bytes) -> np.ndarray:
+    """The tool force (N, x and y) of an operator display payload; ``ValueError`` on a
+    payload that is not 8 bytes."""
+    if len(data) != _DISPLAY_PAYLOAD.size:
+        raise ValueError(f"operator display payload of {len(data)} bytes, expected "
+                         f"{_DISPLAY_PAYLOAD.size}")
+    return np.array(_DISPLAY_PAYLOAD.unpack(data), float)
+
+
+NMT_PRE_OPERATIONAL_STATE = "pre-operational"
+NMT_OPERATIONAL_STATE = "operational"
+NMT_STOPPED_STATE = "stopped"
+
+
+@dataclass
+class _SyncAnswer:
+    """What the devices do at one SYNC: the drives after it, the sample, the frames to send
+    and the sensor's counters. The model has already stepped; ``undo`` holds the rig state's
+    arrays (and ``rng_undo`` the noise generator's state) from before the step, so a prepared
+    answer can be taken back (both empty for an answer committed at once)."""
+
+    drives: list[DriveRuntime]
+    sample: RigSample
+    messages: list[can.Message]
+    sensor_counter: int
+    drop_sensor: int
+    sensor_status_cycles: int
+    undo: list[tuple[Any, str, np.ndarray]] = field(default_factory=list)
+    rng_undo: dict[str, Any] | None = None
+
+
+def _state_arrays(state: RigState) -> list[tuple[Any, str]]:
+    """(holder, attribute) of every array of the rig state and its operator state."""
+    return [(holder, item.name) for holder in (state, state.operator)
+            for item in fields(holder) if isinstance(getattr(holder, item.name), np.ndarray)]
+
+
+class SimulatedCanRig:
+    """The rig's devices: CAN frame logic over :class:`RigModel`, fed frames either by its own
+    thread on a virtual bus (:meth:`start`) or by a caller's loop (:meth:`attach`, then
+    :meth:`serve`).
+
+    Parameters
+    ----------
+    model:
+        The rig block (axes and operator).
+    settings:
+        Node ids, unit conversions and sensor calibration (the same the driver uses).
+    channel:
+        python-can virtual bus channel :meth:`start` opens (informative for :meth:`attach`).
+    initial_position_m:
+        Handle position at start (x, y), m.
+    rng:
+        Seeded generator for the sensor noise.
+    """
+
+    def __init__(self, model: RigModel, settings: CanSettings, channel: str,
+                 initial_position_m: tuple[float, float], rng: np.random.Generator) -> None:
+        self.model = model
+        self.settings = settings
+        self.channel = channel
+        self.codec = ForceSensorCodec(settings.force_scale_N_per_count,
+                                      settings.force_offset_count,
+                                      load_database(settings.dbc_file or None))
+        self.state = model.initial_state(np.asarray([initial_position_m], float), rng)
+        self._state_arrays = _state_arrays(self.state)
+        self.tool_force_N = np.zeros((1, 2))
+        #: whether the operator has grasped the handle (the ready lamp has been on)
+        self.operator_grasped = False
+        self.last_sample: RigSample | None = None
+        self.drives = [DriveRuntime(node) for node in settings.node_ids]
+        #: Each drive's object dictionary (its EDS) and communication objects.
+        self.devices = [
+            DriveObjects(node, eds, self._send, drive,
+                         lambda axis=axis: self._position_counts(axis))
+            for axis, (node, eds, drive) in enumerate(zip(settings.node_ids, settings.eds_files,
+                                                          self.drives, strict=True))]
+        for axis, drive in enumerate(self.drives):
+            drive.position_counts = self._position_counts(axis)
+        #: When each drive last heard the heartbeat it consumes (monotonic s; None: not yet).
+        self._heartbeat_heard: list[float | None] = [None, None]
+        self._heartbeat_due = [0.0, 0.0]
+        #: When the serving loop next looks at the heartbeat timers (0: at once), s.
+        self._timers_due_s = 0.0
+        #: SYNCs received as CAN FD frames: the cyclic answers go out as FD frames too.
+        self._sync_fd = False
+        self.sync_count = 0
+        #: Each drive's last SYNC counter (0: none yet) and the counter jumps it saw.
+        self.sync_counter_seen = [0, 0]
+        self.sync_counter_jumps = [0, 0]
+        #: SYNCs answered with an answer prepared on the operator display frame.
+        self.prepared_syncs = 0
+        self.errors: list[str] = []
+        self._sensor_counter = 0
+        self._sensor_status_override: int | None = None
+        self._sensor_status_cycles = 0
+        self._drop_sensor = 0
+        self._prepared: _SyncAnswer | None = None
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._bus: can.BusABC | None = None
+        self._thread: threading.Thread | None = None
+
+    @classmethod
+    def from_config(cls, config: dict[str, Any], channel: str,
+                    operator_waits_for_lamp: bool = False) -> SimulatedCanRig:
+        """The devices of a validated configuration: ``[model]`` (Ts, Gh, Th), ``[master.can]``
+        (node ids, conversions, DBC) and ``[master.sim]`` (operator, noise, seed, start).
+        ``operator_waits_for_lamp``: the operator's script starts at the first ready-lamp
+        frame (:data:`OPERATOR_READY_ID`, sent by the simulated backends); otherwise at the
+        first SYNC (a rig driven by the ``can`` backend, which sends no emulator frames)."""
+        settings = master_settings(config)
+        sim = settings.sim
+        rig_model = RigModel.from_model(model_from_config(config), sim.operator,
+                                        sim.force_noise_std_N)
+        rig = cls(rig_model, settings.can, channel, sim.initial_position_m,
+                  np.random.default_rng(sim.seed))
+        rig.operator_grasped = not operator_waits_for_lamp
+        return rig
+
+    # --- lifecycle -------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Connect to the virtual bus ``channel`` and answer frames from a background thread
+        of this process; send the boot-ups."""
+        if self._thread is not None:
+            return
+        self._stop.clear()
+        self.attach(can.Bus(interface="virtual", channel=self.channel))
+        self._thread = threading.Thread(target=self.serve, args=(self._stop.is_set,),
+                                        name="sim-rig", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the thread (joined) and leave the bus."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+            self._thread = None
+        if self._bus is not None:
+            self._bus.shutdown()
+            self._bus = None
+
+    def attach(self, bus: can.BusABC) -> None:
+        """Speak on ``bus`` (opened by the caller, who also shuts it down) from now on, and
+        send the drives' boot-ups."""
+        self._bus = bus
+        for drive in self.drives:
+            self._send(0x700 + drive.node_id, b"\x00")  # boot-up
+
+    def serve(self, should_stop: Callable[[], bool], poll_s: float = 0.05,
+              on_error: Callable[[str], None] | None = None) -> None:
+        """Block on the bus and answer each frame until ``should_stop()`` is true (checked
+        after each frame and at least every ``poll_s`` s). Between frames the drives'
+        heartbeats go out and their heartbeat consumers are checked (:meth:`poll_timers`). A
+        frame that raises is recorded in :attr:`errors` (and passed to ``on_error``) and
+        serving goes on."""
+        while not should_stop():
+            bus = self._bus
+            if bus is None:
+                return
+            now_s = time.monotonic()
+            if now_s >= self._timers_due_s:  # only when a heartbeat or a check is due
+                self._timers_due_s = now_s + max(0.0, self.poll_timers(now_s))
+            message = bus.recv(timeout=min(poll_s, max(0.0, self._timers_due_s - now_s)))
+            if message is None:
+                continue
+            error = self.handle_message(message)
+            if error is not None and on_error is not None:
+                on_error(error)
+
+    def handle_message(self, message: can.Message) -> str | None:
+        """Act on one received frame (thread-safe); returns the error text when it raised
+        (also kept in :attr:`errors`), else ``None``."""
+        try:
+            with self._lock:
+                self._handle(message.arbitration_id, bytes(message.data),
+                             message.is_extended_id, message.is_fd)
+        except Exception as error:  # keep serving; the test or user sees .errors
+            text = f"{type(error).__name__}: {error}"
+            self.errors.append(text)
+            return text
+        return None
+
+    def poll_timers(self, now_s: float) -> float:
+        """Send the drives' heartbeats that are due and trip a drive whose heartbeat consumer
+        timed out (EMCY 0x8130, then its 0x6007 reaction); returns the time to the next
+        heartbeat, s (thread-safe)."""
+        next_s = 1.0
+        with self._lock:
+            for axis, (drive, device) in enumerate(zip(self.drives, self.devices, strict=True)):
+                period_s = device.heartbeat_producer_ms * 1e-3
+                if period_s > 0.0:
+                    if now_s >= self._heartbeat_due[axis]:
+                        self._send(0x700 + drive.node_id, device.heartbeat_payload())
+                        self._heartbeat_due[axis] = max(self._heartbeat_due[axis] + period_s,
+                                                        now_s)
+                    next_s = min(next_s, self._heartbeat_due[axis] - now_s)
+                heard = self._heartbeat_heard[axis]
+                timeout_s = device.heartbeat_consumer_ms * 1e-3
+                if heard is not None and timeout_s > 0.0:
+                    if now_s - heard > timeout_s:
+                        self._heartbeat_heard[axis] = None  # one trip per loss
+                        self._connection_lost(axis, EMCY_HEARTBEAT)
+                    else:
+                        next_s = min(next_s, heard + timeout_s - now_s)
+        return next_s
+
+    def _connection_lost(self, axis: int, emcy_code: int) -> None:
+        """The drive lost its master (heartbeat or RPDO deadline): EMCY, then the abort
+        connection reaction of 0x6007 (1 fault, 2 disable voltage, 3 quick stop) when it is
+        enabled (under the lock)."""
+        self._discard_prepared()
+        drive, device = self.drives[axis], self.devices[axis]
+        self._send(cia402.EMCY_BASE + drive.node_id, cia402.emcy_frame(emcy_code))
+        if drive.state is not DriveState.OPERATION_ENABLED:
+            return
+        option = device.abort_connection_option
+        if option == 1:
+            drive.state, drive.error_code = DriveState.FAULT, emcy_code
+        elif option == 2:
+            drive.state = DriveState.SWITCH_ON_DISABLED
+        elif option == 3:
+            drive.state = DriveState.QUICK_STOP_ACTIVE
+        drive.target_counts = drive.position_counts  # stop where it is
+
+    # --- fault injection (thread-safe; acts at the next SYNC) -------------------------
+
+    def inject_drive_fault(self, axis: int, error_code: int = 0x2310,
+                           persistent: bool = False) -> None:
+        """The drive of ``axis`` (0 x, 1 y) faults: EMCY ``error_code`` and statusword Fault;
+        ``persistent``: the cause stays, so it faults again after every fault reset."""
+        with self._lock:
+            self.drives[axis].pending_fault_code = error_code
+            if persistent:
+                self.drives[axis].persistent_fault_code = error_code
+            self._discard_prepared()
+
+    def drop_tpdo(self, axis: int, count: int = 1) -> None:
+        """The drive of ``axis`` sends no TPDO1 for the next ``count`` SYNCs."""
+        with self._lock:
+            self.drives[axis].drop_tpdo = count
+            self._discard_prepared()
+
+    def drop_sensor_frames(self, count: int = 1) -> None:
+        """The sensor sends nothing for the next ``count`` SYNCs."""
+        with self._lock:
+            self._drop_sensor = count
+            self._discard_prepared()
+
+    def set_sensor_status(self, status: int, count: int = 1) -> None:
+        """The sensor reports ``status`` (e.g. 2 invalid) for the next ``count`` SYNCs."""
+        with self._lock:
+            self._sensor_status_override = status
+            self._sensor_status_cycles = count
+            self._discard_prepared()
+
+    def set_tool_force(self, tool_force_N: np.ndarray) -> None:
+        """The tool force (N, x and y) the operator feels from now on."""
+        with self._lock:
+            self.tool_force_N = np.asarray(tool_force_N, float).reshape(1, 2).copy()
+            self._discard_prepared()
+
+    def set_operator_ready(self, enabled: bool) -> None:
+        """The master's ready lamp: the operator grasps the handle the first time it is on."""
+        with self._lock:
+            if enabled and not self.operator_grasped:
+                self.operator_grasped = True
+                self._discard_prepared()
+
+    # --- frame handling (under the lock) ----------------------------------------------
+
+    def _send(self, frame_id: int, data: bytes) -> None:
+        if self._bus is not None:
+            self._bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False))
+
+    def _handle(self, frame_id: int, data: bytes, extended: bool = False,
+                fd: bool = False) -> None:
+        if extended:  # CANopen is 11-bit: the only 29-bit frame here is the display frame
+            if frame_id == OPERATOR_DISPLAY_ID:
+                tool_force_N = decode_operator_display(data).reshape(1, 2)
+                self._discard_prepared()
+                self.tool_force_N = tool_force_N
+                self._prepared = self._prepare_sync(undoable=True)
+            elif frame_id == OPERATOR_READY_ID and data[:1] == b"\x01":
+                if not self.operator_grasped:
+                    self.operator_grasped = True
+                    self._discard_prepared()
+            return
+        if frame_id == cia402.SYNC_COB_ID:
+            if fd != self._sync_fd:
+                self._discard_prepared()
+                self._sync_fd = fd
+            refused = self._check_sync(data)
+            if refused:
+                self._discard_prepared()
+            answer, self._prepared = self._prepared, None
+            if answer is None:
+                answer = self._prepare_sync(undoable=False, refused=refused)
+            else:
+                self.prepared_syncs += 1
+            self._commit_sync(answer)
+            return
+        if frame_id == cia402.NMT_COB_ID and len(data) >= 2:
+            self._discard_prepared()
+            self._on_nmt(data[0], data[1])
+            return
+        for axis, (drive, device) in enumerate(zip(self.drives, self.devices, strict=True)):
+            if 0x700 <= frame_id <= 0x77F and frame_id == 0x700 + device.heartbeat_consumer_node:
+                if self._heartbeat_heard[axis] is None:
+                    self._timers_due_s = 0.0  # its consumer starts now
+                self._heartbeat_heard[axis] = time.monotonic()  # changes no input
+                continue
+            if frame_id == device.rpdo.cob_id and device.rpdo.enabled:
+                if drive.nmt_state == NMT_OPERATIONAL_STATE:
+                    self._discard_prepared()
+                    values = device.decode_rpdo(data)
+                    if isinstance(values, int):  # a length error: not processed
+                        self._send(cia402.EMCY_BASE + drive.node_id,
+                                   cia402.emcy_frame(values))
+                        continue
+                    drive.received_controlword = values.get(0x6040, drive.received_controlword)
+                    drive.received_target = values.get(0x607A, drive.received_target)
+                    drive.syncs_without_rpdo = 0
+                continue
+            if frame_id == cia402.SDO_RX_BASE + drive.node_id:
+                if drive.nmt_state != NMT_STOPPED_STATE:
+                    self._discard_prepared()
+                    device.on_sdo_request(data)
+                    if device.refresh_if_changed():
+                        self._timers_due_s = 0.0  # a heartbeat time may have changed
+                return
+        # Anything else (another node's frames, this bus's own frames coming back) is not ours.
+
+    def _on_nmt(self, command: int, node: int) -> None:
+        for drive in self.drives:
+            if node not in (0, drive.node_id):
+                continue
+            if command == cia402.NMT_START:
+                drive.nmt_state = NMT_OPERATIONAL_STATE
+            elif command == cia402.NMT_STOP:
+                drive.nmt_state = NMT_STOPPED_STATE
+            elif command == cia402.NMT_PRE_OPERATIONAL:
+                drive.nmt_state = NMT_PRE_OPERATIONAL_STATE
+            elif command in (cia402.NMT_RESET_NODE, cia402.NMT_RESET_COMMUNICATION):
+                # Back to the power-on values: the communication objects (0x1000-0x1FFF),
+                # and on a node reset the application's too.
+                device = self.devices[self.drives.index(drive)]
+                store = device.node.data_store
+                for index in list(store):
+                    if command == cia402.NMT_RESET_NODE or index < 0x2000:
+                        del store[index]
+                device.refresh()
+                if command == cia402.NMT_RESET_NODE:
+                    drive.state, drive.mode, drive.error_code = (
+                        DriveState.SWITCH_ON_DISABLED, 0, 0)
+                drive.nmt_state = NMT_PRE_OPERATIONAL_STATE
+                self._heartbeat_heard[self.drives.index(drive)] = None
+                self.sync_counter_seen[self.drives.index(drive)] = 0
+                self._send(0x700 + drive.node_id, b"\x00")
+
+    def _position_counts(self, axis: int, sample: RigSample | None = None) -> int:
+        """Encoder counts of ``axis`` in ``sample`` (default: the last SYNC's)."""
+        sample = self.last_sample if sample is None else sample
+        position = sample.handle_position_m[0, axis] if sample is not None else (
+            self.state.plant[0] @ self.model.position_C[axis])
+        return int(self.settings.counts_from_metres(position))
+
+    def _check_sync(self, data: bytes) -> frozenset[int]:
+        """Each drive checks a SYNC against its 0x1019 (CiA 301): without a counter it must
+        carry no data; with one, one byte. A drive refuses a SYNC of another length (EMCY
+        0x8240; it does not act on that SYNC, as CANopen stacks do); a counter that is not
+        the last one plus 1 (wrapping to 1 after the overflow value) means SYNCs lost on the
+        bus (counted in :attr:`sync_counter_jumps`). Returns the axes that refused it."""
+        refused = set()
+        for axis, device in enumerate(self.devices):
+            overflow = device.sync_counter_overflow
+            if len(data) != (1 if overflow else 0):
+                refused.add(axis)
+                self._send(cia402.EMCY_BASE + device.node_id,
+                           cia402.emcy_frame(EMCY_SYNC_LENGTH))
+                continue
+            if overflow:
+                last = self.sync_counter_seen[axis]
+                if last and data[0] != last % overflow + 1:
+                    self.sync_counter_jumps[axis] += 1
+                self.sync_counter_seen[axis] = data[0]
+        return frozenset(refused)
+
+    def _prepare_sync(self, undoable: bool, refused: frozenset[int] = frozenset()
+                      ) -> _SyncAnswer:
+        """The devices' answer to the next SYNC: each drive applies the controlword and
+        target it latched (a pending fault first, with its EMCY; CiA 402 transitions, quick
+        stop holding the position), the model advances one period with the enabled drives'
+        targets, the drives check their following error window and RPDO deadline, then each
+        operational drive sends TPDO1 as mapped (per its transmission type) and the sensor
+        its frame sampled at this SYNC. Only the model's state changes here (``undoable``:
+        keep what :meth:`_discard_prepared` needs to restore it); the rest at the commit."""
+        drives = [copy.copy(drive) for drive in self.drives]
+        frames: list[tuple[int, bytes]] = []
+        targets = np.full((1, 2), np.nan)
+        for axis, (drive, device) in enumerate(zip(drives, self.devices, strict=True)):
+            if device.sync_cob_id != cia402.SYNC_COB_ID or axis in refused:
+                continue  # this drive listens for SYNC elsewhere, or refused this one
+            if drive.persistent_fault_code and drive.state is not DriveState.FAULT:
+                drive.pending_fault_code = drive.persistent_fault_code
+            if drive.pending_fault_code:
+                drive.state, drive.error_code = DriveState.FAULT, drive.pending_fault_code
+                frames.append((cia402.EMCY_BASE + drive.node_id,
+                               cia402.emcy_frame(drive.pending_fault_code)))
+                drive.pending_fault_code = 0
+            if drive.state is DriveState.QUICK_STOP_ACTIVE and device.quick_stop_option <= 4:
+                drive.state = DriveState.SWITCH_ON_DISABLED  # stopped: the power goes off
+            received_rpdo = drive.received_controlword is not None or (
+                drive.received_target is not None)
+            if drive.received_controlword is not None:
+                previous = drive.controlword
+                drive.controlword = drive.received_controlword
+                before = drive.state
+                if drive.mode == cia402.MODE_CYCLIC_SYNC_POSITION:  # no mode: no power
+                    drive.state = cia402.next_drive_state(drive.state, drive.controlword,
+                                                          previous)
+                if drive.state is DriveState.SWITCH_ON_DISABLED and before is not drive.state:
+                    drive.error_code, drive.status_extra = 0, 0
+                if drive.state is DriveState.QUICK_STOP_ACTIVE and (
+                        before is not DriveState.QUICK_STOP_ACTIVE):
+                    drive.target_counts = drive.position_counts  # stop where it is
+            enabled = drive.state is DriveState.OPERATION_ENABLED and (
+                drive.mode == cia402.MODE_CYCLIC_SYNC_POSITION)
+            if drive.received_target is not None and enabled:
+                drive.target_counts = drive.received_target
+            drive.received_controlword = drive.received_target = None
+            if enabled or drive.state is DriveState.QUICK_STOP_ACTIVE:
+                targets[0, axis] = self.settings.metres_from_counts(drive.target_counts)
+            # RPDO deadline (0x1400:05) in SYNC time (interpolation periods).
+            timer_s = device.rpdo.event_timer_ms * 1e-3
+            if enabled and timer_s > 0.0 and not received_rpdo:
+                drive.syncs_without_rpdo += 1
+                if drive.syncs_without_rpdo * device.interpolation_period_s > timer_s:
+                    drive.syncs_without_rpdo = 0
+                    frames.append((cia402.EMCY_BASE + drive.node_id,
+                                   cia402.emcy_frame(EMCY_RPDO_TIMEOUT)))
+                    drive.state, drive.error_code = DriveState.FAULT, EMCY_RPDO_TIMEOUT
+                    drive.target_counts = drive.position_counts
+                    targets[0, axis] = self.settings.metres_from_counts(drive.position_counts)
+            elif received_rpdo:
+                drive.syncs_without_rpdo = 0
+        undo: list[tuple[Any, str, np.ndarray]] = []
+        rng_undo = None
+        if undoable:
+            undo = [(holder, name, getattr(holder, name).copy())
+                    for holder, name in self._state_arrays]
+            if self.model.force_noise_std_N > 0.0:
+                rng_undo = self.state.rng.bit_generator.state
+        if not self.operator_grasped:
+            # the operator waits for the ready lamp: the script's clock has not started
+            # (one period before its start: no intent yet, even with onset 0)
+            self.state.operator.time_s[0] = -self.model.period_s
+            self.state.operator.integral_N_s[0] = 0.0
+        # Disabled or faulted drives keep the command they applied (brake, lead screw).
+        sample = self.model.step(self.state, targets, self.tool_force_N)
+        for axis, (drive, device) in enumerate(zip(drives, self.devices, strict=True)):
+            drive.position_counts = self._position_counts(axis, sample)
+            if axis in refused:
+                continue
+            drive.sync_count += 1
+            self._check_following_error(drive, device, frames)
+            if drive.nmt_state != NMT_OPERATIONAL_STATE or not device.tpdo.enabled or (
+                    device.sync_cob_id != cia402.SYNC_COB_ID):
+                continue
+            if drive.drop_tpdo > 0:
+                drive.drop_tpdo -= 1
+                continue
+            payload = device.encode_tpdo(drive, drive.position_counts)
+            kind = device.tpdo.transmission_type
+            if 1 <= kind <= 240:
+                due = drive.sync_count % kind == 0
+            else:  # 0 acyclic synchronous, 254/255 event-driven: on a change
+                due = payload != drive.last_tpdo
+            if due:
+                drive.last_tpdo = payload
+                frames.append((device.tpdo.cob_id, payload))
+        counter = self._sensor_counter
+        drop_sensor, status_cycles = self._drop_sensor, self._sensor_status_cycles
+        if drop_sensor > 0:
+            drop_sensor -= 1
+        else:
+            raw_x, raw_y, saturated = self.codec.to_counts(sample.handle_force_measured_N[0])
+            status = STATUS_OVERLOAD if saturated else STATUS_OK
+            if status_cycles > 0 and self._sensor_status_override is not None:
+                status = self._sensor_status_override
+                status_cycles -= 1
+            frames.append((self.codec.frame_id,
+                           self.codec.encode(ForceSample(raw_x, raw_y, counter, status))))
+        fd = self._sync_fd
+        emcy_ids = {cia402.EMCY_BASE + drive.node_id for drive in drives}
+        messages = [can.Message(arbitration_id=frame_id, data=data, is_extended_id=False,
+                                is_fd=(fd or len(data) > 8) and frame_id not in emcy_ids,
+                                bitrate_switch=(fd or len(data) > 8) and frame_id not in emcy_ids)
+                    for frame_id, data in frames]
+        return _SyncAnswer(drives, sample, messages, (counter + 1) % 256, drop_sensor,
+                           status_cycles, undo, rng_undo)
+
+    def _check_following_error(self, drive: DriveRuntime, device: DriveObjects,
+                               frames: list[tuple[int, bytes]]) -> None:
+        """Following error (0x6065 window, 0x6066 time out): statusword bit 7 (warning) while
+        beyond the window, then bit 13, Fault and EMCY 0x8611 once it lasted the time out."""
+        if drive.state is not DriveState.OPERATION_ENABLED:
+            drive.following_error_syncs = 0
+            drive.status_extra &= ~SW_WARNING
+            return
+        error = abs(drive.target_counts - drive.position_counts)
+        if error <= device.following_error_window_counts:
+            drive.following_error_syncs = 0
+            drive.status_extra &= ~(SW_WARNING | SW_FOLLOWING_ERROR)
+            return
+        drive.following_error_syncs += 1
+        drive.status_extra |= SW_WARNING
+        if drive.following_error_syncs * device.interpolation_period_s > (
+                device.following_error_timeout_s):
+            drive.status_extra |= SW_FOLLOWING_ERROR
+            drive.state, drive.error_code = DriveState.FAULT, EMCY_FOLLOWING_ERROR
+            frames.append((cia402.EMCY_BASE + drive.node_id,
+                           cia402.emcy_frame(EMCY_FOLLOWING_ERROR)))
+
+    def _discard_prepared(self) -> None:
+        """Take back a prepared answer (an input changed after it): the model's state as it
+        was before its step."""
+        answer, self._prepared = self._prepared, None
+        if answer is None:
+            return
+        for holder, name, saved in answer.undo:
+            getattr(holder, name)[...] = saved  # in place: the arrays may be bound buffers
+        if answer.rng_undo is not None:
+            self.state.rng.bit_generator.state = answer.rng_undo
+
+    def _commit_sync(self, answer: _SyncAnswer) -> None:
+        """Make ``answer`` the devices' state, then send its frames (in that order, so whoever
+        has received them sees the devices' new state)."""
+        for drive, after in zip(self.drives, answer.drives, strict=True):
+            vars(drive).update(vars(after))
+        self.last_sample = answer.sample
+        self._sensor_counter = answer.sensor_counter
+        self._drop_sensor = answer.drop_sensor
+        self._sensor_status_cycles = answer.sensor_status_cycles
+        self.sync_count += 1
+        bus = self._bus
+        if bus is not None:
+            for message in answer.messages:
+                bus.send(message)
+
+
+class SimulatedRigHardware(HandleHardware):
+    """The simulated rig in this process (backend ``sim-inproc``): the CAN driver talking to a
+    :class:`SimulatedCanRig` that answers from a thread on a virtual bus (the control code
+    cannot tell it from the real rig). The devices are reachable as :attr:`rig` for fault
+    injection; the tool force goes to the operator directly (no display frame)."""
+
+    def __init__(self, rig: SimulatedCanRig, driver: CanHandleDriver) -> None:
+        self.rig = rig
+        self.driver = driver
+
+    @property
+    def lifecycle_state(self) -> LifecycleState:
+        return self.driver.lifecycle_state
+
+    def configure(self) -> None:
+        self.rig.start()
+        try:
+            self.driver.configure()
+        except BaseException:
+            self.rig.stop()
+            raise
+
+    def activate(self) -> None:
+        self.driver.activate()
+
+    def deactivate(self) -> None:
+        self.driver.deactivate()
+
+    def cleanup(self) -> None:
+        try:
+            self.driver.cleanup()
+        finally:
+            self.rig.stop()
+
+    def read(self) -> HandleReading:
+        return self.driver.read()
+
+    def write(self, position_command_m: np.ndarray) -> None:
+        self.driver.write(position_command_m)
+
+    def stop_motion(self, reason: str) -> None:
+        self.driver.stop_motion(reason)
+
+    def resume_motion(self) -> None:
+        self.driver.resume_motion()
+
+    def present_tool_force(self, tool_force_N: np.ndarray) -> None:
+        self.rig.set_tool_force(tool_force_N)
+
+    def present_forces_enabled(self, enabled: bool) -> None:
+        self.rig.set_operator_ready(enabled)
+
+
+@register_hardware("sim-inproc")
+def simulated_rig_hardware(config: dict[str, Any]) -> SimulatedRigHardware:
+    """The in-process simulated rig for a validated configuration (``[model]``,
+    ``[master.can]`` for node ids and conversions, ``[master.sim]``; the virtual bus
+    ``[master.sim] channel``)."""
+    sim = master_settings(config).sim
+    rig = SimulatedCanRig.from_config(config, sim.channel, operator_waits_for_lamp=True)
+    driver = CanHandleDriver(rig.settings, {"interface": "virtual", "channel": sim.channel},
+                             sim.pdo_timeout_s, config["model"]["sample_period_s"])
+    return SimulatedRigHardware(rig, driver)

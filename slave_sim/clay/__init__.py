@@ -1,0 +1,2 @@
+"""The simulated clay: the field, its Warp and NumPy kernels, the workpiece, its views and
+rendering."""

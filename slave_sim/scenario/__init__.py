@@ -1,0 +1,1 @@
+"""``haptic-slave-sim``: the slave alone on a scenario (an ideal master), the cut saved."""
