@@ -31,12 +31,37 @@ def test_a_gap_in_the_sequence_is_caught_up_in_one_tick() -> None:
     assert pacing.caught_up_steps == 2 and pacing.dropped_samples == 0
 
 
-def test_catching_up_is_bounded_and_the_rest_is_counted() -> None:
+def test_what_one_tick_cannot_take_is_owed_to_the_next_ticks() -> None:
     pacing = _pacing(limit=4)
     pacing.steps(True, (1, 0))
-    assert pacing.steps(True, (1, 10)) == 4
-    assert pacing.dropped_samples == 6 and pacing.caught_up_steps == 3
-    assert pacing.steps(True, (1, 11)) == 1  # counts on from the newest sample
+    assert pacing.steps(True, (1, 10)) == 4  # ten samples on: four now, six owed
+    assert pacing.backlog == 6 and pacing.dropped_samples == 0
+    assert pacing.steps(True, None) == 4  # no new sample: the backlog is taken
+    assert pacing.steps(True, (1, 11)) == 3  # two owed and the new one
+    assert pacing.steps(True, None) == 0 and pacing.waited_ticks == 1
+    # every sample 0..11 stepped exactly once: 1 + 4 + 4 + 3
+    assert pacing.caught_up_steps == 3 + 4 + 2 and pacing.max_backlog == 6
+
+
+def test_the_backlog_is_bounded_and_what_it_gives_up_is_counted() -> None:
+    pacing = MasterSamplePacing(PacingSettings(True, 4, max_backlog_samples=3))
+    pacing.steps(True, (1, 0))
+    assert pacing.steps(True, (1, 20)) == 4  # 20 on: 4 now, 3 owed, 13 given up
+    assert pacing.backlog == 3 and pacing.dropped_samples == 13
+    assert pacing.steps(True, (1, 21)) == 4 and pacing.backlog == 0
+    assert pacing.max_backlog == 3
+
+
+def test_a_halt_or_a_new_epoch_clears_the_backlog() -> None:
+    pacing = _pacing(limit=2)
+    pacing.steps(True, (1, 0))
+    pacing.steps(True, (1, 9))
+    assert pacing.backlog == 7
+    assert pacing.steps(False, None) == 1 and pacing.backlog == 0
+    pacing.steps(True, (1, 10))
+    pacing.steps(True, (1, 19))
+    assert pacing.backlog == 7
+    assert pacing.steps(True, (2, 0)) == 1 and pacing.backlog == 0
 
 
 def test_halted_tool_steps_every_tick_and_the_count_restarts() -> None:
@@ -77,7 +102,7 @@ def test_off_steps_once_per_tick() -> None:
 
 def test_settings_come_from_the_configuration() -> None:
     config = load_config(None)
-    assert PacingSettings.from_config(config) == PacingSettings(True, 4)
+    assert PacingSettings.from_config(config) == PacingSettings(True, 4, 32)
 
 
 def test_an_invalid_catch_up_bound_is_refused(tmp_path) -> None:

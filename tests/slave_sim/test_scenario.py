@@ -6,7 +6,7 @@ import pytest
 
 from haptic.common.config import ConfigError, load_config, override
 from haptic.common.config.scenario import SCENARIO_NAMES, load_scenario
-from haptic.slave_sim.workpiece import build_workpiece
+from haptic.slave_sim.clay.workpiece import build_workpiece
 
 GOOD = """
 [scenario]
@@ -112,7 +112,8 @@ def test_slave_config_section_is_validated() -> None:
                                "scenario": "constant-rate", "environment": "scenario",
                                "clay_impl": "warp", "device": "auto",
                                "pacing": {"follow_master_samples": True,
-                                          "max_steps_per_tick": 4},
+                                          "max_steps_per_tick": 4,
+                                          "max_backlog_samples": 32},
                                "phase_lock": {"enabled": True, "margin_s": 3e-05}}
     assert override(config, "slave.device", "cuda:1")["slave"]["device"] == "cuda:1"
     with pytest.raises(ConfigError) as error:
