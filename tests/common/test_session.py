@@ -6,13 +6,13 @@ import json
 import subprocess
 import sys
 
-from haptic.common.summary import REQUIRED_SUMMARY_KEYS
+from haptic.common.runtime.summary import REQUIRED_SUMMARY_KEYS
 
 
 def test_session_runs_both_programs_and_writes_the_report(tmp_path) -> None:
     out = tmp_path / "session"
     process = subprocess.Popen(
-        [sys.executable, "-m", "haptic.common.session", "--duration", "1.5", "--out", str(out)],
+        [sys.executable, "-m", "haptic.common.launch.cli", "--duration", "1.5", "--out", str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )
     try:
@@ -32,6 +32,9 @@ def test_session_runs_both_programs_and_writes_the_report(tmp_path) -> None:
         assert summary["side"] == side and summary["steps"] > 0
     slave = json.loads((out / "slave.json").read_text())
     assert slave["removed_volume_m3"] > 0.0  # the tool reached the clay and cut it
+    # the sides end aligned (issue 16): every master sample stepped once on the slave
+    assert "position gap at the end |yt - Ah1 yh|" in log and "work area: " in log
+    assert max(abs(g) for g in slave["final_position_gap_m"]) <= 0.001, slave
     report = (out / "report.md").read_text()
     assert "## master summary" in report and "## slave summary" in report
 
@@ -43,7 +46,7 @@ def _loop_summary(**changes) -> dict:
 
 
 def test_real_time_verdict_names_each_missed_target() -> None:
-    from haptic.common.session import real_time_misses
+    from haptic.common.launch.cli import real_time_misses
 
     assert real_time_misses(_loop_summary(), _loop_summary()) == []
     # 1845 Hz at Ts = 0.54 ms is the floor (99.6 % of 1851.85 Hz); 0.1 % overruns the ceiling
