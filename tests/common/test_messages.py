@@ -166,3 +166,14 @@ def test_energy_travels_and_a_control_mismatch_is_named() -> None:
     paper = ToolState(1, 2, 3, Flags(0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)
     assert control_mismatch("paper", paper) is None
     assert 'mode = "paper"' in control_mismatch("tdpa", paper)
+
+
+def test_the_flag_bits_are_the_wire_format() -> None:
+    """Each flag is one bit of its own, at the value the wire has always carried: a peer of
+    another build reads WORK_AREA_STOP without also reading SAFE_STATE, and the other way."""
+    assert {flag.name: flag.value for flag in Flags} == {
+        "SAFE_STATE": 1, "FORCES_ENABLED": 2, "IN_CONTACT": 4, "TDPA": 8,
+        "WORK_AREA_STOP": 16}
+    stopped = decode(encode(ToolState(1, 1, 1, Flags.WORK_AREA_STOP, (0.0, 0.0), (0.0, 0.0),
+                                      (0.0, 0.0), 0.0, 0.0)), KIND_TOOL)
+    assert not stopped.safe_state and Flags.WORK_AREA_STOP in stopped.flags

@@ -264,6 +264,21 @@ def test_command_is_clamped_to_each_wall_of_the_workspace(block, axis, sign) -> 
         ("command clamped to the workspace", "xy"[axis])]
 
 
+@pytest.mark.parametrize("side", ["min", "max"])
+def test_a_command_resting_exactly_on_a_wall_is_not_clamped(block, side) -> None:
+    """The workspace is closed: a command exactly on a wall (the shared work area puts the
+    handle there) is inside, so it is neither clamped nor reported, on both axes."""
+    safety = _safety()
+    wall = safety.workspace_min_m if side == "min" else safety.workspace_max_m
+    start = np.array([wall], dtype=float)
+    node = MasterNode(block, safety)
+    state = _enabled(node, start)
+    for _ in range(50):
+        command = node.step(state, np.zeros((1, 2)), start, np.zeros((1, 2)))
+    assert np.array_equal(command, start)
+    assert [e for e in state.events if e.kind == "saturate"] == []
+
+
 @pytest.mark.parametrize("samples", [1, 4])
 def test_the_force_gate_needs_exactly_n_strictly_small_samples(block, samples) -> None:
     node = MasterNode(block, _safety(ramp_small_samples=samples, ramp_small_force_N=0.5))

@@ -234,9 +234,13 @@ def test_stop_reasons_name_the_latest_hardware_fault() -> None:
 
 def test_a_warm_start_is_enabled_and_counts_as_ever_enabled() -> None:
     supervisor = make()
+    assert not supervisor.peer_held  # nothing has stopped the tool yet
+    assert supervisor.stop_reason().startswith("watchdog")
     supervisor.start_synced()
     assert supervisor.enabled and supervisor.ever_enabled
     assert supervisor.state_name() == "ok"
+    # the lockstep's first ticks, before the delayed first message: still enabled
+    assert supervisor.update(0.0, None, (0.01, 0.02)) is Transition.NONE
     # the next tick in sync changes nothing; a silence then holds
     assert run_in_sync(supervisor, 1)[0] is Transition.NONE
     assert supervisor.update(1.0, None, (0.01, 0.02), silence_s=1.0) is Transition.HOLD
