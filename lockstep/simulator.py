@@ -367,8 +367,9 @@ class LockstepSimulator:
                     master_tick.state.gain_ratio[:] = governed.update(
                         k, ts, tool_line.schedule, handle_line.schedule)
                     handle_message[:, gain_column] = master_tick.state.gain_ratio
-                if tdpa:  # the slave's handed-over energy, as the program's link gives it
+                if tdpa:  # the slave's handed-over energy and its tool, as the link gives them
                     master_tick.state.peer_energy_J[:] = tool_rows[:, 7]
+                    master_tick.state.peer_target_m[:] = tool_rows[:, 2:4] / ratio
                 used = master_tick.control(fh, yh)
                 command = used.command_m.copy()
                 handle_message[:, 0:2] = used.handle_force_used_N

@@ -106,6 +106,9 @@ class MasterNodeState:
     #: (lanes,) the slave's cumulative handed-over energy received, J (NaN: none yet); the
     #: passivity kernel takes it at every step (``tdpa`` mode).
     peer_energy_J: np.ndarray | None = None
+    #: ``tdpa``: the tool's received position in handle coordinates, Ah1^-1 yt_recv (lanes,
+    #: 2), m, the drift correction's target (NaN: none yet)
+    peer_target_m: np.ndarray | None = None
     _passivity_kernel: Any = field(default=None, repr=False)
 
     @property
@@ -270,7 +273,7 @@ class MasterNode:
             _buffers=buffers,
         )
         if self.passivity is not None:
-            self._attach_passivity(state, safe, (inputs, faulted, command, last_command,
+            self._attach_passivity(state, safe, (inputs, enabled, faulted, command, last_command,
                                                  origin))
         for lane in np.flatnonzero(faulted_at_start):
             self._trip(state, lane, "non-finite handle position at activation", None)
@@ -372,19 +375,23 @@ class MasterNode:
         limits.keep_J = settings.master_keep_J
         limits.workspace_min_x_m, limits.workspace_min_y_m = map(float, self._workspace_min)
         limits.workspace_max_x_m, limits.workspace_max_y_m = map(float, self._workspace_max)
-        inputs, faulted, command, last_command, origin = node_buffers
+        limits.drift_rate_per_s = settings.master_drift_rate_per_s
+        limits.drift_speed_max_m_per_s = settings.master_drift_speed_max_m_per_s
+        inputs, enabled, faulted, command, last_command, origin = node_buffers
+        target = wp.full((lanes, 2), wp.float64(np.nan), dtype=wp.float64, device=DEVICE)
         # PassivityPort's field order: tank, sent, peer_sent, input, output, forgotten,
         # dissipated, correction, (damper force), active steps, previous position.
         tank, sent, peer_sent, energy_in, energy_out, forgotten, dissipated, correction = (
             buffers[:8])
         state.passivity = port
         state.peer_energy_J = peer.numpy()
+        state.peer_target_m = target.numpy()
         state._passivity_kernel = wp.launch(
             passivity_kernel.master_passivity_kernel, dim=lanes, device=DEVICE,
-            inputs=[inputs, peer, faulted, command, last_command, origin, buffers[10], tank,
-                    sent, peer_sent, energy_in, energy_out, forgotten, dissipated, correction,
-                    buffers[9], limits], record_cmd=True)
-        state._buffers = (*state._buffers, *buffers, peer)
+            inputs=[inputs, peer, target, enabled, faulted, command, last_command, origin,
+                    buffers[10], tank, sent, peer_sent, energy_in, energy_out, forgotten,
+                    dissipated, correction, buffers[9], limits], record_cmd=True)
+        state._buffers = (*state._buffers, *buffers, peer, target)
 
     def _collect_events(self, state: MasterNodeState) -> None:
         """Turn the kernel's event codes into :class:`SafetyEvent` in the safety layer's

@@ -32,6 +32,8 @@ class PassivityLimits:
     workspace_min_y_m: wp.float64
     workspace_max_x_m: wp.float64
     workspace_max_y_m: wp.float64
+    drift_rate_per_s: wp.float64
+    drift_speed_max_m_per_s: wp.float64
 
 
 @wp.func
@@ -47,6 +49,8 @@ def capped(tank: wp.float64, forgotten: wp.array(dtype=wp.float64), lane: int,
 def master_passivity_kernel(
     inputs: wp.array2d(dtype=wp.float64),
     peer_value: wp.array(dtype=wp.float64),
+    peer_target: wp.array2d(dtype=wp.float64),
+    enabled: wp.array(dtype=wp.bool),
     faulted: wp.array(dtype=wp.bool),
     command: wp.array2d(dtype=wp.float64),
     last_command: wp.array2d(dtype=wp.float64),
@@ -108,6 +112,29 @@ def master_passivity_kernel(
     if faulted[lane]:
         dx = zero
         dy = zero
+    # drift: the command towards the tool's position in handle coordinates (Ah1^-1 yt_recv),
+    # slowly; its work fh . d is the operator's input where positive, else paid from what the
+    # account holds after this step's other work
+    tx = peer_target[lane, 0]
+    ty = peer_target[lane, 1]
+    if (limits.drift_rate_per_s > zero and enabled[lane] and not faulted[lane]
+            and wp.isfinite(tx) and wp.isfinite(ty)):
+        rate = limits.drift_rate_per_s * ts
+        gx = (tx - (cx + dx)) * rate
+        gy = (ty - (cy + dy)) * rate
+        step = wp.sqrt(gx * gx + gy * gy)
+        most = limits.drift_speed_max_m_per_s * ts
+        if step > most:
+            gx = gx * most / step
+            gy = gy * most / step
+        drift_work = fx * gx + fy * gy
+        if drift_work < zero:
+            budget = wp.max(account + fx * (cx + dx - px) + fy * (cy + dy - py), zero)
+            if -drift_work > budget:
+                gx = gx * budget / (-drift_work)
+                gy = gy * budget / (-drift_work)
+        dx = dx + gx
+        dy = dy + gy
     mx = wp.clamp(cx + dx, limits.workspace_min_x_m, limits.workspace_max_x_m)
     my = wp.clamp(cy + dy, limits.workspace_min_y_m, limits.workspace_max_y_m)
     command[lane, 0] = mx

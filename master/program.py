@@ -246,6 +246,11 @@ def _run_linked_master(
                             and tool is not None):  # the slave's handed-over energy
                         node_state.peer_energy_J[0] = tdpa_peer.peer_energy(
                             node_state.passivity, tool)
+                        # the drift correction's target: the tool in handle coordinates
+                        node_state.peer_target_m[0, 0] = (tool.tool_position_m[0]
+                                                          / supervisor.ratio_x)
+                        node_state.peer_target_m[0, 1] = (tool.tool_position_m[1]
+                                                          / supervisor.ratio_y)
                     # node: vh = Ch1 fh - Ct1 ft behind the safety layer, or the safe state;
                     # the node reports what it used (the slave's Ch2 integrates exactly the
                     # handle force Ch1 used; the operator feels the tool force it used)

@@ -41,6 +41,11 @@ CONTROL_SCHEMA: Schema = {
                                      "the tool to Ah1 yh, N/m (0: off).", minimum=0.0),
     "drift_force_max_N": Field("float", "tdpa: cap of the drift correction's force, N.",
                                minimum=0.0),
+    "master_drift_rate_per_s": Field(
+        "float", "tdpa: the master's drift correction, the share of the gap to the tool "
+        "(Ah1^-1 yt) its handle command closes per second, 1/s (0: off).", minimum=0.0),
+    "master_drift_speed_max_m_per_s": Field(
+        "float", "tdpa: the most speed of that correction, m/s.", minimum=0.0),
     "paper_drift_stiffness_N_per_m": Field(
         "float", "paper: stiffness kp of the slow drift coupling vt += kp wc/(s + wc) (Ah1 yh - "
         "yt) at the slave, N/m (0: off, the paper's scheme exactly; haptic-analyze includes "

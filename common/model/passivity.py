@@ -80,6 +80,8 @@ class PassivitySettings:
     damper_force_rate_N_per_s: float = 4000.0
     drift_stiffness_N_per_m: float = 200.0
     drift_force_max_N: float = 2.0
+    master_drift_rate_per_s: float = 1.0
+    master_drift_speed_max_m_per_s: float = 0.005
 
 
 @dataclass(eq=False)
@@ -199,6 +201,31 @@ class PassivityPort:
         work_out = -np.einsum("ij,ij->i", force_N, handle_step_m)
         return self._correction(force_N, work_out)
 
+    def drift_command(self, force_N: np.ndarray, command_m: np.ndarray,
+                      target_m: np.ndarray) -> np.ndarray:
+        """Master side, drift compensation: the step (lanes, 2), m, that moves this step's
+        handle command ``command_m`` (after the yield) towards ``target_m``, the tool's
+        received position in handle coordinates (Ah1^-1 yt_recv; NaN: none): the gap times
+        ``master_drift_rate_per_s`` Ts, at most ``master_drift_speed_max_m_per_s`` Ts long.
+        Its work at the port ``fh . d`` is the operator's input where positive (free); where
+        negative it is paid from what the account holds after this step's other work
+        ``fh . (command - previous)``, else scaled down. With no operator force it costs
+        nothing: the port's work is ``fh . dcmd``."""
+        s, ts = self.settings, self.period_s
+        target = np.asarray(target_m, float)
+        known = np.all(np.isfinite(target), axis=1) & (s.master_drift_rate_per_s > 0.0)
+        step = np.where(known[:, None], (np.nan_to_num(target) - command_m)
+                        * (s.master_drift_rate_per_s * ts), 0.0)
+        length = np.sqrt(np.einsum("ij,ij->i", step, step))
+        most = s.master_drift_speed_max_m_per_s * ts
+        step *= np.where(length > most, most / np.maximum(length, 1e-300), 1.0)[:, None]
+        work = np.einsum("ij,ij->i", force_N, step)
+        other = np.einsum("ij,ij->i", force_N, command_m - self.previous_position_m)
+        budget = np.maximum(self.reserve_J() + other, 0.0)
+        paid = (work >= 0.0) | (-work <= budget)
+        step *= np.where(paid, 1.0, budget / np.maximum(-work, 1e-300))[:, None]
+        return step
+
     def damp(self, force_N: np.ndarray, velocity_m_per_s: np.ndarray,
              port_force_N: np.ndarray) -> np.ndarray:
         """Slave side: the actuator force (lanes, 2), N, after the adaptive damper on the
@@ -245,15 +272,24 @@ class PassivityPort:
 def master_step_reference(port: PassivityPort, inputs: np.ndarray, command_m: np.ndarray,
                           last_command_m: np.ndarray, origin_m: np.ndarray,
                           faulted: np.ndarray, force_limit_N: float,
-                          workspace_min_m: np.ndarray, workspace_max_m: np.ndarray) -> None:
+                          workspace_min_m: np.ndarray, workspace_max_m: np.ndarray,
+                          peer_target_m: np.ndarray | None = None,
+                          enabled: np.ndarray | None = None) -> None:
     """The master's passivity step in numpy, in place, after the node's kernel wrote
     ``command_m`` (lanes, 2): the command yields along fh by what the account lacks for this
-    step's work ``fh . dcmd``, the offset is re-based like the kernel's own limits, then the
-    work is observed. The reference of haptic.master.passivity_kernel (same arithmetic)."""
+    step's work ``fh . dcmd``, then drifts towards ``peer_target_m`` (Ah1^-1 yt_recv, (lanes,
+    2), m; NaN or None: no target) on ``enabled`` lanes (:meth:`PassivityPort.drift_command`),
+    the offset is re-based like the kernel's own limits, then the work is observed. The
+    reference of haptic.master.passivity_kernel (same arithmetic)."""
     raw = inputs[:, 0:2]
     force = np.clip(np.where(np.isfinite(raw), raw, 0.0), -force_limit_N, force_limit_N)
     correction = port.yield_command(force, command_m - port.previous_position_m)
     correction[faulted] = 0.0
+    if peer_target_m is not None:
+        lanes = np.ones(len(command_m), bool) if enabled is None else np.asarray(enabled, bool)
+        drift = port.drift_command(force, command_m + correction, peer_target_m)
+        drift[~lanes | np.asarray(faulted, bool)] = 0.0
+        correction = correction + drift
     moved = np.clip(command_m + correction, workspace_min_m, workspace_max_m)
     command_m[...] = moved
     origin_m += moved - last_command_m

@@ -125,6 +125,40 @@ def test_drift_correction_adds_no_energy() -> None:
     assert paid[1, 0] > 0.0  # applied when the account pays for it
 
 
+def test_the_master_drifts_to_the_tool_for_free_without_an_operator_force() -> None:
+    """With no operator force the command's step costs nothing at the port (fh . dcmd = 0):
+    it moves the gap times rate Ts towards the target, capped at the speed limit, from an
+    empty account; no target (NaN) or a zero rate, no step."""
+    p = port(3, master_drift_rate_per_s=2.0, master_drift_speed_max_m_per_s=0.005)
+    command = np.zeros((3, 2))
+    target = np.array([[0.001, -0.002], [0.5, 0.0], [np.nan, 0.0]])
+    step = p.drift_command(np.zeros((3, 2)), command, target)
+    np.testing.assert_allclose(step[0], target[0] * 2.0 * TS, rtol=1e-12)
+    np.testing.assert_allclose(step[1], [0.005 * TS, 0.0], rtol=1e-12)  # capped
+    assert step[2].tolist() == [0.0, 0.0]
+    off = port(1, master_drift_rate_per_s=0.0)
+    assert off.drift_command(np.zeros((1, 2)), command[:1], target[:1]).tolist() == [[0.0, 0.0]]
+
+
+def test_the_master_drift_against_the_operator_is_paid_from_the_account() -> None:
+    """Along the operator's push the drift takes the operator's input (always); against it,
+    the work the port gives out (-fh . d) is at most what the account holds: none from an
+    empty one, all of it once the account pays."""
+    p = port(2, master_drift_rate_per_s=2.0)
+    force = np.array([[1.0, 0.0], [-1.0, 0.0]])  # lane 0 pushes towards +x, lane 1 against
+    command = np.zeros((2, 2))
+    target = np.array([[0.002, 0.0], [0.002, 0.0]])
+    step = p.drift_command(force, command, target)
+    assert step[0, 0] == pytest.approx(0.002 * 2.0 * TS)
+    assert step[1, 0] == 0.0
+    p.receive(np.array([1e-9, 1e-9]))  # a little energy: pays part of the step
+    part = p.drift_command(force, command, target)
+    assert -np.dot(force[1], part[1]) == pytest.approx(1e-9)
+    p.receive(np.array([1.0, 1.0]))
+    paid = p.drift_command(force, command, target)
+    assert paid[1, 0] == pytest.approx(0.002 * 2.0 * TS)
+
+
 def test_two_port_passivity_in_a_delayed_lockstep_run() -> None:
     """The linear loop at k = 13 and 0.1 s round trip grows in the paper's scheme and stays
     bounded with TDPA, and the sum of the ports' output never exceeds their input by more

@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from haptic.common.config import load_config
 from haptic.common.model.passivity import PassivityPort, PassivitySettings, master_step_reference
@@ -31,8 +32,15 @@ def test_kernel_matches_the_numpy_reference() -> None:
     rng = np.random.default_rng(3)
     position = np.zeros((lanes, 2))
     peer = np.zeros(lanes)
+    target = np.full((lanes, 2), np.nan)  # the tool in handle coordinates: none yet
     acted = 0
     for step in range(3000):
+        if step == 200:  # the tool's first message: a few mm off on every lane but the last
+            target = rng.normal(0.0, 0.004, (lanes, 2))
+            target[-1] = np.nan
+        if step >= 200 and step % 50 == 0:
+            target[:-1] += rng.normal(0.0, 0.002, (lanes - 1, 2))
+        kernel_state.peer_target_m[...] = target
         force = rng.normal(0.0, 1.5, (lanes, 2))
         force[0] = 0.0  # a lane below the force floor
         if step == 1500:
@@ -48,7 +56,8 @@ def test_kernel_matches_the_numpy_reference() -> None:
                               reference_state.last_command_m, reference_state.origin_m,
                               reference_state.faulted, safety.force_limit_N,
                               np.asarray(safety.workspace_min_m),
-                              np.asarray(safety.workspace_max_m))
+                              np.asarray(safety.workspace_max_m), target,
+                              reference_state.forces_enabled)
         reference = reference_state.command_m.copy()
         np.testing.assert_allclose(command, reference, rtol=0, atol=1e-12)
         position = position + 0.2 * (command - position)  # a handle servo following
@@ -61,3 +70,36 @@ def test_kernel_matches_the_numpy_reference() -> None:
     assert acted > 100  # the controller did act
     assert kernel.active_steps[0] == 0  # never below the force floor
     assert kernel_state.faulted[1]
+
+
+def test_the_handle_command_drifts_to_the_tool_while_the_operator_lets_go() -> None:
+    """Issue 16's drift compensation on the master: with no operator force the handle's
+    command closes its gap to the tool (Ah1^-1 yt_recv, 3 mm off) at the configured rate and
+    speed, for free (the port's work fh . dcmd is 0); a lane whose tool is unknown (NaN) and
+    a lane pushed against the correction with an empty account stay where they are."""
+    config = load_config(None)
+    model = model_from_config(config).with_gain(13.0)
+    safety = replace(master_settings(config).safety, ramp_small_force_N=1e9,
+                     ramp_small_samples=1, ramp_time_s=0.0)
+    settings = PassivitySettings(master_drift_rate_per_s=1.0, master_keep_J=0.0,
+                                 master_drift_speed_max_m_per_s=0.005, force_floor_N=1e9)
+    node = MasterNode.from_model(model, safety, settings)
+    ts = model.sample_period_s
+    start = np.zeros((3, 2))
+    state = node.activate(start)
+    target = np.array([[0.003, 0.0], [np.nan, np.nan], [0.003, 0.0]])
+    force = np.zeros((3, 2))
+    node.step(state, force, start, np.zeros((3, 2)))  # the start-up gate opens
+    state.peer_target_m[...] = target
+    force[2, 0] = -1e-9  # a touch against the correction, below any compensator response
+    moved = []
+    for _ in range(int(round(5.0 / ts))):
+        command = node.step(state, force, start, np.zeros((3, 2)))
+        moved.append(command[0, 0])
+    moved = np.array(moved)
+    assert moved[0] == pytest.approx(0.003 * 1.0 * ts, rel=1e-6)  # rate x gap x Ts
+    assert np.all(np.diff(moved) <= 0.005 * ts * (1 + 1e-9))  # never faster than the cap
+    assert 0.003 - moved[-1] == pytest.approx(0.003 * np.exp(-5.0), rel=0.01)  # 1/s
+    assert command[1].tolist() == [0.0, 0.0]
+    assert abs(command[2, 0]) < 1e-12  # nothing in the account to pay for it
+    assert state.passivity.tank_J[0] == pytest.approx(0.0, abs=1e-15)
