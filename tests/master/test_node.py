@@ -280,6 +280,8 @@ def test_tdpa_node_matches_the_numpy_reference_port() -> None:
     paper = MasterNode.from_model(model, safety)
     state = tdpa.activate(start)
     assert np.isnan(state.peer_energy_J).all()  # no energy received yet
+    assert state.peer_target_m.shape == (lanes, 2)  # the tool in handle coordinates (x, y)
+    assert np.isnan(state.peer_target_m).all()  # no tool position received yet
     reference_state = paper.activate(start)
     port = PassivityPort.create(settings, model.sample_period_s, lanes, settings.master_keep_J)
     rng = np.random.default_rng(5)
@@ -295,13 +297,16 @@ def test_tdpa_node_matches_the_numpy_reference_port() -> None:
             peer = peer + rng.random(lanes) * 1e-4
             given = peer
             port.receive(peer)
+        if step == 100:  # the tool's first message: its position, a few mm off
+            state.peer_target_m[...] = rng.normal(0.0, 0.003, (lanes, 2))
         command = tdpa.step(state, force, position, tool, peer_energy_J=given)
         paper.step(reference_state, force, position, tool)
         master_step_reference(port, reference_state.inputs, reference_state.command_m,
                               reference_state.last_command_m, reference_state.origin_m,
                               reference_state.faulted, safety.force_limit_N,
                               np.asarray(safety.workspace_min_m),
-                              np.asarray(safety.workspace_max_m))
+                              np.asarray(safety.workspace_max_m), state.peer_target_m,
+                              reference_state.forces_enabled)
         np.testing.assert_allclose(command, reference_state.command_m, rtol=0, atol=1e-12)
         position = position + 0.2 * (command - position)
         acted += int(np.count_nonzero(state.passivity.correction_m))
