@@ -80,8 +80,8 @@ class PassivitySettings:
     damper_force_rate_N_per_s: float = 4000.0
     drift_stiffness_N_per_m: float = 200.0
     drift_force_max_N: float = 2.0
-    master_drift_rate_per_s: float = 1.0
-    master_drift_speed_max_m_per_s: float = 0.005
+    master_drift_rate_per_s: float = 2.0
+    master_drift_speed_max_m_per_s: float = 0.01
 
 
 @dataclass(eq=False)
