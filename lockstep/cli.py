@@ -18,7 +18,10 @@ from typing import Any
 import numpy as np
 
 from haptic.common.config import ConfigError, exit_on_config_error, load_config
-from haptic.common.config.control_schema import passivity_settings
+from haptic.common.config.control_schema import (
+    passivity_settings,
+    standby_passivity_settings,
+)
 from haptic.common.config.scenario import load_scenario
 from haptic.common.model.delay_profile import DelayProfileError, parse_delay_profile
 from haptic.common.model.teleop import model_from_config
@@ -138,9 +141,15 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
                    else TRANSPARENT_SUPERVISION)
     if args.control is not None:
         config["control"]["mode"] = args.control
+    governed = config["governor"]["enabled"] if args.governor is None else args.governor
+    # paper mode with the governor's tdpa action: the layer on standby (master/tick.py)
+    standby = bool(governed and config["governor"]["action"] == "tdpa"
+                   and config["control"]["mode"] == "paper")
     simulator = LockstepSimulator(model, scenario, operator, np.array([gain]), environment,
                                   safety, device="cpu", supervision=supervision,
-                                  passivity=passivity_settings(config))
+                                  passivity=(standby_passivity_settings(config) if standby
+                                             else passivity_settings(config)),
+                                  passivity_standby=standby)
     lines = []
     for flag, text in (("--delay-profile-to-slave", args.delay_profile_to_slave),
                        ("--delay-profile-to-master", args.delay_profile_to_master)):
@@ -153,8 +162,7 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
             injection = InjectionConfig(jitter_s=args.jitter, loss_probability=args.loss,
                                         delay_profile=profile)
         lines.append(injection)
-    governed = config["governor"]["enabled"] if args.governor is None else args.governor
-    governors = [governor_for(model, config)] if governed else None
+    governors = [governor_for(model, config, tdpa_available=standby)] if governed else None
     delay_samples = int(round(args.delay / model.sample_period_s))
     result = simulator.run(args.duration, delay_samples, to_slave=lines[0],
                            to_master=lines[1], seed=int(config["lockstep"]["seed"]),

@@ -31,11 +31,20 @@ class GovernedLanes:
         self.gains_k = np.empty((steps, self.base_gains_k.size))
         """The gain k every lane used at every tick (steps, lanes)."""
         self.beyond_margin = np.zeros(self.base_gains_k.size, bool)
+        #: (lanes,) the lanes whose governor asked this tick for the passivity layer
+        #: (``tdpa``) and for the paper's scheme back (``paper``): the simulator switches
+        #: them (master/tick.py ``switch_passivity``)
+        self.switch_on = np.zeros(self.base_gains_k.size, bool)
+        self.switch_off = np.zeros(self.base_gains_k.size, bool)
+        self.switches = 0
+        """Mode requests over the run."""
 
     def update(self, tick: int, period_s: float, tool_schedule: np.ndarray,
                handle_schedule: np.ndarray) -> np.ndarray:
         """Step every governor at ``tick``; returns the gain ratios k/k0 (lanes,)."""
         sources = tool_schedule[tick]
+        self.switch_on[...] = False
+        self.switch_off[...] = False
         for lane, governor in enumerate(self.governors):
             j = int(sources[lane])
             echo = int(handle_schedule[j, lane]) if j >= 0 else -1
@@ -44,6 +53,10 @@ class GovernedLanes:
             self.ratio[lane] = decision.gain_k / self.base_gains_k[lane]
             self.gains_k[tick, lane] = decision.gain_k
             self.beyond_margin[lane] |= decision.beyond_margin
+            if decision.mode_request is not None:
+                self.switches += 1
+                (self.switch_on if decision.mode_request == "tdpa" else self.switch_off)[
+                    lane] = True
         return self.ratio
 
     @property

@@ -148,7 +148,8 @@ def run_cell(model: TeleopModel, gain_k: float, injected_round_trip_s: float,
             if enabled_at is None and bool(used.enabled[0]):
                 enabled_at = k + 1
             master_link.send_handle(tuple(used.handle_force_used_N[0].tolist()),
-                                    tuple(yh[0].tolist()), used.flags[0])
+                                    tuple(yh[0].tolist()), used.flags[0],
+                                    force_scale=float(used.force_scale[0]))
             # slave: poll -> supervise -> node -> send
             message = slave_link.poll()
             latest = slave_link.latest

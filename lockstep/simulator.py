@@ -219,7 +219,7 @@ class LockstepSimulator:
                  clay_impl: str = "warp", device: str = "auto",
                  supervision: LockstepSupervision = TRANSPARENT_SUPERVISION,
                  passivity: PassivitySettings | None = None,
-                 drift: DriftCoupling | None = None) -> None:
+                 drift: DriftCoupling | None = None, passivity_standby: bool = False) -> None:
         if environment not in ENVIRONMENTS:
             raise ValueError(f"environment must be one of {', '.join(ENVIRONMENTS)}")
         self.model = model
@@ -228,19 +228,23 @@ class LockstepSimulator:
         self.lanes = self.gains_k.size
         self.environment = environment
         master_block, slave_block = stacked_compensators(model, self.gains_k)
-        # passivity: None runs the paper's scheme, settings the TDPA layer (tdpa mode).
+        # passivity: None runs the paper's scheme, settings the TDPA layer (tdpa mode); with
+        # passivity_standby the layer waits switched off for the governors' tdpa action (the
+        # paper's scheme until a lane's governor switches it on, the slave following the flag)
         self.passivity = passivity
+        self.passivity_standby = bool(passivity_standby and passivity is not None)
         # the work area both sides hold, as the programs do (common/model/work_area.py): the
         # handle's workspace and the slave's work area, the tighter bound of each for both
         self.work_area = shared_work_area(
             [a.position_ratio_ah1 for a in model.axes], safety.workspace_min_m,
             safety.workspace_max_m, supervision.work_area_m)
         self.master = MasterNode(master_block, with_work_area(safety, self.work_area),
-                                 passivity)
+                                 passivity, self.passivity_standby)
         self.rig = RigModel.from_model(model, operator, force_noise_std_N)
         base = "linear" if environment == "linear" else "clay"
         self.slave = SlaveNode(model, scenario, base, clay_impl, device, passivity, drift,
-                               (self.work_area.tool_low_m, self.work_area.tool_high_m))
+                               (self.work_area.tool_low_m, self.work_area.tool_high_m),
+                               self.passivity_standby)
         # The node synthesizes its compensators for the model's k; lanes use their own k.
         self.slave.compensators = slave_block
         if environment == "clay+linear":
@@ -304,17 +308,20 @@ class LockstepSimulator:
         enabled = float(Flags.FORCES_ENABLED)
         # the messages before tick 0 (the link runs in sync before the run): no force, the
         # handle and the tool at their start, forces enabled on both sides
-        # the handle's message: force, position, flags (then the governed k/k0 and the
-        # passivity layer's handed-over energy, J, where they apply); the tool's: force,
-        # position, velocity, flags (then the energy)
-        gain_column = 5 if governed is not None else None
-        handle_columns = 5 + (governed is not None) + tdpa
+        # the handle's message: force, position, flags, the force ramp's scale (then the
+        # governed k/k0 and the passivity layer's handed-over energy, J, where they apply);
+        # the tool's: force, position, velocity, flags (then the energy)
+        gain_column = 6 if governed is not None else None
+        handle_columns = 6 + (governed is not None) + tdpa
         handle_energy_column = handle_columns - 1 if tdpa else None
+        master_tick, slave_tick = self.ticks(handle_start, start)
+        self.last_ticks = (master_tick, slave_tick)  # the run's ticks, for inspection
         handle_line = DelayLine(source_schedule(steps, to_slave_d, 0, ts, to_slave,
                                                 line_rngs[0]), handle_columns,
                                 np.column_stack((np.zeros((lanes, 2)), handle_start,
                                                  np.full(lanes, enabled),
-                                                 np.ones((lanes, handle_columns - 5 - tdpa)),
+                                                 master_tick.state.force_scale,
+                                                 np.ones((lanes, handle_columns - 6 - tdpa)),
                                                  np.zeros((lanes, tdpa)))))
         tool_line = DelayLine(source_schedule(steps, to_master_d, 1, ts, to_master,
                                               line_rngs[1]), 7 + tdpa,
@@ -322,8 +329,6 @@ class LockstepSimulator:
                                                np.zeros((lanes, 2)), np.full(lanes, enabled),
                                                np.zeros((lanes, tdpa)))))
         rig_state = self.rig.initial_state(handle_start, line_rngs[2])
-        master_tick, slave_tick = self.ticks(handle_start, start)
-        self.last_ticks = (master_tick, slave_tick)  # the run's ticks, for inspection
         master_state = master_tick.state
         slave_state = slave_tick.state
         command = master_state.last_command_m.copy()
@@ -367,6 +372,11 @@ class LockstepSimulator:
                     master_tick.state.gain_ratio[:] = governed.update(
                         k, ts, tool_line.schedule, handle_line.schedule)
                     handle_message[:, gain_column] = master_tick.state.gain_ratio
+                    if self.passivity_standby and governed.switches:  # the tdpa action
+                        for mask, on in ((governed.switch_on, True),
+                                         (governed.switch_off, False)):
+                            if mask.any():
+                                master_tick.switch_passivity(now_s, mask, on, "governor")
                 if tdpa:  # the slave's handed-over energy and its tool, as the link gives them
                     master_tick.state.peer_energy_J[:] = tool_rows[:, 7]
                     master_tick.state.peer_target_m[:] = tool_rows[:, 2:4] / ratio
@@ -375,6 +385,7 @@ class LockstepSimulator:
                 handle_message[:, 0:2] = used.handle_force_used_N
                 handle_message[:, 2:4] = yh
                 handle_message[:, 4] = [float(f) for f in used.flags]
+                handle_message[:, 5] = used.force_scale
                 if tdpa:
                     handle_message[:, handle_energy_column] = master_tick.state.passivity.sent_J
                 handle_line.send(k, handle_message)
@@ -478,6 +489,7 @@ class _Arrivals:
         fresh, sent = self._fresh(tick)
         period_ns = self.period_s * 1e9
         return [HandleState(0, int(sent[lane]), int(sent[lane] * period_ns),
-                            _FLAGS[int(row[4])], (row[0], row[1]), (row[2], row[3]))
+                            _FLAGS[int(row[4])], (row[0], row[1]), (row[2], row[3]),
+                            force_scale=row[5])
                 if fresh[lane] else None
                 for lane, row in enumerate(rows.tolist())]

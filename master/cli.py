@@ -18,14 +18,17 @@ import zenoh
 
 from haptic.common.analysis.preflight import add_preflight_options, run_preflight
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
-from haptic.common.config.control_schema import passivity_settings
+from haptic.common.config.control_schema import (
+    passivity_settings,
+    standby_passivity_settings,
+)
 from haptic.common.config.scenario import load_scenario, max_block_damping
 from haptic.common.model.teleop import model_from_config
 from haptic.common.model.work_area import work_area_from_config
 from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
 from haptic.common.runtime.failures import exit_on_link_error
 from haptic.common.runtime.program_harness import add_networked_options, check_networked_options
-from haptic.master.governor_setup import start_governor
+from haptic.master.governor_setup import start_governor, tdpa_standby
 from haptic.master.hardware.interface import HardwareError, create_hardware
 from haptic.master.node import MasterNode
 from haptic.master.program import DEFAULT_SYNC_TOLERANCE_M, MasterLoopOptions, run_linked_master
@@ -105,8 +108,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         scenario = load_scenario(options.config["slave"]["scenario"])
         area = work_area_from_config(options.config, scenario.grid.x_range_m,
                                      scenario.grid.y_range_m)
+        # paper mode with the governor's tdpa action: the layer on standby (master/tick.py)
+        standby = tdpa_standby(options.config, args)
         node = MasterNode.from_model(model, with_work_area(settings.safety, area),
-                                     passivity_settings(options.config))
+                                     standby_passivity_settings(options.config) if standby
+                                     else passivity_settings(options.config), standby)
     with exit_on_config_error():
         clay = None
         if args.analysis_environment == "clay":

@@ -23,17 +23,31 @@ from haptic.common.wire.link import Link
 from haptic.master.margin_governor import GovernorDecision, MarginGovernor, governor_for
 
 
+def tdpa_standby(config: dict[str, Any], args: argparse.Namespace) -> bool:
+    """Whether the master builds the passivity layer switched off for the governor to switch
+    on at run time: the governor is enabled with ``action = "tdpa"`` in ``paper`` mode."""
+    return (governor_enabled(config, args) and config["governor"]["action"] == "tdpa"
+            and config["control"]["mode"] == "paper")
+
+
 def start_governor(config: dict[str, Any], args: argparse.Namespace, model: TeleopModel,
                    program: str = "haptic-master", stream: TextIO | None = None,
                    ) -> tuple[MarginGovernor | None, int | None]:
     """The governor (None when not enabled) and ``None`` to go on, or :data:`EXIT_UNSTABLE`
     when the largest round trip the configured delay profiles reach is beyond the delay
-    margin of the lowest gain and ``--allow-unstable`` was not given. Raises
+    margin of the lowest gain and ``--allow-unstable`` was not given (with the ``tdpa``
+    action the passivity layer covers any round trip, so nothing is refused). Raises
     :class:`~haptic.common.config.ConfigError` (``governor.action``)."""
     stream = stream if stream is not None else sys.stderr
     if not governor_enabled(config, args):
         return None, None
-    governor = governor_for(model, config)
+    switchable = tdpa_standby(config, args)
+    governor = governor_for(model, config, tdpa_available=switchable)
+    if switchable:
+        print(f"{program}: governor (tdpa: the passivity layer switches on before the round "
+              f"trip reaches {governor.settings.safety_factor:g} tau*(k)): "
+              f"{governor.table.describe()}", file=stream, flush=True)
+        return governor, None
     print(f"{program}: governor ({governor.settings.action}, usable while round trip <= "
           f"{governor.settings.safety_factor:g} tau*): {governor.table.describe()}",
           file=stream, flush=True)

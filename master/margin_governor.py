@@ -21,9 +21,11 @@ echo age (s), returns the gain k to use, and appends events.
   (their designs are linear in k). With ``recover_after_s`` > 0, k goes back up one table
   step once the *peak* round trip over ``hold_s`` has allowed that step for
   ``recover_after_s``.
-- **tdpa.** Instead of lowering k, request the passivity mode (an event and
-  :attr:`GovernorDecision.mode_request`); where the build has no such mode
-  (``tdpa_available`` False) the governor lowers k as above and says so in the event.
+- **tdpa.** Instead of lowering k, request the passivity layer (an event and
+  :attr:`GovernorDecision.mode_request`): the master switches its standby layer on and the
+  slave follows (master/tick.py ``switch_passivity``, docs/governor.md); where the caller
+  cannot switch it (``tdpa_available`` False) the governor lowers k as above and says so in
+  the event.
 - **Beyond every margin.** When even the lowest table gain is not stable at the round trip
   (``rtt >= tau*(k_min)``), :attr:`GovernorDecision.beyond_margin` is set: the caller puts
   the loop in its safe state unless ``--allow-unstable`` was given. The governor never picks
@@ -242,7 +244,7 @@ class MarginGovernor:
         k = f"k {self.gain_k:.3g}"
         if abs(self.gain_k - self.target_k) > _SNAP * self.target_k:
             k += f"->{self.target_k:.3g}"
-        extra = " TDPA?" if self.tdpa_requested else ""
+        extra = (" TDPA" if self.tdpa_available else " TDPA?") if self.tdpa_requested else ""
         extra += " BEYOND MARGIN" if self.beyond_margin else ""
         return f"  gov {k} rtt {rtt}{extra}"
 

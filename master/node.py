@@ -144,7 +144,8 @@ class MasterNode:
     """
 
     def __init__(self, compensator: Any, safety: SafetySettings,
-                 passivity: PassivitySettings | None = None) -> None:
+                 passivity: PassivitySettings | None = None,
+                 passivity_standby: bool = False) -> None:
         if tuple(compensator.input_names) != COMPENSATOR_INPUTS or (
             tuple(compensator.output_names) != COMPENSATOR_OUTPUTS
         ):
@@ -154,6 +155,9 @@ class MasterNode:
         self.period_s = compensator.period_s
         #: ``None``: the paper's scheme; else the TDPA layer's settings (``tdpa`` mode).
         self.passivity = passivity
+        #: the TDPA layer is built switched off, for the margin governor to switch on at run
+        #: time (``paper`` mode with ``[governor] action = "tdpa"``; master/tick.py)
+        self.passivity_standby = bool(passivity_standby and passivity is not None)
         self._workspace_min = np.asarray(safety.workspace_min_m, float)
         self._workspace_max = np.asarray(safety.workspace_max_m, float)
         self._matrices: tuple | None = None
@@ -176,9 +180,11 @@ class MasterNode:
 
     @classmethod
     def from_model(cls, model: TeleopModel, safety: SafetySettings,
-                   passivity: PassivitySettings | None = None) -> MasterNode:
-        """The node for the configured model and safety limits (and TDPA layer)."""
-        return cls(master_compensator(model), safety, passivity)
+                   passivity: PassivitySettings | None = None,
+                   passivity_standby: bool = False) -> MasterNode:
+        """The node for the configured model and safety limits (and TDPA layer, switched off
+        until the governor switches it on with ``passivity_standby``)."""
+        return cls(master_compensator(model), safety, passivity, passivity_standby)
 
     def _kernel_constants(self) -> tuple[tuple, Any]:
         """The compensator's matrices as (L, ., .) Warp arrays and the limits struct, built
@@ -352,7 +358,7 @@ class MasterNode:
         wp = _warp()
         lanes = position.shape[0]
         buffers: list = []
-        types = {np.float64: wp.float64, np.int64: wp.int64}
+        types = {np.float64: wp.float64, np.int64: wp.int64, np.bool_: wp.bool}
 
         def zeros(shape: tuple, dtype: Any) -> np.ndarray:
             array = wp.zeros(shape, dtype=types[dtype], device=DEVICE)
@@ -361,7 +367,7 @@ class MasterNode:
 
         settings = self.passivity
         port = PassivityPort.create(settings, self.period_s, lanes, settings.master_keep_J,
-                                    zeros)
+                                    zeros, active=not self.passivity_standby)
         port.previous_position_m[...] = position
         peer = wp.full(lanes, wp.float64(np.nan), dtype=wp.float64, device=DEVICE)
         limits = passivity_kernel.PassivityLimits()
@@ -390,7 +396,7 @@ class MasterNode:
             passivity_kernel.master_passivity_kernel, dim=lanes, device=DEVICE,
             inputs=[inputs, peer, target, enabled, faulted, command, last_command, origin,
                     buffers[10], tank, sent, peer_sent, energy_in, energy_out, forgotten,
-                    dissipated, correction, buffers[9], limits], record_cmd=True)
+                    dissipated, correction, buffers[9], buffers[11], limits], record_cmd=True)
         state._buffers = (*state._buffers, *buffers, peer, target)
 
     def _collect_events(self, state: MasterNodeState) -> None:

@@ -65,9 +65,11 @@ def master_passivity_kernel(
     dissipated: wp.array(dtype=wp.float64),
     correction: wp.array(dtype=wp.float64),
     active_steps: wp.array(dtype=wp.int64),
+    active: wp.array(dtype=wp.bool),
     limits: PassivityLimits,
 ):
-    """One period of one lane: receive, yield, observe (common/model/passivity.py)."""
+    """One period of one lane: receive, yield, observe (common/model/passivity.py); a lane
+    switched off only notes the peer's energy and where the command is."""
     lane = wp.tid()
     zero = wp.float64(0.0)
     ts = limits.period_s
@@ -75,9 +77,15 @@ def master_passivity_kernel(
     # receive: the newest (largest) cumulative energy the slave handed over
     value = peer_value[lane]
     if wp.isfinite(value) and value > peer_sent[lane]:
-        account = capped(account + value - peer_sent[lane], forgotten, lane,
-                         limits.credit_max_J)
+        if active[lane]:
+            account = capped(account + value - peer_sent[lane], forgotten, lane,
+                             limits.credit_max_J)
         peer_sent[lane] = value
+    if not active[lane]:  # switched off (paper mode, the governor's standby)
+        correction[lane] = zero
+        previous[lane, 0] = command[lane, 0]
+        previous[lane, 1] = command[lane, 1]
+        return
     # the operator's force as the node used it (non-finite: 0, saturated)
     limit = limits.force_limit_N
     fx = inputs[lane, 0]

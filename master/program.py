@@ -15,9 +15,11 @@ One tick at Ts (docs/programs.md):
    the compensator is not stepped. Back to ``ok``: a fresh node state at the current position
    whose forces ramp in (``MasterNode.resume``; at the very first start the node's own
    small-force gate applies);
-5. ``hardware.write(command)``; ``link.send_handle(fh_used, yh, flags)``, where fh_used is the
-   force the compensator used as the node reports it (saturated, scaled by the force ramp;
-   zero in the safe state), so that Ch2 at the slave sees the same force as Ch1 here.
+5. ``hardware.write(command)``; ``link.send_handle(fh_used, yh, flags, ..., force_scale)``,
+   where fh_used is the force the compensator used as the node reports it (saturated, scaled
+   by the force ramp; zero in the safe state), so that Ch2 at the slave sees the same force as
+   Ch1 here, and force_scale the ramp's factor, which the slave applies to its Ct2's input as
+   Ct1 here had it applied to the received tool force.
 
 Each tick's stages (read, poll, supervise, node, write, send, telemetry) are timed; the
 summary's ``stages`` gives their p50/p99 (common/runtime/stage_times.py).
@@ -33,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.model.passivity import passivity_summary
 from haptic.common.model.teleop import TeleopModel
 from haptic.common.records.run_recording import RunRecording
 from haptic.common.records.trace import TraceRecorder
@@ -59,6 +62,8 @@ TICK_STAGES = ("read", "poll", "supervise", "node", "write", "send", "telemetry"
 
 #: Default tolerance of the resync position check, m per axis.
 DEFAULT_SYNC_TOLERANCE_M = 0.001
+#: the program's one lane, as a mask (MasterTick.switch_passivity)
+_ONE_LANE = np.ones(1, bool)
 
 #: The columns of ``/master/state`` in the recording (``--record``).
 MASTER_RECORD_COLUMNS = (
@@ -201,7 +206,10 @@ def _run_linked_master(
                 governor = loop_options.governor
                 governor_events = governor.events if governor is not None else []
                 nominal_k = model.ch1_gain_k
-                tdpa_peer = PassivityLink(node.passivity is not None)  # energy_J on the wire
+                # energy_J on the wire; the TDPA flag says the configured mode (a standby
+                # layer's run-time switch is Flags.TDPA_SWITCHED, master/tick.py)
+                tdpa_peer = PassivityLink(node.passivity is not None
+                                          and not node.passivity_standby)
 
                 def step(tick: int, now_ns: int) -> None:
                     nonlocal reading
@@ -235,6 +243,13 @@ def _run_linked_master(
                     if governor is not None:  # k from the echoed round trip (governor.md)
                         decision = governor_step(governor, link, now_s)
                         gain_k = decision.gain_k
+                        if decision.mode_request is not None and node.passivity_standby:
+                            # the passivity layer on or off; the slave follows the flag
+                            tick_stages.switch_passivity(
+                                now_s, _ONE_LANE, decision.mode_request == "tdpa",
+                                governor.events[-1]["reason"] if governor.events else "governor")
+                            loop.node_events.extend(tick_stages.passivity_events)
+                            tick_stages.passivity_events.clear()
                         if supervisor.enabled:
                             tick_stages.state.gain_ratio[0] = gain_k / nominal_k
                             if decision.beyond_margin and not loop_options.allow_unstable:
@@ -268,7 +283,8 @@ def _run_linked_master(
                     # send: the force the compensator used and the handle position
                     loop.last_yh = position_for_the_wire((yhx, yhy), loop.last_yh)
                     link.send_handle(sent, loop.last_yh, used.flags[0] | tdpa_peer.flags, gain_k,
-                                     tdpa_peer.sent_J(tick_stages.state))
+                                     tdpa_peer.sent_J(tick_stages.state),
+                                     float(used.force_scale[0]))
                     send_ns = clock()
                     # telemetry: summary figures, trace, recording, display
                     _flush_node_events(loop, tick_stages)
@@ -325,7 +341,8 @@ def _run_linked_master(
                         hardware.present_tool_force(np.zeros(2))
                         hardware.write(hold)
                         link.send_handle((0.0, 0.0), (float(hold[0]), float(hold[1])),
-                                         Flags.SAFE_STATE, gain_k_now())
+                                         Flags.SAFE_STATE | tick_stages.switched_flags()[0],
+                                         gain_k_now(), force_scale=0.0)
                     except Exception as error:  # noqa: BLE001 - shutting down regardless
                         print(f"haptic-master: while stopping: {error}", file=sys.stderr)
                     _flush_node_events(loop, tick_stages)
@@ -356,7 +373,10 @@ def _run_linked_master(
         hardware_faults=supervisor.hardware_faults[:50], node_faulted=supervisor.faulted,
         stages=stages.summary(), work_area_holds=supervisor.peer_stops,
         **tool_guard.summary(), **inert_summary,
-        **(governor.summary() if governor is not None else {}), **extra_summary)
+        **(governor.summary() if governor is not None else {}),
+        **passivity_summary(tick_stages.state.passivity if tick_stages.state is not None
+                            else None, node.passivity_standby),
+        **extra_summary)
     if loop_options.trace_path:
         trace.save(loop_options.trace_path)
         summary["trace"] = str(loop_options.trace_path)

@@ -70,6 +70,11 @@ class MasterTick:
         self._scale = np.zeros(lanes)
         self._tool_force = np.zeros((lanes, 2))
         self._pending_events: list[tuple[float, Any]] = []
+        self._no_flags = [Flags(0)] * lanes
+        #: (lanes,) where the governor has the standby passivity layer switched on
+        self.standby_active = np.zeros(lanes, bool)
+        #: the switch's events (``tdpa_on``/``tdpa_off``), for the program's event list
+        self.passivity_events: list[dict[str, Any]] = []
 
     def start(self, position_m: Any, synced: bool = False) -> None:
         """Hold each lane where its handle is ((lanes, 2) or (2,), m). With ``synced`` the
@@ -125,6 +130,8 @@ class MasterTick:
             if previous is not None and previous.passivity is not None:
                 # the passivity layer's energies are monotone over the whole run
                 self.state.passivity.continue_from(previous.passivity)
+            if self.node.passivity_standby:  # switched on stays on
+                self.state.passivity.active[...] = self.standby_active
             self.node_offset_s = now_s
             if every_lane_resumes or not resume.any():
                 return
@@ -196,14 +203,42 @@ class MasterTick:
             self._tool_used[...] = 0.0
             self._scale[...] = 0.0
         flags = []
+        switched = self.switched_flags()
         for lane, supervisor in enumerate(self.supervisors):
             if enabled[lane]:
-                flags.append(Flags.FORCES_ENABLED)
+                flags.append(Flags.FORCES_ENABLED | switched[lane])
             else:
                 self._command[lane] = supervisor.hold_m
-                flags.append(Flags.SAFE_STATE)
+                flags.append(Flags.SAFE_STATE | switched[lane])
         return MasterTickOutput(self._command, self._handle_used, self._tool_used, self._scale,
                                 enabled, flags)
+
+    def switched_flags(self) -> list[Flags]:
+        """Per lane, :attr:`Flags.TDPA_SWITCHED` where the governor switched the passivity
+        layer on (a standby node), else no flag."""
+        port = self.state.passivity if self.state is not None else None
+        if port is None or not self.node.passivity_standby:
+            return self._no_flags
+        return [Flags.TDPA_SWITCHED if on else Flags(0) for on in port.active.tolist()]
+
+    def switch_passivity(self, now_s: float, lanes: np.ndarray, on: bool, reason: str) -> int:
+        """Switch the passivity layer on (``on``) or off in ``lanes`` ((lanes,) bool mask) of
+        a node built with it on standby (``paper`` mode, the governor's ``tdpa`` action;
+        common/model/passivity.py ``PassivityPort.switch``): the messages carry
+        :attr:`Flags.TDPA_SWITCHED` while it is on and the slave follows. An event per lane
+        that changed (``tdpa_on``/``tdpa_off``, with ``reason``); returns how many did.
+        Raises ``RuntimeError`` on a node without a standby layer."""
+        if not self.node.passivity_standby:
+            raise RuntimeError("the passivity layer can be switched only where it is built "
+                               "on standby ([governor] action = \"tdpa\", paper mode)")
+        mask = np.asarray(lanes, bool)
+        self.standby_active[mask] = on  # a node state made later starts so too
+        port = self.state.passivity if self.state is not None else None
+        changed = port.switch(mask, on) if port is not None else mask
+        for lane in np.flatnonzero(changed):
+            self.passivity_events.append({"time_s": now_s, "kind": "tdpa_on" if on else
+                                          "tdpa_off", "reason": reason, "lane": int(lane)})
+        return int(np.count_nonzero(changed))
 
     def _received_tool_force(self) -> np.ndarray:
         """The newest received tool force per lane (zero before the first message), N."""

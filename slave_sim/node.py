@@ -71,6 +71,9 @@ class SlaveState:
     gain_ratio: np.ndarray | None = None
     """(lanes,) k/k0 the compensators' inputs are scaled by: the master's governed gain k
     (HandleState.gain_k) over this node's; None: 1 (common/analysis/margin_table.py)."""
+    tool_force_scale: np.ndarray | None = None
+    """(lanes,) the master's force ramp (HandleState.force_scale, 0..1) the Ct2 input ft is
+    scaled by, as the master's Ct1 input is; None: 1."""
     #: The TDPA observer and controller of the tool's port (``tdpa`` mode), else None.
     passivity: PassivityPort | None = None
     #: The paper mode's drift coupling filter (common/model/drift.py), else None.
@@ -123,7 +126,8 @@ class SlaveNode:
                  clay_impl: str = "warp", device: str = "auto",
                  passivity: PassivitySettings | None = None,
                  drift: DriftCoupling | None = None,
-                 tool_bounds_m: tuple[Sequence[float], Sequence[float]] | None = None) -> None:
+                 tool_bounds_m: tuple[Sequence[float], Sequence[float]] | None = None,
+                 passivity_standby: bool = False) -> None:
         self.model = model
         #: The wall the tool stays inside: (low (x, y), high (x, y)), m, the work area both
         #: sides hold (common/model/work_area.py); None: no wall.
@@ -133,6 +137,10 @@ class SlaveNode:
         self.drift = drift
         #: ``None``: the paper's scheme; else the TDPA layer's settings (``tdpa`` mode).
         self.passivity = passivity
+        #: the TDPA layer is built switched off and follows the master's
+        #: :attr:`~haptic.common.wire.messages.Flags.TDPA_SWITCHED` (``paper`` mode: the
+        #: master's governor may switch it on; slave_sim/tick.py)
+        self.passivity_standby = bool(passivity_standby and passivity is not None)
         self.scenario = scenario
         self.sample_period_s = model.sample_period_s
         self.compensators = slave_compensators(model)
@@ -154,13 +162,21 @@ class SlaveNode:
         section = config["slave"]
         scenario = scenario or load_scenario(section["scenario"])
         environment = None if section["environment"] == "scenario" else section["environment"]
-        from haptic.common.config.control_schema import drift_coupling, passivity_settings
+        from haptic.common.config.control_schema import (
+            drift_coupling,
+            passivity_settings,
+            standby_passivity_settings,
+        )
 
         model = model_from_config(config)
         area = work_area_from_config(config, scenario.grid.x_range_m, scenario.grid.y_range_m)
+        # paper mode: the layer on standby, for a master whose governor switches it on
+        passivity = passivity_settings(config)
+        standby = passivity is None
         return cls(model, scenario, environment, section["clay_impl"], section["device"],
-                   passivity_settings(config), drift_coupling(config, model.sample_period_s),
-                   (area.tool_low_m, area.tool_high_m))
+                   standby_passivity_settings(config) if standby else passivity,
+                   drift_coupling(config, model.sample_period_s),
+                   (area.tool_low_m, area.tool_high_m), standby)
 
     def initial_state(self, lanes: int = 1, start_position_m: np.ndarray | None = None
                       ) -> SlaveState:
@@ -180,7 +196,8 @@ class SlaveNode:
             halted=np.zeros(lanes, bool),
             environment=self.environment.initial_state(lanes),
             passivity=None if self.passivity is None else PassivityPort.create(
-                self.passivity, self.sample_period_s, lanes, self.passivity.slave_keep_J),
+                self.passivity, self.sample_period_s, lanes, self.passivity.slave_keep_J,
+                active=not self.passivity_standby),
             drift=None if self.drift is None else self.drift.initial_state(lanes),
         )
 
@@ -191,10 +208,16 @@ class SlaveNode:
         ``peer_energy_J`` (lanes,): the master's cumulative input energy received (``tdpa``
         mode; ignored otherwise)."""
         inputs = np.concatenate((handle_force_N, state.tool_force_N), axis=1)
+        if state.tool_force_scale is not None:  # the master's force ramp on ft, as Ct1 has it
+            inputs[:, 2:4] *= state.tool_force_scale[:, None]
         if state.gain_ratio is not None:
             inputs *= state.gain_ratio[:, None]
         actuator = self.compensators.step(state.compensator, inputs)
         port = state.passivity
+        if port is not None and not port.active.any():  # on standby: the paper's scheme
+            if peer_energy_J is not None:
+                port.receive(peer_energy_J)  # noted, not credited: counters stay monotone
+            port = None
         if state.drift is not None:  # paper mode's slow coupling of Ah1 yh_recv - yt
             actuator += self.drift.force(state.drift, self._position_ratio * np.asarray(
                 handle_position_m) - state.tool[:, POSITION_COLUMNS])

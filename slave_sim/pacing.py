@@ -24,13 +24,31 @@ what one tick could not take left the tool 1.6 mm behind a 2 cm sine after 6 s (
 given up of 11 000). While the tool is halted (waiting, tripped,
 resyncing) every tick takes one step, as before, and the count restarts at the next message.
 
+Each step uses its own sample's bounded force, position and force scale (the master's force
+ramp), not the newest's: the link hands over every message delivered in the tick
+(``Link.delivered``), each passes the input guard (slave_sim/tick.py, ``SlaveTick.samples``),
+and :meth:`MasterSamplePacing.plan` returns one entry per step. A lost sample (a gap in the
+sequence) is stepped with the values interpolated linearly between the samples on either side
+of it: the master's Ch1 integrated the force it measured then, which lies closer to that line
+than to either end.
+
 ``[slave.pacing] follow_master_samples = false`` restores one step per tick.
 """
 
 from __future__ import annotations
 
+from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
+
+#: One admitted master sample: (epoch, seq, (fx, fy) N, (x, y) m, the master's force ramp
+#: 0..1) (``SlaveTick.samples``).
+Sample = tuple[int, int, tuple[float, float], tuple[float, float], float]
+#: One node step: the handle force (fx, fy) N, position (x, y) m and force scale to step
+#: with, or ``None``: the tick's own input (the newest admitted message's, as ``SlaveTick``
+#: holds it).
+Step = tuple[float, float, float, float, float] | None
 
 
 @dataclass(frozen=True)
@@ -51,58 +69,95 @@ class PacingSettings:
 
 
 class MasterSamplePacing:
-    """Per tick, the number of node steps (see the module docstring); counts the ticks it
-    waited (``waited_ticks``), the steps it caught up (``caught_up_steps``: beyond one per
-    tick), the samples it gave up (``dropped_samples``: beyond the backlog's bound) and the
-    largest backlog (``max_backlog``)."""
+    """Per tick, the node steps to take, each with its sample's input (see the module
+    docstring); counts the ticks it waited (``waited_ticks``), the steps it caught up
+    (``caught_up_steps``: beyond one per tick), the steps for lost samples
+    (``interpolated_steps``), the samples it gave up (``dropped_samples``: beyond the
+    backlog's bound) and the largest backlog (``max_backlog``)."""
 
     def __init__(self, settings: PacingSettings) -> None:
         self.settings = settings
-        self._last: tuple[int, int] | None = None  # (epoch, seq) of the last sample stepped
+        self._last: Sample | None = None  # the last sample queued for a step
+        self._owed: deque[tuple[float, float, float, float, float]] = deque()
         self.waited_ticks = 0
         self.caught_up_steps = 0
+        self.interpolated_steps = 0
         self.dropped_samples = 0
-        self.backlog = 0  # samples received but not yet stepped
         self.max_backlog = 0
 
-    def steps(self, running: bool, sample: tuple[int, int] | None) -> int:
-        """Node steps for this tick. ``running``: the tool follows the handle this tick;
-        ``sample``: (epoch, seq) of the fresh, admitted master message, or None."""
-        if not self.settings.follow_master_samples:
-            return 1
-        if not running:
-            # halted: one step per tick; the count restarts with the next message
-            self._last = sample
-            self.backlog = 0
-            return 1
-        if sample is None:
-            if self._last is None:  # running without a sample yet (a warm start)
-                return 1
-            if self.backlog == 0:
-                self.waited_ticks += 1
-                return 0
-            return self._take(0)
-        last, self._last = self._last, sample
-        if last is None or last[0] != sample[0]:
-            self.backlog = 0
-            return 1  # the first sample, or a new epoch (the master restarted)
-        ahead = sample[1] - last[1]
-        if ahead <= 0:  # the receive filter drops these; never step backwards
-            return self._take(0) if self.backlog else 0
-        return self._take(ahead)
+    @property
+    def backlog(self) -> int:
+        """Samples received but not yet stepped."""
+        return len(self._owed)
 
-    def _take(self, new_samples: int) -> int:
-        """Steps for this tick from the backlog plus ``new_samples``; the rest stays owed,
-        up to ``max_backlog_samples`` (beyond: given up and counted)."""
-        owed = self.backlog + new_samples
-        steps = min(owed, self.settings.max_steps_per_tick)
-        rest = owed - steps
-        if rest > self.settings.max_backlog_samples:
-            self.dropped_samples += rest - self.settings.max_backlog_samples
-            rest = self.settings.max_backlog_samples
-        self.backlog = rest
-        self.max_backlog = max(self.max_backlog, rest)
-        self.caught_up_steps += steps - 1 if new_samples else steps
+    def plan(self, running: bool, samples: Sequence[Sample]) -> list[Step]:
+        """The node steps of this tick, one entry each. ``running``: the tool follows the
+        handle this tick; ``samples``: the admitted master samples delivered this tick, in
+        order (none: nothing new)."""
+        if not self.settings.follow_master_samples:
+            return [None]
+        owed = self._owed
+        if not running:
+            # halted: one step per tick with the tick's input; the count restarts with the
+            # next sample
+            self._last = samples[-1] if samples else None
+            owed.clear()
+            return [None]
+        if not samples:
+            if self._last is None:  # running without a sample yet (a warm start)
+                return [None]
+            if not owed:
+                self.waited_ticks += 1
+                return []
+            return self._take(0)
+        new = 0
+        for sample in samples:
+            new += self._queue(sample)
+        if not new and not owed:
+            return []
+        return self._take(new)
+
+    def _queue(self, sample: Sample) -> int:
+        """Owe the steps up to ``sample``: one per sample since the last one queued, the lost
+        ones interpolated; returns how many were queued."""
+        last = self._last
+        owed = self._owed
+        epoch, seq, (fx, fy), (x, y), scale = sample
+        if last is None or last[0] != epoch:
+            owed.clear()  # the first sample, or a new epoch (the master restarted)
+            owed.append((fx, fy, x, y, scale))
+            self._last = sample
+            return 1
+        ahead = seq - last[1]
+        if ahead <= 0:  # the receive filter drops these; never step backwards
+            return 0
+        self._last = sample
+        _, _, (fx0, fy0), (x0, y0), scale0 = last
+        keep = self.settings.max_steps_per_tick + self.settings.max_backlog_samples
+        first = max(1, ahead - keep + 1)  # the oldest lost samples beyond the bound: given up
+        self.dropped_samples += first - 1
+        for index in range(first, ahead + 1):
+            weight = index / ahead
+            owed.append((fx0 + weight * (fx - fx0), fy0 + weight * (fy - fy0),
+                         x0 + weight * (x - x0), y0 + weight * (y - y0),
+                         scale0 + weight * (scale - scale0)))
+        self.interpolated_steps += ahead - first
+        return ahead - first + 1
+
+    def _take(self, new_samples: int) -> list[Step]:
+        """This tick's steps, the oldest owed first, at most ``max_steps_per_tick``; beyond
+        ``max_backlog_samples`` left owed, the oldest are given up and counted."""
+        owed = self._owed
+        settings = self.settings
+        excess = len(owed) - settings.max_steps_per_tick - settings.max_backlog_samples
+        for _ in range(excess):
+            owed.popleft()
+        if excess > 0:
+            self.dropped_samples += excess
+        steps: list[Step] = [owed.popleft()
+                             for _ in range(min(len(owed), settings.max_steps_per_tick))]
+        self.max_backlog = max(self.max_backlog, len(owed))
+        self.caught_up_steps += len(steps) - 1 if new_samples else len(steps)
         return steps
 
     def summary(self) -> dict[str, Any]:
@@ -110,5 +165,6 @@ class MasterSamplePacing:
         return {"pacing_follow_master_samples": self.settings.follow_master_samples,
                 "pacing_waited_ticks": self.waited_ticks,
                 "pacing_caught_up_steps": self.caught_up_steps,
+                "pacing_interpolated_steps": self.interpolated_steps,
                 "pacing_dropped_samples": self.dropped_samples,
                 "pacing_max_backlog_samples": self.max_backlog}

@@ -36,6 +36,7 @@ import numpy as np
 
 from haptic.common.analysis.margin_table import gain_scalable
 from haptic.common.config import ConfigError
+from haptic.common.model.passivity import passivity_summary
 from haptic.common.model.work_area import slave_work_area_m, work_area_from_config
 from haptic.common.records.cutting import cutting_figures, steady_cut_fields
 from haptic.common.records.run_recording import RunRecording
@@ -222,7 +223,9 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         # the master's governed k (never above ours) and the echo of its send time
         tick_stages.follow_gain(node.model.ch1_gain_k, gain_scalable(node.model))
         echo = tick_stages.echo_send_time_ns
-        tdpa_peer = PassivityLink(node.passivity is not None)  # energy_J on the wire
+        # energy_J on the wire; the TDPA flag says the configured mode (in paper mode the
+        # layer waits on standby for the master's Flags.TDPA_SWITCHED: slave_sim/tick.py)
+        tdpa_peer = PassivityLink(node.passivity is not None and not node.passivity_standby)
 
         def step(tick: int, now_ns: int) -> None:
             now_s = harness.time_s(now_ns)
@@ -233,8 +236,12 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             poll_ns = clock()
             # supervise: input bounds (slave_sim/input_guard.py), watchdog, resync, work-area
             # guard (slave_sim/supervisor.py), all in slave_sim/tick.py; then the phase lock
+            # every message delivered with the newest passes the guard too: each admitted
+            # one is a node step with its own force (slave_sim/pacing.py)
+            delivered = link.delivered
             fresh = bool(tick_stages.supervise(now_s, (message,), (link.silence_s(),),
-                                               (link.peer_alive,))[0])
+                                               (link.peer_alive,),
+                                               (delivered[:-1] if delivered else (),))[0])
             if fresh and phase_lock is not None:
                 if link.last_delivery_measured:
                     harness.runner.shift_schedule(phase_lock.update(
@@ -249,13 +256,12 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             supervise_ns = clock()
             # node: Ch2/Ct2, the tool and the clay, once per master sample while the tool
             # runs (none while the master's next sample has not come, more after a gap)
-            steps = pacing.steps(running, (message.epoch, message.seq) if fresh else None)
+            plan = pacing.plan(running, tick_stages.samples[0])
             ticked = last_tick["ticked"]
-            if steps or ticked is None:
-                for _ in range(max(steps, 1)):
-                    ticked = tick_stages.control()
+            if plan or ticked is None:  # each step with its own sample's force
+                ticked = tick_stages.control_samples(plan)
                 last_tick["ticked"] = ticked
-                last_tick["sample_time_s"] += max(steps, 1) * period_s
+                last_tick["sample_time_s"] += max(len(plan), 1) * period_s
             out = ticked.out
             if running:  # yt - Ah1 yh while the tool runs (a stopped tool is re-placed)
                 flags_box["running_gap"] = out.tracking_error_m[0]
@@ -335,6 +341,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                                                      not None else np.ones(1))[0]),
         **(phase_lock.summary() if phase_lock is not None else {"phase_lock_enabled": False}),
         **pacing.summary(),
+        **passivity_summary(state.passivity, node.passivity_standby),
         **extra_summary,
     )
     traced = trace.arrays()

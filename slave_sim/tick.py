@@ -9,7 +9,9 @@ the input guard, the supervisor, the resync and the node exactly as they ship
     (caller) SlaveTick.supervise  SlaveTick.control  (caller)
 
 :meth:`SlaveTick.supervise`, per lane: the input guard bounds a fresh ``HandleState``
-(slave_sim/input_guard.py; a fault is not an input); the supervisor (watchdog, resync,
+(slave_sim/input_guard.py; a fault is not an input), and, where the caller passes them, every
+older message delivered in the same tick before it (the program steps each admitted one with
+its own force: :attr:`SlaveTick.samples`, slave_sim/pacing.py); the supervisor (watchdog, resync,
 work-area guard; slave_sim/supervisor.py) says whether the tool follows the handle
 (``ToolResync``: through the clay at a bounded speed) and whether it runs, stops or resumes.
 :meth:`SlaveTick.control` steps the node (Ch2/Ct2, the tool, the environment) with the
@@ -28,6 +30,7 @@ from haptic.common.analysis.margin_table import follow_gain
 from haptic.common.wire.messages import Flags, HandleState
 from haptic.slave_sim.input_guard import InputGuard
 from haptic.slave_sim.node import SlaveNode, SlaveOutputs, SlaveState
+from haptic.slave_sim.pacing import Sample, Step
 from haptic.slave_sim.resync import ToolResync
 from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
 
@@ -70,6 +73,14 @@ class SlaveTick:
         self.resync = resync if resync is not None else ToolResync(node)
         self.lanes = lanes
         self.handle_force_N = np.zeros((lanes, 2))
+        #: per lane, every message of the last :meth:`supervise` the guard admitted, in order,
+        #: as (epoch, seq, (fx, fy) N bounded, (x, y) m, force scale); filled only where
+        #: ``earlier`` was passed (the program: slave_sim/pacing.py)
+        self.samples: list[list[Sample]] = [[] for _ in range(lanes)]
+        #: (lanes,) the newest admitted message's force ramp (HandleState.force_scale), which
+        #: scales the node's Ct2 input ft as the master's scaled its Ct1 input
+        self.force_scale = np.ones(lanes)
+        state.tool_force_scale = self.force_scale
         self.handle_position_m = state.handle_position_m.copy()
         self.fresh = np.zeros(lanes, bool)
         self.running = np.zeros(lanes, bool)
@@ -104,18 +115,32 @@ class SlaveTick:
 
     def supervise(self, now_s: float, messages: Sequence[HandleState | None],
                   silence_s: Sequence[float] | None = None,
-                  peer_alive: Sequence[bool] | None = None) -> np.ndarray:
+                  peer_alive: Sequence[bool] | None = None,
+                  earlier: Sequence[Sequence[HandleState]] | None = None) -> np.ndarray:
         """Feed every lane's guard and supervisor (``messages``: the fresh ``HandleState``
         per lane or ``None``; ``silence_s``: time since the last fresh message per lane, s;
-        ``peer_alive``: the master's liveliness per lane); re-place, stop or resume the tool
-        as they say. Returns the lanes whose message was an input (fresh and admitted)."""
+        ``peer_alive``: the master's liveliness per lane; ``earlier``: per lane, the older
+        messages delivered with it, in order: each passes the guard before it, and the
+        admitted ones go into :attr:`samples`); re-place, stop or resume the tool as they
+        say. Returns the lanes whose message was an input (fresh and admitted)."""
         guards, supervisors = self.guards, self.supervisors
         admitted_lanes = []
         follow = []
         for lane, message in enumerate(messages):
-            admitted = message is not None and guards[lane].admit(message, now_s)
+            guard = guards[lane]
+            if earlier is not None:
+                samples = self.samples[lane]
+                samples.clear()
+                for older in earlier[lane]:  # a fault among them latches the guard too
+                    if guard.admit(older, now_s):
+                        samples.append((older.epoch, older.seq, guard.force_N,
+                                        guard.position_m, older.force_scale))
+            admitted = message is not None and guard.admit(message, now_s)
             if admitted:
                 admitted_lanes.append(lane)
+                if earlier is not None:
+                    self.samples[lane].append((message.epoch, message.seq, guard.force_N,
+                                               guard.position_m, message.force_scale))
             # a fault is not an input
             follow.append(supervisors[lane].receive(message if admitted else None))
         fresh = self.fresh
@@ -130,8 +155,11 @@ class SlaveTick:
             for lane in admitted_lanes:
                 message = messages[lane]
                 self.echo_send_time_ns[lane] = message.send_time_ns
+                self.force_scale[lane] = message.force_scale
                 if gain is not None:
                     self.state.gain_ratio[lane] = follow_gain(message.gain_k, *gain)
+            if self.node.passivity_standby:
+                self._follow_switch(now_s, messages, admitted_lanes)
         state = self.state
         if any(follow):  # to the held handle, cutting (slave_sim/resync.py)
             self.resync.step(state, self.handle_position_m, now_s,
@@ -153,6 +181,44 @@ class SlaveTick:
             self.node.safe_stop(state, None if all(stop) else np.array(stop))
         return fresh
 
+    def _follow_switch(self, now_s: float, messages: Sequence[HandleState | None],
+                       admitted_lanes: list[int]) -> None:
+        """A standby passivity layer (``paper`` mode) follows the master's
+        :attr:`Flags.TDPA_SWITCHED` in every admitted message: on while it is set, off while
+        it is clear (an event ``tdpa_on``/``tdpa_off`` on the lane's supervisor)."""
+        port = self.state.passivity
+        if port is None:
+            return
+        active = port.active
+        for lane in admitted_lanes:
+            on = bool(messages[lane].flags & Flags.TDPA_SWITCHED)
+            if on != bool(active[lane]):
+                mask = np.zeros(self.lanes, bool)
+                mask[lane] = True
+                port.switch(mask, on)
+                self.supervisors[lane].events.append({
+                    "time_s": now_s, "kind": "tdpa_on" if on else "tdpa_off",
+                    "reason": "the master's governor switched the passivity layer "
+                    + ("on" if on else "off")})
+
+    def control_samples(self, plan: Sequence[Step]) -> SlaveTickOutput:
+        """The node stage once per entry of ``plan`` (slave_sim/pacing.py; lane 0: the
+        program's one lane): each step with its sample's bounded force (fx, fy) N, position
+        (x, y) m and force scale, or the tick's own input where the entry is None (at least
+        one step). Afterwards :attr:`handle_force_N`, :attr:`handle_position_m` and
+        :attr:`force_scale` hold the tick's own input again (the newest admitted message).
+        Returns the last step's output."""
+        fh, yh, scale = self.handle_force_N, self.handle_position_m, self.force_scale
+        newest = (fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0])
+        ticked = None
+        for sample in plan or (None,):
+            if sample is not None:
+                fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = sample
+            ticked = self.control()
+        fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = newest
+        assert ticked is not None
+        return ticked
+
     def control(self) -> SlaveTickOutput:
         """The node stage: Ch2/Ct2, the tool and the environment, with the bounded handle
         force where the tool runs and zero force elsewhere."""
@@ -166,7 +232,12 @@ class SlaveTick:
         out = self.node.step(self.state, force, self.handle_position_m, self.peer_energy_J)
         cutting = out.cutting
         table = _FLAGS
+        port = self.state.passivity
+        switched = (port.active.tolist() if port is not None and self.node.passivity_standby
+                    else [False] * self.lanes)
         flags = [table[supervisor.ready, bool(cut)]
                  | (Flags.WORK_AREA_STOP if supervisor.outside else Flags(0))
-                 for supervisor, cut in zip(self.supervisors, cutting.tolist(), strict=True)]
+                 | (Flags.TDPA_SWITCHED if on else Flags(0))
+                 for supervisor, cut, on in zip(self.supervisors, cutting.tolist(), switched,
+                                                strict=True)]
         return SlaveTickOutput(out, running, flags)

@@ -81,8 +81,14 @@ def control_mode(config: dict[str, Any]) -> str:
 
 def passivity_settings(config: dict[str, Any]) -> PassivitySettings | None:
     """The passivity layer's settings in ``tdpa`` mode; None in ``paper`` mode."""
-    section = config["control"]
-    if section["mode"] != "tdpa":
+    if config["control"]["mode"] != "tdpa":
         return None
+    return standby_passivity_settings(config)
+
+
+def standby_passivity_settings(config: dict[str, Any]) -> PassivitySettings:
+    """The passivity layer's settings whatever the mode: in ``paper`` mode the layer is built
+    switched off for the margin governor's run-time switch (``[governor] action = "tdpa"``)."""
+    section = config["control"]
     names = PassivitySettings.__dataclass_fields__
     return PassivitySettings(**{name: float(section[name]) for name in names})

@@ -97,6 +97,13 @@ class PassivityPort:
     size of the controller's last correction, ``active_steps`` how often it acted;
     ``input_energy_J``/``output_energy_J`` the port's positive and negative work (the
     observer's two sums, for reports).
+
+    ``active`` (lanes,) bool: the lanes whose layer runs. In ``tdpa`` mode every lane always
+    does; in ``paper`` mode with the margin governor's ``tdpa`` action the port is built
+    switched off (a standby) and :meth:`switch` turns it on and off at run time. A switched-off
+    lane observes nothing, corrects nothing and hands nothing over; it still takes the peer's
+    cumulative energy (``peer_sent_J``), so the counters on both sides stay monotone over the
+    whole run and energy is never counted twice. Switching on starts the account empty.
     """
 
     settings: PassivitySettings
@@ -113,35 +120,58 @@ class PassivityPort:
     damper_force_N: np.ndarray
     active_steps: np.ndarray
     previous_position_m: np.ndarray
+    active: np.ndarray
 
     @classmethod
     def create(cls, settings: PassivitySettings, period_s: float, lanes: int,
-               keep_J: float = 0.0, zeros: Any = np.zeros) -> PassivityPort:
+               keep_J: float = 0.0, zeros: Any = np.zeros, active: bool = True
+               ) -> PassivityPort:
         """A port with nothing observed yet; ``keep_J``: the energy of its own input the port
         keeps to return itself (0: everything goes to the peer, Artigas' TDPN). ``zeros``
         ``(shape, dtype) -> array`` makes the arrays (the master: views of Warp buffers); the
-        port only ever changes them in place."""
+        port only ever changes them in place. ``active``: the layer runs from the start
+        (``tdpa`` mode), else it waits switched off for :meth:`switch`."""
         floats = [zeros((lanes,), np.float64) for _ in range(9)]
-        return cls(settings, float(period_s), float(keep_J), *floats,
-                   zeros((lanes,), np.int64), zeros((lanes, 2), np.float64))
+        port = cls(settings, float(period_s), float(keep_J), *floats,
+                   zeros((lanes,), np.int64), zeros((lanes, 2), np.float64),
+                   zeros((lanes,), np.bool_))
+        port.active[...] = active
+        return port
+
+    def switch(self, lanes: np.ndarray, on: bool) -> np.ndarray:
+        """Switch the layer on (``on``) or off in ``lanes`` ((lanes,) bool mask); returns the
+        lanes whose state changed. Switching on starts their account empty (safe: nothing may
+        be given out that was not taken in since) with no correction or damper force under
+        way; the monotone counters (``sent_J``, ``peer_sent_J``) carry on."""
+        mask = np.asarray(lanes, bool)
+        changed = mask & (self.active != on)
+        if on:
+            self.tank_J[changed] = 0.0
+            self.correction_m[changed] = 0.0
+            self.damper_force_N[changed] = 0.0
+        self.active[changed] = on
+        return changed
 
     def receive(self, peer_sent_J: np.ndarray) -> None:
         """Take the peer's cumulative handed-over energy from a message (lanes,), J. A lane
         without a message (non-finite) and an older (smaller) value change nothing, so loss
-        and reordering only delay energy, never create it."""
+        and reordering only delay energy, never create it. A switched-off lane notes the value
+        without crediting it."""
         value = np.asarray(peer_sent_J, float)
         newest = np.fmax(self.peer_sent_J, np.where(np.isfinite(value), value, -np.inf))
-        self.tank_J += newest - self.peer_sent_J
+        self.tank_J += np.where(self.active, newest - self.peer_sent_J, 0.0)
         self.peer_sent_J[...] = newest
         self._cap_credit()
 
     def continue_from(self, previous: PassivityPort | None) -> None:
         """Carry the monotone counters over from the port this one replaces (a node state
         made afresh after a resync): the peer keeps seeing ``sent_J`` grow, and what the peer
-        sent is not counted twice. The account itself starts empty (which is safe)."""
+        sent is not counted twice; a lane switched on stays on. The account itself starts
+        empty (which is safe)."""
         if previous is not None:
             self.sent_J[...] = previous.sent_J
             self.peer_sent_J[...] = previous.peer_sent_J
+            self.active[...] = previous.active
 
     def peer_restarted(self) -> None:
         """The peer's counter started again (a new run, a new epoch): count from zero."""
@@ -161,7 +191,7 @@ class PassivityPort:
     def observe(self, work_in_J: np.ndarray) -> None:
         """Account one step's work into the network at this port (lanes,), J; hand the step's
         input, as far as the port holds more than ``keep_J``, to the peer (``sent_J``)."""
-        work = np.nan_to_num(np.asarray(work_in_J, float))
+        work = np.where(self.active, np.nan_to_num(np.asarray(work_in_J, float)), 0.0)
         self.input_energy_J += np.maximum(work, 0.0)
         self.output_energy_J += np.maximum(-work, 0.0)
         self.tank_J += work
@@ -188,6 +218,7 @@ class PassivityPort:
                                            self.correction_m + rise))
         if most_m is not None:
             size = np.minimum(size, np.maximum(most_m, 0.0))
+        size = np.where(self.active, size, 0.0)  # a switched-off lane corrects nothing
         self.correction_m[...] = size
         self.active_steps += size > 0.0
         self.dissipated_energy_J += size * np.sqrt(force2)
@@ -223,7 +254,8 @@ class PassivityPort:
         other = np.einsum("ij,ij->i", force_N, command_m - self.previous_position_m)
         budget = np.maximum(self.reserve_J() + other, 0.0)
         paid = (work >= 0.0) | (-work <= budget)
-        step *= np.where(paid, 1.0, budget / np.maximum(-work, 1e-300))[:, None]
+        step *= np.where(paid & self.active, 1.0,
+                         np.where(self.active, budget / np.maximum(-work, 1e-300), 0.0))[:, None]
         return step
 
     def damp(self, force_N: np.ndarray, velocity_m_per_s: np.ndarray,
@@ -240,7 +272,7 @@ class PassivityPort:
         excess = np.maximum(work_out - self.reserve_J(), 0.0)
         moving = speed2 >= s.velocity_floor_m_per_s ** 2
         alpha = np.where(moving, excess / (ts * np.maximum(speed2, 1e-300)), 0.0)
-        alpha = np.minimum(alpha, s.damper_max_N_s_per_m)
+        alpha = np.where(self.active, np.minimum(alpha, s.damper_max_N_s_per_m), 0.0)
         speed = np.sqrt(speed2)
         rise = s.damper_force_rate_N_per_s * ts
         magnitude = np.minimum(alpha * speed, np.minimum(s.damper_force_max_N,
@@ -266,7 +298,26 @@ class PassivityPort:
         own = np.maximum(np.einsum("ij,ij->i", port_force_N, velocity_m_per_s) * ts, 0.0)
         budget = np.maximum(self.reserve_J() - own, 0.0)
         scale = np.where(work <= budget, 1.0, budget / np.maximum(work, 1e-300))
-        return force * scale[:, None]
+        return force * np.where(self.active, scale, 0.0)[:, None]
+
+
+def passivity_summary(port: PassivityPort | None, standby: bool, lane: int = 0
+                      ) -> dict[str, Any]:
+    """A program's summary keys of its passivity layer (one lane): ``tdpa_layer`` ("off": the
+    paper's scheme without it; "tdpa": on all run; "standby": built for the governor's
+    run-time switch), ``tdpa_active`` (on at the end), and its energies, J: what it handed
+    to the peer and received, what flowed in and out at the port, what the controller
+    dissipated, and the steps it acted."""
+    if port is None:
+        return {"tdpa_layer": "standby" if standby else "off", "tdpa_active": False}
+    return {"tdpa_layer": "standby" if standby else "tdpa",
+            "tdpa_active": bool(port.active[lane]),
+            "tdpa_sent_J": float(port.sent_J[lane]),
+            "tdpa_received_J": float(port.peer_sent_J[lane]),
+            "tdpa_input_energy_J": float(port.input_energy_J[lane]),
+            "tdpa_output_energy_J": float(port.output_energy_J[lane]),
+            "tdpa_dissipated_energy_J": float(port.dissipated_energy_J[lane]),
+            "tdpa_active_steps": int(port.active_steps[lane])}
 
 
 def master_step_reference(port: PassivityPort, inputs: np.ndarray, command_m: np.ndarray,

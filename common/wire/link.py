@@ -270,12 +270,13 @@ class Link:
         flags: Flags = NO_FLAGS,
         gain_k: float = 0.0,
         energy_J: float = 0.0,
+        force_scale: float = 1.0,
     ) -> HandleState:
         """Master: stamp and publish the handle's force (N), position (m), the Ch1 gain k
-        its compensator uses (0: not said) and the passivity layer's handed-over energy
-        (J)."""
+        its compensator uses (0: not said), the passivity layer's handed-over energy (J) and
+        the force ramp's factor at this sample (0..1)."""
         message = HandleState(self.epoch, self.next_sequence(), 0, flags, handle_force_N,
-                              handle_position_m, gain_k, energy_J)
+                              handle_position_m, gain_k, energy_J, force_scale)
         return self.send(message)  # type: ignore[return-value]
 
     def send_tool(
@@ -464,6 +465,13 @@ class Link:
             if not (self.peer_alive and self.paired):
                 time.sleep(poll_interval_s)
         return True
+
+    @property
+    def delivered(self) -> list[Message]:
+        """Every message the last :meth:`poll` delivered, in order, the newest (the one it
+        returned) last; empty when it returned ``None``. Reused: read it before the next
+        poll."""
+        return self.receive.released
 
     @property
     def latest(self) -> Message | None:

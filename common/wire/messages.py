@@ -10,7 +10,9 @@ Every message is a msgpack array (compact: no field names on the wire)::
     the pairing hello (common/wire/auth.py) and, on an authenticated link, a 16-byte tag after
     the msgpack body; version 3 (issue 16) the handle's ``gain_k`` and the tool's
     ``echo_send_time_ns``; version 4 (issue 16) ``energy_J`` in both payloads and the
-    :attr:`Flags.TDPA` bit.
+    :attr:`Flags.TDPA` bit; version 5 (issue 16) the :attr:`Flags.TDPA_SWITCHED` bit (the
+    margin governor's run-time switch to the passivity layer, which a version-4 slave would
+    not follow) and the handle's ``force_scale``.
 ``kind``
     :data:`KIND_HANDLE` (master to slave, :class:`HandleState`) or :data:`KIND_TOOL` (slave to
     master, :class:`ToolState`).
@@ -25,11 +27,13 @@ Every message is a msgpack array (compact: no field names on the wire)::
     encode everything else first and stamp the time last (:func:`encode_around_send_time`).
 ``flags``
     a bit field of :class:`Flags`.
-payload, :class:`HandleState` (5 floats)
+payload, :class:`HandleState` (7 floats)
     ``handle_force_N`` x, y; ``handle_position_m`` x, y; ``gain_k``, the Ch1 gain k the
     master's compensator uses now (> 0; 0: not said, the slave uses its configured k): the
     margin governor (master/margin_governor.py) lowers it and the slave follows;
-    ``energy_J`` (>= 0).
+    ``energy_J`` (>= 0); ``force_scale`` (0..1), the master's force ramp at this sample
+    (master/node.py), which the slave applies to its Ct2's input so that both sides'
+    Ct integrate the same scaled tool force.
 payload, :class:`ToolState` (9 floats and an integer)
     ``tool_force_N`` x, y; ``tool_position_m`` x, y; ``tool_velocity_m_s`` x, y;
     ``clay_engagement`` (0..1); ``removed_volume_m3`` (>= 0); ``energy_J`` (>= 0);
@@ -39,7 +43,9 @@ payload, :class:`ToolState` (9 floats and an integer)
 
 ``energy_J`` is the sender's cumulative energy handed to the peer by the passivity layer
 (common/model/passivity.py, ``[control] mode = "tdpa"``), J; monotone, so a lost message only
-delays it. A sender in the paper's scheme sends 0 and leaves :attr:`Flags.TDPA` clear.
+delays it. A sender in the paper's scheme leaves :attr:`Flags.TDPA` clear and sends the energy
+its layer handed over while the governor had it switched on (:attr:`Flags.TDPA_SWITCHED`; 0
+if never).
 
 :func:`decode` never lets an exception other than :class:`DecodeError` escape; the error's
 ``reason`` (a :class:`DropReason`) says which counter the receiver charges.
@@ -54,12 +60,12 @@ from typing import Any
 
 import msgpack
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 KIND_HANDLE = 1
 KIND_TOOL = 2
 
 _HEADER_LENGTH = 6
-_HANDLE_FLOATS = 6
+_HANDLE_FLOATS = 7
 _TOOL_FLOATS = 9
 _TOOL_VALUES = _TOOL_FLOATS + 1  # the floats and the echoed send time
 _MAX_U32 = 2**32 - 1
@@ -85,6 +91,12 @@ class Flags(enum.IntFlag):
     """Slave only: the work-area guard stopped the tool (it left the scenario's grid by more
     than the margin); the master holds its handle while this is set, so the handle does not
     run on alone (issue 16)."""
+    TDPA_SWITCHED = 32
+    """The sender runs the passivity layer switched on at run time (its configured mode is
+    ``paper``): the master while its margin governor holds the switch on
+    (master/margin_governor.py), the slave while it follows the master's flag. Unlike
+    :attr:`TDPA` it is not a start-up mismatch: a ``paper`` slave switches its layer on and
+    off with the master's flag (slave_sim/tick.py)."""
 
 
 class DropReason(enum.StrEnum):
@@ -131,6 +143,9 @@ class HandleState:
     """The Ch1 gain k the master's compensator uses (0: not said)."""
     energy_J: float = 0.0
     """The master's cumulative energy handed to the slave (tdpa), J."""
+    force_scale: float = 1.0
+    """The master's force ramp at this sample, 0..1: the factor its compensator's inputs (fh
+    and the received ft) were scaled by; the slave scales its Ct2's input ft by it too."""
 
     KIND = KIND_HANDLE
 
@@ -196,7 +211,7 @@ def encode_around_send_time(message: Message) -> tuple[bytes, bytes]:
     tail: tuple[int, ...] = ()
     if isinstance(message, HandleState):
         floats = (*message.handle_force_N, *message.handle_position_m, message.gain_k,
-                  message.energy_J)
+                  message.energy_J, message.force_scale)
     elif isinstance(message, ToolState):
         floats = (
             *message.tool_force_N,
@@ -293,9 +308,11 @@ def decode(payload: bytes, expected_kind: int) -> Message:
             raise DecodeError(DropReason.MALFORMED, f"gain_k {v[4]} is negative")
         if v[5] < 0.0:
             raise DecodeError(DropReason.MALFORMED, f"energy_J {v[5]} is negative")
+        if not 0.0 <= v[6] <= 1.0:
+            raise DecodeError(DropReason.MALFORMED, f"force_scale {v[6]} outside 0..1")
         return HandleState(
             epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3]), v[4],
-            energy_J=v[5],
+            energy_J=v[5], force_scale=v[6],
         )
     if len(body) != _TOOL_VALUES:
         raise DecodeError(DropReason.MALFORMED, f"tool payload has {len(body)} values")

@@ -19,8 +19,10 @@ Per received payload, in order:
 
 :meth:`ReceivePath.release` pops every message whose delivery time has come; one older than a
 message already delivered is dropped ``out_of_order`` (jitter without ``preserve_order`` can
-reorder); the newest is returned and the others count as ``superseded`` (delivered, but the
-loop only uses the newest).
+reorder); the newest is returned and the others count as ``superseded`` (delivered before the
+newest in the same release). :attr:`ReceivePath.released` holds every message of the last
+release in delivery order, the newest last: a loop that must use every sample (the slave's
+pacing, slave_sim/pacing.py) takes them from there.
 """
 
 from __future__ import annotations
@@ -139,6 +141,9 @@ class ReceivePath:
         self._age = LogHistogram()
         self.last_delivered: Message | None = None
         self.last_delivery_ns: int | None = None
+        #: every message the last :meth:`release` delivered, in order (the newest last); the
+        #: list is reused: read it before the next release
+        self.released: list[Message] = []
         self._pinned_epoch: int | None = None
         self._epochs_pinned = False
         self.last_unknown_version: int | None = None
@@ -242,6 +247,9 @@ class ReceivePath:
     def release(self, now_ns: int) -> Message | None:
         """The newest message whose delivery time is at or before ``now_ns``, or ``None``."""
         pending = self._pending
+        released = self.released
+        if released:
+            released.clear()
         if not pending or pending[0][0] > now_ns:
             return None
         seq_state = self._seq
@@ -260,6 +268,7 @@ class ReceivePath:
             if newest is not None:
                 self._n.superseded += 1
             newest = message
+            released.append(message)
             newest_delivery_ns = delivery_ns
         if newest is not None:
             self._age.record((now_ns - newest.send_time_ns) * 1e-9)

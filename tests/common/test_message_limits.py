@@ -26,7 +26,7 @@ MAX_U63 = 2**63 - 1
 
 
 def _handle(epoch=1, seq=2, send=3, flags=2,
-            floats=(0.5, -0.5, 0.01, 0.02, 13.0, 0.0)) -> bytes:
+            floats=(0.5, -0.5, 0.01, 0.02, 13.0, 0.0, 1.0)) -> bytes:
     return msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, epoch, seq, send, flags, *floats])
 
 
@@ -42,8 +42,8 @@ def _refused(payload: bytes, kind: int = KIND_HANDLE) -> DecodeError:
 
 
 def test_wire_values_of_the_kinds_and_flags() -> None:
-    # 3: gain k and echo, 4: energy fields (#16)
-    assert (SCHEMA_VERSION, KIND_HANDLE, KIND_TOOL) == (4, 1, 2)
+    # 3: gain k and echo, 4: energy fields, 5: TDPA_SWITCHED and the force scale (#16)
+    assert (SCHEMA_VERSION, KIND_HANDLE, KIND_TOOL) == (5, 1, 2)
     assert (int(Flags.SAFE_STATE), int(Flags.FORCES_ENABLED), int(Flags.IN_CONTACT),
             int(Flags.TDPA)) == (1, 2, 4, 8)
     wire = msgpack.unpackb(encode(ToolState(0, 0, 0, Flags.IN_CONTACT | Flags.SAFE_STATE,
@@ -126,9 +126,9 @@ def test_removed_volume_may_be_zero_never_negative() -> None:
 
 
 # The schema-4 fields (#16, #19): handle gain_k and energy_J, tool energy_J and echo.
-def _handle4(gain_k: float = 13.0, energy_J: float = 0.0) -> bytes:
+def _handle4(gain_k: float = 13.0, energy_J: float = 0.0, force_scale: float = 1.0) -> bytes:
     return msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, 1, 2, 3, 2,
-                          0.5, -0.5, 0.01, 0.02, gain_k, energy_J])
+                          0.5, -0.5, 0.01, 0.02, gain_k, energy_J, force_scale])
 
 
 def _tool4(energy_J: float = 0.0, echo: object = 0) -> bytes:
@@ -149,10 +149,12 @@ def test_defaults_of_the_schema_4_fields_are_zero() -> None:
 
 
 def test_handle_gain_and_energy_round_trip_in_their_places() -> None:
-    sent = HandleState(1, 2, 3, Flags(2), (0.5, -0.5), (0.01, 0.02), 13.25, energy_J=0.75)
+    sent = HandleState(1, 2, 3, Flags(2), (0.5, -0.5), (0.01, 0.02), 13.25, energy_J=0.75,
+                       force_scale=0.25)
     got = decode(encode(sent), KIND_HANDLE)
     assert got == sent
-    assert (got.gain_k, got.energy_J) == (13.25, 0.75)
+    assert (got.gain_k, got.energy_J, got.force_scale) == (13.25, 0.75, 0.25)
+    assert msgpack.unpackb(encode(sent))[-3:] == [13.25, 0.75, 0.25]  # scale last
 
 
 def test_tool_energy_and_echo_round_trip_in_their_places() -> None:

@@ -18,6 +18,7 @@ from haptic.common.wire.messages import (
     Flags,
     HandleState,
     ToolState,
+    control_mismatch,
     decode,
     encode,
 )
@@ -52,7 +53,7 @@ def test_tool_state_round_trip(seq, force, position, velocity, engagement, volum
 def test_wire_layout_is_a_compact_array():
     message = HandleState(5, 9, 1000, Flags.FORCES_ENABLED, (1.0, 2.0), (0.1, 0.2), 13.0)
     assert msgpack.unpackb(encode(message)) == [
-        SCHEMA_VERSION, KIND_HANDLE, 5, 9, 1000, 2, 1.0, 2.0, 0.1, 0.2, 13.0, 0.0
+        SCHEMA_VERSION, KIND_HANDLE, 5, 9, 1000, 2, 1.0, 2.0, 0.1, 0.2, 13.0, 0.0, 1.0
     ]
     tool = ToolState(5, 9, 1000, Flags(0), (1.0, 2.0), (0.1, 0.2), (0.0, 0.0), 0.5, 0.0, 777)
     assert msgpack.unpackb(encode(tool))[-1] == 777  # the echoed send time, last
@@ -60,13 +61,18 @@ def test_wire_layout_is_a_compact_array():
 
 def test_gain_and_echo_are_validated():
     handle = msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, 1, 2, 3, 0, 0.0, 0.0, 0.0, 0.0, -1.0,
-                            0.0])
+                            0.0, 1.0])
     with pytest.raises(DecodeError, match="gain_k"):
         decode(handle, KIND_HANDLE)
     handle = msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, 1, 2, 3, 0, 0.0, 0.0, 0.0, 0.0, 1.0,
-                            -1e-9])
+                            -1e-9, 1.0])
     with pytest.raises(DecodeError, match="energy_J"):
         decode(handle, KIND_HANDLE)
+    for scale in (-1e-9, 1.0 + 1e-9):  # the force ramp's factor is 0..1
+        handle = msgpack.packb([SCHEMA_VERSION, KIND_HANDLE, 1, 2, 3, 0, 0.0, 0.0, 0.0, 0.0,
+                                1.0, 0.0, scale])
+        with pytest.raises(DecodeError, match="force_scale"):
+            decode(handle, KIND_HANDLE)
     fields = _valid_tool_fields()
     fields[-2] = -1e-9
     with pytest.raises(DecodeError, match="energy_J"):
@@ -155,7 +161,6 @@ def test_decode_of_random_msgpack_structures_raises_only_decode_error(value):
 
 
 def test_energy_travels_and_a_control_mismatch_is_named() -> None:
-    from haptic.common.wire.messages import control_mismatch
 
     message = HandleState(1, 2, 3, Flags.TDPA | Flags.FORCES_ENABLED, (1.0, 2.0), (0.1, 0.2),
                           energy_J=0.125)
@@ -173,7 +178,11 @@ def test_the_flag_bits_are_the_wire_format() -> None:
     another build reads WORK_AREA_STOP without also reading SAFE_STATE, and the other way."""
     assert {flag.name: flag.value for flag in Flags} == {
         "SAFE_STATE": 1, "FORCES_ENABLED": 2, "IN_CONTACT": 4, "TDPA": 8,
-        "WORK_AREA_STOP": 16}
+        "WORK_AREA_STOP": 16, "TDPA_SWITCHED": 32}
+    switched = decode(encode(HandleState(1, 1, 1, Flags.TDPA_SWITCHED, (0.0, 0.0), (0.0, 0.0))),
+                      KIND_HANDLE)
+    assert Flags.TDPA_SWITCHED in switched.flags and Flags.TDPA not in switched.flags
+    assert control_mismatch("paper", switched) is None  # a run-time switch, not a mismatch
     stopped = decode(encode(ToolState(1, 1, 1, Flags.WORK_AREA_STOP, (0.0, 0.0), (0.0, 0.0),
                                       (0.0, 0.0), 0.0, 0.0)), KIND_TOOL)
     assert not stopped.safe_state and Flags.WORK_AREA_STOP in stopped.flags

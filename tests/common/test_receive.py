@@ -40,7 +40,7 @@ def path(injection: InjectionConfig | None = None, seed: int = 0, stale_s: float
 
 def _fields(seq: int) -> list:
     return [SCHEMA_VERSION, KIND_HANDLE, 1, seq, T0 + seq * MS, 0, 1.0, 2.0, 0.1, 0.2, 13.0,
-            0.0]
+            0.0, 1.0]
 
 
 bad_value = st.sampled_from(["x", None, [1.0], b"\x00", {"a": 1}, True])

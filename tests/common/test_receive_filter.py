@@ -11,6 +11,7 @@ from haptic.common.wire.injection import InjectionConfig
 from haptic.common.wire.messages import (
     KIND_HANDLE,
     KIND_TOOL,
+    SCHEMA_VERSION,
     DropReason,
     Flags,
     HandleState,
@@ -34,7 +35,7 @@ def handle(seq: int, epoch: int = 1) -> bytes:
 def test_every_real_message_passes_the_filter() -> None:
     tool = encode(ToolState(1, 2, T0, Flags(0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0))
     assert tool[:3] == b"\xdc\x00\x10"  # 16 items: an array16 header
-    assert handle(1)[0] == 0x9C  # 12 items: a fixarray
+    assert handle(1)[0] == 0x9D  # 13 items: a fixarray
     p = path()
     assert not p.rejects_at_once(tool) and not p.rejects_at_once(handle(1))
     assert p.stats().received == 0  # passing counts nothing: accept() counts
@@ -122,6 +123,7 @@ def test_the_latest_unknown_version_is_remembered_and_others_are_not() -> None:
     p = path()
     p.accept(msgpack.packb([99, KIND_HANDLE, 1, 1, T0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]), T0)
     assert p.last_unknown_version == 99
-    p.accept(msgpack.packb([4, KIND_TOOL, 1, 1, T0, 0]), T0)  # wrong kind: not a version
+    # the right version, the wrong kind: not a version
+    p.accept(msgpack.packb([SCHEMA_VERSION, KIND_TOOL, 1, 1, T0, 0]), T0)
     assert p.last_unknown_version == 99
     assert path().last_unknown_version is None

@@ -118,6 +118,17 @@ def test_release_keeps_only_the_newest_and_counts_the_superseded() -> None:
     assert p.last_delivery_ns == T0 + 3 * MS
 
 
+def test_release_hands_over_every_delivered_message_in_order() -> None:
+    """The slave steps each delivered sample with its own force (slave_sim/pacing.py): the
+    superseded ones are kept in ``released``, in order, the returned newest last."""
+    p = path()
+    for seq in (0, 2, 1, 3):  # 1 arrives after 2: dropped out of order
+        p.accept(handle(seq, T0 + seq * MS), T0 + 3 * MS)
+    newest = p.release(T0 + 10 * MS)
+    assert [m.seq for m in p.released] == [0, 2, 3] and p.released[-1] is newest
+    assert p.release(T0 + 11 * MS) is None and p.released == []
+
+
 def test_delay_percentiles_are_the_50th_and_99th() -> None:
     p = path(stale_s=1.0)
     delays_ms = [1] * 90 + [20] * 9 + [100]

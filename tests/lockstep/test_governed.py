@@ -129,3 +129,69 @@ def test_on_a_ramp_the_governor_acts_before_the_margin(k13, table) -> None:
     assert round_trip_then == pytest.approx(0.7 * table.margin_s(13.0), abs=2 * ts)
     assert not growth_verdict(result, 1.0).growing[0]
     assert result.peak_handle_force_N.max() < 2.0
+
+
+def _standby_run(model, table, profile: str, duration_s: float, **settings):
+    """A governed run with the ``tdpa`` action in paper mode: the passivity layer waits on
+    standby on both sides (master/tick.py, slave_sim/tick.py)."""
+    from haptic.common.model.passivity import PassivitySettings
+
+    ts = model.sample_period_s
+    steps = int(round(duration_s / ts))
+    pulse = np.zeros((steps, 2))
+    pulse[:20] = 1.0
+    at = int(round(STEP_AT_S / ts))
+    pulse[at:at + 20] = 1.0
+    simulator = LockstepSimulator(model, load_scenario("constant-rate"),
+                                  parse_operator_spec("constant:fx=0,fy=0"),
+                                  np.array([13.0]), "linear", passivity=PassivitySettings(),
+                                  passivity_standby=True)
+    governor = MarginGovernor(GovernorSettings(enabled=True, action="tdpa", **settings), table,
+                              tdpa_available=True)
+    result = simulator.run(duration_s, 0, to_slave=InjectionConfig(delay_s=0.002),
+                           to_master=InjectionConfig(delay_profile=parse_delay_profile(profile)),
+                           excitation_N=pulse, governors=[governor])
+    return simulator, result
+
+
+def test_governed_tdpa_switches_the_passivity_layer_on_at_both_sides(k13, table) -> None:
+    """The tdpa action at run time: the step to 40 ms switches the standby layer on at the
+    master, the slave follows the flag; k stays 13 (nothing is lowered) and the loop that
+    grows without bound ungoverned stays bounded, the sides aligned."""
+    simulator, result = _standby_run(k13, table, f"step 0:0.002 {STEP_AT_S}:0.040",
+                                     DURATION_S, recover_after_s=0.0)
+    assert not growth_verdict(result, STEP_AT_S + 0.5).growing[0]
+    assert not result.diverged[0] and result.peak_handle_force_N.max() < 2.0
+    assert np.all(result.governed.gains_k == 13.0)
+    first = result.governed.events[0]
+    assert first["kind"] == "governor_tdpa_request"
+    assert STEP_AT_S < first["time_s"] < STEP_AT_S + 0.040
+    master_tick, slave_tick = simulator.last_ticks
+    assert master_tick.passivity_events[0]["kind"] == "tdpa_on"
+    assert master_tick.passivity_events[0]["time_s"] == pytest.approx(first["time_s"])
+    master_state, slave_state = simulator.final_states
+    assert master_state.passivity.active[0] and slave_state.passivity.active[0]
+    followed = [e for e in slave_tick.supervisors[0].events if e["kind"] == "tdpa_on"]
+    # the slave switches on once the first flagged handle message reaches it (2 ms later)
+    assert len(followed) == 1
+    ts = k13.sample_period_s
+    assert followed[0]["time_s"] - first["time_s"] == pytest.approx(0.002, abs=2 * ts)
+    assert np.abs(result.final_position_gap_m[0]).max() < 2e-3
+
+
+def test_governed_tdpa_switches_back_off_when_the_delay_returns(k13, table) -> None:
+    """Out of tdpa: once the peak round trip over ``hold_s`` allows the nominal k again for
+    ``recover_after_s``, both sides switch the layer off (the paper's scheme again)."""
+    simulator, result = _standby_run(k13, table, "step 0:0.002 1.0:0.040 2.0:0.002", 5.0,
+                                     recover_after_s=1.0, hold_s=0.5)
+    kinds = [e["kind"] for e in result.governed.events]
+    assert kinds == ["governor_tdpa_request", "governor_paper_request"]
+    off_at = result.governed.events[1]["time_s"]
+    assert 2.0 + 0.5 + 1.0 <= off_at < 2.0 + 0.5 + 1.0 + 0.1
+    master_tick, slave_tick = simulator.last_ticks
+    assert [e["kind"] for e in master_tick.passivity_events] == ["tdpa_on", "tdpa_off"]
+    assert [e["kind"] for e in slave_tick.supervisors[0].events
+            if e["kind"].startswith("tdpa")] == ["tdpa_on", "tdpa_off"]
+    master_state, slave_state = simulator.final_states
+    assert not master_state.passivity.active[0] and not slave_state.passivity.active[0]
+    assert not result.diverged[0] and result.peak_handle_force_N.max() < 2.0

@@ -65,7 +65,8 @@ def test_lockstep_outputs_equal_program_ticks_fed_the_same_inputs(paper_config,
     rig_state = rig.initial_state(handle_start, rng)
     enabled = Flags.FORCES_ENABLED
     to_slave = HandleState(0, -1, -int(ts * 1e9), enabled, (0.0, 0.0),
-                           tuple(handle_start[0]))
+                           tuple(handle_start[0]),
+                           force_scale=float(master.state.force_scale[0]))
     to_master_next = ToolState(0, -2, 0, enabled, (0.0, 0.0), tuple(tool_start[0]),
                                (0.0, 0.0), 0.0, 0.0)
     to_master = to_master_next
@@ -78,7 +79,8 @@ def test_lockstep_outputs_equal_program_ticks_fed_the_same_inputs(paper_config,
         used = master.control(fh, yh)
         command = used.command_m.copy()
         sent = HandleState(0, k, int(k * ts * 1e9), used.flags[0],
-                           tuple(used.handle_force_used_N[0].tolist()), tuple(yh[0].tolist()))
+                           tuple(used.handle_force_used_N[0].tolist()), tuple(yh[0].tolist()),
+                           force_scale=float(used.force_scale[0]))  # as the program sends
         slave.supervise(k * ts, [to_slave])
         out = slave.control()
         to_slave = sent  # one sample to the slave
@@ -165,3 +167,47 @@ def test_the_slaves_work_area_stop_reaches_the_master_tick_and_holds_the_handle(
     held = HandleState(0, 1, int(ts * 1e9), used.flags[0], (0.0, 0.0), tuple(handle_start[0]))
     slave.supervise(2 * ts, [held])
     assert Flags.WORK_AREA_STOP in slave.control().flags[0]
+
+
+def test_every_message_delivered_in_a_tick_passes_the_guard_and_is_a_sample(
+        paper_config, paper_model) -> None:
+    """The slave's tick checks each older message delivered with the newest (a forged one
+    among them is a fault, not a sample) and keeps the admitted ones' bounded force and
+    position for the pacing (slave_sim/pacing.py)."""
+    scenario = load_scenario("constant-rate")
+    ts = paper_model.sample_period_s
+    sup = LockstepSupervision.from_config(paper_config, scenario)
+    ratio = tuple(float(a.position_ratio_ah1) for a in paper_model.axes)
+    tool_start = np.asarray(scenario.tool.start_position_m, float)[None, :]
+    handle_start = tool_start / np.asarray(ratio)
+    slave_node = SlaveNode(paper_model, scenario, "linear", device="cpu")
+    guard_settings = InputGuardSettings.from_config(paper_config)
+    slave = SlaveTick(slave_node, slave_node.initial_state(1, tool_start),
+                      [SlaveSupervisor(ratio, sup.sync_tolerance_m, sup.work_area_m,
+                                       sup.max_message_age_s, sup.resync_messages)],
+                      [InputGuard(guard_settings, ts)])
+    slave.handle_position_m[...] = handle_start
+    slave.start(synced=True)
+    x, y = (float(v) for v in handle_start[0])
+    period_ns = int(ts * 1e9)
+
+    def handle(seq: int, force_N: float) -> HandleState:
+        return HandleState(0, seq, seq * period_ns, Flags.FORCES_ENABLED, (force_N, 0.0),
+                           (x, y))
+
+    limit = guard_settings.force_limit_N
+    fresh = slave.supervise(0.0, [handle(3, 0.3)], earlier=[[handle(1, 0.1), handle(2, 0.2)]])
+    assert fresh[0]
+    assert [(seq, force) for _, seq, force, _, _ in slave.samples[0]] == [
+        (1, (0.1, 0.0)), (2, (0.2, 0.0)), (3, (0.3, 0.0))]
+    assert slave.handle_force_N[0].tolist() == [0.3, 0.0]  # the newest is the tick's input
+    # a forged force among the older ones: a fault, not a sample
+    slave.supervise(ts, [handle(6, 0.3)], earlier=[[handle(4, 1e9), handle(5, limit + 5)]])
+    assert [seq for _, seq, _, _, _ in slave.samples[0]] == [5, 6]
+    assert slave.samples[0][0][2][0] <= limit  # bounded like the newest
+    assert slave.guards[0].faulted and slave.guards[0].counters.faults == 1
+    assert not slave.running[0]  # the latched fault stops the tool
+    # without ``earlier`` (the lockstep) no samples are kept
+    slave.samples[0].clear()
+    slave.supervise(2 * ts, [handle(7, 0.3)])
+    assert slave.samples[0] == []

@@ -1,7 +1,8 @@
 """The margin governor over a real Zenoh link: haptic-master and haptic-slave as two
 processes, k = 13, the tool's messages delayed 2 ms and then, from 1.5 s, 40 ms one way (a
 round trip of about 42 ms, three times tau*(13) = 14.3 ms). The governor lowers k on both
-sides and the run stays bounded. Behaviour is asserted, not timing."""
+sides (``lower_k``), or switches the passivity layer on at both sides (``tdpa``), and the run
+stays bounded. Behaviour is asserted, not timing."""
 
 from __future__ import annotations
 
@@ -67,10 +68,11 @@ def _start(processes: list, args: list[str]) -> subprocess.Popen:
     return process
 
 
-def test_a_delay_step_lowers_k_on_both_sides_and_the_run_stays_bounded(tmp_path: Path,
-                                                                        processes) -> None:
+def _governed_run(tmp_path: Path, processes: list, extra_config: str = ""
+                  ) -> tuple[str, dict, dict]:
+    """The two programs over the step; returns the master's output and both summaries."""
     config = tmp_path / "governed.toml"
-    config.write_text(CONFIG)
+    config.write_text(CONFIG + extra_config)
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     common = ["--config", str(config), "--key-prefix", f"test/{uuid.uuid4().hex[:8]}",
               "--no-status", "--peer-wait", "40", "--k", "13"]
@@ -82,10 +84,15 @@ def test_a_delay_step_lowers_k_on_both_sides_and_the_run_stays_bounded(tmp_path:
                                 "--json-summary", str(master_json), "--duration", "4"])
     out, _ = master.communicate(timeout=WAIT_S)
     assert master.returncode == 0, out
-    assert "governor (lower_k" in out and "k 13: 14.3 ms" in out
     slave.terminate()
     slave_out, _ = slave.communicate(timeout=WAIT_S)
-    summary = json.loads(master_json.read_text())
+    return out, json.loads(master_json.read_text()), json.loads(slave_json.read_text())
+
+
+def test_a_delay_step_lowers_k_on_both_sides_and_the_run_stays_bounded(tmp_path: Path,
+                                                                        processes) -> None:
+    out, summary, slave_summary = _governed_run(tmp_path, processes)
+    assert "governor (lower_k" in out and "k 13: 14.3 ms" in out
     assert summary["governor_nominal_k"] == 13.0
     lowest = summary["governor_table"]["k"][-1]
     assert summary["governor_table"]["delay_margin_s"][-1] is None  # any delay
@@ -95,5 +102,35 @@ def test_a_delay_step_lowers_k_on_both_sides_and_the_run_stays_bounded(tmp_path:
     assert "governor_lower_k" in kinds and "governor_beyond_margin" not in kinds
     assert not summary["node_faulted"]
     assert summary["max_abs_force_N"] < 10.0  # bounded: the operator's 1 N, no growth
-    slave_summary = json.loads(slave_json.read_text())
+    assert summary["tdpa_layer"] == "off" and not summary["tdpa_active"]
     assert slave_summary["slave_gain_k"] == pytest.approx(lowest)  # the slave followed
+    assert slave_summary["tdpa_layer"] == "standby" and not slave_summary["tdpa_active"]
+    assert max(abs(v) for v in slave_summary["final_position_gap_m"]) < 3e-3
+
+
+def test_a_delay_step_switches_the_passivity_layer_on_at_both_sides(tmp_path: Path,
+                                                                    processes) -> None:
+    """``action = "tdpa"`` in paper mode: the master's layer waits on standby, the step
+    switches it on (TDPA_SWITCHED on the wire), the slave's follows; k stays 13."""
+    out, summary, slave_summary = _governed_run(tmp_path, processes, "action = \"tdpa\"\n")
+    assert "governor (tdpa" in out
+    assert summary["governor_final_k"] == 13.0 and summary["governor_min_k"] == 13.0
+    assert summary["governor_tdpa_requested"] and summary["governor_max_round_trip_s"] > 0.040
+    kinds = [event["kind"] for event in summary["events"]]
+    assert "governor_tdpa_request" in kinds and "tdpa_on" in kinds
+    assert "governor_lower_k" not in kinds and "governor_beyond_margin" not in kinds
+    on_at = next(e["time_s"] for e in summary["events"] if e["kind"] == "tdpa_on")
+    assert on_at > 1.5  # at the step, not before
+    assert summary["tdpa_layer"] == "standby" and summary["tdpa_active"]
+    assert not summary["node_faulted"]
+    assert summary["max_abs_force_N"] < 10.0  # bounded: the operator's 1 N, no growth
+    assert slave_summary["slave_gain_k"] == pytest.approx(13.0)
+    assert slave_summary["tdpa_layer"] == "standby" and slave_summary["tdpa_active"]
+    slave_kinds = [event["kind"] for event in slave_summary["events"]]
+    assert slave_kinds.count("tdpa_on") == 1
+    # the layer observed the push from the switch on, and nothing crossed twice
+    assert summary["tdpa_input_energy_J"] > 0.0
+    assert slave_summary["tdpa_received_J"] <= summary["tdpa_sent_J"]
+    assert summary["tdpa_received_J"] <= slave_summary["tdpa_sent_J"]
+    # aligned at the end (the paper scheme's offset for a sustained 1 N at this delay)
+    assert max(abs(v) for v in slave_summary["final_position_gap_m"]) < 3e-3

@@ -103,3 +103,69 @@ def test_the_handle_command_drifts_to_the_tool_while_the_operator_lets_go() -> N
     assert command[1].tolist() == [0.0, 0.0]
     assert abs(command[2, 0]) < 1e-12  # nothing in the account to pay for it
     assert state.passivity.tank_J[0] == pytest.approx(0.0, abs=1e-15)
+
+
+def test_a_standby_layer_switched_per_lane_matches_the_reference_and_off_is_the_paper() -> None:
+    """The governor's run-time switch (paper mode, ``action = "tdpa"``): lanes switched on and
+    off at different steps step exactly as the numpy reference with the same switches; a lane
+    never switched on steps exactly as the paper's node; the energy counters stay monotone
+    across a switch and a switched-on lane starts with an empty account."""
+    config = load_config(None)
+    model = model_from_config(config).with_gain(13.0)
+    safety = replace(master_settings(config).safety, ramp_small_force_N=1e9,
+                     ramp_small_samples=1, ramp_time_s=0.05)
+    settings = PassivitySettings(credit_max_J=0.002, master_keep_J=0.0005)
+    lanes = 5
+    start = np.zeros((lanes, 2))
+    standby = MasterNode.from_model(model, safety, settings, passivity_standby=True)
+    paper = MasterNode.from_model(model, safety)
+    kernel_state = standby.activate(start)
+    assert standby.passivity_standby and not kernel_state.passivity.active.any()
+    reference_state = paper.activate(start)
+    plain_state = paper.activate(start)
+    port = PassivityPort.create(settings, model.sample_period_s, lanes, settings.master_keep_J,
+                                active=False)
+    switches = {300: ([1, 3, 4], True), 1200: ([3], False), 2000: ([0, 3], True)}
+    rng = np.random.default_rng(5)
+    position = np.zeros((lanes, 2))
+    peer = np.zeros(lanes)
+    sent_before = None
+    for step in range(2600):
+        if step in switches:
+            which, on = switches[step]
+            mask = np.zeros(lanes, bool)
+            mask[which] = True
+            if step == 1200:
+                sent_before = kernel_state.passivity.sent_J.copy()
+            changed = kernel_state.passivity.switch(mask, on)
+            assert port.switch(mask, on).tolist() == changed.tolist()
+            if on:
+                assert np.all(kernel_state.passivity.tank_J[changed] == 0.0)
+        force = rng.normal(0.0, 1.5, (lanes, 2))
+        tool = rng.normal(0.0, 3.0, (lanes, 2))
+        if step % 7 == 0:
+            peer += rng.random(lanes) * 1e-4
+            kernel_state.peer_energy_J[...] = peer
+            port.receive(peer)
+        command = standby.step(kernel_state, force, position, tool)
+        paper.step(reference_state, force, position, tool)
+        master_step_reference(port, reference_state.inputs, reference_state.command_m,
+                              reference_state.last_command_m, reference_state.origin_m,
+                              reference_state.faulted, safety.force_limit_N,
+                              np.asarray(safety.workspace_min_m),
+                              np.asarray(safety.workspace_max_m))
+        np.testing.assert_allclose(command, reference_state.command_m, rtol=0, atol=1e-12)
+        plain = paper.step(plain_state, force, position, tool)
+        # lane 2 is never switched on: the paper's node, bit for bit
+        assert command[2].tolist() == plain[2].tolist()
+        position = position + 0.2 * (command - position)
+    kernel = kernel_state.passivity
+    for name in ("tank_J", "sent_J", "peer_sent_J", "input_energy_J", "output_energy_J",
+                 "dissipated_energy_J", "active_steps"):
+        np.testing.assert_allclose(getattr(kernel, name), getattr(port, name), rtol=1e-9,
+                                   atol=1e-12, err_msg=name)
+    assert kernel.active.tolist() == [True, True, False, True, True]
+    assert kernel.active_steps[2] == 0 and kernel.input_energy_J[2] == 0.0
+    assert kernel.peer_sent_J[2] == peer[2]  # noted while off: counted once, never twice
+    assert np.all(kernel.sent_J >= sent_before) and kernel.sent_J[3] > sent_before[3]
+    assert kernel.active_steps[[1, 4]].min() > 50  # the switched-on lanes acted

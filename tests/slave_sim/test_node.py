@@ -200,3 +200,51 @@ def test_resync_places_the_tool_at_the_handle_at_rest(paper_config) -> None:
     node.resume(state)
     out = node.step(state, np.zeros((2, 2)), target)
     assert np.allclose(out.tool_position_m, target)  # at rest with no force: stays there
+
+
+def test_a_standby_passivity_layer_is_the_paper_until_switched_on(model) -> None:
+    """Paper mode builds the slave's TDPA layer switched off (the master's governor may switch
+    it on): until then every lane steps exactly as the paper's node; a lane switched on
+    damps the tool where the account lacks energy, the others stay the paper's, bit for bit."""
+    from haptic.common.model.passivity import PassivitySettings
+
+    scenario = load_scenario("constant-rate")
+    paper = SlaveNode(model, scenario, "linear")
+    standby = SlaveNode(model, scenario, "linear", passivity=PassivitySettings(),
+                        passivity_standby=True)
+    assert standby.passivity_standby and not paper.passivity_standby
+    lanes = 3
+    paper_state = paper.initial_state(lanes)
+    standby_state = standby.initial_state(lanes)
+    assert not standby_state.passivity.active.any()
+    rng = np.random.default_rng(2)
+    position = paper_state.handle_position_m.copy()
+    differed = False
+    for step in range(1500):
+        if step == 500:
+            mask = np.array([False, True, False])
+            assert standby_state.passivity.switch(mask, True).tolist() == mask.tolist()
+        force = rng.normal(0.0, 2.0, (lanes, 2))
+        peer = np.full(lanes, 1e-6 * step)  # the master's cumulative energy, slowly
+        expected = paper.step(paper_state, force, position)
+        got = standby.step(standby_state, force, position, peer)
+        same = expected.tool_position_m == got.tool_position_m
+        if step < 500:
+            assert same.all()
+        else:
+            assert same[[0, 2]].all()
+            differed |= not same[1].all()
+    assert differed and standby_state.passivity.dissipated_energy_J[1] > 0.0
+    assert standby_state.passivity.dissipated_energy_J[[0, 2]].tolist() == [0.0, 0.0]
+    # the master's energy was noted on every lane while off (monotone, counted once)
+    assert standby_state.passivity.peer_sent_J.tolist() == pytest.approx([1e-6 * 1499] * 3)
+
+
+def test_paper_mode_from_config_builds_the_layer_on_standby() -> None:
+    config = load_config()
+    node = SlaveNode.from_config(config)
+    assert node.passivity is not None and node.passivity_standby
+    assert not node.initial_state(1).passivity.active.any()
+    tdpa = SlaveNode.from_config(override(config, "control.mode", "tdpa"))
+    assert tdpa.passivity is not None and not tdpa.passivity_standby
+    assert tdpa.initial_state(1).passivity.active.all()
