@@ -31,6 +31,11 @@ from haptic.common.wire.messages import Flags, ToolState
 from haptic.master.node import MasterNode, MasterNodeState
 from haptic.master.supervisor import MasterSupervisor, Transition
 
+#: The flags of the message to the slave by whether the layer is switched on (IntFlag
+#: arithmetic costs about 1 us per operation, too much per lane and tick in a sweep).
+_ENABLED = (Flags.FORCES_ENABLED, Flags.FORCES_ENABLED | Flags.TDPA_SWITCHED)
+_SAFE = (Flags.SAFE_STATE, Flags.SAFE_STATE | Flags.TDPA_SWITCHED)
+
 
 @dataclass
 class MasterTickOutput:
@@ -71,6 +76,7 @@ class MasterTick:
         self._tool_force = np.zeros((lanes, 2))
         self._pending_events: list[tuple[float, Any]] = []
         self._no_flags = [Flags(0)] * lanes
+        self._none_switched = [False] * lanes
         #: (lanes,) where the governor has the standby passivity layer switched on
         self.standby_active = np.zeros(lanes, bool)
         #: the switch's events (``tdpa_on``/``tdpa_off``), for the program's event list
@@ -203,13 +209,15 @@ class MasterTick:
             self._tool_used[...] = 0.0
             self._scale[...] = 0.0
         flags = []
-        switched = self.switched_flags()
+        port = self.state.passivity if self.state is not None else None
+        switched = (port.active.tolist() if port is not None and self.node.passivity_standby
+                    else self._none_switched)
         for lane, supervisor in enumerate(self.supervisors):
             if enabled[lane]:
-                flags.append(Flags.FORCES_ENABLED | switched[lane])
+                flags.append(_ENABLED[switched[lane]])
             else:
                 self._command[lane] = supervisor.hold_m
-                flags.append(Flags.SAFE_STATE | switched[lane])
+                flags.append(_SAFE[switched[lane]])
         return MasterTickOutput(self._command, self._handle_used, self._tool_used, self._scale,
                                 enabled, flags)
 

@@ -34,10 +34,24 @@ from haptic.slave_sim.pacing import Sample, Step
 from haptic.slave_sim.resync import ToolResync
 from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
 
-#: (ready, cutting) -> the flags of the message to the master.
-_FLAGS = {(True, False): Flags.FORCES_ENABLED, (False, False): Flags.SAFE_STATE,
-          (True, True): Flags.FORCES_ENABLED | Flags.IN_CONTACT,
-          (False, True): Flags.SAFE_STATE | Flags.IN_CONTACT}
+
+def _flags(ready: bool, cutting: bool, outside: bool, switched: bool) -> Flags:
+    """The flags of the message to the master: FORCES_ENABLED when ready, else SAFE_STATE;
+    IN_CONTACT while cutting; WORK_AREA_STOP while the work-area guard holds the tool;
+    TDPA_SWITCHED while a standby passivity layer is switched on."""
+    flags = Flags.FORCES_ENABLED if ready else Flags.SAFE_STATE
+    for bit, on in ((Flags.IN_CONTACT, cutting), (Flags.WORK_AREA_STOP, outside),
+                    (Flags.TDPA_SWITCHED, switched)):
+        if on:
+            flags |= bit
+    return flags
+
+
+#: (ready, cutting, outside, switched) -> the flags (IntFlag arithmetic costs about 1 us
+#: per operation, too much per lane and tick in a sweep)
+_FLAGS = {(ready, cutting, outside, switched): _flags(ready, cutting, outside, switched)
+          for ready in (False, True) for cutting in (False, True)
+          for outside in (False, True) for switched in (False, True)}
 
 
 @dataclass
@@ -233,11 +247,11 @@ class SlaveTick:
         cutting = out.cutting
         table = _FLAGS
         port = self.state.passivity
-        switched = (port.active.tolist() if port is not None and self.node.passivity_standby
-                    else [False] * self.lanes)
-        flags = [table[supervisor.ready, bool(cut)]
-                 | (Flags.WORK_AREA_STOP if supervisor.outside else Flags(0))
-                 | (Flags.TDPA_SWITCHED if on else Flags(0))
-                 for supervisor, cut, on in zip(self.supervisors, cutting.tolist(), switched,
-                                                strict=True)]
+        if port is not None and self.node.passivity_standby:
+            flags = [table[supervisor.ready, bool(cut), supervisor.outside, on]
+                     for supervisor, cut, on in zip(self.supervisors, cutting.tolist(),
+                                                    port.active.tolist(), strict=True)]
+        else:
+            flags = [table[supervisor.ready, bool(cut), supervisor.outside, False]
+                     for supervisor, cut in zip(self.supervisors, cutting.tolist(), strict=True)]
         return SlaveTickOutput(out, running, flags)
