@@ -50,8 +50,15 @@ class PassivityLink:
         return float(message.energy_J)
 
     def receive(self, port: PassivityPort, message: Any) -> None:
-        """Give ``port`` (one lane) the peer's energy from ``message`` (numpy path)."""
-        self._value[0] = self.peer_energy(port, message)
+        """Give ``port`` (one lane) the peer's energy from ``message`` (numpy path). A layer
+        switched off (on standby for the governor) only notes the newest value, as
+        :meth:`PassivityPort.receive` would, without its numpy calls on every tick."""
+        value = self.peer_energy(port, message)
+        if not port.active[0]:
+            if value > port.peer_sent_J[0]:  # NaN compares False: nothing noted
+                port.peer_sent_J[0] = value
+            return
+        self._value[0] = value
         port.receive(self._value)
 
     @staticmethod
