@@ -17,12 +17,17 @@ from typing import Any
 
 import numpy as np
 
-from haptic.common.config import ConfigError, exit_on_config_error, load_config
+from haptic.common.analysis.preflight import (
+    PreflightResult,
+    check_stability,
+    with_damper_environment,
+)
+from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.config.control_schema import (
     passivity_settings,
     standby_passivity_settings,
 )
-from haptic.common.config.scenario import load_scenario
+from haptic.common.config.scenario import load_scenario, max_block_damping
 from haptic.common.model.delay_profile import DelayProfileError, parse_delay_profile
 from haptic.common.model.teleop import model_from_config
 from haptic.common.runtime.cli_options import add_retired_delay_option
@@ -175,9 +180,21 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
     np.savez(out / "traces.npz", time_s=result.time_s, **traces)
     _plot_run(out / "traces.png", result.time_s, traces, f"{scenario.name}, k = {gain:g}, "
               f"delay {delay_samples * model.sample_period_s * 1e3:.2f} ms")
+    analysis = _analysis(config, gain, scenario, environment,
+                         delay_samples * model.sample_period_s)
+    if not analysis.stable:
+        margin = analysis.delay_margin_s
+        print(f"haptic-sim run: k = {gain:g} at {analysis.round_trip_delay_s * 1e3:.2f} ms round "
+              "trip is UNSTABLE in the sampled analysis ("
+              + ("unstable even without delay" if margin == 0.0 else
+                 f"delay margin {margin * 1e3:.2f} ms")
+              + ("" if environment == "linear" else
+                 f"; the clay as its damping, {max_block_damping(scenario):g} N s/m")
+              + "); the run shows what that does", file=sys.stderr)
     return {
         "scenario": scenario.name, "environment": environment, "k": gain,
         "round_trip_delay_s": delay_samples * model.sample_period_s,
+        "analysis": analysis.as_dict(),
         "duration_s": result.steps * result.sample_period_s,
         "peak_handle_force_N": result.peak_handle_force_N[0].tolist(),
         "peak_tool_force_N": result.peak_tool_force_N[0].tolist(),
@@ -189,6 +206,19 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
         "control": config["control"]["mode"],
         "final_position_gap_m": result.final_position_gap_m[0].tolist(),
     }
+
+
+def _analysis(config: dict[str, Any], gain: float, scenario: Any, environment: str,
+              round_trip_s: float) -> PreflightResult:
+    """The sampled analysis' verdict for the run: gain ``gain``, the constant round trip (s),
+    and for the clay its linearisation (the largest block damping B s as Tt, as the programs'
+    pre-flight has it), so a user sees whether what the run shows is what the analysis
+    predicts (a simulator runs unstable combinations; the programs refuse them)."""
+    analysed = override(config, "model.ch1.gain_k", float(gain))
+    damping = max_block_damping(scenario) if environment != "linear" else None
+    if damping is not None:
+        analysed = with_damper_environment(analysed, damping)
+    return check_stability(analysed, round_trip_s, sampled=True)
 
 
 def _plot_run(path: Path, time_s: np.ndarray, traces: dict[str, np.ndarray], title: str

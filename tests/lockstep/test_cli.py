@@ -61,3 +61,22 @@ def test_bad_arguments_exit_2_with_one_line(argv, capsys) -> None:
 def test_ranges() -> None:
     assert _floats("0:0.002:0.001") == pytest.approx((0.0, 0.001, 0.002))
     assert _floats("1,3") == (1.0, 3.0)
+
+
+def test_run_reports_the_analysis_and_warns_when_it_calls_the_loop_unstable(tmp_path,
+                                                                            capsys) -> None:
+    """The paper's k = 13 against the clay (Tt = B s, B = 100 N s/m) is unstable even without
+    delay in the sampled analysis; the simulator runs it and says so, and the summary carries
+    the verdict next to what the run did (the tool flies off: far over the 3.6 N of a cut)."""
+    out = tmp_path / "run"
+    assert main(["run", "--k", "13", "--duration", "1.0", "--out", str(out), "--json"]) == 0
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out)
+    assert summary["environment"] == "clay"
+    assert summary["analysis"]["stable"] is False and summary["analysis"]["k"] == 13.0
+    assert "k = 13 at 0.00 ms round trip is UNSTABLE" in captured.err
+    assert max(summary["peak_tool_force_N"]) > 50.0
+    assert main(["run", "--k", "1", "--duration", "0.3", "--out", str(out), "--json"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["analysis"]["stable"] is True
+    assert "UNSTABLE" not in captured.err
