@@ -75,7 +75,6 @@ class MasterTick:
         self._scale = np.zeros(lanes)
         self._tool_force = np.zeros((lanes, 2))
         self._pending_events: list[tuple[float, Any]] = []
-        self._no_flags = [Flags(0)] * lanes
         self._none_switched = [False] * lanes
         #: (lanes,) where the governor has the standby passivity layer switched on
         self.standby_active = np.zeros(lanes, bool)
@@ -209,9 +208,7 @@ class MasterTick:
             self._tool_used[...] = 0.0
             self._scale[...] = 0.0
         flags = []
-        port = self.state.passivity if self.state is not None else None
-        switched = (port.active.tolist() if port is not None and self.node.passivity_standby
-                    else self._none_switched)
+        switched = self._switched()
         for lane, supervisor in enumerate(self.supervisors):
             if enabled[lane]:
                 flags.append(_ENABLED[switched[lane]])
@@ -221,13 +218,17 @@ class MasterTick:
         return MasterTickOutput(self._command, self._handle_used, self._tool_used, self._scale,
                                 enabled, flags)
 
+    def _switched(self) -> list[bool]:
+        """Per lane, whether the governor has a standby passivity layer switched on."""
+        port = self.state.passivity if self.state is not None else None
+        if port is None or not self.node.passivity_standby:
+            return self._none_switched
+        return port.active.tolist()
+
     def switched_flags(self) -> list[Flags]:
         """Per lane, :attr:`Flags.TDPA_SWITCHED` where the governor switched the passivity
         layer on (a standby node), else no flag."""
-        port = self.state.passivity if self.state is not None else None
-        if port is None or not self.node.passivity_standby:
-            return self._no_flags
-        return [Flags.TDPA_SWITCHED if on else Flags(0) for on in port.active.tolist()]
+        return [Flags.TDPA_SWITCHED if on else Flags(0) for on in self._switched()]
 
     def switch_passivity(self, now_s: float, lanes: np.ndarray, on: bool, reason: str) -> int:
         """Switch the passivity layer on (``on``) or off in ``lanes`` ((lanes,) bool mask) of
