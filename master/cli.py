@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import zenoh
@@ -37,6 +39,8 @@ from haptic.master.settings import master_settings, with_work_area
 
 #: Run length of the master-only mode when --duration is not given, s.
 NO_LINK_DEFAULT_DURATION_S = 1.0
+#: The rigs whose time advances only when the loop steps them (``--rig-time``).
+SIMULATED_RIGS = ("sim", "sim-inproc", "model")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -53,6 +57,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="channel on that interface ([master.can] channel), e.g. can0")
     parser.add_argument("--operator", help="simulated operator spec ([master.sim] operator), "
                         "e.g. regulate:fx=3.6,onset=0.2")
+    parser.add_argument("--rig-time", dest="rig_time", type=float, metavar="S",
+                        help="simulated rigs (sim, sim-inproc, model): end the run once S s of "
+                        "the rig's time (ticks x Ts) have been stepped, however long that takes "
+                        "(a late tick stops a simulated rig's time, so --duration, wall time, "
+                        "ends a loaded run early in its scenario)")
     add_preflight_options(parser)
     add_networked_options(parser, "slave", "write master_trace.npz (every --trace-every-th "
                           "tick) here at the end", DEFAULT_SYNC_TOLERANCE_M)
@@ -103,6 +112,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_networked_options(args)
         settings = master_settings(options.config)
         model = model_from_config(options.config)
+        if args.rig_time is not None:
+            options = replace(options, max_steps=rig_time_steps(args.rig_time, settings.rig,
+                                                                 model.sample_period_s))
         # the handle stops where the slave's tool does (issue 16): the slave's scenario grid
         # bounds the handle's workspace too, through Ah1
         scenario = load_scenario(options.config["slave"]["scenario"])
@@ -140,9 +152,22 @@ def main(argv: Sequence[str] | None = None) -> int:
                                   "work_area": area.describe()})
 
 
+def rig_time_steps(rig_time_s: float, rig: str, period_s: float) -> int:
+    """The ticks of ``--rig-time``: ``rig_time_s`` (s) stepped at ``period_s`` (s); only a
+    simulated rig has a time of its own (ConfigError otherwise)."""
+    if rig not in SIMULATED_RIGS:
+        raise ConfigError("--rig-time", f"only with a simulated rig ({', '.join(SIMULATED_RIGS)}); "
+                          f"rig {rig!r} runs on the wall clock: use --duration")
+    if not (math.isfinite(rig_time_s) and rig_time_s > 0.0):
+        raise ConfigError("--rig-time", f"must be a finite number > 0 s (got {rig_time_s:g})")
+    return max(1, round(rig_time_s / period_s))
+
+
 def _main_alone(args: argparse.Namespace) -> int:
     duration = NO_LINK_DEFAULT_DURATION_S if args.duration is None else args.duration
     with exit_on_config_error():
+        if args.rig_time is not None:
+            raise ConfigError("--rig-time", "not with --no-link (use --duration)")
         config = _config(args)
         if not (duration > 0.0 and duration < float("inf")):
             raise ConfigError("--duration", f"must be a finite number > 0 (got {duration})")

@@ -372,6 +372,7 @@ def _run_linked_master(
                                           governor.events if governor is not None else []),
         hardware_faults=supervisor.hardware_faults[:50], node_faulted=supervisor.faulted,
         stages=stages.summary(), work_area_holds=supervisor.peer_stops,
+        stepped_time_s=run.steps * model.sample_period_s,
         **tool_guard.summary(), **inert_summary,
         **(governor.summary() if governor is not None else {}),
         **passivity_summary(tick_stages.state.passivity if tick_stages.state is not None

@@ -45,6 +45,10 @@ DEFAULT_OPERATOR = "regulate:fx=3.6,onset=0.2,max=5"
 TERM_GRACE_S = 3.0
 #: Start-up allowance on top of the duration (Python, Warp and Zenoh start, the peer wait), s.
 START_ALLOWANCE_S = 40.0
+#: The master steps the session's duration in rig time (``--rig-time``), so the scripted
+#: scenario runs to its end however loaded the machine is; a run this many times slower than
+#: real time still finishes (the slave's wall-time bound and the session's deadline).
+SLOWDOWN_ALLOWANCE = 4.0
 
 
 #: The largest position gap |yt - Ah1 yh| at the end of a session (issue 16), m.
@@ -61,7 +65,8 @@ def free_port() -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="haptic-session", description=__doc__.split("\n")[0])
     parser.add_argument("--duration", type=float, default=4.0, metavar="S",
-                        help="run length of the loops, s (default 4)")
+                        help="run length of the loops in the simulated rig's time, s (default "
+                        "4; a loaded machine takes longer in wall time, never less scenario)")
     parser.add_argument("--out", type=Path, default=Path("out/session"), metavar="DIR",
                         help="report directory (default out/session)")
     parser.add_argument("--config", metavar="FILE", help="TOML configuration for both programs")
@@ -124,14 +129,16 @@ def run_session(args: argparse.Namespace) -> int:
     files = {"master": out / "master.json", "slave": out / "slave.json"}
     for path in files.values():
         path.unlink(missing_ok=True)
-    # The slave runs a little longer; the session stops it as soon as the master is done.
+    # The master steps the duration in rig time; the slave's wall-time bound allows a slow
+    # master, and the session stops the slave as soon as the master is done.
+    wall_bound_s = SLOWDOWN_ALLOWANCE * args.duration
     commands = {
         "slave": [sys.executable, "-m", "haptic.slave_sim.cli", *common,
-                  "--duration", repr(args.duration + 5.0), "--connect", endpoint,
+                  "--duration", repr(wall_bound_s + 5.0), "--connect", endpoint,
                   "--scenario", args.scenario, "--out", str(out),
                   "--json-summary", str(files["slave"]), *shlex.split(args.slave_args)],
         "master": [sys.executable, "-m", "haptic.master.cli", *common,
-                   "--duration", repr(args.duration), "--listen", endpoint, "--rig", args.rig,
+                   "--rig-time", repr(args.duration), "--listen", endpoint, "--rig", args.rig,
                    "--operator", args.operator, "--out", str(out),
                    "--json-summary", str(files["master"]), *shlex.split(args.master_args)],
     }
@@ -143,7 +150,7 @@ def run_session(args: argparse.Namespace) -> int:
     try:
         for side in ("slave", "master"):
             processes[side] = subprocess.Popen(commands[side])
-        deadline = time.monotonic() + args.duration + START_ALLOWANCE_S
+        deadline = time.monotonic() + wall_bound_s + START_ALLOWANCE_S
         master = processes["master"]
         while master.poll() is None and time.monotonic() < deadline:
             if processes["slave"].poll() is not None:
@@ -244,6 +251,10 @@ def combined_summary(master: dict[str, Any], slave: dict[str, Any]) -> str:
     from haptic.common.runtime.stage_times import format_stages
 
     lines = ["session summary"]
+    stepped = master.get("stepped_time_s")
+    if stepped is not None and master.get("duration_s"):
+        lines.append(f"  rig time {stepped:.2f} s stepped in {master['duration_s']:.2f} s of wall "
+                     f"time")
     for name, s in (("master", master), ("slave", slave)):
         lines.append(
             f"  {name:6s} {s['steps']} steps  rate {s['rate_hz']:.1f} Hz  period error p99 "

@@ -70,7 +70,8 @@ class RunOptions:
     side's :class:`LinkConfig`; ``duration_s``: run length in s (``None``: until SIGINT or
     SIGTERM); ``json_summary``: where to write the JSON summary (or ``None``);
     ``show_status``: the live status line (``None``: when stderr is a terminal);
-    ``runner``: the loop's pacing and scheduling (``[runner]``).
+    ``runner``: the loop's pacing and scheduling (``[runner]``); ``max_steps``: end the run
+    after this many ticks as well (``None``: no limit; the master's ``--rig-time``).
     """
 
     config: dict[str, Any]
@@ -79,6 +80,7 @@ class RunOptions:
     json_summary: Path | None
     show_status: bool | None
     runner: RunnerSettings
+    max_steps: int | None = None
 
 
 def add_run_options(parser: argparse.ArgumentParser) -> None:

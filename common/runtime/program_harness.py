@@ -146,7 +146,8 @@ class ProgramHarness:
         of the live status line."""
         options = self.options
         self.runner = RealTimeRunner(
-            self.period_s, step, duration_s=options.duration_s, spin_s=options.runner.spin_s,
+            self.period_s, step, duration_s=options.duration_s, max_steps=options.max_steps,
+            spin_s=options.runner.spin_s,
             realtime=options.runner.realtime, status=status_text,
             show_status=options.show_status, stop_signals=signals)
         try:

@@ -118,7 +118,8 @@ class RunStats:
 
 
 class RealTimeRunner:
-    """Calls ``step`` every ``period_s`` seconds until ``duration_s`` (None: until stopped).
+    """Calls ``step`` every ``period_s`` seconds until ``duration_s`` (None: until stopped) or
+    ``max_steps`` ticks have run (None: no limit), whichever comes first.
 
     ``clock_ns`` and ``sleep`` are injectable (tests drive a fake clock). ``status`` returns
     extra text for the live status line (link delay, loss, force); the line is written to
@@ -135,6 +136,7 @@ class RealTimeRunner:
         step: StepFunction,
         *,
         duration_s: float | None = None,
+        max_steps: int | None = None,
         spin_s: float = 0.0003,
         clock_ns: Callable[[], int] = time.perf_counter_ns,
         sleep: Callable[[float], None] = time.sleep,
@@ -150,6 +152,9 @@ class RealTimeRunner:
             raise ValueError(f"period_s must be > 0 (got {period_s})")
         if duration_s is not None and not duration_s >= 0.0:
             raise ValueError(f"duration_s must be >= 0 (got {duration_s})")
+        if max_steps is not None and max_steps < 0:
+            raise ValueError(f"max_steps must be >= 0 (got {max_steps})")
+        self._max_steps = max_steps
         self.period_s = period_s
         self._period_ns = round(period_s * 1e9)
         self._spin_ns = round(max(spin_s, 0.0) * 1e9)
@@ -232,7 +237,11 @@ class RealTimeRunner:
         last_status = start
         status_steps = 0
         tick = 0
+        max_steps = self._max_steps
         while not self._stop:
+            if max_steps is not None and tick >= max_steps:
+                self.stop_reason = self.stop_reason or "steps"
+                break
             if signals is not None and signals.requested:
                 self.request_stop(signals.reason)
                 break

@@ -92,6 +92,29 @@ def test_short_overrun_is_counted_and_caught_up_once():
     assert sum(g < PERIOD_NS * 0.9 for g in gaps) == 1  # one short gap to get back on grid
 
 
+def test_max_steps_counts_executed_ticks_not_wall_time():
+    """``max_steps`` (the master's ``--rig-time``): a run whose ticks stall still executes
+    every one of its ticks, where a wall-time duration would have ended it early."""
+    clock = FakeClock()
+    starts = []
+
+    def step(tick: int, now: int) -> None:
+        starts.append(now)
+        if tick % 50 == 0:
+            clock.now += 10 * PERIOD_NS  # a loaded machine: frozen for ten periods now and then
+
+    stats = make(clock, step, duration_s=None, max_steps=400).run()
+    assert stats.steps == len(starts) == 400 and stats.stop_reason == "steps"
+    assert stats.skipped_ticks == 8 * 9  # wall time went on, the steps did not
+    clock = FakeClock()
+    walled = make(clock, step, duration_s=400 * PERIOD_NS * 1e-9).run()
+    assert walled.stop_reason == "duration" and walled.steps < 400 - 50
+    # whichever comes first: a duration shorter than the steps ends the run
+    clock = FakeClock()
+    both = make(clock, lambda tick, now: None, duration_s=0.01, max_steps=1000).run()
+    assert both.stop_reason == "duration" and both.steps < 1000
+
+
 def test_request_stop_from_the_step():
     clock = FakeClock()
     holder = {}
@@ -141,6 +164,8 @@ def test_invalid_arguments():
         RealTimeRunner(0.0, lambda t, n: None)
     with pytest.raises(ValueError):
         RealTimeRunner(0.001, lambda t, n: None, duration_s=-1.0)
+    with pytest.raises(ValueError):
+        RealTimeRunner(0.001, lambda t, n: None, max_steps=-1)
 
 
 CHILD = textwrap.dedent(

@@ -12,11 +12,11 @@ from haptic.common.runtime.summary import REQUIRED_SUMMARY_KEYS
 def test_session_runs_both_programs_and_writes_the_report(tmp_path) -> None:
     out = tmp_path / "session"
     process = subprocess.Popen(
-        [sys.executable, "-m", "haptic.common.launch.cli", "--duration", "1.5", "--out", str(out)],
+        [sys.executable, "-m", "haptic.common.launch.cli", "--out", str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )
     try:
-        log, _ = process.communicate(timeout=90)
+        log, _ = process.communicate(timeout=150)
     finally:
         if process.poll() is None:
             process.kill()
@@ -31,14 +31,20 @@ def test_session_runs_both_programs_and_writes_the_report(tmp_path) -> None:
         assert set(REQUIRED_SUMMARY_KEYS) <= set(summary)
         assert summary["side"] == side and summary["steps"] > 0
     slave = json.loads((out / "slave.json").read_text())
+    master = json.loads((out / "master.json").read_text())
     assert slave["removed_volume_m3"] > 0.0  # the tool reached the clay and cut it
-    # the sides end aligned (issue 16): every master sample stepped once on the slave, one
-    # work area. The issue's 1 mm is a figure the summary prints against its target (0.17 mm
-    # on a quiet 2-core VM); under the suite's load, the master overrunning its ticks on the
-    # emulated CAN rig, it was 1.01 mm once, so this asserts the behaviour: no drift that
-    # grows (before, 25 mm after 3 s behind real time).
+    # the README's session, whole: the master steps its 4 s in rig time however loaded the
+    # machine is (a late tick stops a simulated rig's time), so the scenario runs to its end
+    assert master["stop_reason"] == "steps"
+    assert abs(master["stepped_time_s"] - 4.0) <= master["period_s"]
+    assert "rig time 4.00 s stepped in" in log
+    # the sides end aligned (issue 16's 1 mm): the cut done, the operator pushes the handle
+    # on the work area's wall, where the tool stands; what is left is the handle's servo
+    # giving under that push (0.17 mm, quiet or beside a CPU hog; 0.7 mm of velocity lag
+    # mid-cut, where a wall-time run ended early under load: 0.5-1.8 mm)
     assert "position gap at the end |yt - Ah1 yh|" in log and "work area: " in log
-    assert max(abs(g) for g in slave["final_position_gap_m"]) <= 0.002, slave
+    assert abs(slave["final_tool_position_m"][0] - 0.15) <= 1e-6, slave
+    assert max(abs(g) for g in slave["final_position_gap_m"]) <= 0.001, slave
     report = (out / "report.md").read_text()
     assert "## master summary" in report and "## slave summary" in report
 

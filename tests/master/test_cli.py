@@ -89,3 +89,25 @@ def test_master_alone_flags_are_refused_in_the_linked_run(capsys) -> None:
     assert caught.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--no-pace" in err[0] and "--no-link" in err[0]
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--rig", "can", "--rig-time", "1"], ("--rig-time", "simulated rig", "--duration")),
+    (["--rig", "model", "--rig-time", "nan"], ("--rig-time", "> 0")),
+    (["--rig", "model", "--rig-time", "0"], ("--rig-time", "> 0")),
+    (["--no-link", "--rig-time", "1"], ("--rig-time", "--no-link")),
+])
+def test_rig_time_is_refused_where_the_rig_has_no_time_of_its_own(argv, words, capsys) -> None:
+    """``--rig-time`` steps a simulated rig's time; a real rig runs on the wall clock."""
+    with pytest.raises(SystemExit) as caught:
+        main(argv)
+    assert caught.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(word in err[0] for word in words), err
+
+
+def test_rig_time_counts_ticks_of_the_period() -> None:
+    from haptic.master.cli import rig_time_steps
+
+    assert rig_time_steps(4.0, "sim", 0.00054) == 7407
+    assert rig_time_steps(1e-9, "model", 0.00054) == 1
