@@ -147,6 +147,7 @@ class SlaveNode:
         self.plant = tool_plant(model)
         mass, damping, stiffness = tool_constants(model)
         self._inv_mass = 1.0 / mass
+        self._inv_period_s = 1.0 / model.sample_period_s
         self._damping = damping
         self._stiffness = stiffness
         self._position_ratio = np.array([a.position_ratio_ah1 for a in model.axes])
@@ -229,6 +230,10 @@ class SlaveNode:
             actuator[state.halted] = 0.0
         tool = state.tool
         previous = tool[:, POSITION_COLUMNS]
+        shift = None
+        if port is not None:  # tdpa: the tool moves towards Ah1 yh where that adds no energy
+            shift = self._drift_shift(state, port, handle_position_m)
+            tool[:, POSITION_COLUMNS] += shift
         held = tool.copy() if halted else None
         tool[...] = tool @ self._plant_a_t + actuator @ self._plant_b_t
         if halted:
@@ -241,6 +246,10 @@ class SlaveNode:
                         - self._stiffness * position) * self._inv_mass
         result = self.environment.step(state.environment, previous, position, velocity,
                                        acceleration)
+        if shift is not None:  # the drift moves the tool's base, slowly: the environment
+            # sees the swept positions and the plant's own speed (a force law of the speed
+            # would otherwise charge the step after it was judged); the outputs the whole
+            velocity = velocity + shift * self._inv_period_s
         force = result.force_N
         if halted:
             force = force.copy()
@@ -289,6 +298,16 @@ class SlaveNode:
             :, POSITION_COLUMNS]
         force = state.tool_force_N
         return port.damp(actuator + port.drift_force(gap, velocity, force), velocity, force)
+
+    def _drift_shift(self, state: SlaveState, port: PassivityPort,
+                     handle_position_m: np.ndarray) -> np.ndarray:
+        """The tool's drift step (lanes, 2), m (:meth:`PassivityPort.drift_shift`); none on
+        halted lanes. The environment sees it as the tool's motion of this step."""
+        gap = self._position_ratio * np.asarray(handle_position_m) - state.tool[
+            :, POSITION_COLUMNS]
+        shift = port.drift_shift(gap, state.tool_force_N)
+        shift[state.halted] = 0.0
+        return shift
 
     def safe_stop(self, state: SlaveState, lanes: np.ndarray | slice | None = None) -> None:
         """Put ``lanes`` (default: all) in the safe state: the tool stops where it is (zero

@@ -46,6 +46,12 @@ CONTROL_SCHEMA: Schema = {
         "(Ah1^-1 yt) its handle command closes per second, 1/s (0: off).", minimum=0.0),
     "master_drift_speed_max_m_per_s": Field(
         "float", "tdpa: the most speed of that correction, m/s.", minimum=0.0),
+    "slave_drift_rate_per_s": Field(
+        "float", "tdpa: the slave's drift correction, the share of the gap to the handle "
+        "(Ah1 yh) the tool closes per second where the environment's force allows it (free), "
+        "else paid from the account, 1/s (0: off).", minimum=0.0),
+    "slave_drift_speed_max_m_per_s": Field(
+        "float", "tdpa: the most speed of that correction, m/s.", minimum=0.0),
     "paper_drift_stiffness_N_per_m": Field(
         "float", "paper: stiffness kp of the slow drift coupling vt += kp wc/(s + wc) (Ah1 yh - "
         "yt) at the slave, N/m (0: off, the paper's scheme exactly; haptic-analyze includes "

@@ -82,6 +82,8 @@ class PassivitySettings:
     drift_force_max_N: float = 2.0
     master_drift_rate_per_s: float = 2.0
     master_drift_speed_max_m_per_s: float = 0.01
+    slave_drift_rate_per_s: float = 2.0
+    slave_drift_speed_max_m_per_s: float = 0.01
 
 
 @dataclass(eq=False)
@@ -253,6 +255,30 @@ class PassivityPort:
         work = np.einsum("ij,ij->i", force_N, step)
         other = np.einsum("ij,ij->i", force_N, command_m - self.previous_position_m)
         budget = np.maximum(self.reserve_J() + other, 0.0)
+        paid = (work >= 0.0) | (-work <= budget)
+        step *= np.where(paid & self.active, 1.0,
+                         np.where(self.active, budget / np.maximum(-work, 1e-300), 0.0))[:, None]
+        return step
+
+    def drift_shift(self, gap_m: np.ndarray, port_force_N: np.ndarray) -> np.ndarray:
+        """Slave side, drift compensation: the step (lanes, 2), m, that moves the tool
+        towards ``Ah1 yh`` (``gap_m`` = Ah1 yh - yt; NaN: none), the gap times
+        ``slave_drift_rate_per_s`` Ts, at most ``slave_drift_speed_max_m_per_s`` Ts long, as
+        the master's command moves towards the tool. Its work at the port, the
+        environment's ``-ft . d``, is the environment's own release where positive (free:
+        it moves the tool where the environment pushes it, and the observer counts it in);
+        where negative it is paid from the account, else scaled down. In free space (no
+        environment force) it costs nothing."""
+        s, ts = self.settings, self.period_s
+        gap = np.asarray(gap_m, float)
+        known = np.all(np.isfinite(gap), axis=1) & (s.slave_drift_rate_per_s > 0.0)
+        step = np.where(known[:, None], np.nan_to_num(gap) * (s.slave_drift_rate_per_s * ts),
+                        0.0)
+        length = np.sqrt(np.einsum("ij,ij->i", step, step))
+        most = s.slave_drift_speed_max_m_per_s * ts
+        step *= np.where(length > most, most / np.maximum(length, 1e-300), 1.0)[:, None]
+        work = -np.einsum("ij,ij->i", np.nan_to_num(port_force_N), step)
+        budget = np.maximum(self.reserve_J(), 0.0)
         paid = (work >= 0.0) | (-work <= budget)
         step *= np.where(paid & self.active, 1.0,
                          np.where(self.active, budget / np.maximum(-work, 1e-300), 0.0))[:, None]

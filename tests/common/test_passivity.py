@@ -159,6 +159,73 @@ def test_the_master_drift_against_the_operator_is_paid_from_the_account() -> Non
     assert paid[1, 0] == pytest.approx(0.002 * 2.0 * TS)
 
 
+def test_the_slave_drifts_to_the_handle_for_free_in_free_space() -> None:
+    """With no environment force the tool's step costs nothing at the port (-ft . d = 0): it
+    moves the gap (Ah1 yh - yt) times rate Ts, capped at the speed limit, from an empty
+    account; no handle position (NaN), a zero rate or a port switched off, no step."""
+    p = port(3, slave_drift_rate_per_s=2.0, slave_drift_speed_max_m_per_s=0.005)
+    gap = np.array([[0.001, -0.002], [0.5, 0.0], [np.nan, 0.0]])
+    step = p.drift_shift(gap, np.zeros((3, 2)))
+    np.testing.assert_allclose(step[0], gap[0] * 2.0 * TS, rtol=1e-12)
+    np.testing.assert_allclose(step[1], [0.005 * TS, 0.0], rtol=1e-12)  # capped
+    assert step[2].tolist() == [0.0, 0.0]
+    off = port(1, slave_drift_rate_per_s=0.0)
+    assert off.drift_shift(gap[:1], np.zeros((1, 2))).tolist() == [[0.0, 0.0]]
+    standby = port(1)
+    standby.active[:] = False
+    assert standby.drift_shift(gap[:1], np.zeros((1, 2))).tolist() == [[0.0, 0.0]]
+
+
+def test_the_slave_drift_against_the_environment_is_paid_from_the_account() -> None:
+    """Where the environment pushes the tool (ft, the force on the environment, points the
+    other way) the step is the environment's release and always taken; against the
+    environment its work on it (ft . d) is at most what the account holds: none from an empty
+    one, all of it once the account pays."""
+    p = port(2, slave_drift_rate_per_s=2.0)
+    gap = np.array([[-0.002, 0.0], [0.002, 0.0]])  # both tools should move by the gap
+    force = np.array([[1.0, 0.0], [1.0, 0.0]])  # a spring at +x: it pushes the tools to -x
+    step = p.drift_shift(gap, force)
+    assert step[0, 0] == pytest.approx(-0.002 * 2.0 * TS)  # with the environment: free
+    assert step[1, 0] == 0.0  # into the spring with nothing to pay
+    p.receive(np.array([1e-9, 1e-9]))
+    part = p.drift_shift(gap, force)
+    assert np.dot(force[1], part[1]) == pytest.approx(1e-9)
+    p.receive(np.array([1.0, 1.0]))
+    assert p.drift_shift(gap, force)[1, 0] == pytest.approx(0.002 * 2.0 * TS)
+
+
+def test_both_sides_close_a_gap_the_controllers_left_in_lockstep() -> None:
+    """The sweep's worst tdpa cell of the last round (k = 19, 0.2 s round trip, 20 % loss in
+    bursts): after the 1 N pulse the TDPA controllers leave the handle and the tool on either
+    side of their start, at rest in force balance. The master's drift alone closes that only
+    at the loop's slow pace, because the force loop pulls the handle back to the balance
+    (this seed: 0.94 mm left after 8 s, 2.8 mm with neither drift); with the slave's drift as
+    well both sides meet (0.012 mm)."""
+    from haptic.common.config import load_config
+    from haptic.common.config.scenario import load_scenario
+    from haptic.common.model.teleop import model_from_config
+    from haptic.lockstep.simulator import LockstepSimulator
+    from haptic.lockstep.sweep import SweepSettings, sweep_injection
+    from haptic.master.sim.operator import parse_operator_spec
+
+    model = model_from_config(load_config(None))
+    delay = int(round(0.2 / model.sample_period_s))
+    injection = sweep_injection(SweepSettings(gains_k=(19.0,), delays_s=(0.2,),
+                                                loss_probability=0.2, bursty=True))
+    gaps = {}
+    for name, rate in (("both", 2.0), ("master only", 0.0)):
+        sim = LockstepSimulator(model, load_scenario("constant-rate"),
+                                parse_operator_spec("constant:fx=0,fy=0"), np.array([19.0]),
+                                "linear", device="cpu",
+                                passivity=PassivitySettings(slave_drift_rate_per_s=rate))
+        result = sim.run(8.0, delay, to_slave=injection, to_master=injection, seed=4,
+                         excitation_N=np.full((20, 2), 1.0))
+        assert np.isfinite(result.peak_handle_force_N).all()
+        gaps[name] = float(np.linalg.norm(result.final_position_gap_m[0]))
+    assert gaps["both"] <= 0.1e-3, gaps
+    assert gaps["master only"] > 0.5e-3, gaps
+
+
 def test_two_port_passivity_in_a_delayed_lockstep_run() -> None:
     """The linear loop at k = 13 and 0.1 s round trip grows in the paper's scheme and stays
     bounded with TDPA, and the sum of the ports' output never exceeds their input by more

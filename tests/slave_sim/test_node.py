@@ -248,3 +248,41 @@ def test_paper_mode_from_config_builds_the_layer_on_standby() -> None:
     tdpa = SlaveNode.from_config(override(config, "control.mode", "tdpa"))
     assert tdpa.passivity is not None and not tdpa.passivity_standby
     assert tdpa.initial_state(1).passivity.active.all()
+
+
+def test_the_tdpa_tool_drifts_to_the_handle_and_its_speed_shows_it(model) -> None:
+    """tdpa: at rest in free space with the handle 2 mm away (the controllers' leftover), the
+    tool moves the gap times slave_drift_rate_per_s Ts in one step, capped at the speed limit,
+    and its reported velocity is the plant's plus that step per period (the environment's
+    force law sees the plant's own); a halted lane stays put, and with the rate 0 nothing moves."""
+    from haptic.common.model.passivity import PassivitySettings
+
+    scenario = load_scenario("constant-rate")
+    ts = model.sample_period_s
+    for rate, cap in ((2.0, 0.01), (50.0, 0.01), (0.0, 0.01)):
+        node = SlaveNode(model, scenario, "linear", passivity=PassivitySettings(
+            slave_drift_rate_per_s=rate, slave_drift_speed_max_m_per_s=cap,
+            drift_stiffness_N_per_m=0.0))  # the spring off: the step alone
+        state = node.initial_state(2)
+        node.safe_stop(state, np.array([False, True]))
+        handle = np.array([[0.002, 0.0], [0.002, 0.0]])
+        out = node.step(state, np.zeros((2, 2)), handle, np.zeros(2))
+        expected = min(0.002 * rate * ts, cap * ts)
+        assert out.tool_position_m[0, 0] == pytest.approx(expected, rel=1e-9, abs=1e-15)
+        assert out.tool_velocity_m_s[0, 0] == pytest.approx(expected / ts, rel=1e-9,
+                                                            abs=1e-12)
+        assert out.tool_position_m[1].tolist() == [0.0, 0.0]  # halted: held
+        assert out.tool_position_m[0, 1] == 0.0
+    # in free space (outside the clay) the gap closes at 2/s over 5 s (e^-10 of it left)
+    # from an empty account; against the linear environment's spring it costs what the
+    # account holds, none here, so it stops short of the handle
+    ends = {}
+    for environment in ("clay", "linear"):
+        node = SlaveNode(model, scenario.with_grid(256, 64), environment, clay_impl="numpy",
+                         passivity=PassivitySettings(drift_stiffness_N_per_m=0.0))
+        state = node.initial_state(1)
+        for _ in range(int(round(5.0 / ts))):
+            out = node.step(state, np.zeros((1, 2)), np.array([[0.002, -0.001]]), np.zeros(1))
+        assert state.passivity.tank_J[0] >= -1e-9  # nothing taken the port did not hold
+        ends[environment] = np.abs(out.tracking_error_m).max()
+    assert ends["clay"] <= 1e-6 and ends["linear"] > 1e-4, ends
