@@ -34,6 +34,15 @@ def _deployed(paper_config, paper_model, scenario) -> LockstepSimulator:
         supervision=LockstepSupervision.from_config(paper_config, scenario))
 
 
+
+def _starts(config: dict, model, scenario) -> tuple:
+    """The lockstep's supervision settings, Ah1 per axis, and the tool's and the handle's
+    start positions (1, 2), m, for ``scenario``."""
+    sup = LockstepSupervision.from_config(config, scenario)
+    ratio = tuple(float(a.position_ratio_ah1) for a in model.axes)
+    tool_start = np.asarray(scenario.tool.start_position_m, float)[None, :]
+    return sup, ratio, tool_start, tool_start / np.asarray(ratio)
+
 def test_lockstep_outputs_equal_program_ticks_fed_the_same_inputs(paper_config,
                                                                   paper_model) -> None:
     """Drive a master tick and a slave tick built as the programs build them (one lane each,
@@ -44,10 +53,7 @@ def test_lockstep_outputs_equal_program_ticks_fed_the_same_inputs(paper_config,
     duration_s = 0.3
     result = simulator.run(duration_s, 2, record_lanes=[0])  # d1 = 1 to the slave, d2 = 1 back
     ts = paper_model.sample_period_s
-    sup = LockstepSupervision.from_config(paper_config, scenario)
-    ratio = tuple(float(a.position_ratio_ah1) for a in paper_model.axes)
-    tool_start = np.asarray(scenario.tool.start_position_m, float)[None, :]
-    handle_start = tool_start / np.asarray(ratio)
+    sup, ratio, tool_start, handle_start = _starts(paper_config, paper_model, scenario)
     node = MasterNode.from_model(paper_model, master_settings(paper_config).safety)
     master = MasterTick(node, [MasterSupervisor(ratio, sup.sync_tolerance_m,
                                                 sup.max_message_age_s, sup.resync_messages)])
@@ -131,10 +137,7 @@ def test_the_slaves_work_area_stop_reaches_the_master_tick_and_holds_the_handle(
     off, SAFE_STATE on the wire) instead of running on alone."""
     scenario = load_scenario("constant-rate")
     ts = paper_model.sample_period_s
-    sup = LockstepSupervision.from_config(paper_config, scenario)
-    ratio = tuple(float(a.position_ratio_ah1) for a in paper_model.axes)
-    tool_start = np.asarray(scenario.tool.start_position_m, float)[None, :]
-    handle_start = tool_start / np.asarray(ratio)
+    sup, ratio, tool_start, handle_start = _starts(paper_config, paper_model, scenario)
     x, y = float(tool_start[0, 0]), float(tool_start[0, 1])
     # a work area that ends 1 mm short of the tool, on x: the guard stops it at once
     area = (x - 0.05, x - 0.001, y - 0.05, y + 0.05)
@@ -176,10 +179,7 @@ def test_every_message_delivered_in_a_tick_passes_the_guard_and_is_a_sample(
     position for the pacing (slave_sim/pacing.py)."""
     scenario = load_scenario("constant-rate")
     ts = paper_model.sample_period_s
-    sup = LockstepSupervision.from_config(paper_config, scenario)
-    ratio = tuple(float(a.position_ratio_ah1) for a in paper_model.axes)
-    tool_start = np.asarray(scenario.tool.start_position_m, float)[None, :]
-    handle_start = tool_start / np.asarray(ratio)
+    sup, ratio, tool_start, handle_start = _starts(paper_config, paper_model, scenario)
     slave_node = SlaveNode(paper_model, scenario, "linear", device="cpu")
     guard_settings = InputGuardSettings.from_config(paper_config)
     slave = SlaveTick(slave_node, slave_node.initial_state(1, tool_start),

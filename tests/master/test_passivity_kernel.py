@@ -15,13 +15,18 @@ from haptic.master.node import MasterNode
 from haptic.master.settings import master_settings
 
 
-def test_kernel_matches_the_numpy_reference() -> None:
+def _random_input_setup() -> tuple:
+    """k = 13, the shipped limits with the start-up gate open at once (random forces are
+    never small), and a small account (the credit cap and keep_J act often)."""
     config = load_config(None)
     model = model_from_config(config).with_gain(13.0)
-    # the shipped limits, with the start-up gate open at once (random forces are never small)
     safety = replace(master_settings(config).safety, ramp_small_force_N=1e9,
                      ramp_small_samples=1, ramp_time_s=0.05)
-    settings = PassivitySettings(credit_max_J=0.002, master_keep_J=0.0005)
+    return model, safety, PassivitySettings(credit_max_J=0.002, master_keep_J=0.0005)
+
+
+def test_kernel_matches_the_numpy_reference() -> None:
+    model, safety, settings = _random_input_setup()
     lanes = 6
     start = np.zeros((lanes, 2))
     tdpa = MasterNode.from_model(model, safety, settings)
@@ -110,11 +115,7 @@ def test_a_standby_layer_switched_per_lane_matches_the_reference_and_off_is_the_
     off at different steps step exactly as the numpy reference with the same switches; a lane
     never switched on steps exactly as the paper's node; the energy counters stay monotone
     across a switch and a switched-on lane starts with an empty account."""
-    config = load_config(None)
-    model = model_from_config(config).with_gain(13.0)
-    safety = replace(master_settings(config).safety, ramp_small_force_N=1e9,
-                     ramp_small_samples=1, ramp_time_s=0.05)
-    settings = PassivitySettings(credit_max_J=0.002, master_keep_J=0.0005)
+    model, safety, settings = _random_input_setup()
     lanes = 5
     start = np.zeros((lanes, 2))
     standby = MasterNode.from_model(model, safety, settings, passivity_standby=True)
