@@ -244,21 +244,12 @@ class PassivityPort:
         negative it is paid from what the account holds after this step's other work
         ``fh . (command - previous)``, else scaled down. With no operator force it costs
         nothing: the port's work is ``fh . dcmd``."""
-        s, ts = self.settings, self.period_s
-        target = np.asarray(target_m, float)
-        known = np.all(np.isfinite(target), axis=1) & (s.master_drift_rate_per_s > 0.0)
-        step = np.where(known[:, None], (np.nan_to_num(target) - command_m)
-                        * (s.master_drift_rate_per_s * ts), 0.0)
-        length = np.sqrt(np.einsum("ij,ij->i", step, step))
-        most = s.master_drift_speed_max_m_per_s * ts
-        step *= np.where(length > most, most / np.maximum(length, 1e-300), 1.0)[:, None]
+        s = self.settings
+        step = self._drift_step(np.asarray(target_m, float) - command_m,
+                                s.master_drift_rate_per_s, s.master_drift_speed_max_m_per_s)
         work = np.einsum("ij,ij->i", force_N, step)
         other = np.einsum("ij,ij->i", force_N, command_m - self.previous_position_m)
-        budget = np.maximum(self.reserve_J() + other, 0.0)
-        paid = (work >= 0.0) | (-work <= budget)
-        step *= np.where(paid & self.active, 1.0,
-                         np.where(self.active, budget / np.maximum(-work, 1e-300), 0.0))[:, None]
-        return step
+        return self._paid(step, work, np.maximum(self.reserve_J() + other, 0.0))
 
     def drift_shift(self, gap_m: np.ndarray, port_force_N: np.ndarray) -> np.ndarray:
         """Slave side, drift compensation: the step (lanes, 2), m, that moves the tool
@@ -269,19 +260,32 @@ class PassivityPort:
         it moves the tool where the environment pushes it, and the observer counts it in);
         where negative it is paid from the account, else scaled down. In free space (no
         environment force) it costs nothing."""
-        s, ts = self.settings, self.period_s
-        gap = np.asarray(gap_m, float)
-        known = np.all(np.isfinite(gap), axis=1) & (s.slave_drift_rate_per_s > 0.0)
-        step = np.where(known[:, None], np.nan_to_num(gap) * (s.slave_drift_rate_per_s * ts),
-                        0.0)
-        length = np.sqrt(np.einsum("ij,ij->i", step, step))
-        most = s.slave_drift_speed_max_m_per_s * ts
-        step *= np.where(length > most, most / np.maximum(length, 1e-300), 1.0)[:, None]
+        s = self.settings
+        step = self._drift_step(np.asarray(gap_m, float), s.slave_drift_rate_per_s,
+                                s.slave_drift_speed_max_m_per_s)
         work = -np.einsum("ij,ij->i", np.nan_to_num(port_force_N), step)
-        budget = np.maximum(self.reserve_J(), 0.0)
-        paid = (work >= 0.0) | (-work <= budget)
+        return self._paid(step, work, np.maximum(self.reserve_J(), 0.0))
+
+    def _drift_step(self, gap_m: np.ndarray, rate_per_s: float,
+                    speed_max_m_per_s: float) -> np.ndarray:
+        """Either side's drift step (lanes, 2), m: ``gap_m`` (lanes, 2; NaN: no step) times
+        ``rate_per_s`` Ts, at most ``speed_max_m_per_s`` Ts long."""
+        ts = self.period_s
+        known = np.all(np.isfinite(gap_m), axis=1) & (rate_per_s > 0.0)
+        step = np.where(known[:, None], np.nan_to_num(gap_m) * (rate_per_s * ts), 0.0)
+        length = np.sqrt(np.einsum("ij,ij->i", step, step))
+        most = speed_max_m_per_s * ts
+        step *= np.where(length > most, most / np.maximum(length, 1e-300), 1.0)[:, None]
+        return step
+
+    def _paid(self, step: np.ndarray, work_J: np.ndarray, budget_J: np.ndarray) -> np.ndarray:
+        """``step`` (lanes, 2) as far as it is paid: whole where its work at the port
+        ``work_J`` is an input (>= 0) or within ``budget_J``, else scaled to the budget; none
+        on lanes switched off."""
+        paid = (work_J >= 0.0) | (-work_J <= budget_J)
         step *= np.where(paid & self.active, 1.0,
-                         np.where(self.active, budget / np.maximum(-work, 1e-300), 0.0))[:, None]
+                         np.where(self.active, budget_J / np.maximum(-work_J, 1e-300),
+                                  0.0))[:, None]
         return step
 
     def damp(self, force_N: np.ndarray, velocity_m_per_s: np.ndarray,
