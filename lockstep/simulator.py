@@ -48,14 +48,14 @@ from haptic.master.settings import SafetySettings, with_work_area
 from haptic.master.sim.operator import OperatorModel
 from haptic.master.sim.rig_model import RigModel
 from haptic.master.supervisor import MasterSupervisor
-from haptic.master.tick import MasterTick
+from haptic.master.tick import MasterTick, ToolColumns
 from haptic.slave_sim.clay.sim import ClayStepResult
 from haptic.slave_sim.environment import LinearEnvironment, make_environment
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from haptic.slave_sim.node import SlaveNode, slave_compensators
 from haptic.slave_sim.resync import ToolResync
 from haptic.slave_sim.supervisor import SlaveSupervisor
-from haptic.slave_sim.tick import SlaveTick
+from haptic.slave_sim.tick import HandleColumns, SlaveTick
 
 ENVIRONMENTS = ("linear", "clay", "clay+linear")
 
@@ -280,7 +280,8 @@ class LockstepSimulator:
             to_slave: InjectionConfig | None = None, to_master: InjectionConfig | None = None,
             seed: int = 0, excitation_N: np.ndarray | None = None, window_s: float = 0.25,
             record_lanes: np.ndarray | None = None,
-            governors: Sequence[MarginGovernor] | None = None) -> LockstepResult:
+            governors: Sequence[MarginGovernor] | None = None,
+            every_lane_supervised: bool = False) -> LockstepResult:
         """Run every lane for ``duration_s``.
 
         ``round_trip_delay_samples`` (scalar or (lanes,)): whole samples, split d1 = n // 2
@@ -290,6 +291,10 @@ class LockstepSimulator:
         ``record_lanes``: lanes whose full traces are kept (default none).
         ``governors``: one margin governor per lane (lockstep/governed.py): k follows it on
         both sides; the result's ``governed`` holds the gains used and the events.
+        ``every_lane_supervised``: feed every lane's message object to its supervisor and
+        guard each tick, as the program does, instead of letting the lanes with nothing to
+        change only store their messages (``supervise_columns``; the same run, bit for bit,
+        several times slower: tests/lockstep/test_quiet_lanes.py).
         """
         ts = self.period_s
         steps = int(round(duration_s / ts))
@@ -366,8 +371,12 @@ class LockstepSimulator:
                 if excitation is not None and k < excitation.shape[0]:
                     fh = fh + excitation[k]
                 yh = sample.handle_position_m
-                master_tick.supervise(now_s, tool_arrivals.tool_states(k, tool_rows), yh,
-                                      silence_s=tool_arrivals.silence_s.tolist())
+                if every_lane_supervised:
+                    master_tick.supervise(now_s, tool_arrivals.tool_states(k, tool_rows), yh,
+                                          silence_s=tool_arrivals.silence_s.tolist())
+                else:
+                    master_tick.supervise_columns(now_s, tool_arrivals.tool_columns(
+                        k, tool_rows), yh, tool_arrivals.silence_s)
                 if governed is not None:  # k on the master now, on the slave with the message
                     master_tick.state.gain_ratio[:] = governed.update(
                         k, ts, tool_line.schedule, handle_line.schedule)
@@ -384,7 +393,7 @@ class LockstepSimulator:
                 command = used.command_m.copy()
                 handle_message[:, 0:2] = used.handle_force_used_N
                 handle_message[:, 2:4] = yh
-                handle_message[:, 4] = [float(f) for f in used.flags]
+                handle_message[:, 4] = used.flag_values
                 handle_message[:, 5] = used.force_scale
                 if tdpa:
                     handle_message[:, handle_energy_column] = master_tick.state.passivity.sent_J
@@ -392,8 +401,12 @@ class LockstepSimulator:
                 # slave: poll -> supervise -> node -> send
                 received = handle_line.receive(k)
                 yt = slave_state.tool[:, [0, 2]]
-                slave_tick.supervise(now_s, handle_arrivals.handle_states(k, received),
-                                     silence_s=handle_arrivals.silence_s.tolist())
+                if every_lane_supervised:
+                    slave_tick.supervise(now_s, handle_arrivals.handle_states(k, received),
+                                         silence_s=handle_arrivals.silence_s.tolist())
+                else:
+                    slave_tick.supervise_columns(now_s, handle_arrivals.handle_columns(
+                        k, received), handle_arrivals.silence_s)
                 if governed is not None:
                     slave_tick.state.gain_ratio = received[:, gain_column].copy()
                 if tdpa:
@@ -402,7 +415,7 @@ class LockstepSimulator:
                 out = ticked.out
                 ft = out.tool_force_N
                 tool_message = [ft, out.tool_position_m, out.tool_velocity_m_s,
-                                np.array([float(f) for f in ticked.flags])[:, None]]
+                                ticked.flag_values[:, None]]
                 if tdpa:
                     tool_message.append(slave_tick.state.passivity.sent_J[:, None])
                 tool_line.send(k, np.column_stack(tool_message))
@@ -428,6 +441,8 @@ class LockstepSimulator:
                               command, sample.operator_intent_force_N)
                     for name, value in zip(TRACE_NAMES, values, strict=True):
                         traces[name][k] = value[recorded]
+        master_tick.sync_supervisors()  # what the quiet lanes took, for their readers
+        slave_tick.sync_supervisors()
         master_state = master_tick.state
         self.final_states = (master_state, slave_tick.state)
         finite = np.isfinite(stats.handle_force_sumsq_N2).all(axis=(0, 2)) & np.isfinite(
@@ -474,6 +489,34 @@ class _Arrivals:
         self.silence_s[...] = (tick - self.last_fresh) * self.period_s
         sent = np.where(source >= 0, source, tick - self.lag)
         return fresh, sent
+
+    def tool_columns(self, tick: int, rows: np.ndarray) -> ToolColumns:
+        """The tick's tool messages as columns (``MasterTick.supervise_columns``)."""
+        fresh, sent = self._fresh(tick)
+        return ToolColumns(fresh, rows[:, 0:2], rows[:, 6].astype(np.int64),
+                           np.column_stack((rows[:, :7], sent)), self._tool_state)
+
+    def _tool_state(self, lane: int, row: np.ndarray) -> ToolState:
+        """The ``ToolState`` of a ``tool_columns`` row (the tool line's first 7 columns, then
+        the send tick)."""
+        fx, fy, x, y, vx, vy, flags, sent = row.tolist()
+        return ToolState(0, int(sent), int(int(sent) * (self.period_s * 1e9)),
+                         _FLAGS[int(flags)], (fx, fy), (x, y), (vx, vy), 0.0, 0.0)
+
+    def handle_columns(self, tick: int, rows: np.ndarray) -> HandleColumns:
+        """The tick's handle messages as columns (``SlaveTick.supervise_columns``)."""
+        fresh, sent = self._fresh(tick)
+        send_time_ns = (sent * (self.period_s * 1e9)).astype(np.int64)
+        return HandleColumns(fresh, rows[:, 0:2], rows[:, 2:4], rows[:, 4].astype(np.int64),
+                             np.zeros(self.lanes, np.int64), send_time_ns, rows[:, 5],
+                             np.column_stack((rows[:, :6], sent)), self._handle_state)
+
+    def _handle_state(self, lane: int, row: np.ndarray) -> HandleState:
+        """The ``HandleState`` of a ``handle_columns`` row (the handle line's first 6
+        columns, then the send tick)."""
+        fx, fy, x, y, flags, scale, sent = row.tolist()
+        return HandleState(0, int(sent), int(int(sent) * (self.period_s * 1e9)),
+                           _FLAGS[int(flags)], (fx, fy), (x, y), force_scale=scale)
 
     def tool_states(self, tick: int, rows: np.ndarray) -> list[ToolState | None]:
         """The fresh ``ToolState`` per lane (None where nothing new came)."""

@@ -91,6 +91,15 @@ class MasterSupervisor:
         self.watchdog.state = WatchdogState.OK
         self.enabled = self.ever_enabled = True
 
+    def steady(self) -> bool:
+        """Forces on with nothing latched, awaited or guarded: while the link stays fresh
+        (the silence within ``max_message_age_s``), the slave alive, no hardware fault and
+        the newest tool message without ``WORK_AREA_STOP`` (:func:`quiet_lanes`),
+        :meth:`update` changes nothing but the stored message and returns ``NONE``."""
+        return (self.enabled and not self.faulted and not self._await_sync
+                and not self._await_peer and self.tool_guard is None
+                and self.watchdog.state is WatchdogState.OK)
+
     def in_sync(self, handle_x_m: float, handle_y_m: float) -> bool:
         """The slave reports its forces enabled and its tool is at Ah1 yh within the
         tolerance on both axes."""
@@ -184,4 +193,21 @@ class MasterSupervisor:
     def state_name(self) -> str:
         """The watchdog's state, for the status line and the summary."""
         return self.watchdog.state.value
+
+
+_WORK_AREA_STOP = int(Flags.WORK_AREA_STOP)
+
+
+def quiet_lanes(steady: np.ndarray, silence_s: np.ndarray, max_message_age_s: np.ndarray,
+                newest_flags: np.ndarray) -> np.ndarray:
+    """The lanes whose :meth:`MasterSupervisor.update` would change nothing but the stored
+    message and return ``NONE`` (the lockstep's many lanes skip the call; the program's one
+    lane always makes it): :meth:`MasterSupervisor.steady` (``steady``, (lanes,) bool), the
+    watchdog not silent (``silence_s`` (lanes,) s not above ``max_message_age_s``) and the
+    newest tool message's flags (``newest_flags``, (lanes,) int, the fresh one's where a
+    message came) without ``WORK_AREA_STOP``; the slave alive and no hardware fault are the
+    caller's to ensure. Mirrors :meth:`MasterSupervisor.update` line by line; the lockstep's
+    equivalence test (tests/lockstep/test_quiet_lanes.py) runs every lane through both."""
+    return (steady & ~(silence_s > max_message_age_s)
+            & ((newest_flags & _WORK_AREA_STOP) == 0))
 

@@ -16,12 +16,15 @@ used (saturated, scaled by the force ramp), the ramp's scale, and the flags to s
 whose forces are off hold the supervisor's ``hold_m`` and send no force.
 
 The program has one lane; the simulator one lane per cell of a sweep (the node is one Warp
-kernel over every lane; one supervisor per lane).
+kernel over every lane; one supervisor per lane). The simulator feeds its messages as
+columns (:meth:`MasterTick.supervise_columns`): a lane in the supervisor's steady state whose
+tick would change nothing (master/supervisor.py ``quiet_lanes``) only stores its message,
+and every other lane goes through its supervisor as the program's does.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -29,12 +32,16 @@ import numpy as np
 
 from haptic.common.wire.messages import Flags, ToolState
 from haptic.master.node import MasterNode, MasterNodeState
-from haptic.master.supervisor import MasterSupervisor, Transition
+from haptic.master.supervisor import MasterSupervisor, Transition, quiet_lanes
 
-#: The flags of the message to the slave by whether the layer is switched on (IntFlag
-#: arithmetic costs about 1 us per operation, too much per lane and tick in a sweep).
-_ENABLED = (Flags.FORCES_ENABLED, Flags.FORCES_ENABLED | Flags.TDPA_SWITCHED)
-_SAFE = (Flags.SAFE_STATE, Flags.SAFE_STATE | Flags.TDPA_SWITCHED)
+#: Flag values (IntFlag arithmetic costs about 1 us per operation, too much per lane and
+#: tick in a sweep): the message to the slave carries FORCES_ENABLED or SAFE_STATE, and
+#: TDPA_SWITCHED while the governor has the layer switched on.
+_FORCES_ENABLED = int(Flags.FORCES_ENABLED)
+_SAFE_STATE = int(Flags.SAFE_STATE)
+_TDPA_SWITCHED = int(Flags.TDPA_SWITCHED)
+#: Every combination of the flags by value.
+_FLAG_OF = {value: Flags(value) for value in range(2 * max(Flags))}
 
 
 @dataclass
@@ -44,14 +51,34 @@ class MasterTickOutput:
     ``tool_force_used_N`` (lanes, 2): the forces the compensator used, N (zero where forces
     are off): the first goes to the slave's Ch2, the second is what the operator feels;
     ``force_scale`` (lanes,): the force ramp's factor 0..1; ``enabled`` (lanes,) bool;
-    ``flags``: per lane, the flags of the message to the slave."""
+    ``flag_values`` (lanes,) int: the flags of the message to the slave (:attr:`flags` as
+    ``Flags``)."""
 
     command_m: np.ndarray
     handle_force_used_N: np.ndarray
     tool_force_used_N: np.ndarray
     force_scale: np.ndarray
     enabled: np.ndarray
-    flags: list[Flags]
+    flag_values: np.ndarray
+
+    @property
+    def flags(self) -> list[Flags]:
+        """Per lane, the flags of the message to the slave."""
+        return [_FLAG_OF[value] for value in self.flag_values.tolist()]
+
+
+@dataclass
+class ToolColumns:
+    """A tick's tool messages as columns (the lockstep's lanes): ``fresh`` (lanes,) bool
+    where a new message came; each lane's message's ``force_N`` (lanes, 2), N, and ``flags``
+    (lanes,) int (read where fresh); ``rows`` (lanes, C): what ``build(lane, row)`` needs to
+    make that lane's ``ToolState`` for its supervisor."""
+
+    fresh: np.ndarray
+    force_N: np.ndarray
+    flags: np.ndarray
+    rows: np.ndarray
+    build: Callable[[int, np.ndarray], ToolState]
 
 
 class MasterTick:
@@ -73,9 +100,26 @@ class MasterTick:
         self._handle_used = np.zeros((lanes, 2))
         self._tool_used = np.zeros((lanes, 2))
         self._scale = np.zeros(lanes)
+        #: the newest received tool force per lane (zero before the first message), N
         self._tool_force = np.zeros((lanes, 2))
+        #: each supervisor's ``hold_m`` (lanes, 2), m
+        self._hold = np.zeros((lanes, 2))
+        self._flag_values = np.zeros(lanes, np.int64)
         self._pending_events: list[tuple[float, Any]] = []
-        self._none_switched = [False] * lanes
+        self._none_switched = np.zeros(lanes, bool)
+        # supervise_columns' view of the supervisors, made afresh after a supervise():
+        # each one's steady(), its newest message's flags and row, and whether the
+        # supervisor's stored message is older than that row (a quiet lane's)
+        self._columns_current = False
+        self._steady = np.zeros(lanes, bool)
+        self._max_age_s = np.array([s.watchdog.max_age_s for s in self.supervisors])
+        self._newest_flags = np.zeros(lanes, np.int64)
+        self._newest_rows: np.ndarray | None = None
+        self._stale = np.zeros(lanes, bool)
+        self._build: Callable[[int, np.ndarray], ToolState] | None = None
+        #: lane-ticks of supervise_columns that went through their supervisor, and all
+        self.lane_ticks_fed = 0
+        self.lane_ticks = 0
         #: (lanes,) where the governor has the standby passivity layer switched on
         self.standby_active = np.zeros(lanes, bool)
         #: the switch's events (``tdpa_on``/``tdpa_off``), for the program's event list
@@ -89,8 +133,10 @@ class MasterTick:
         position = np.broadcast_to(np.asarray(position_m, float), (self.lanes, 2))
         for lane, supervisor in enumerate(self.supervisors):
             supervisor.start(position[lane])
+            self._hold[lane] = supervisor.hold_m
             if synced:
                 supervisor.start_synced()
+        self._columns_current = False
         if synced:
             self.state = self.node.activate(np.nan_to_num(position))
             self.enabled[:] = True
@@ -108,6 +154,8 @@ class MasterTick:
         position = np.asarray(handle_position_m, float)
         rows = position.tolist()  # floats: the supervisors are plain Python
         supervisors = self.supervisors
+        if self._columns_current:
+            self.sync_supervisors()
         transitions = [
             supervisor.update(now_s, messages[lane], rows[lane],
                               () if faults is None else faults[lane], cycle,
@@ -115,11 +163,90 @@ class MasterTick:
                               True if peer_alive is None else peer_alive[lane])
             for lane, supervisor in enumerate(supervisors)]
         self.enabled[...] = [supervisor.enabled for supervisor in supervisors]
+        for lane, supervisor in enumerate(supervisors):
+            tool = supervisor.tool
+            if tool is not None:
+                self._tool_force[lane] = tool.tool_force_N
+            if transitions[lane] is Transition.HOLD:
+                self._hold[lane] = supervisor.hold_m
+        self._columns_current = False
         activate = np.array([t is Transition.ACTIVATE for t in transitions])
         resume = np.array([t is Transition.RESUME for t in transitions])
         if activate.any() or resume.any():
             self._renew(now_s, np.nan_to_num(position), activate, resume)
         return transitions
+
+    def supervise_columns(self, now_s: float, messages: ToolColumns,
+                          handle_position_m: np.ndarray, silence_s: np.ndarray) -> np.ndarray:
+        """:meth:`supervise` for messages given as columns, the slave alive and no hardware
+        fault (the lockstep's lanes; supervisors without a tool guard): a quiet lane
+        (master/supervisor.py ``quiet_lanes``) only stores its message; every other lane's
+        supervisor is fed as :meth:`supervise` feeds it, with its stored message brought up
+        to date first. ``silence_s`` (lanes,), s. Returns the lanes fed to their supervisor
+        ((lanes,) bool)."""
+        supervisors = self.supervisors
+        if not self._columns_current:
+            if any(supervisor.tool_guard is not None for supervisor in supervisors):
+                raise ValueError("supervise_columns: supervisors with a tool guard take "
+                                 "their messages one by one (supervise)")
+            self._steady[...] = [supervisor.steady() for supervisor in supervisors]
+            self._newest_flags[...] = [0 if supervisor.tool is None
+                                       else int(supervisor.tool.flags)
+                                       for supervisor in supervisors]
+            self._stale[...] = False
+            self._columns_current = True
+        fresh = messages.fresh
+        self._build = messages.build
+        if self._newest_rows is None or self._newest_rows.shape != messages.rows.shape:
+            self._newest_rows = np.zeros_like(messages.rows)
+        newest_flags = np.where(fresh, messages.flags, self._newest_flags)
+        self._newest_flags = newest_flags
+        quiet = quiet_lanes(self._steady, silence_s, self._max_age_s, newest_flags)
+        self._newest_rows[fresh] = messages.rows[fresh]
+        self._tool_force[fresh] = messages.force_N[fresh]
+        self._stale |= fresh & quiet
+        fed = ~quiet
+        self.lane_ticks += self.lanes
+        if not fed.any():
+            return fed
+        lanes = self.lanes
+        activate = np.zeros(lanes, bool)
+        resume = np.zeros(lanes, bool)
+        position = np.asarray(handle_position_m, float)
+        rows = position.tolist()
+        build = messages.build
+        fed_lanes = np.flatnonzero(fed).tolist()
+        self.lane_ticks_fed += len(fed_lanes)
+        for lane in fed_lanes:
+            supervisor = supervisors[lane]
+            message = None
+            if fresh[lane]:
+                message = build(lane, messages.rows[lane])
+            elif self._stale[lane]:
+                supervisor.tool = build(lane, self._newest_rows[lane])
+            self._stale[lane] = False
+            transition = supervisor.update(now_s, message, rows[lane], (), 0,
+                                           float(silence_s[lane]), True)
+            self.enabled[lane] = supervisor.enabled
+            self._steady[lane] = supervisor.steady()
+            if transition is Transition.HOLD:
+                self._hold[lane] = supervisor.hold_m
+            elif transition is Transition.ACTIVATE:
+                activate[lane] = True
+            elif transition is Transition.RESUME:
+                resume[lane] = True
+        if activate.any() or resume.any():
+            self._renew(now_s, np.nan_to_num(position), activate, resume)
+        return fed
+
+    def sync_supervisors(self) -> None:
+        """Give every supervisor the newest message its lane took as quiet in
+        :meth:`supervise_columns` (after a run, before the supervisors are read)."""
+        build, rows = self._build, self._newest_rows
+        if build is not None and rows is not None:
+            for lane in np.flatnonzero(self._stale).tolist():
+                self.supervisors[lane].tool = build(lane, rows[lane])
+        self._stale[...] = False
 
     def _renew(self, now_s: float, position_m: np.ndarray, activate: np.ndarray,
                resume: np.ndarray) -> None:
@@ -179,7 +306,7 @@ class MasterTick:
         enabled = self.enabled
         state = self.state
         if tool_force_N is None:
-            tool_force_N = self._received_tool_force()
+            tool_force_N = self._tool_force
         if state is not None and enabled.any():
             inputs = state.inputs
             inputs[:, 0:2] = handle_force_N
@@ -203,32 +330,31 @@ class MasterTick:
             faulted = state.faulted
             for lane in np.flatnonzero(enabled & faulted):
                 self.supervisors[lane].note_node_fault()
+                self._steady[lane] = False
         else:
             self._handle_used[...] = 0.0
             self._tool_used[...] = 0.0
             self._scale[...] = 0.0
-        flags = []
-        switched = self._switched()
-        for lane, supervisor in enumerate(self.supervisors):
-            if enabled[lane]:
-                flags.append(_ENABLED[switched[lane]])
-            else:
-                self._command[lane] = supervisor.hold_m
-                flags.append(_SAFE[switched[lane]])
+        values = self._flag_values
+        values[...] = np.where(enabled, _FORCES_ENABLED, _SAFE_STATE)
+        values |= np.where(self._switched(), _TDPA_SWITCHED, 0)
+        if not enabled.all():
+            off = ~enabled
+            self._command[off] = self._hold[off]
         return MasterTickOutput(self._command, self._handle_used, self._tool_used, self._scale,
-                                enabled, flags)
+                                enabled, values)
 
-    def _switched(self) -> list[bool]:
-        """Per lane, whether the governor has a standby passivity layer switched on."""
+    def _switched(self) -> np.ndarray:
+        """(lanes,) bool: where the governor has a standby passivity layer switched on."""
         port = self.state.passivity if self.state is not None else None
         if port is None or not self.node.passivity_standby:
             return self._none_switched
-        return port.active.tolist()
+        return port.active
 
     def switched_flags(self) -> list[Flags]:
         """Per lane, :attr:`Flags.TDPA_SWITCHED` where the governor switched the passivity
         layer on (a standby node), else no flag."""
-        return [Flags.TDPA_SWITCHED if on else Flags(0) for on in self._switched()]
+        return [Flags.TDPA_SWITCHED if on else Flags(0) for on in self._switched().tolist()]
 
     def switch_passivity(self, now_s: float, lanes: np.ndarray, on: bool, reason: str) -> int:
         """Switch the passivity layer on (``on``) or off in ``lanes`` ((lanes,) bool mask) of
@@ -248,15 +374,6 @@ class MasterTick:
             self.passivity_events.append({"time_s": now_s, "kind": "tdpa_on" if on else
                                           "tdpa_off", "reason": reason, "lane": int(lane)})
         return int(np.count_nonzero(changed))
-
-    def _received_tool_force(self) -> np.ndarray:
-        """The newest received tool force per lane (zero before the first message), N."""
-        force = self._tool_force
-        for lane, supervisor in enumerate(self.supervisors):
-            tool = supervisor.tool
-            if tool is not None:
-                force[lane] = tool.tool_force_N
-        return force
 
     def take_node_events(self) -> list[tuple[float, Any]]:
         """The node's safety events since the last call, each with its absolute tick time

@@ -28,6 +28,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from haptic.common.config import ConfigError
 from haptic.common.wire.messages import HandleState
 
@@ -166,9 +168,64 @@ class InputGuard:
                                     "a row"})
         return True
 
+    def take_plain(self, count: int, force_N: tuple[float, float],
+                   position_m: tuple[float, float], epoch: int, send_time_ns: int) -> None:
+        """Record ``count`` messages that :meth:`admit` takes as they are (:func:`plain_admits`;
+        the guard not faulted), the last of them with these values (N, m, its sender's epoch
+        and send time, ns): the state those :meth:`admit` calls would have left."""
+        self.counters.checked += count
+        self.force_N = force_N
+        self.position_m = position_m
+        self._epoch, self._send_ns = epoch, send_time_ns
+        self._saturating = self._rate_limiting = False
+
+    @property
+    def last_epoch(self) -> int | None:
+        """The sender epoch of the latest accepted message (None before the first)."""
+        return self._epoch
+
+    @property
+    def last_send_time_ns(self) -> int:
+        """The send time of the latest accepted message, ns (0 before the first)."""
+        return self._send_ns
+
     def summary(self) -> dict[str, Any]:
         """The summary's ``input_guard`` figures."""
         c = self.counters
         return {"input_guard": {"checked": c.checked, "faults": c.faults,
                                 "saturated": c.saturated, "rate_limited": c.rate_limited,
                                 "non_finite": c.non_finite, "faulted": self.faulted}}
+
+
+def plain_admits(settings: InputGuardSettings, period_s: float, force_N: np.ndarray,
+                 position_m: np.ndarray, epoch: np.ndarray, send_time_ns: np.ndarray,
+                 last_force_N: np.ndarray, last_position_m: np.ndarray,
+                 last_epoch: np.ndarray, last_send_time_ns: np.ndarray, has_last: np.ndarray,
+                 faulted: np.ndarray) -> np.ndarray:
+    """Per lane, whether :meth:`InputGuard.admit` takes the message as it is: the guard not
+    faulted, every value finite, no force beyond the trip, the position in its box, the same
+    sender epoch as the last accepted message (``has_last``: there is one) with no jump,
+    and neither saturation nor rate limit (so the message's own force and position become
+    the guard's, with no event). Arrays are per lane: forces (lanes, 2) N, positions
+    (lanes, 2) m, epochs and send times (lanes,) int (ns). Mirrors :meth:`InputGuard.admit`
+    comparison by comparison (the lockstep's many lanes; tests/lockstep/test_quiet_lanes.py
+    runs every lane through both)."""
+    s = settings
+    fx, fy = force_N[:, 0], force_N[:, 1]
+    px, py = position_m[:, 0], position_m[:, 1]
+    last_fx, last_fy = last_force_N[:, 0], last_force_N[:, 1]
+    (lo_x, lo_y), (hi_x, hi_y) = s.position_min_m, s.position_max_m
+    with np.errstate(invalid="ignore", over="ignore"):
+        dt_s = np.maximum((send_time_ns - last_send_time_ns) * 1e-9, period_s)
+        allowed_m = s.velocity_trip_m_per_s * dt_s + s.jump_margin_m
+        jump_m = np.maximum(np.abs(px - last_position_m[:, 0]),
+                            np.abs(py - last_position_m[:, 1]))
+        limit, step = s.force_limit_N, s.force_rate_limit_N_per_s * dt_s
+        return (~faulted & np.isfinite(force_N).all(axis=1)
+                & np.isfinite(position_m).all(axis=1)
+                & ~(np.abs(fx) > s.force_trip_N) & ~(np.abs(fy) > s.force_trip_N)
+                & (lo_x <= px) & (px <= hi_x) & (lo_y <= py) & (py <= hi_y)
+                & has_last & (epoch == last_epoch) & ~(jump_m > allowed_m)
+                & (-limit <= fx) & (fx <= limit) & (-limit <= fy) & (fy <= limit)
+                & (last_fx - step <= fx) & (fx <= last_fx + step)
+                & (last_fy - step <= fy) & (fy <= last_fy + step))

@@ -277,7 +277,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             # send: the tool force, position and velocity, the clay's status
             link.send_tool((float(ft[0]), float(ft[1])), (float(position[0]), float(position[1])),
                            (float(velocity[0]), float(velocity[1])), engagement, removed,
-                           ticked.flags[0] | tdpa_peer.flags, echo[0],
+                           ticked.flags[0] | tdpa_peer.flags, int(echo[0]),
                            tdpa_peer.sent_J(state))
             send_ns = clock()
             # telemetry: summary figures, trace, recording, display

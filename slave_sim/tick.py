@@ -17,52 +17,72 @@ work-area guard; slave_sim/supervisor.py) says whether the tool follows the hand
 :meth:`SlaveTick.control` steps the node (Ch2/Ct2, the tool, the environment) with the
 bounded handle force where the tool runs and zero force elsewhere, and returns the node's
 outputs with the flags to send.
+
+The simulator feeds its messages as columns (:meth:`SlaveTick.supervise_columns`): a lane
+whose guard takes its message as it is and whose supervisor is in its steady state with
+nothing to change (slave_sim/input_guard.py ``plain_admits``, slave_sim/supervisor.py
+``quiet_lanes``) only stores the message, and every other lane goes through its guard and
+supervisor as the program's does.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from haptic.common.analysis.margin_table import follow_gain
 from haptic.common.wire.messages import Flags, HandleState
-from haptic.slave_sim.input_guard import InputGuard
+from haptic.slave_sim.input_guard import InputGuard, plain_admits
 from haptic.slave_sim.node import SlaveNode, SlaveOutputs, SlaveState
 from haptic.slave_sim.pacing import Sample, Step
 from haptic.slave_sim.resync import ToolResync
-from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
+from haptic.slave_sim.supervisor import SlaveSupervisor, Transition, quiet_lanes
 
-
-def _flags(ready: bool, cutting: bool, outside: bool, switched: bool) -> Flags:
-    """The flags of the message to the master: FORCES_ENABLED when ready, else SAFE_STATE;
-    IN_CONTACT while cutting; WORK_AREA_STOP while the work-area guard holds the tool;
-    TDPA_SWITCHED while a standby passivity layer is switched on."""
-    flags = Flags.FORCES_ENABLED if ready else Flags.SAFE_STATE
-    for bit, on in ((Flags.IN_CONTACT, cutting), (Flags.WORK_AREA_STOP, outside),
-                    (Flags.TDPA_SWITCHED, switched)):
-        if on:
-            flags |= bit
-    return flags
-
-
-#: (ready, cutting, outside, switched) -> the flags (IntFlag arithmetic costs about 1 us
-#: per operation, too much per lane and tick in a sweep)
-_FLAGS = {(ready, cutting, outside, switched): _flags(ready, cutting, outside, switched)
-          for ready in (False, True) for cutting in (False, True)
-          for outside in (False, True) for switched in (False, True)}
+#: Flag values (IntFlag arithmetic costs about 1 us per operation, too much per lane and
+#: tick in a sweep), and every combination of the flags by value.
+_FORCES_ENABLED, _SAFE_STATE = int(Flags.FORCES_ENABLED), int(Flags.SAFE_STATE)
+_IN_CONTACT, _WORK_AREA_STOP = int(Flags.IN_CONTACT), int(Flags.WORK_AREA_STOP)
+_TDPA_SWITCHED = int(Flags.TDPA_SWITCHED)
+_FLAG_OF = {value: Flags(value) for value in range(2 * max(Flags))}
 
 
 @dataclass
 class SlaveTickOutput:
     """What one tick produced: the node's outputs (``out``), which lanes ran (``running``,
-    (lanes,) bool), and per lane the flags of the message to the master (FORCES_ENABLED when
-    this side is ready, IN_CONTACT while cutting)."""
+    (lanes,) bool), and per lane the flags of the message to the master (``flag_values``
+    (lanes,) int, :attr:`flags` as ``Flags``: FORCES_ENABLED when this side is ready,
+    IN_CONTACT while cutting)."""
 
     out: SlaveOutputs
     running: np.ndarray
-    flags: list[Flags]
+    flag_values: np.ndarray
+
+    @property
+    def flags(self) -> list[Flags]:
+        """Per lane, the flags of the message to the master."""
+        return [_FLAG_OF[value] for value in self.flag_values.tolist()]
+
+
+@dataclass
+class HandleColumns:
+    """A tick's handle messages as columns (the lockstep's lanes): ``fresh`` (lanes,) bool
+    where a new message came; each lane's message's ``force_N`` and ``position_m``
+    ((lanes, 2), N and m), ``flags``, ``epoch`` and ``send_time_ns`` ((lanes,) int, ns) and
+    ``force_scale`` ((lanes,), 0..1), read where fresh; ``rows`` (lanes, C): what
+    ``build(lane, row)`` needs to make that lane's ``HandleState`` for its guard and
+    supervisor."""
+
+    fresh: np.ndarray
+    force_N: np.ndarray
+    position_m: np.ndarray
+    flags: np.ndarray
+    epoch: np.ndarray
+    send_time_ns: np.ndarray
+    force_scale: np.ndarray
+    rows: np.ndarray
+    build: Callable[[int, np.ndarray], HandleState]
 
 
 class SlaveTick:
@@ -101,11 +121,34 @@ class SlaveTick:
         self._zero_force = np.zeros((lanes, 2))
         #: per lane, the send time of the newest admitted handle message (ns, 0: none yet),
         #: echoed to the master for its round-trip estimate (master/margin_governor.py)
-        self.echo_send_time_ns = [0] * lanes
+        self.echo_send_time_ns = np.zeros(lanes, np.int64)
         #: (lanes,) the master's cumulative handed-over energy, J, as last received (the
         #: passivity layer, ``tdpa`` mode; None otherwise)
         self.peer_energy_J: np.ndarray | None = None
         self._gain: tuple[float, bool] | None = None
+        #: each supervisor's ``ready`` and ``outside`` (the flags of :meth:`control`)
+        self._ready = np.zeros(lanes, bool)
+        self._outside = np.zeros(lanes, bool)
+        self._flag_values = np.zeros(lanes, np.int64)
+        # supervise_columns' view of the guards and supervisors, made afresh after a
+        # supervise(): each supervisor's steady() and work area, each guard's fault and
+        # its latest accepted message (its force and position are handle_force_N and
+        # handle_position_m), and the messages a quiet lane took that its guard and
+        # supervisor have not seen (stale)
+        self._columns_current = False
+        self._steady = np.zeros(lanes, bool)
+        self._max_age_s = np.array([s.watchdog.max_age_s for s in self.supervisors])
+        self._work_area_m = np.array([(s.x_low_m, s.x_high_m, s.y_low_m, s.y_high_m)
+                                      for s in self.supervisors])
+        self._guard_faulted = np.zeros(lanes, bool)
+        self._guard_has_last = np.zeros(lanes, bool)
+        self._guard_epoch = np.zeros(lanes, np.int64)
+        self._guard_send_ns = np.zeros(lanes, np.int64)
+        self._unseen = np.zeros(lanes, np.int64)
+        #: lane-ticks of supervise_columns that went through their guard and supervisor,
+        #: and all
+        self.lane_ticks_fed = 0
+        self.lane_ticks = 0
 
     def follow_gain(self, nominal_k: float, scalable: bool) -> None:
         """Follow the master's governed k (``HandleState.gain_k``, never above
@@ -118,6 +161,7 @@ class SlaveTick:
         """Before the first tick: the tool stops and waits for the master; with ``synced``
         the link counts as up and in sync (the lockstep's warm start) and the tool runs from
         tick 0 with the handle at :attr:`handle_position_m`."""
+        self._columns_current = False
         if not synced:
             self.node.safe_stop(self.state)
             return
@@ -126,6 +170,7 @@ class SlaveTick:
             self.guards[lane].position_m = (float(self.handle_position_m[lane, 0]),
                                             float(self.handle_position_m[lane, 1]))
         self.running[:] = True
+        self._ready[:] = [supervisor.ready for supervisor in self.supervisors]
 
     def supervise(self, now_s: float, messages: Sequence[HandleState | None],
                   silence_s: Sequence[float] | None = None,
@@ -138,6 +183,9 @@ class SlaveTick:
         admitted ones go into :attr:`samples`); re-place, stop or resume the tool as they
         say. Returns the lanes whose message was an input (fresh and admitted)."""
         guards, supervisors = self.guards, self.supervisors
+        if self._columns_current:
+            self.sync_supervisors()
+            self._columns_current = False
         admitted_lanes = []
         follow = []
         for lane, message in enumerate(messages):
@@ -187,6 +235,8 @@ class SlaveTick:
                               guards[lane].faulted)
             for lane, supervisor in enumerate(supervisors)]
         self.running[...] = [supervisor.running for supervisor in supervisors]
+        self._ready[...] = [supervisor.ready for supervisor in supervisors]
+        self._outside[...] = [supervisor.outside for supervisor in supervisors]
         resume = [transition is Transition.RESUME for transition in transitions]
         stop = [transition is Transition.STOP for transition in transitions]
         if any(resume):
@@ -194,6 +244,120 @@ class SlaveTick:
         if any(stop):
             self.node.safe_stop(state, None if all(stop) else np.array(stop))
         return fresh
+
+    def supervise_columns(self, now_s: float, messages: HandleColumns,
+                          silence_s: np.ndarray) -> np.ndarray:
+        """:meth:`supervise` for messages given as columns and the master alive (the
+        lockstep's lanes; no ``earlier`` messages, no :meth:`follow_gain`): a quiet lane
+        (``plain_admits`` and ``quiet_lanes``) only takes its message's bounded values;
+        every other lane's guard and supervisor are fed as :meth:`supervise` feeds them,
+        after they have been told what the lane took meanwhile. ``silence_s`` (lanes,), s.
+        Returns the lanes whose message was an input, as :meth:`supervise` does."""
+        if self._gain is not None:
+            raise ValueError("supervise_columns: a tick that follows the master's gain takes "
+                             "its messages one by one (supervise)")
+        guards, supervisors = self.guards, self.supervisors
+        if not self._columns_current:
+            self._pull(range(self.lanes))
+            self._columns_current = True
+        guard = guards[0]
+        fresh = messages.fresh
+        admitted_plainly = fresh & plain_admits(
+            guard.settings, guard.period_s, messages.force_N, messages.position_m,
+            messages.epoch, messages.send_time_ns, self.handle_force_N,
+            self.handle_position_m, self._guard_epoch, self._guard_send_ns,
+            self._guard_has_last, self._guard_faulted)
+        state = self.state
+        quiet = quiet_lanes(self._steady, fresh,
+                            admitted_plainly & ((messages.flags & _FORCES_ENABLED) != 0),
+                            silence_s, self._max_age_s, state.tool[:, 0::2],
+                            self._work_area_m)
+        taken = quiet & fresh
+        self.handle_force_N[taken] = messages.force_N[taken]
+        self.handle_position_m[taken] = messages.position_m[taken]
+        self._guard_epoch[taken] = messages.epoch[taken]
+        self._guard_send_ns[taken] = messages.send_time_ns[taken]
+        self.echo_send_time_ns[taken] = messages.send_time_ns[taken]
+        self.force_scale[taken] = messages.force_scale[taken]
+        self._unseen[taken] += 1
+        admitted = self.fresh
+        admitted[...] = taken
+        fed = np.flatnonzero(~quiet).tolist()
+        self.lane_ticks_fed += len(fed)
+        self.lane_ticks += self.lanes
+        follow = np.zeros(self.lanes, bool)
+        for lane in fed:
+            self._tell(lane)
+            guard, supervisor = guards[lane], supervisors[lane]
+            message = messages.build(lane, messages.rows[lane]) if fresh[lane] else None
+            if message is not None and guard.admit(message, now_s):
+                admitted[lane] = True
+                self.handle_force_N[lane] = guard.force_N
+                self.handle_position_m[lane] = guard.position_m
+                self.echo_send_time_ns[lane] = message.send_time_ns
+                self.force_scale[lane] = message.force_scale
+                follow[lane] = supervisor.receive(message)
+            else:
+                follow[lane] = supervisor.receive(None)
+        port = state.passivity
+        if self.node.passivity_standby and port is not None:
+            switched = admitted & (((messages.flags & _TDPA_SWITCHED) != 0) != port.active)
+            for lane in np.flatnonzero(switched).tolist():
+                self._switch(now_s, lane, not bool(port.active[lane]))
+        if follow.any():  # to the held handle, cutting (slave_sim/resync.py)
+            self.resync.step(state, self.handle_position_m, now_s,
+                             None if follow.all() else follow)
+        if fed:
+            tool = state.tool[:, 0::2].tolist()
+            resume = np.zeros(self.lanes, bool)
+            stop = np.zeros(self.lanes, bool)
+            for lane in fed:
+                transition = supervisors[lane].update(now_s, bool(admitted[lane]), tool[lane],
+                                                      float(silence_s[lane]), True,
+                                                      guards[lane].faulted)
+                resume[lane] = transition is Transition.RESUME
+                stop[lane] = transition is Transition.STOP
+            self._pull(fed)
+            if resume.any():
+                self.node.resume(state, None if resume.all() else resume)
+            if stop.any():
+                self.node.safe_stop(state, None if stop.all() else stop)
+        return admitted
+
+    def _tell(self, lane: int) -> None:
+        """Tell ``lane``'s guard and supervisor the messages the lane took as quiet since
+        they last saw one (their latest one's values)."""
+        count = int(self._unseen[lane])
+        if not count:
+            return
+        position = (float(self.handle_position_m[lane, 0]),
+                    float(self.handle_position_m[lane, 1]))
+        self.guards[lane].take_plain(count, (float(self.handle_force_N[lane, 0]),
+                                             float(self.handle_force_N[lane, 1])),
+                                     position, int(self._guard_epoch[lane]),
+                                     int(self._guard_send_ns[lane]))
+        self.supervisors[lane].handle_position_m = position
+        self._unseen[lane] = 0
+
+    def _pull(self, lanes: Sequence[int]) -> None:
+        """Read ``lanes``' guards and supervisors into the columns' view."""
+        for lane in lanes:
+            guard, supervisor = self.guards[lane], self.supervisors[lane]
+            self.running[lane] = supervisor.running
+            self._ready[lane] = supervisor.ready
+            self._outside[lane] = supervisor.outside
+            self._steady[lane] = supervisor.steady()
+            self._guard_faulted[lane] = guard.faulted
+            epoch = guard.last_epoch
+            self._guard_has_last[lane] = epoch is not None and guard.position_m is not None
+            self._guard_epoch[lane] = 0 if epoch is None else epoch
+            self._guard_send_ns[lane] = guard.last_send_time_ns
+
+    def sync_supervisors(self) -> None:
+        """Tell every guard and supervisor what its lane took as quiet in
+        :meth:`supervise_columns` (after a run, before their counters are read)."""
+        for lane in np.flatnonzero(self._unseen).tolist():
+            self._tell(lane)
 
     def _follow_switch(self, now_s: float, messages: Sequence[HandleState | None],
                        admitted_lanes: list[int]) -> None:
@@ -207,13 +371,17 @@ class SlaveTick:
         for lane in admitted_lanes:
             on = bool(messages[lane].flags & Flags.TDPA_SWITCHED)
             if on != bool(active[lane]):
-                mask = np.zeros(self.lanes, bool)
-                mask[lane] = True
-                port.switch(mask, on)
-                self.supervisors[lane].events.append({
-                    "time_s": now_s, "kind": "tdpa_on" if on else "tdpa_off",
-                    "reason": "the master's governor switched the passivity layer "
-                    + ("on" if on else "off")})
+                self._switch(now_s, lane, on)
+
+    def _switch(self, now_s: float, lane: int, on: bool) -> None:
+        """Switch ``lane``'s standby passivity layer on or off, with its event."""
+        mask = np.zeros(self.lanes, bool)
+        mask[lane] = True
+        self.state.passivity.switch(mask, on)
+        self.supervisors[lane].events.append({
+            "time_s": now_s, "kind": "tdpa_on" if on else "tdpa_off",
+            "reason": "the master's governor switched the passivity layer "
+            + ("on" if on else "off")})
 
     def control_samples(self, plan: Sequence[Step]) -> SlaveTickOutput:
         """The node stage once per entry of ``plan`` (slave_sim/pacing.py; lane 0: the
@@ -244,14 +412,11 @@ class SlaveTick:
         else:
             force = np.where(running[:, None], self.handle_force_N, 0.0)
         out = self.node.step(self.state, force, self.handle_position_m, self.peer_energy_J)
-        cutting = out.cutting
-        table = _FLAGS
+        values = self._flag_values
+        values[...] = np.where(self._ready, _FORCES_ENABLED, _SAFE_STATE)
+        values |= np.where(out.cutting, _IN_CONTACT, 0)
+        values |= np.where(self._outside, _WORK_AREA_STOP, 0)
         port = self.state.passivity
         if port is not None and self.node.passivity_standby:
-            flags = [table[supervisor.ready, bool(cut), supervisor.outside, on]
-                     for supervisor, cut, on in zip(self.supervisors, cutting.tolist(),
-                                                    port.active.tolist(), strict=True)]
-        else:
-            flags = [table[supervisor.ready, bool(cut), supervisor.outside, False]
-                     for supervisor, cut in zip(self.supervisors, cutting.tolist(), strict=True)]
-        return SlaveTickOutput(out, running, flags)
+            values |= np.where(port.active, _TDPA_SWITCHED, 0)
+        return SlaveTickOutput(out, running, values)
