@@ -7,9 +7,12 @@ Default grid: k = 1, 3, 5, 8, 10, 13, 16, 19, 25, 30 and round-trip delays 0 to 
 linear loop of the analysis (docs/lockstep.md). ``--quick`` (the CI run): k = 1, 3, 8, 13,
 19, 30 and 0 to 20 ms in 2 ms steps, 2.5 s per cell.
 
-``--real-link`` also runs a few cells over the real Zenoh link (two Link objects in this
-process, delay injected by their receive paths, paced in real time; about 3 s each; not in
-CI) and reports each one's measured round trip and verdicts.
+``--real-link`` also runs cells over the real Zenoh link (two Link objects in this process,
+delay injected by their receive paths, paced in real time; about 3 s each) and reports each
+one's measured round trip and verdicts: k = 13 and 19, each at 0.8 and 1.2 times its sampled
+margin tau* (with ``--quick``: the CI set, about 15 s), or at 0.75, 0.85, 1.15 and 1.25 times
+it. ``--check`` then also fails on a real-link cell that disagrees with the analysis (every
+one lies outside the 10 % band).
 
 Usage: ``python bench/latency_sweep.py [--quick] [--mode linear|clay] [--json] [--check]
 [--out DIR] [--real-link]``. ``--json`` prints one object with ``cells``, ``agree``, ``disagree``,
@@ -35,9 +38,23 @@ from haptic.lockstep.sweep import SweepSettings, plot_heatmap, run_sweep, write_
 FULL_GAINS = (1.0, 3.0, 5.0, 8.0, 10.0, 13.0, 16.0, 19.0, 25.0, 30.0)
 QUICK_GAINS = (1.0, 3.0, 8.0, 13.0, 19.0, 30.0)
 SPEED_TARGET = 200.0
-#: (k, injected round trip s) run over the real link: both sides of k = 13's and 19's margins.
-REAL_LINK_CELLS = ((19.0, 0.006), (19.0, 0.0075), (19.0, 0.009), (13.0, 0.012),
-                   (13.0, 0.0135), (13.0, 0.0155))
+#: The gains run over the real link, and the injected round trips as multiples of each one's
+#: sampled delay margin tau*: both sides of it, outside the 10 % band (quick: the CI set).
+REAL_LINK_GAINS = (13.0, 19.0)
+REAL_LINK_FACTORS = (0.75, 0.85, 1.15, 1.25)
+QUICK_REAL_LINK_FACTORS = (0.8, 1.2)
+
+
+def real_link_cells(model, quick: bool) -> list[tuple[float, float]]:
+    """(k, injected round trip s) of the real-link cells, from the sampled analysis."""
+    from haptic.lockstep.sweep import analytic_margin_s
+
+    factors = QUICK_REAL_LINK_FACTORS if quick else REAL_LINK_FACTORS
+    cells = []
+    for gain in REAL_LINK_GAINS:
+        margin_s = analytic_margin_s(model, gain, model.sample_period_s)
+        cells += [(gain, factor * margin_s) for factor in factors]
+    return cells
 
 
 def settings_for(quick: bool, mode: str) -> SweepSettings:
@@ -60,7 +77,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="exit 1 when a cell disagrees outside the band")
     parser.add_argument("--out", type=Path, help="write sweep.csv and sweep.png here")
     parser.add_argument("--real-link", action="store_true",
-                        help="also run a few cells over the real Zenoh link (slow)")
+                        help="also run cells over the real Zenoh link, paced in real time "
+                        "(about 3 s each)")
     args = parser.parse_args(argv)
     model = model_from_config(load_config())
     result = run_sweep(model, settings_for(args.quick, args.mode))
@@ -75,7 +93,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.real_link:
         from haptic.lockstep.real_link import run_cell
 
-        cells = [run_cell(model, gain, delay) for gain, delay in REAL_LINK_CELLS]
+        cells = [run_cell(model, gain, delay)
+                 for gain, delay in real_link_cells(model, args.quick)]
         summary["real_link"] = [
             {"k": c.gain_k, "injected_round_trip_s": c.injected_round_trip_s,
              "measured_round_trip_s": round(c.measured_round_trip_s, 6),
