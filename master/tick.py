@@ -44,6 +44,14 @@ _TDPA_SWITCHED = int(Flags.TDPA_SWITCHED)
 _FLAG_OF = {value: Flags(value) for value in range(2 * max(Flags))}
 
 
+def _flag_value(enabled: Any, switched: Any) -> Any:
+    """The flags of the message to the slave, as an int (Python bools: one lane) or an int
+    array ((lanes,) bool arrays): FORCES_ENABLED where forces are on, else SAFE_STATE, and
+    TDPA_SWITCHED where the governor has the layer switched on (the bits are disjoint)."""
+    return (_SAFE_STATE + (_FORCES_ENABLED - _SAFE_STATE) * enabled
+            + _TDPA_SWITCHED * switched)
+
+
 @dataclass
 class MasterTickOutput:
     """What one tick decided, per lane (arrays have the lanes first; views the next tick
@@ -335,12 +343,18 @@ class MasterTick:
             self._handle_used[...] = 0.0
             self._tool_used[...] = 0.0
             self._scale[...] = 0.0
+        switched = self._switched()
+        if self.lanes == 1:  # the program's lane: Python scalars are cheaper than numpy calls
+            on = bool(enabled[0])
+            self._flag_values[0] = _flag_value(on, bool(switched[0]))
+            if not on:
+                self._command[0] = self._hold[0]
+        else:
+            self._flag_values[...] = _flag_value(enabled, switched)
+            if not enabled.all():
+                off = ~enabled
+                self._command[off] = self._hold[off]
         values = self._flag_values
-        values[...] = np.where(enabled, _FORCES_ENABLED, _SAFE_STATE)
-        values |= np.where(self._switched(), _TDPA_SWITCHED, 0)
-        if not enabled.all():
-            off = ~enabled
-            self._command[off] = self._hold[off]
         return MasterTickOutput(self._command, self._handle_used, self._tool_used, self._scale,
                                 enabled, values)
 

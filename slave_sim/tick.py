@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -46,6 +47,15 @@ _FORCES_ENABLED, _SAFE_STATE = int(Flags.FORCES_ENABLED), int(Flags.SAFE_STATE)
 _IN_CONTACT, _WORK_AREA_STOP = int(Flags.IN_CONTACT), int(Flags.WORK_AREA_STOP)
 _TDPA_SWITCHED = int(Flags.TDPA_SWITCHED)
 _FLAG_OF = {value: Flags(value) for value in range(2 * max(Flags))}
+
+
+def _flag_value(ready: Any, cutting: Any, outside: Any, switched: Any) -> Any:
+    """The flags of the message to the master, as an int (Python bools: one lane) or an int
+    array ((lanes,) bool arrays): FORCES_ENABLED when this side is ready, else SAFE_STATE;
+    IN_CONTACT while cutting; WORK_AREA_STOP while the work-area guard holds the tool;
+    TDPA_SWITCHED while a standby passivity layer is switched on (the bits are disjoint)."""
+    return (_SAFE_STATE + (_FORCES_ENABLED - _SAFE_STATE) * ready + _IN_CONTACT * cutting
+            + _WORK_AREA_STOP * outside + _TDPA_SWITCHED * switched)
 
 
 @dataclass
@@ -130,6 +140,7 @@ class SlaveTick:
         self._ready = np.zeros(lanes, bool)
         self._outside = np.zeros(lanes, bool)
         self._flag_values = np.zeros(lanes, np.int64)
+        self._none_switched = np.zeros(lanes, bool)
         # supervise_columns' view of the guards and supervisors, made afresh after a
         # supervise(): each supervisor's steady() and work area, each guard's fault and
         # its latest accepted message (its force and position are handle_force_N and
@@ -412,11 +423,13 @@ class SlaveTick:
         else:
             force = np.where(running[:, None], self.handle_force_N, 0.0)
         out = self.node.step(self.state, force, self.handle_position_m, self.peer_energy_J)
-        values = self._flag_values
-        values[...] = np.where(self._ready, _FORCES_ENABLED, _SAFE_STATE)
-        values |= np.where(out.cutting, _IN_CONTACT, 0)
-        values |= np.where(self._outside, _WORK_AREA_STOP, 0)
         port = self.state.passivity
-        if port is not None and self.node.passivity_standby:
-            values |= np.where(port.active, _TDPA_SWITCHED, 0)
+        switched = (port.active if port is not None and self.node.passivity_standby
+                    else self._none_switched)
+        values = self._flag_values
+        if self.lanes == 1:  # the program's lane: Python scalars are cheaper than numpy calls
+            values[0] = _flag_value(bool(self._ready[0]), bool(out.cutting[0]),
+                                    bool(self._outside[0]), bool(switched[0]))
+        else:
+            values[...] = _flag_value(self._ready, out.cutting, self._outside, switched)
         return SlaveTickOutput(out, running, values)
