@@ -268,10 +268,14 @@ class SlaveTick:
             raise ValueError("supervise_columns: a tick that follows the master's gain takes "
                              "its messages one by one (supervise)")
         guards, supervisors = self.guards, self.supervisors
+        guard = guards[0]
         if not self._columns_current:
+            if any((other.settings, other.period_s) != (guard.settings, guard.period_s)
+                   for other in guards):
+                raise ValueError("supervise_columns: the lanes' input guards must share "
+                                 "their settings and period")
             self._pull(range(self.lanes))
             self._columns_current = True
-        guard = guards[0]
         fresh = messages.fresh
         admitted_plainly = fresh & plain_admits(
             guard.settings, guard.period_s, messages.force_N, messages.position_m,

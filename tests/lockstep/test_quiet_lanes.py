@@ -221,3 +221,27 @@ def test_governed_lanes_switching_a_standby_passivity_layer(paper_model, table) 
     kinds = [event["kind"] for event in slave_tick.supervisors[0].events
              if event["kind"].startswith("tdpa")]
     assert kinds == ["tdpa_on", "tdpa_off"]
+
+
+def test_columns_refuse_what_they_cannot_mirror(paper_config, paper_model) -> None:
+    """The columns path mirrors one guard setting for every lane, no tool guard and no
+    followed gain: anything else is refused, not silently mis-stepped."""
+    from haptic.master.tool_guard import ToolGuardSettings, ToolInputGuard
+    from haptic.slave_sim.input_guard import InputGuard
+
+    simulator = _clay_lanes(paper_config, paper_model)()
+    start = np.zeros((4, 2))
+    master, slave = simulator.ticks(start, start)
+    ts = paper_model.sample_period_s
+    slave.guards[1] = InputGuard(InputGuardSettings(force_limit_N=1.0), ts)
+    columns = simulator  # never read: the refusal comes first
+    with pytest.raises(ValueError, match="share"):
+        slave.supervise_columns(0.0, columns, np.zeros(4))  # type: ignore[arg-type]
+    master.supervisors[2].tool_guard = ToolInputGuard(
+        ToolGuardSettings.from_config(paper_config), ts)
+    with pytest.raises(ValueError, match="tool guard"):
+        master.supervise_columns(0.0, columns, start, np.zeros(4))  # type: ignore[arg-type]
+    _, slave = simulator.ticks(start, start)
+    slave.follow_gain(3.0, True)
+    with pytest.raises(ValueError, match="gain"):
+        slave.supervise_columns(0.0, columns, np.zeros(4))  # type: ignore[arg-type]
