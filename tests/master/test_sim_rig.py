@@ -31,6 +31,11 @@ def _config(operator: str = "constant:fx=0,fy=0", **overrides):
     config = load_config()
     config = override(config, "master.sim.operator", operator)
     config = override(config, "master.sim.channel", f"test-{uuid.uuid4().hex}")
+    # The heartbeats both ways are wall-clock supervision (tested in
+    # test_can_commissioning.py); these runs step unpaced, and a loaded machine that stalls
+    # the emulation threads for 0.2 s would trip the default 0.3 s consumer time (a drive
+    # tripped by a lost heartbeat at step 172 of the NaN test once, in CI).
+    config = override(config, "master.can.heartbeat_timeout_s", 5.0)
     for key, value in overrides.items():
         config = override(config, key.replace("__", "."), value)
     return config
