@@ -38,7 +38,7 @@ from haptic.common.model.passivity import PassivitySettings
 from haptic.common.model.teleop import TeleopModel
 from haptic.common.model.work_area import shared_work_area, slave_work_area_m
 from haptic.common.wire.injection import InjectionConfig
-from haptic.common.wire.messages import Flags, HandleState, ToolState
+from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, HandleState, ToolState
 from haptic.lockstep.delay_line import DelayLine, source_schedule
 from haptic.lockstep.governed import GovernedLanes
 from haptic.lockstep.stacked import StackedLTI
@@ -460,8 +460,6 @@ class LockstepSimulator:
         )
 
 
-#: Every combination of the flags by value (building an IntFlag from an int is slow).
-_FLAGS = {value: Flags(value) for value in range(2 * max(Flags))}
 
 
 class _Arrivals:
@@ -501,7 +499,7 @@ class _Arrivals:
         the send tick)."""
         fx, fy, x, y, vx, vy, flags, sent = row.tolist()
         return ToolState(0, int(sent), int(int(sent) * (self.period_s * 1e9)),
-                         _FLAGS[int(flags)], (fx, fy), (x, y), (vx, vy), 0.0, 0.0)
+                         FLAGS_BY_VALUE[int(flags)], (fx, fy), (x, y), (vx, vy), 0.0, 0.0)
 
     def handle_columns(self, tick: int, rows: np.ndarray) -> HandleColumns:
         """The tick's handle messages as columns (``SlaveTick.supervise_columns``)."""
@@ -516,14 +514,14 @@ class _Arrivals:
         columns, then the send tick)."""
         fx, fy, x, y, flags, scale, sent = row.tolist()
         return HandleState(0, int(sent), int(int(sent) * (self.period_s * 1e9)),
-                           _FLAGS[int(flags)], (fx, fy), (x, y), force_scale=scale)
+                           FLAGS_BY_VALUE[int(flags)], (fx, fy), (x, y), force_scale=scale)
 
     def tool_states(self, tick: int, rows: np.ndarray) -> list[ToolState | None]:
         """The fresh ``ToolState`` per lane (None where nothing new came)."""
         fresh, sent = self._fresh(tick)
         period_ns = self.period_s * 1e9
         return [ToolState(0, int(sent[lane]), int(sent[lane] * period_ns),
-                          _FLAGS[int(row[6])], (row[0], row[1]), (row[2], row[3]),
+                          FLAGS_BY_VALUE[int(row[6])], (row[0], row[1]), (row[2], row[3]),
                           (row[4], row[5]), 0.0, 0.0) if fresh[lane] else None
                 for lane, row in enumerate(rows.tolist())]
 
@@ -532,7 +530,7 @@ class _Arrivals:
         fresh, sent = self._fresh(tick)
         period_ns = self.period_s * 1e9
         return [HandleState(0, int(sent[lane]), int(sent[lane] * period_ns),
-                            _FLAGS[int(row[4])], (row[0], row[1]), (row[2], row[3]),
+                            FLAGS_BY_VALUE[int(row[4])], (row[0], row[1]), (row[2], row[3]),
                             force_scale=row[5])
                 if fresh[lane] else None
                 for lane, row in enumerate(rows.tolist())]

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from haptic.common.wire.messages import Flags, ToolState
+from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, ToolState
 from haptic.master.node import MasterNode, MasterNodeState
 from haptic.master.supervisor import MasterSupervisor, Transition, quiet_lanes
 
@@ -40,8 +40,6 @@ from haptic.master.supervisor import MasterSupervisor, Transition, quiet_lanes
 _FORCES_ENABLED = int(Flags.FORCES_ENABLED)
 _SAFE_STATE = int(Flags.SAFE_STATE)
 _TDPA_SWITCHED = int(Flags.TDPA_SWITCHED)
-#: Every combination of the flags by value.
-_FLAG_OF = {value: Flags(value) for value in range(2 * max(Flags))}
 
 
 def _flag_value(enabled: Any, switched: Any) -> Any:
@@ -72,7 +70,7 @@ class MasterTickOutput:
     @property
     def flags(self) -> list[Flags]:
         """Per lane, the flags of the message to the slave."""
-        return [_FLAG_OF[value] for value in self.flag_values.tolist()]
+        return [FLAGS_BY_VALUE[value] for value in self.flag_values.tolist()]
 
 
 @dataclass

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from haptic.common.analysis.margin_table import follow_gain
-from haptic.common.wire.messages import Flags, HandleState
+from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, HandleState
 from haptic.slave_sim.input_guard import InputGuard, plain_admits
 from haptic.slave_sim.node import SlaveNode, SlaveOutputs, SlaveState
 from haptic.slave_sim.pacing import Sample, Step
@@ -42,11 +42,10 @@ from haptic.slave_sim.resync import ToolResync
 from haptic.slave_sim.supervisor import SlaveSupervisor, Transition, quiet_lanes
 
 #: Flag values (IntFlag arithmetic costs about 1 us per operation, too much per lane and
-#: tick in a sweep), and every combination of the flags by value.
+#: tick in a sweep).
 _FORCES_ENABLED, _SAFE_STATE = int(Flags.FORCES_ENABLED), int(Flags.SAFE_STATE)
 _IN_CONTACT, _WORK_AREA_STOP = int(Flags.IN_CONTACT), int(Flags.WORK_AREA_STOP)
 _TDPA_SWITCHED = int(Flags.TDPA_SWITCHED)
-_FLAG_OF = {value: Flags(value) for value in range(2 * max(Flags))}
 
 
 def _flag_value(ready: Any, cutting: Any, outside: Any, switched: Any) -> Any:
@@ -72,7 +71,7 @@ class SlaveTickOutput:
     @property
     def flags(self) -> list[Flags]:
         """Per lane, the flags of the message to the master."""
-        return [_FLAG_OF[value] for value in self.flag_values.tolist()]
+        return [FLAGS_BY_VALUE[value] for value in self.flag_values.tolist()]
 
 
 @dataclass

@@ -99,6 +99,11 @@ class Flags(enum.IntFlag):
     off with the master's flag (slave_sim/tick.py)."""
 
 
+#: Every combination of the flags by its int value (building an IntFlag from an int costs
+#: about 1 us, too much per lane and tick in the lockstep's sweeps).
+FLAGS_BY_VALUE = {value: Flags(value) for value in range(2 * max(Flags))}
+
+
 class DropReason(enum.StrEnum):
     """Why a received message was dropped; each has its own counter in the link statistics."""
 
