@@ -518,19 +518,14 @@ class _Arrivals:
 
     def tool_states(self, tick: int, rows: np.ndarray) -> list[ToolState | None]:
         """The fresh ``ToolState`` per lane (None where nothing new came)."""
-        fresh, sent = self._fresh(tick)
-        period_ns = self.period_s * 1e9
-        return [ToolState(0, int(sent[lane]), int(sent[lane] * period_ns),
-                          FLAGS_BY_VALUE[int(row[6])], (row[0], row[1]), (row[2], row[3]),
-                          (row[4], row[5]), 0.0, 0.0) if fresh[lane] else None
-                for lane, row in enumerate(rows.tolist())]
+        columns = self.tool_columns(tick, rows)
+        return [self._tool_state(lane, row) if fresh else None
+                for lane, (fresh, row) in enumerate(zip(columns.fresh, columns.rows,
+                                                        strict=True))]
 
     def handle_states(self, tick: int, rows: np.ndarray) -> list[HandleState | None]:
         """The fresh ``HandleState`` per lane (None where nothing new came)."""
-        fresh, sent = self._fresh(tick)
-        period_ns = self.period_s * 1e9
-        return [HandleState(0, int(sent[lane]), int(sent[lane] * period_ns),
-                            FLAGS_BY_VALUE[int(row[4])], (row[0], row[1]), (row[2], row[3]),
-                            force_scale=row[5])
-                if fresh[lane] else None
-                for lane, row in enumerate(rows.tolist())]
+        columns = self.handle_columns(tick, rows)
+        return [self._handle_state(lane, row) if fresh else None
+                for lane, (fresh, row) in enumerate(zip(columns.fresh, columns.rows,
+                                                        strict=True))]
