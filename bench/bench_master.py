@@ -16,8 +16,10 @@ driver on
 For each: the CAN cycle (``hardware.read()``: SYNC sent to the last PDO received) and the
 whole control cycle (read + node step + operator display + RPDOs), back to back
 (``unpaced``) and paced at Ts by the programs' real-time runner (common/runtime/runner.py: sleep,
-then spin the last ``[runner] spin_s``, 0.1 ms; re-anchored after a stall), with
-p50/p99/max, the overruns and the runner's period error.
+then spin the last ``[runner] spin_s``, 0.1 ms; re-anchored after a stall), and paced with
+each SYNC sent ``[master.can] sync_lead_s`` ahead of its tick (``paced_sync_lead``: the read
+then only collects the answers, as in the master program), with p50/p99/max, the overruns
+and the runner's period error.
 Figures are wall-clock on this machine (noisy: other programs on a 2-core machine move them
 a lot, so the 1-minute load average is printed with them). Nothing is asserted.
 """
@@ -38,6 +40,7 @@ from haptic.common.model.teleop import model_from_config
 from haptic.common.runtime.runner import FreeRunningClock, RealTimeRunner
 from haptic.master.hardware.interface import HandleHardware, create_hardware
 from haptic.master.node import MasterNode
+from haptic.master.runner import early_sync
 from haptic.master.settings import master_settings
 from haptic.master.sim.rig_model import RigModel
 
@@ -96,11 +99,14 @@ def bench_blocks(config: dict, cycles: int, lanes: int) -> dict[str, dict[str, f
 
 
 def _run_cycles(hardware: HandleHardware, node: MasterNode, cycles: int, pace: bool,
-                spin_s: float) -> dict[str, float]:
+                spin_s: float, lead_s: float = 0.0) -> dict[str, float]:
     """``cycles`` control cycles on configured-active ``hardware``: read, node step, present
     the (zero) tool force, write; paced at the node's Ts when ``pace`` (sleep, then spin the
-    last ``spin_s``). Figures of the read (the CAN cycle) and of the whole cycle, the overruns
-    and the faulted cycles."""
+    last ``spin_s``), with each SYNC sent ``lead_s`` before its tick when > 0 (the master
+    program's ``[master.can] sync_lead_s``: ``hardware.sync()`` in the runner's wait; the
+    read then only collects). Figures of the read (the
+    CAN cycle as the tick sees it) and of the whole cycle, the overruns and the faulted
+    cycles."""
     period_s = node.period_s
     reading = hardware.read()
     state = node.activate(reading.position_m[None])
@@ -127,6 +133,8 @@ def _run_cycles(hardware: HandleHardware, node: MasterNode, cycles: int, pace: b
     # the programs' runner (common/runtime/runner.py); unpaced, its ticks run back to back
     free = None if pace else FreeRunningClock()
     runner = RealTimeRunner(period_s, step, spin_s=spin_s if pace else 0.0, show_status=False,
+                            lead=early_sync(hardware, 0) if lead_s > 0.0 else None,
+                            lead_s=lead_s,
                             **({} if free is None else {"clock_ns": free.clock_ns,
                                                         "sleep": free.sleep}))
     stats = runner.run()
@@ -165,6 +173,12 @@ def bench_can_cycle(config: dict, cycles: int, rig: str,
             hardware, MasterNode.from_model(model, safety), cycles, False, spin_s)
         results[f"can_{rig}_paced_at_ts"] = _run_cycles(
             hardware, MasterNode.from_model(model, safety), cycles, True, spin_s)
+        lead_s = config["master"]["can"]["sync_lead_s"]
+        if lead_s > 0.0:
+            results[f"can_{rig}_paced_sync_lead"] = _run_cycles(
+                hardware, MasterNode.from_model(model, safety), cycles, True, spin_s, lead_s)
+            results[f"can_{rig}_paced_sync_lead"]["sync_lead_us"] = lead_s * 1e6
+        hardware.read()  # the last lead's SYNC
         hardware.deactivate()
     return results
 

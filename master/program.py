@@ -3,7 +3,9 @@ the real-time runner (``haptic-master`` without ``--no-link``).
 
 One tick at Ts (docs/programs.md):
 
-1. ``hardware.read()``: the handle force fh and position yh of this SYNC;
+1. ``hardware.read()``: the handle force fh and position yh of this SYNC (on the CAN
+   backends the runner sent it ``[master.can] sync_lead_s`` before the tick, while the loop
+   waited: ``hardware.sync()``, so the devices' answers are there already);
 2. ``link.poll()``: the newest ``ToolState`` whose delivery time has come (tool force ft,
    tool position, the slave's flags);
 3. the watchdog: fresh message? silence? peer alive? and, while re-synchronising, ``in_sync``:
@@ -53,6 +55,7 @@ from haptic.master.governor_setup import governor_step
 from haptic.master.hardware.interface import HandleHardware, HardwareError
 from haptic.master.margin_governor import MarginGovernor
 from haptic.master.node import MasterNode
+from haptic.master.runner import early_sync
 from haptic.master.supervisor import MasterSupervisor, Transition
 from haptic.master.tick import MasterTick
 from haptic.master.tool_guard import ToolGuardSettings, ToolInputGuard
@@ -351,7 +354,8 @@ def _run_linked_master(
                     watchdog, f"fh {loop.last_fh[0]:+.2f} N  ft {loop.last_ft[0]:+.2f} N"
                     f"{inert.status()}"
                     f"{governor.status() if governor is not None else ''}"), signals,
-                    stop_safely)
+                    stop_safely, lead=early_sync(hardware),
+                    lead_s=options.config["master"]["can"]["sync_lead_s"])
                 inert_summary = inert.summary(run.elapsed_s)
         except HardwareError as error:
             print(f"haptic-master: hardware error: {error}", file=sys.stderr)

@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from haptic.common.runtime.runner import FreeRunningClock, RealTimeRunner
-from haptic.master.hardware.interface import HandleHardware
+from haptic.common.runtime.runner import FreeRunningClock, LeadFunction, RealTimeRunner
+from haptic.master.hardware.interface import HandleHardware, starts_cycles_early
 from haptic.master.node import MasterNode, SafetyEvent
 
 #: The runner's spin before each deadline when paced, s.
@@ -46,6 +46,23 @@ class RunSummary:
     events: list[SafetyEvent] = field(default_factory=list)
     hardware_faults: list[str] = field(default_factory=list)
     trace: MasterTrace | None = None
+
+
+def early_sync(hardware: HandleHardware, first_tick: int = 1) -> LeadFunction | None:
+    """The runner's ``lead`` (common/runtime/runner.py, ``[master.can] sync_lead_s``) for
+    ``hardware`` that starts its cycles early (the CAN backends): ``hardware.sync()`` from
+    tick ``first_tick`` on (the program's tick 0 uses the reading taken before the loop);
+    ``None`` for hardware that samples in ``read()``. The sync does not wait for the answers:
+    a loop blocked on the bus would wake on every frame and take the CPU from the devices
+    that send them (measured: a longer CAN cycle on two cores)."""
+    if not starts_cycles_early(hardware):
+        return None
+
+    def lead(tick: int, _deadline_ns: int) -> None:
+        if tick >= first_tick:
+            hardware.sync()
+
+    return lead
 
 
 def run_master(

@@ -40,6 +40,7 @@ class CanSettings:
     fd: bool = True
     data_bitrate: int = 5_000_000
     sync_counter_overflow: int = 240
+    sync_lead_s: float = 0.0
 
     @property
     def eds_files(self) -> tuple[str, str]:

@@ -33,6 +33,11 @@ CAN_SCHEMA: Schema = {
     "dbc_file": Field("str", "Force sensor DBC file; empty for the packaged one."),
     "pdo_timeout_s": Field("float", "How long read() waits for the PDOs of a SYNC, s.",
                            minimum=0.0, exclusive_minimum=True),
+    "sync_lead_s": Field("float", "The loop sends each cycle's SYNC this long before its "
+                         "tick, while it waits for it, so the drives' and the sensor's answers "
+                         "are there when the tick reads them, s (at most one period); 0: "
+                         "read() sends it at the tick and waits. The sample-to-command delay "
+                         "stays one SYNC.", minimum=0.0, maximum=0.01),
     "enable_timeout_cycles": Field("int", "SYNC cycles allowed for the CiA 402 enable "
                                    "sequence and SDO replies.", minimum=1),
     "lead_screw_pitch_m_per_rev": Field("float", "Lead-screw pitch, m per revolution.",

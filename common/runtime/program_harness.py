@@ -31,7 +31,13 @@ from typing import Any
 from haptic.common.config import ConfigError
 from haptic.common.records.run_recording import RunRecording
 from haptic.common.runtime.display import DisplayPublisher, EventCursor
-from haptic.common.runtime.runner import RealTimeRunner, RunStats, StepFunction, StopSignals
+from haptic.common.runtime.runner import (
+    LeadFunction,
+    RealTimeRunner,
+    RunStats,
+    StepFunction,
+    StopSignals,
+)
 from haptic.common.runtime.runner_config import prioritise_zenoh_threads
 from haptic.common.runtime.summary import format_summary, make_summary, write_json_summary
 from haptic.common.runtime.watchdog import PeerWatchdog
@@ -138,18 +144,20 @@ class ProgramHarness:
                 f"{stats.loss_ratio * 100:.2f} %  {watchdog.state.value}  {text}")
 
     def run(self, step: StepFunction, status_text: Callable[[], str], signals: StopSignals,
-            on_stop: Callable[[], None]) -> RunStats:
+            on_stop: Callable[[], None], lead: LeadFunction | None = None,
+            lead_s: float = 0.0) -> RunStats:
         """The real-time runner over ``step`` for the run's duration (or until stopped);
         :attr:`runner` is the runner while it runs (a step may shift its schedule). On every
         way out ``on_stop()`` puts the side in its safe state and tells the peer, then the
         link's figures are kept (:meth:`collect_link`). ``status_text()``: this side's part
-        of the live status line."""
+        of the live status line; ``lead``/``lead_s``: the runner's call ``lead_s`` (s) before
+        each tick (the master's early SYNC)."""
         options = self.options
         self.runner = RealTimeRunner(
             self.period_s, step, duration_s=options.duration_s, max_steps=options.max_steps,
             spin_s=options.runner.spin_s,
             realtime=options.runner.realtime, status=status_text,
-            show_status=options.show_status, stop_signals=signals)
+            show_status=options.show_status, stop_signals=signals, lead=lead, lead_s=lead_s)
         try:
             return self.runner.run()
         finally:

@@ -70,6 +70,11 @@ StepFunction = Callable[[int, int], None]
 """``step(tick, now_ns)``: ``tick`` counts from 0; ``now_ns`` is the tick's start on the
 runner's clock (ns). It may call :meth:`RealTimeRunner.request_stop`."""
 
+LeadFunction = Callable[[int, int], None]
+"""``lead(tick, deadline_ns)``: called ``lead_s`` before tick ``tick``'s deadline
+(``deadline_ns``, on the runner's clock), while the loop waits for it (e.g. the CAN master's
+SYNC, so the drives sample and answer before the tick reads them)."""
+
 
 @dataclass(frozen=True)
 class RunStats:
@@ -128,6 +133,9 @@ class RealTimeRunner:
     :meth:`run` (``None``: left as it is). ``stop_signals``: an outer :class:`StopSignals`
     the loop checks (then the runner installs no handlers of its own); otherwise, with
     ``handle_signals``, the runner installs its own for the duration of :meth:`run`.
+    ``lead``: called ``lead_s`` (s, at most one period) before each tick's deadline, in the
+    wait before it (with the sleep's precision; right away when the previous step ended later
+    than that, and never after the deadline: a late tick calls it just before its step).
     """
 
     def __init__(
@@ -147,6 +155,8 @@ class RealTimeRunner:
         handle_signals: bool = True,
         stop_signals: StopSignals | None = None,
         realtime: RealtimeSettings | None = None,
+        lead: LeadFunction | None = None,
+        lead_s: float = 0.0,
     ) -> None:
         if not period_s > 0.0:
             raise ValueError(f"period_s must be > 0 (got {period_s})")
@@ -154,6 +164,10 @@ class RealTimeRunner:
             raise ValueError(f"duration_s must be >= 0 (got {duration_s})")
         if max_steps is not None and max_steps < 0:
             raise ValueError(f"max_steps must be >= 0 (got {max_steps})")
+        if not lead_s >= 0.0:
+            raise ValueError(f"lead_s must be >= 0 (got {lead_s})")
+        self._lead = lead
+        self._lead_ns = min(round(lead_s * 1e9), round(period_s * 1e9))
         self._max_steps = max_steps
         self.period_s = period_s
         self._period_ns = round(period_s * 1e9)
@@ -246,6 +260,11 @@ class RealTimeRunner:
                 self.request_stop(signals.reason)
                 break
             remaining = deadline - clock()
+            if self._lead is not None:
+                if remaining > self._lead_ns:
+                    sleep((remaining - self._lead_ns) * 1e-9)
+                self._lead(tick, deadline)
+                remaining = deadline - clock()
             if remaining > spin:
                 sleep((remaining - spin) * 1e-9)
             now = clock()

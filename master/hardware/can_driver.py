@@ -3,7 +3,9 @@ two-channel force sensor (DBC), behind :class:`~haptic.master.hardware.interface
 
 One control cycle is one SYNC: :meth:`CanHandleDriver.read` sends SYNC and waits (at most
 ``pdo_timeout_s``) for both drives' TPDO1 (statusword, position actual value) and the
-sensor frame sampled at that SYNC; :meth:`CanHandleDriver.write` sends each drive's RPDO1
+sensor frame sampled at that SYNC (or, where :meth:`CanHandleDriver.sync` sent the SYNC ahead
+of the tick, ``[master.can] sync_lead_s`` before it, collects the frames that came
+meanwhile); :meth:`CanHandleDriver.write` sends each drive's RPDO1
 (controlword, target position), which the drive applies at the next SYNC. A command
 written in cycle k therefore acts over [t_{k+1}, t_{k+2}): zero-order hold plus one sample
 of delay, the contract the analysis and the simulated rig use.
@@ -78,6 +80,11 @@ class CanHandleDriver(HandleHardware):
         self._sensor_counter: int | None = None
         self._pending_faults: list[str] = []
         self._pending_events: list[str] = []
+        #: a SYNC is out whose PDOs read() has not collected yet (sync()), sent at this
+        #: time (time.monotonic(), s), and the drive faults found before it (late EMCYs)
+        self._sync_pending = False
+        self._sync_sent_s = 0.0
+        self._sync_drive_fault = [False, False]
         self.last_reading: HandleReading | None = None
         #: Frames that arrived after their cycle's timeout and were discarded.
         self.late_frames = 0
@@ -496,15 +503,41 @@ class CanHandleDriver(HandleHardware):
 
     def _close_bus(self) -> None:
         self._stop_idle_heartbeat()
+        self._sync_pending = False
         if self._bus is not None:
             self._bus.shutdown()
             self._bus = None
 
     # --- cyclic I/O ------------------------------------------------------------------
 
+    def sync(self) -> None:
+        """Start the next cycle ahead of its :meth:`read`: drop the frames left from an
+        earlier SYNC (acting on an EMCY or a heartbeat among them), send the master's
+        heartbeat when due and the SYNC. The drives apply the last :meth:`write`'s targets
+        and sample at the SYNC and answer while the loop waits for its tick (the runner's
+        ``lead``), so :meth:`read` finds the frames there instead of waiting for them; the
+        sample-to-command delay stays one SYNC. Nothing when a SYNC is already pending."""
+        bus = self._bus
+        if bus is None or self._state is LifecycleState.UNCONFIGURED:
+            raise HardwareError("sync needs a configured driver")
+        if self._sync_pending:
+            return
+        if self._master_stop is not None:
+            self._stop_cycles += 1
+        self._discard_late_frames(self._pending_faults, self._sync_drive_fault)
+        now = time.monotonic()
+        if now >= self._heartbeat_due_s:
+            self._send(HEARTBEAT_BASE + self.settings.master_node_id, self._master_heartbeat)
+            self._heartbeat_due_s = max(self._heartbeat_due_s + self._heartbeat_period_s, now)
+        bus.send(self._next_sync())
+        self._cycle += 1
+        self._sync_sent_s = now
+        self._sync_pending = True
+
     def read(self) -> HandleReading:
-        """Send SYNC (and the master's heartbeat when due), collect that SYNC's PDOs, return
-        the sample (NaN where missing) with the drives' faults and statusword events.
+        """Collect the PDOs of the pending SYNC (:meth:`sync`; sent now when none is
+        pending), return the sample (NaN where missing) with the drives' faults and
+        statusword events.
 
         Supervision: EMCYs, a drive in Fault or out of operation enabled, a drive's heartbeat
         older than ``heartbeat_timeout_s`` or reporting another NMT state are faults, and
@@ -514,20 +547,16 @@ class CanHandleDriver(HandleHardware):
         bus = self._bus
         if bus is None or self._state is LifecycleState.UNCONFIGURED:
             raise HardwareError("read needs a configured driver")
+        if not self._sync_pending:
+            self.sync()
+        self._sync_pending = False
+        now = self._sync_sent_s
         faults = self._pending_faults
         self._pending_faults = []
         events = self._pending_events
         self._pending_events = []
-        drive_fault = [False, False]
-        if self._master_stop is not None:
-            self._stop_cycles += 1
-        self._discard_late_frames(faults, drive_fault)
-        now = time.monotonic()
-        if now >= self._heartbeat_due_s:
-            self._send(HEARTBEAT_BASE + self.settings.master_node_id, self._master_heartbeat)
-            self._heartbeat_due_s = max(self._heartbeat_due_s + self._heartbeat_period_s, now)
-        bus.send(self._next_sync())
-        self._cycle += 1
+        drive_fault = self._sync_drive_fault
+        self._sync_drive_fault = [False, False]
         dispatch = self._dispatch
         position_m = np.full(2, np.nan)
         force_N = np.full(2, np.nan)
@@ -535,10 +564,8 @@ class CanHandleDriver(HandleHardware):
         have_sensor = False
         deadline = now + self.pdo_timeout_s
         while not (have_drive[0] and have_drive[1] and have_sensor):
-            remaining = deadline - time.monotonic()
-            if remaining <= 0.0:
-                break
-            message = bus.recv(timeout=remaining)
+            # past the deadline, only what has arrived already (a late read after sync())
+            message = bus.recv(timeout=max(deadline - time.monotonic(), 0.0))
             if message is None:
                 break
             kind, axis = dispatch.get(message.arbitration_id, _OTHER)
@@ -635,14 +662,20 @@ class CanHandleDriver(HandleHardware):
         is not a late frame."""
         assert self._bus is not None
         while (message := self._bus.recv(timeout=0.0)) is not None:
-            if message.arbitration_id in (self._own_extended_ids if message.is_extended_id
-                                          else self._own_ids):
-                continue  # our own frame, back from an interface that echoes
-            kind, axis = self._dispatch.get(message.arbitration_id, _OTHER)
-            if kind in (_EMCY, _HEARTBEAT):
-                self._supervision_frame(kind, axis, bytes(message.data), faults, drive_fault)
-                continue
-            self.late_frames += 1
+            self._late_frame(message, faults, drive_fault)
+
+    def _late_frame(self, message: can.Message, faults: list[str],
+                    drive_fault: list[bool]) -> None:
+        """One frame from an earlier SYNC: an EMCY or a heartbeat is acted on, our own frame
+        ignored, anything else counted in :attr:`late_frames`."""
+        if message.arbitration_id in (self._own_extended_ids if message.is_extended_id
+                                      else self._own_ids):
+            return  # our own frame, back from an interface that echoes
+        kind, axis = self._dispatch.get(message.arbitration_id, _OTHER)
+        if kind in (_EMCY, _HEARTBEAT):
+            self._supervision_frame(kind, axis, bytes(message.data), faults, drive_fault)
+            return
+        self.late_frames += 1
 
     def _sensor_force(self, data: bytes, faults: list[str]) -> np.ndarray:
         try:

@@ -86,6 +86,14 @@ class HandleHardware(ABC):
     def cleanup(self) -> None:
         """-> unconfigured: close the bus (safe to call in any state)."""
 
+    def sync(self) -> None:
+        """Start the next control cycle ahead of its :meth:`read` (the CAN backends send its
+        SYNC: the devices sample and answer while the loop waits for its tick, the runner's
+        ``lead``); :meth:`read` then collects that cycle. Optional: :meth:`read` starts the
+        cycle itself when this was not called. The default does nothing (a backend that
+        samples in :meth:`read`)."""
+        return None
+
     @abstractmethod
     def read(self) -> HandleReading:
         """One control cycle's sample (a SYNC on the CAN backends)."""
@@ -127,6 +135,12 @@ class HandleHardware(ABC):
 
     def __exit__(self, *exc: object) -> None:
         self.cleanup()
+
+
+def starts_cycles_early(hardware: HandleHardware) -> bool:
+    """Whether ``hardware`` has a :meth:`HandleHardware.sync` of its own (the CAN backends:
+    the loop then sends each SYNC ``[master.can] sync_lead_s`` before its tick)."""
+    return type(hardware).sync is not HandleHardware.sync
 
 
 HardwareFactory = Callable[[dict[str, Any]], HandleHardware]

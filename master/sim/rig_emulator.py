@@ -347,6 +347,12 @@ class EmulatedRigHardware(HandleHardware):
             self._display = None
             self._stop_emulator()
 
+    def sync(self) -> None:
+        if self.driver is None:
+            raise HardwareError("sync needs a configured driver")
+        self._send_display()
+        self.driver.sync()
+
     def read(self) -> HandleReading:
         if self.driver is None:
             raise HardwareError("read needs a configured driver")

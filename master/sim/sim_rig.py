@@ -678,6 +678,9 @@ class SimulatedRigHardware(HandleHardware):
         finally:
             self.rig.stop()
 
+    def sync(self) -> None:
+        self.driver.sync()
+
     def read(self) -> HandleReading:
         return self.driver.read()
 
