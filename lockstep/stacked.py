@@ -31,6 +31,18 @@ class StackedLTI:
     input_names: tuple[str, ...]
     output_names: tuple[str, ...]
 
+    def __post_init__(self) -> None:
+        # [[C, D], [A, B]] per lane: one batched product per step for the outputs and the
+        # next state together (four small batched products cost twice as much), and the
+        # stacked [x; u] it multiplies
+        lanes, n, m = self.B.shape
+        p = self.C.shape[1]
+        system = np.zeros((lanes, p + n, n + m))
+        system[:, :p, :n], system[:, :p, n:] = self.C, self.D
+        system[:, p:, :n], system[:, p:, n:] = self.A, self.B
+        object.__setattr__(self, "_system", system)
+        object.__setattr__(self, "_stacked", np.zeros((lanes, n + m, 1)))
+
     @classmethod
     def from_blocks(cls, blocks: Sequence[DiscreteLTI]) -> StackedLTI:
         """Stack one block per lane; blocks with fewer states are padded with inert ones
@@ -70,8 +82,11 @@ class StackedLTI:
 
     def step(self, state: np.ndarray, inputs: np.ndarray) -> np.ndarray:
         """Outputs (lanes, p) for ``inputs`` (lanes, m); advances ``state`` in place."""
-        x = state[:, :, None]
-        u = inputs[:, :, None]
-        outputs = (self.C @ x + self.D @ u)[:, :, 0]
-        state[...] = (self.A @ x + self.B @ u)[:, :, 0]
-        return outputs
+        stacked = self._stacked
+        n = state.shape[1]
+        stacked[:, :n, 0] = state
+        stacked[:, n:, 0] = inputs
+        result = (self._system @ stacked)[:, :, 0]
+        p = result.shape[1] - n
+        state[...] = result[:, p:]
+        return result[:, :p]
