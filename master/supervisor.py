@@ -17,6 +17,9 @@ the hardware's faults, the link's silence (s) and the slave's liveliness. Decisi
 - the slave's work-area guard (``Flags.WORK_AREA_STOP``) holds the handle too (an event
   ``handle_held`` and :attr:`peer_stops`), so the handle does not run on while the tool
   stands; forces come back once the flag clears and the tool is in sync again (issue 16);
+  so does any other stop of the slave's tool while forces are on here (``FORCES_ENABLED``
+  gone from its messages: its watchdog tripped, an input fault), until it reports its forces
+  enabled and its tool in sync again;
 - the safe state holds the handle where it was when forces went off (or at the start).
 
 :meth:`update` returns a :class:`Transition`: ``ACTIVATE`` the first time forces come on (the
@@ -77,8 +80,11 @@ class MasterSupervisor:
         #: the slave's work-area guard stopped the tool: forces wait for the flag to clear
         #: and the tool to be in sync again
         self._await_peer = False
-        #: how many times the slave's work-area stop held the handle
+        self._peer_reason = ""
+        #: how many times a stop of the slave's tool held the handle, and how many of them
+        #: were its work-area guard's
         self.peer_stops = 0
+        self.work_area_stops = 0
 
     def start(self, position_m: Any) -> None:
         """Hold the handle where it is at the start (m; non-finite values read as 0)."""
@@ -127,13 +133,22 @@ class MasterSupervisor:
         input_fault = guard is not None and guard.faulted
         if self._await_sync and not input_fault and synced:
             self._await_sync = False
-        peer_stop = self.tool is not None and Flags.WORK_AREA_STOP in self.tool.flags
+        tool = self.tool
+        work_area_stop = tool is not None and Flags.WORK_AREA_STOP in tool.flags
+        # the slave stopped its tool while this side applies forces (its watchdog, an input
+        # fault): FORCES_ENABLED gone from its messages
+        slave_stopped = (tool is not None and self.enabled
+                         and Flags.FORCES_ENABLED not in tool.flags)
+        peer_stop = work_area_stop or slave_stopped
         if peer_stop and not self._await_peer:
             self._await_peer = True
             self.peer_stops += 1
+            self.work_area_stops += work_area_stop
+            self._peer_reason = (_WORK_AREA_REASON if work_area_stop
+                                 else _SLAVE_STOPPED_REASON)
             self.events.append({"time_s": now_s, "kind": "handle_held",
-                                "reason": "the slave's work-area guard stopped the tool: "
-                                "the handle is held until the tool is back in sync"})
+                                "reason": f"{self._peer_reason}: the handle is held until "
+                                "the tool is back in sync"})
         elif self._await_peer and not peer_stop and synced:
             self._await_peer = False
         if faults:
@@ -169,7 +184,7 @@ class MasterSupervisor:
 
     @property
     def peer_held(self) -> bool:
-        """The slave's work-area stop holds the handle (until the tool is back in sync)."""
+        """A stop of the slave's tool holds the handle (until the tool is back in sync)."""
         return self._await_peer
 
     def stop_reason(self) -> str:
@@ -182,7 +197,7 @@ class MasterSupervisor:
         if self._await_sync:
             return "tool input fault: waiting for the tool at the handle"
         if self._await_peer:
-            return "the slave's work-area guard stopped the tool: waiting for it at the handle"
+            return f"{self._peer_reason}: waiting for it at the handle"
         return f"watchdog {self.watchdog.state.value}"
 
     @property
@@ -196,6 +211,10 @@ class MasterSupervisor:
 
 
 _WORK_AREA_STOP = int(Flags.WORK_AREA_STOP)
+_FORCES_ENABLED = int(Flags.FORCES_ENABLED)
+_WORK_AREA_REASON = "the slave's work-area guard stopped the tool"
+_SLAVE_STOPPED_REASON = ("the slave stopped its tool (its forces are off: its watchdog or an "
+                         "input fault)")
 
 
 def quiet_lanes(steady: np.ndarray, silence_s: np.ndarray, max_message_age_s: np.ndarray,
@@ -205,9 +224,10 @@ def quiet_lanes(steady: np.ndarray, silence_s: np.ndarray, max_message_age_s: np
     lane always makes it): :meth:`MasterSupervisor.steady` (``steady``, (lanes,) bool), the
     watchdog not silent (``silence_s`` (lanes,) s not above ``max_message_age_s``) and the
     newest tool message's flags (``newest_flags``, (lanes,) int, the fresh one's where a
-    message came) without ``WORK_AREA_STOP``; the slave alive and no hardware fault are the
-    caller's to ensure. Mirrors :meth:`MasterSupervisor.update` line by line; the lockstep's
-    equivalence test (tests/lockstep/test_quiet_lanes.py) runs every lane through both."""
+    message came) with ``FORCES_ENABLED`` and without ``WORK_AREA_STOP``; the slave alive and
+    no hardware fault are the caller's to ensure. Mirrors :meth:`MasterSupervisor.update`
+    line by line; the lockstep's equivalence test (tests/lockstep/test_quiet_lanes.py) runs
+    every lane through both."""
     return (steady & ~(silence_s > max_message_age_s)
-            & ((newest_flags & _WORK_AREA_STOP) == 0))
+            & ((newest_flags & (_WORK_AREA_STOP | _FORCES_ENABLED)) == _FORCES_ENABLED))
 

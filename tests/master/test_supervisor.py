@@ -39,7 +39,7 @@ def test_forces_come_on_after_the_resync_messages_in_sync() -> None:
     supervisor = make()
     transitions = run_in_sync(supervisor, RESYNC)
     assert transitions[:-1] == [Transition.NONE] * (RESYNC - 1)
-    assert transitions[-1] is Transition.ACTIVATE
+    assert transitions.count(Transition.ACTIVATE) == 1 and supervisor.enabled
     assert supervisor.enabled and supervisor.ever_enabled
 
 
@@ -289,3 +289,44 @@ def test_the_slaves_work_area_stop_holds_the_handle_until_the_tool_is_back_in_sy
     assert not supervisor.enabled
     transitions = run_in_sync(supervisor, 2, start=111)
     assert Transition.RESUME in transitions and supervisor.enabled
+
+
+def test_a_slave_that_stops_its_tool_holds_the_handle_until_it_is_ready_and_in_sync() -> None:
+    """The slave stops its tool on its own (its watchdog, an input fault: FORCES_ENABLED gone
+    from its messages) while the master's forces are on: the handle is held too, with an
+    event saying why, and forces return only once the slave reports its forces enabled and
+    its tool at Ah1 yh again."""
+    supervisor = make()
+    run_in_sync(supervisor, RESYNC)
+    assert supervisor.enabled
+    handle = (0.01, 0.02)
+    assert supervisor.update(100 * PERIOD_S, tool(0.02, 0.01, enabled=False, seq=100),
+                             handle) is Transition.HOLD
+    assert supervisor.peer_held and supervisor.peer_stops == 1
+    held = [e for e in supervisor.events if e["kind"] == "handle_held"]
+    assert len(held) == 1 and "the slave stopped its tool" in held[0]["reason"]
+    assert "the slave stopped its tool" in supervisor.stop_reason()
+    for i in range(1, 10):  # the slave still stopped: held, counted once
+        assert supervisor.update((100 + i) * PERIOD_S,
+                                 tool(0.02, 0.01, enabled=False, seq=100 + i),
+                                 handle) is Transition.NONE
+    assert not supervisor.enabled and supervisor.peer_stops == 1
+    # ready again but its tool elsewhere: still held
+    supervisor.update(110 * PERIOD_S, tool(0.05, 0.01, seq=110), handle)
+    assert not supervisor.enabled
+    transitions = run_in_sync(supervisor, 2, start=111)
+    assert Transition.RESUME in transitions and supervisor.enabled
+    assert not supervisor.peer_held and supervisor.watchdog.trips == 0
+
+
+def test_a_slave_not_ready_before_forces_came_on_holds_nothing_new() -> None:
+    """Before the master's forces first come on (and during its own resync) a slave without
+    FORCES_ENABLED is the watchdog's business: no handle_held event, no count."""
+    supervisor = make()
+    handle = (0.01, 0.02)
+    for i in range(20):
+        supervisor.update(i * PERIOD_S, tool(0.02, 0.01, enabled=False, seq=i), handle)
+    assert not supervisor.enabled and supervisor.peer_stops == 0
+    assert not [e for e in supervisor.events if e["kind"] == "handle_held"]
+    transitions = run_in_sync(supervisor, RESYNC, start=20)
+    assert transitions.count(Transition.ACTIVATE) == 1 and supervisor.enabled
