@@ -172,6 +172,58 @@ def test_the_slaves_work_area_stop_reaches_the_master_tick_and_holds_the_handle(
     assert Flags.WORK_AREA_STOP in slave.control().flags[0]
 
 
+def test_a_slave_input_fault_holds_the_handle_until_both_are_back_in_sync(
+        paper_config, paper_model) -> None:
+    """On the shared ticks: a forged 1e9 N handle message is an input fault at the slave
+    (its tool stops, FORCES_ENABLED leaves its messages); the master's tick, fed that
+    message, holds the handle instead of running on alone; once plausible messages clear the
+    fault the tool is re-placed at the handle and both run again."""
+    scenario = load_scenario("constant-rate")
+    ts = paper_model.sample_period_s
+    sup, ratio, tool_start, handle_start = _starts(paper_config, paper_model, scenario)
+    slave_node = SlaveNode(paper_model, scenario, "linear", device="cpu")
+    guard_settings = InputGuardSettings.from_config(paper_config)
+    slave = SlaveTick(slave_node, slave_node.initial_state(1, tool_start),
+                      [SlaveSupervisor(ratio, sup.sync_tolerance_m, sup.work_area_m,
+                                       sup.max_message_age_s, sup.resync_messages)],
+                      [InputGuard(guard_settings, ts)])
+    slave.handle_position_m[...] = handle_start
+    slave.start(synced=True)
+    node = MasterNode.from_model(paper_model, master_settings(paper_config).safety)
+    master = MasterTick(node, [MasterSupervisor(ratio, sup.sync_tolerance_m,
+                                                sup.max_message_age_s, sup.resync_messages)])
+    master.start(handle_start, synced=True)
+    handle_xy = tuple(handle_start[0])
+
+    def exchange(tick: int, force_N: tuple[float, float], master_flags: Flags):
+        handle = HandleState(0, tick, int(tick * ts * 1e9), master_flags, force_N, handle_xy)
+        slave.supervise(tick * ts, [handle])
+        out = slave.control()
+        tool = ToolState(0, tick, int(tick * ts * 1e9), out.flags[0],
+                         tuple(out.out.tool_force_N[0].tolist()),
+                         tuple(out.out.tool_position_m[0].tolist()),
+                         tuple(out.out.tool_velocity_m_s[0].tolist()), 0.0, 0.0)
+        master.supervise((tick + 1) * ts, [tool], handle_start)
+        return out, master.control(np.zeros((1, 2)), handle_start)
+
+    out, used = exchange(0, (1e9, 0.0), Flags.FORCES_ENABLED)  # the forged message
+    assert not out.running[0] and Flags.FORCES_ENABLED not in out.flags[0]
+    assert not used.enabled[0] and Flags.SAFE_STATE in used.flags[0]
+    np.testing.assert_array_equal(used.handle_force_used_N[0], 0.0)
+    supervisor = master.supervisors[0]
+    assert supervisor.peer_stops == 1 and supervisor.work_area_stops == 0
+    flags = used.flags[0]
+    for tick in range(1, guard_settings.clear_after_messages + 40):
+        out, used = exchange(tick, (0.0, 0.0), flags)
+        flags = used.flags[0]
+        if used.enabled[0]:
+            break
+    assert used.enabled[0] and Flags.FORCES_ENABLED in out.flags[0]
+    assert supervisor.peer_stops == 1 and not supervisor.peer_held
+    assert np.all(np.abs(out.out.tool_position_m[0] - np.asarray(ratio) * handle_start[0])
+                  < sup.sync_tolerance_m)
+
+
 def test_every_message_delivered_in_a_tick_passes_the_guard_and_is_a_sample(
         paper_config, paper_model) -> None:
     """The slave's tick checks each older message delivered with the newest (a forged one
