@@ -43,6 +43,21 @@ def _starts(config: dict, model, scenario) -> tuple:
     tool_start = np.asarray(scenario.tool.start_position_m, float)[None, :]
     return sup, ratio, tool_start, tool_start / np.asarray(ratio)
 
+def _running_slave(config: dict, model, scenario) -> tuple[SlaveTick, InputGuardSettings]:
+    """A one-lane slave tick as the program builds it (the shipped work area and input
+    guard), in sync and running with the handle at its start; and the guard's settings."""
+    sup, ratio, tool_start, handle_start = _starts(config, model, scenario)
+    slave_node = SlaveNode(model, scenario, "linear", device="cpu")
+    guard_settings = InputGuardSettings.from_config(config)
+    slave = SlaveTick(slave_node, slave_node.initial_state(1, tool_start),
+                      [SlaveSupervisor(ratio, sup.sync_tolerance_m, sup.work_area_m,
+                                       sup.max_message_age_s, sup.resync_messages)],
+                      [InputGuard(guard_settings, model.sample_period_s)])
+    slave.handle_position_m[...] = handle_start
+    slave.start(synced=True)
+    return slave, guard_settings
+
+
 def test_lockstep_outputs_equal_program_ticks_fed_the_same_inputs(paper_config,
                                                                   paper_model) -> None:
     """Drive a master tick and a slave tick built as the programs build them (one lane each,
@@ -181,14 +196,7 @@ def test_a_slave_input_fault_holds_the_handle_until_both_are_back_in_sync(
     scenario = load_scenario("constant-rate")
     ts = paper_model.sample_period_s
     sup, ratio, tool_start, handle_start = _starts(paper_config, paper_model, scenario)
-    slave_node = SlaveNode(paper_model, scenario, "linear", device="cpu")
-    guard_settings = InputGuardSettings.from_config(paper_config)
-    slave = SlaveTick(slave_node, slave_node.initial_state(1, tool_start),
-                      [SlaveSupervisor(ratio, sup.sync_tolerance_m, sup.work_area_m,
-                                       sup.max_message_age_s, sup.resync_messages)],
-                      [InputGuard(guard_settings, ts)])
-    slave.handle_position_m[...] = handle_start
-    slave.start(synced=True)
+    slave, guard_settings = _running_slave(paper_config, paper_model, scenario)
     node = MasterNode.from_model(paper_model, master_settings(paper_config).safety)
     master = MasterTick(node, [MasterSupervisor(ratio, sup.sync_tolerance_m,
                                                 sup.max_message_age_s, sup.resync_messages)])
@@ -232,14 +240,7 @@ def test_every_message_delivered_in_a_tick_passes_the_guard_and_is_a_sample(
     scenario = load_scenario("constant-rate")
     ts = paper_model.sample_period_s
     sup, ratio, tool_start, handle_start = _starts(paper_config, paper_model, scenario)
-    slave_node = SlaveNode(paper_model, scenario, "linear", device="cpu")
-    guard_settings = InputGuardSettings.from_config(paper_config)
-    slave = SlaveTick(slave_node, slave_node.initial_state(1, tool_start),
-                      [SlaveSupervisor(ratio, sup.sync_tolerance_m, sup.work_area_m,
-                                       sup.max_message_age_s, sup.resync_messages)],
-                      [InputGuard(guard_settings, ts)])
-    slave.handle_position_m[...] = handle_start
-    slave.start(synced=True)
+    slave, guard_settings = _running_slave(paper_config, paper_model, scenario)
     x, y = (float(v) for v in handle_start[0])
     period_ns = int(ts * 1e9)
 

@@ -17,6 +17,7 @@ from haptic.master.hardware.interface import create_hardware, starts_cycles_earl
 from haptic.master.sim.model_rig import ModelRigHardware
 from haptic.master.sim.rig_emulator import EmulatedRigHardware
 from haptic.master.sim.sim_rig import SimulatedRigHardware
+from tests.common.test_runner import FakeClock
 
 PERIOD_NS = 540_000
 
@@ -101,22 +102,8 @@ def test_which_backends_start_their_cycles_early() -> None:
     assert not starts_cycles_early(ModelRigHardware.__new__(ModelRigHardware))
 
 
-class _Clock:
-    """1 us per clock read; a sleep moves the clock by what was asked."""
-
-    def __init__(self) -> None:
-        self.now = 1_000_000_000
-
-    def clock(self) -> int:
-        self.now += 1_000
-        return self.now
-
-    def sleep(self, seconds: float) -> None:
-        self.now += round(seconds * 1e9)
-
-
 def _run(lead_s: float, step_cost_ns: int = 0, steps: int = 50):
-    clock = _Clock()
+    clock = FakeClock()  # 1 us per read, a sleep moves it by what was asked
     log: list[tuple[str, int, int]] = []
 
     def step(tick: int, now_ns: int) -> None:
