@@ -58,7 +58,7 @@ def early_sync(hardware: HandleHardware, first_tick: int = 1) -> LeadFunction | 
     if not starts_cycles_early(hardware):
         return None
 
-    def lead(tick: int, _deadline_ns: int) -> None:
+    def lead(tick: int) -> None:
         if tick >= first_tick:
             hardware.sync()
 

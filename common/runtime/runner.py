@@ -70,10 +70,9 @@ StepFunction = Callable[[int, int], None]
 """``step(tick, now_ns)``: ``tick`` counts from 0; ``now_ns`` is the tick's start on the
 runner's clock (ns). It may call :meth:`RealTimeRunner.request_stop`."""
 
-LeadFunction = Callable[[int, int], None]
-"""``lead(tick, deadline_ns)``: called ``lead_s`` before tick ``tick``'s deadline
-(``deadline_ns``, on the runner's clock), while the loop waits for it (e.g. the CAN master's
-SYNC, so the drives sample and answer before the tick reads them)."""
+LeadFunction = Callable[[int], None]
+"""``lead(tick)``: called ``lead_s`` before tick ``tick``'s deadline, while the loop waits for
+it (e.g. the CAN master's SYNC, so the drives sample and answer before the tick reads them)."""
 
 
 @dataclass(frozen=True)
@@ -263,7 +262,7 @@ class RealTimeRunner:
             if self._lead is not None:
                 if remaining > self._lead_ns:
                     sleep((remaining - self._lead_ns) * 1e-9)
-                self._lead(tick, deadline)
+                self._lead(tick)
                 remaining = deadline - clock()
             if remaining > spin:
                 sleep((remaining - spin) * 1e-9)

@@ -662,20 +662,14 @@ class CanHandleDriver(HandleHardware):
         is not a late frame."""
         assert self._bus is not None
         while (message := self._bus.recv(timeout=0.0)) is not None:
-            self._late_frame(message, faults, drive_fault)
-
-    def _late_frame(self, message: can.Message, faults: list[str],
-                    drive_fault: list[bool]) -> None:
-        """One frame from an earlier SYNC: an EMCY or a heartbeat is acted on, our own frame
-        ignored, anything else counted in :attr:`late_frames`."""
-        if message.arbitration_id in (self._own_extended_ids if message.is_extended_id
-                                      else self._own_ids):
-            return  # our own frame, back from an interface that echoes
-        kind, axis = self._dispatch.get(message.arbitration_id, _OTHER)
-        if kind in (_EMCY, _HEARTBEAT):
-            self._supervision_frame(kind, axis, bytes(message.data), faults, drive_fault)
-            return
-        self.late_frames += 1
+            if message.arbitration_id in (self._own_extended_ids if message.is_extended_id
+                                          else self._own_ids):
+                continue  # our own frame, back from an interface that echoes
+            kind, axis = self._dispatch.get(message.arbitration_id, _OTHER)
+            if kind in (_EMCY, _HEARTBEAT):
+                self._supervision_frame(kind, axis, bytes(message.data), faults, drive_fault)
+                continue
+            self.late_frames += 1
 
     def _sensor_force(self, data: bytes, faults: list[str]) -> np.ndarray:
         try:

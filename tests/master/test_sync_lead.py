@@ -112,7 +112,7 @@ def _run(lead_s: float, step_cost_ns: int = 0, steps: int = 50):
 
     runner = RealTimeRunner(PERIOD_NS * 1e-9, step, max_steps=steps, clock_ns=clock.clock,
                             sleep=clock.sleep, handle_signals=False, show_status=False,
-                            lead=lambda tick, _deadline: log.append(("lead", tick, clock.now)),
+                            lead=lambda tick: log.append(("lead", tick, clock.now)),
                             lead_s=lead_s)
     stats = runner.run()
     return log, stats
