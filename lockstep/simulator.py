@@ -344,17 +344,8 @@ class LockstepSimulator:
         handle_message = np.ones((lanes, handle_columns))
 
         window = max(1, int(round(window_s / ts)))
-        n_windows = -(-steps // window)
-        shape = (n_windows, lanes, 2)
-        stats = WindowStats(window, np.full(shape, -np.inf), np.full(shape, np.inf),
-                            np.zeros(shape), np.zeros(shape), np.zeros(shape),
-                            np.full(shape, -np.inf), np.full(shape, np.inf), np.zeros(shape),
-                            np.zeros(shape))
-        peak_fh = np.zeros((lanes, 2))
-        peak_ft = np.zeros((lanes, 2))
-        error_sumsq = np.zeros((lanes, 2))
-        force_error_sumsq = np.zeros((lanes, 2))
         force_ratio = np.array([a.force_ratio_ah2 for a in self.model.axes])
+        tally = _WindowTally(steps, window, lanes, force_ratio)
         recorded = np.asarray([] if record_lanes is None else record_lanes, int)
         traces = {name: np.empty((steps, recorded.size, 2)) for name in TRACE_NAMES} \
             if recorded.size else {}
@@ -400,7 +391,8 @@ class LockstepSimulator:
                 handle_line.send(k, handle_message)
                 # slave: poll -> supervise -> node -> send
                 received = handle_line.receive(k)
-                yt = slave_state.tool[:, [0, 2]]
+                yt = slave_state.tool[:, 0::2]  # t_k: read into the tally before the step
+                tally.add_tool_position(k, yt)
                 if every_lane_supervised:
                     slave_tick.supervise(now_s, handle_arrivals.handle_states(k, received),
                                          silence_s=handle_arrivals.silence_s.tolist())
@@ -420,22 +412,7 @@ class LockstepSimulator:
                     tool_message.append(slave_tick.state.passivity.sent_J[:, None])
                 tool_line.send(k, np.column_stack(tool_message))
 
-                w = k // window
-                np.maximum(stats.handle_force_max_N[w], fh, out=stats.handle_force_max_N[w])
-                np.minimum(stats.handle_force_min_N[w], fh, out=stats.handle_force_min_N[w])
-                stats.handle_force_sum_N[w] += fh
-                stats.handle_force_sumsq_N2[w] += fh * fh
-                stats.handle_force_moment_N[w] += (k - w * window) * fh
-                np.maximum(stats.tool_force_max_N[w], ft, out=stats.tool_force_max_N[w])
-                np.minimum(stats.tool_force_min_N[w], ft, out=stats.tool_force_min_N[w])
-                stats.tool_force_sum_N[w] += ft
-                stats.tool_force_sumsq_N2[w] += ft * ft
-                np.maximum(peak_fh, np.abs(fh), out=peak_fh)
-                np.maximum(peak_ft, np.abs(ft), out=peak_ft)
-                error = yh - yt
-                error_sumsq += error * error
-                force_error = fh - ft / force_ratio
-                force_error_sumsq += force_error * force_error
+                tally.add(k, fh, ft, yh)
                 if recorded.size:
                     values = (fh, yh, ft, out.tool_position_m, out.tool_velocity_m_s, ft_recv,
                               command, sample.operator_intent_force_N)
@@ -445,21 +422,96 @@ class LockstepSimulator:
         slave_tick.sync_supervisors()
         master_state = master_tick.state
         self.final_states = (master_state, slave_tick.state)
+        stats = tally.stats
         finite = np.isfinite(stats.handle_force_sumsq_N2).all(axis=(0, 2)) & np.isfinite(
             stats.tool_force_sumsq_N2).all(axis=(0, 2))
         return LockstepResult(
             sample_period_s=ts, steps=steps, gains_k=self.gains_k.copy(),
             round_trip_delay_samples=np.array(delays), stats=stats,
-            peak_handle_force_N=peak_fh, peak_tool_force_N=peak_ft,
-            position_error_rms_m=np.sqrt(error_sumsq / max(steps, 1)),
+            peak_handle_force_N=tally.peak_handle_force_N,
+            peak_tool_force_N=tally.peak_tool_force_N,
+            position_error_rms_m=np.sqrt(tally.position_error_sumsq_m2 / max(steps, 1)),
             diverged=~finite | master_state.faulted, recorded_lanes=recorded, traces=traces,
             safety_events=len(master_tick.take_node_events()), governed=governed,
-            force_error_rms_N=np.sqrt(force_error_sumsq / max(steps, 1)),
+            force_error_rms_N=np.sqrt(tally.force_error_sumsq_N2 / max(steps, 1)),
             final_position_gap_m=(slave_tick.state.tool[:, [0, 2]] - ratio * yh) if steps else
             np.zeros((lanes, 2)),
         )
 
 
+class _WindowTally:
+    """The run's statistics (:class:`WindowStats`, the peaks and the sums of squared errors)
+    from the ticks' forces and positions: each tick's values are copied into a buffer of one
+    window, which is reduced when the window is full (a few whole-window numpy calls instead
+    of some twenty per tick). Axis-0 reductions add the rows in tick order, so the sums are
+    bit for bit those of a running sum per tick.
+
+    ``force_ratio`` (2,): the model's Ah2 per axis (the force error is fh - ft / Ah2)."""
+
+    def __init__(self, steps: int, window: int, lanes: int, force_ratio: np.ndarray) -> None:
+        self.steps = steps
+        self.window = window
+        self.force_ratio = force_ratio
+        n_windows = -(-steps // window)
+        shape = (n_windows, lanes, 2)
+        self.stats = WindowStats(window, np.full(shape, -np.inf), np.full(shape, np.inf),
+                                 np.zeros(shape), np.zeros(shape), np.zeros(shape),
+                                 np.full(shape, -np.inf), np.full(shape, np.inf),
+                                 np.zeros(shape), np.zeros(shape))
+        self.peak_handle_force_N = np.zeros((lanes, 2))
+        self.peak_tool_force_N = np.zeros((lanes, 2))
+        self.position_error_sumsq_m2 = np.zeros((lanes, 2))
+        self.force_error_sumsq_N2 = np.zeros((lanes, 2))
+        buffer = (window, lanes, 2)
+        self._handle_force_N = np.empty(buffer)
+        self._tool_force_N = np.empty(buffer)
+        self._handle_position_m = np.empty(buffer)
+        self._tool_position_m = np.empty(buffer)
+        # row 0: the running sum, rows 1..: the window's terms (one reduction in tick order)
+        self._terms = np.empty((window + 1, lanes, 2))
+        self._sample_index = np.arange(window, dtype=float)[:, None, None]
+
+    def add_tool_position(self, tick: int, tool_position_m: np.ndarray) -> None:
+        """The tool's position at t_k (lanes, 2), m (before the slave's step)."""
+        self._tool_position_m[tick % self.window] = tool_position_m
+
+    def add(self, tick: int, handle_force_N: np.ndarray, tool_force_N: np.ndarray,
+            handle_position_m: np.ndarray) -> None:
+        """The tick's handle force and position (N, m) and the tool force it sent (N), each
+        (lanes, 2); reduces the window after its last tick (or the run's)."""
+        row = tick % self.window
+        self._handle_force_N[row] = handle_force_N
+        self._tool_force_N[row] = tool_force_N
+        self._handle_position_m[row] = handle_position_m
+        if row == self.window - 1 or tick == self.steps - 1:
+            self._reduce(tick // self.window, row + 1)
+
+    def _running_sum(self, total: np.ndarray, terms: np.ndarray) -> None:
+        """``total`` += every row of ``terms``, in order, in place."""
+        rows = terms.shape[0]
+        self._terms[0] = total
+        self._terms[1:rows + 1] = terms
+        np.add.reduce(self._terms[:rows + 1], axis=0, out=total)
+
+    def _reduce(self, w: int, rows: int) -> None:
+        stats = self.stats
+        fh, ft = self._handle_force_N[:rows], self._tool_force_N[:rows]
+        for force, high, low, total, squares, peak in (
+                (fh, stats.handle_force_max_N, stats.handle_force_min_N,
+                 stats.handle_force_sum_N, stats.handle_force_sumsq_N2,
+                 self.peak_handle_force_N),
+                (ft, stats.tool_force_max_N, stats.tool_force_min_N, stats.tool_force_sum_N,
+                 stats.tool_force_sumsq_N2, self.peak_tool_force_N)):
+            np.maximum.reduce(force, axis=0, out=high[w])
+            np.minimum.reduce(force, axis=0, out=low[w])
+            np.add.reduce(force, axis=0, out=total[w])
+            np.add.reduce(force * force, axis=0, out=squares[w])
+            np.maximum(peak, np.maximum.reduce(np.abs(force), axis=0), out=peak)
+        np.add.reduce(self._sample_index[:rows] * fh, axis=0, out=stats.handle_force_moment_N[w])
+        error = self._handle_position_m[:rows] - self._tool_position_m[:rows]
+        self._running_sum(self.position_error_sumsq_m2, error * error)
+        force_error = fh - ft / self.force_ratio
+        self._running_sum(self.force_error_sumsq_N2, force_error * force_error)
 
 
 class _Arrivals:
