@@ -22,23 +22,27 @@ from __future__ import annotations
 import json
 import math
 import os
+import struct
+import tempfile
 import threading
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 from mcap.data_stream import RecordBuilder
-from mcap.records import DataEnd, Footer
+from mcap.records import ChunkIndex, DataEnd, Footer
 from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 
 #: Default queue capacity, messages (about 35 s of one 1850 Hz channel).
 DEFAULT_QUEUE_SIZE = 65536
 #: Default chunk size, bytes (a chunk about every 0.3 s at the loops' rates: what a SIGKILL
-#: may lose; larger than 64 kB because the MCAP writer keeps one chunk index per chunk in
-#: memory until the file closes, about 140 B each: 256 kB makes that ~0.5 kB/s, 2 MB/h).
+#: may lose).
 DEFAULT_CHUNK_SIZE = 256 * 1024
+#: Where mcap's ``Writer`` keeps its chunk indexes (a list it appends one ``ChunkIndex`` to
+#: per chunk and writes into the summary at ``finish``).
+_WRITER_CHUNK_INDEXES = "_Writer__chunk_indices"
 
 
 def _provisional_trailer() -> bytes:
@@ -51,6 +55,51 @@ def _provisional_trailer() -> bytes:
     DataEnd(data_section_crc=0).write(builder)
     Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
     return builder.end() + MCAP0_MAGIC
+
+
+class _RawRecord:
+    """One record already serialised (opcode, length, body), written as it is."""
+
+    __slots__ = ("data",)
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+
+    def write(self, builder: RecordBuilder) -> None:
+        builder.write(self.data)
+
+
+class SpilledChunkIndexes:
+    """The MCAP writer's chunk indexes on disk, not in memory: the writer appends one
+    ``ChunkIndex`` per chunk and keeps them all until it writes the summary, which made a
+    recording's memory grow with its length (about 1 kB/s, 3.5 MB/h, at the loops' rates).
+    Here each index is serialised (about 70 B) into an unnamed temporary file in the
+    recording's directory; :meth:`__iter__` reads them back, in order, for the summary."""
+
+    def __init__(self, directory: Path) -> None:
+        self._file = tempfile.TemporaryFile(dir=directory, prefix=".chunk-index-")
+        self._count = 0
+
+    def append(self, index: ChunkIndex) -> None:
+        builder = RecordBuilder()
+        index.write(builder)
+        self._file.write(builder.end())
+        self._count += 1
+
+    def __len__(self) -> int:
+        return self._count
+
+    def __iter__(self) -> Iterator[_RawRecord]:
+        self._file.flush()
+        self._file.seek(0)
+        for _ in range(self._count):
+            header = self._file.read(9)
+            _opcode, length = struct.unpack("<BQ", header)
+            yield _RawRecord(header + self._file.read(length))
+        self._file.seek(0, os.SEEK_END)
+
+    def close(self) -> None:
+        self._file.close()
 
 
 class _UnbufferedFile:
@@ -160,6 +209,9 @@ class McapRecorder:
         self._thread: threading.Thread | None = None
         self._file: Any = None
         self._writer: Writer | None = None
+        #: the writer's chunk indexes, on disk (None where this mcap version keeps them
+        #: elsewhere: then in its memory, as before)
+        self._chunk_indexes: SpilledChunkIndexes | None = None
         self.max_queue_depth = 0
 
     # -- lifecycle -------------------------------------------------------------------------
@@ -169,6 +221,9 @@ class McapRecorder:
         self._file = _UnbufferedFile(self.path)
         self._writer = Writer(self._file, chunk_size=self._chunk_size,
                               compression=_compression())
+        if isinstance(getattr(self._writer, _WRITER_CHUNK_INDEXES, None), list):
+            self._chunk_indexes = SpilledChunkIndexes(self.path.parent)
+            setattr(self._writer, _WRITER_CHUNK_INDEXES, self._chunk_indexes)
         self._writer.start(profile="", library="haptic-teleop")
         self._thread = threading.Thread(target=self._drain, name=f"mcap-{self.side}",
                                          daemon=True)
@@ -198,6 +253,8 @@ class McapRecorder:
         self._file.final()
         writer.finish()
         self._file.close()
+        if self._chunk_indexes is not None:
+            self._chunk_indexes.close()
 
     # -- loop side -------------------------------------------------------------------------
     def add_channel(self, topic: str, fields: Sequence[str] | None = None) -> None:

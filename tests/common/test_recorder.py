@@ -46,6 +46,37 @@ def test_round_trip_every_channel_and_count(tmp_path: Path) -> None:
     assert topics.count("/slave/state") == 500
 
 
+def test_chunk_indexes_live_on_disk_and_index_every_chunk(tmp_path: Path) -> None:
+    """The writer keeps no chunk index in memory (a long recording's memory stays flat), yet
+    the summary lists one per chunk, in order, and an indexed reader finds every message
+    through them, time-ordered and from a time window."""
+    path = tmp_path / "long.mcap"
+    recorder = McapRecorder(path, "master", chunk_size=1024).open()
+    recorder.add_channel("/master/state", ("time_s", "handle_force_x_N"))
+    for i in range(3000):
+        recorder.record("/master/state", 1_000_000_000 + i * 540_000, (i * 0.00054, 0.1 * i))
+    spilled = recorder._chunk_indexes
+    assert spilled is not None
+    assert getattr(recorder._writer, "_Writer__chunk_indices") is spilled
+    recorder.close()
+    assert list(tmp_path.iterdir()) == [path]  # nothing left beside the recording
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        assert summary is not None
+        indexes = summary.chunk_indexes
+        assert len(indexes) == summary.statistics.chunk_count == len(spilled) > 50
+        starts = [index.chunk_start_offset for index in indexes]
+        assert starts == sorted(starts) and len(set(starts)) == len(starts)
+        assert all(index.message_index_offsets for index in indexes)
+        times = [message.log_time for _, _, message in reader.iter_messages()]
+        assert times == [1_000_000_000 + i * 540_000 for i in range(3000)]
+        window = list(reader.iter_messages(starting_at=1_000_000_000 + 1000 * 540_000,
+                                           ending_before=1_000_000_000 + 1010 * 540_000))
+        assert [json.loads(message.data)["handle_force_x_N"] for _, _, message in window] == [
+            0.1 * i for i in range(1000, 1010)]
+
+
 def test_full_queue_drops_and_counts(tmp_path: Path) -> None:
     recorder = McapRecorder(tmp_path / "drops.mcap", "master", queue_size=5)
     recorder.add_channel("/master/state", ("time_s",))
