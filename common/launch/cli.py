@@ -201,9 +201,12 @@ def _us(value: Any) -> str:
     return "n/a" if value is None or not math.isfinite(value) else f"{value * 1e6:.1f} us"
 
 
-def _trips(summary: dict[str, Any]) -> tuple[int, int]:
+def _trips(summary: dict[str, Any], peer: dict[str, Any] | None = None) -> tuple[int, int]:
     """(trips during the run, trips at its end): a last trip with no return of the peer
-    after it, in the last 1.5 s of this side's run, is the peer stopping first."""
+    after it is the peer stopping first when it came after the peer's loop ended (both
+    summaries' ``loop_start_time_s`` + ``duration_s``, one host's clock); without the peer's
+    times, when it came in the last 1.5 s of this side's run. (The session stops the slave
+    only after the master has exited, which may take longer than that on a slow machine.)"""
     end = summary.get("duration_s") or 0.0
     events = summary.get("events", [])
     trips = [i for i, e in enumerate(events) if e.get("kind") == "trip"]
@@ -211,7 +214,14 @@ def _trips(summary: dict[str, Any]) -> tuple[int, int]:
         return 0, 0
     last = trips[-1]
     returned = any(e.get("kind") == "peer_returned" for e in events[last:])
-    if not returned and events[last]["time_s"] >= end - 1.5:
+    trip_s = events[last]["time_s"]
+    origin_s, peer_origin_s = summary.get("loop_start_time_s"), (peer or {}).get(
+        "loop_start_time_s")
+    if origin_s is not None and peer_origin_s is not None and peer.get("duration_s"):
+        at_end = origin_s + trip_s >= peer_origin_s + peer["duration_s"]
+    else:
+        at_end = trip_s >= end - 1.5
+    if not returned and at_end:
         return len(trips) - 1, 1
     return len(trips), 0
 
@@ -229,7 +239,7 @@ REAL_TIME_TARGETS = ("rate >= 99.6 % of 1/Ts, overruns <= 0.1 %, period error p9
 def real_time_misses(master: dict[str, Any], slave: dict[str, Any]) -> list[str]:
     """The loop targets each side missed, one short text each (empty: real time)."""
     misses = []
-    for name, s in (("master", master), ("slave", slave)):
+    for name, s, peer in (("master", master, slave), ("slave", slave, master)):
         target_hz = 1.0 / s["period_s"] if s.get("period_s") else math.nan
         if not s["rate_hz"] >= MIN_RATE_RATIO * target_hz:
             misses.append(f"{name} rate {s['rate_hz']:.1f} Hz < {MIN_RATE_RATIO * target_hz:.1f}")
@@ -240,7 +250,7 @@ def real_time_misses(master: dict[str, Any], slave: dict[str, Any]) -> list[str]
         if error is None or not error <= MAX_PERIOD_ERROR_P99_S:
             misses.append(f"{name} period error p99 {_us(error)} > "
                           f"{MAX_PERIOD_ERROR_P99_S * 1e6:g} us")
-        during, _ = _trips(s)
+        during, _ = _trips(s, peer)
         if during:
             misses.append(f"{name} watchdog tripped {during}x during the run")
     return misses
@@ -308,8 +318,8 @@ def combined_summary(master: dict[str, Any], slave: dict[str, Any]) -> str:
                      f"y {abs(gap[1]) * 1e3:.2f} mm (target <= {GAP_TARGET_M * 1e3:g} mm)")
     if master.get("work_area"):
         lines.append(f"  work area: {master['work_area']}")
-    m_during, m_end = _trips(master)
-    s_during, s_end = _trips(slave)
+    m_during, m_end = _trips(master, slave)
+    s_during, s_end = _trips(slave, master)
     lines.append(
         f"  watchdog trips during the run: master {m_during}, slave {s_during} "
         f"(at the end, a side seeing its peer stop first: master {m_end}, slave {s_end})"

@@ -74,3 +74,24 @@ def test_real_time_verdict_names_each_missed_target() -> None:
     # the peer stopping first at the end of the run is not a miss
     end_trip = _loop_summary(events=[{"kind": "trip", "time_s": 3.9}])
     assert real_time_misses(_loop_summary(), end_trip) == []
+
+
+
+def test_a_trip_after_the_peer_ended_is_at_the_end_however_long_this_side_ran_on() -> None:
+    """With both loops' start times (one host's clock), a trip is the peer stopping first
+    when it came after the peer's loop ended, even where the session stopped this side much
+    later (a slow machine: the master took 1.6 s to exit); one before it is a miss."""
+    from haptic.common.launch.cli import _trips, real_time_misses
+
+    master = _loop_summary(loop_start_time_s=1000.0, duration_s=4.36)
+    slave = _loop_summary(loop_start_time_s=999.99, duration_s=6.0,
+                          events=[{"kind": "trip", "time_s": 4.376}])  # 1000.366: after
+    assert _trips(slave, master) == (0, 1)
+    assert real_time_misses(master, slave) == []
+    early = _loop_summary(loop_start_time_s=999.99, duration_s=6.0,
+                          events=[{"kind": "trip", "time_s": 4.0}])  # 1003.99: the master ran
+    assert _trips(early, master) == (1, 0)
+    assert real_time_misses(master, early) == ["slave watchdog tripped 1x during the run"]
+    # without the times, the last 1.5 s of this side's own run (the older rule)
+    assert _trips(_loop_summary(duration_s=6.0, events=[{"kind": "trip", "time_s": 4.376}])
+                  ) == (1, 0)
