@@ -13,10 +13,16 @@ Warp clay stepped alone grow 0 kB over 250k steps; two Links exchanging at 1850 
 +12 kB of Python objects. The RSS that grows lives in glibc's per-thread arenas of Zenoh's
 threads (``/proc/PID/smaps``), is not given back by ``malloc_trim`` and slows down: over 10
 minutes the slave's slope in the second half was 0.95 kB/s recorded and 2.7 kB/s not (the
-master's 2.4 and 0.06). What recording itself keeps is the MCAP writer's chunk index (one
-``ChunkIndex`` of about 370 B per chunk, written into the summary at the end): about 1 kB/s at
-the slave's 1850 Hz state channel, 3.5 MB/h. One 10-minute run without recording, on a machine
-then at load 10, grew 25 MB in both programs in its second half: rerun before trusting one run.
+master's 2.4 and 0.06). What recording itself kept was the MCAP writer's chunk index (one
+``ChunkIndex`` of about 370 B per chunk, written into the summary at the end): the recorder
+now spills them to an unnamed file beside the recording (common/records/recorder.py). Two
+10-minute recorded runs after that (``--env MALLOC_ARENA_MAX=2``, 2-core AMD EPYC, nothing
+else running): the slave flat (0.0 and 0.05 kB/s, +0 and +28 kB over the last 5 minutes;
+before: 0.59 kB/s, 1.7 in the second half); the master 1.3 and 1.6 kB/s (+252 and +668 kB
+over the last 5 minutes; before: 3.0 kB/s), its growth in glibc's main heap and the arena its
+threads share (``/proc/PID/smaps``), not found in our objects. One 10-minute run without
+recording, on a machine then at load 10, grew 25 MB in both programs in its second half:
+rerun before trusting one run.
 
 ``--no-record`` runs the same without recording (the reference: what the recording adds).
 
