@@ -13,7 +13,7 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
-from haptic.common.records.recorder import McapRecorder
+from haptic.common.records.recorder import _WRITER_CHUNK_INDEXES, McapRecorder
 from haptic.common.records.recording import read_recording
 
 
@@ -57,7 +57,7 @@ def test_chunk_indexes_live_on_disk_and_index_every_chunk(tmp_path: Path) -> Non
         recorder.record("/master/state", 1_000_000_000 + i * 540_000, (i * 0.00054, 0.1 * i))
     spilled = recorder._chunk_indexes
     assert spilled is not None
-    assert getattr(recorder._writer, "_Writer__chunk_indices") is spilled
+    assert getattr(recorder._writer, _WRITER_CHUNK_INDEXES) is spilled
     recorder.close()
     assert list(tmp_path.iterdir()) == [path]  # nothing left beside the recording
     with open(path, "rb") as stream:
@@ -92,7 +92,7 @@ def test_full_queue_drops_and_counts(tmp_path: Path) -> None:
 
 WRITER = textwrap.dedent("""
     import sys, time
-    from haptic.common.records.recorder import McapRecorder
+    from haptic.common.records.recorder import _WRITER_CHUNK_INDEXES, McapRecorder
     recorder = McapRecorder(sys.argv[1], "slave", chunk_size=4096).open()
     recorder.add_channel("/slave/state", ("time_s", "tool_force_x_N"))
     i = 0
