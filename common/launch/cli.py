@@ -215,8 +215,8 @@ def _trips(summary: dict[str, Any], peer: dict[str, Any] | None = None) -> tuple
     last = trips[-1]
     returned = any(e.get("kind") == "peer_returned" for e in events[last:])
     trip_s = events[last]["time_s"]
-    origin_s, peer_origin_s = summary.get("loop_start_time_s"), (peer or {}).get(
-        "loop_start_time_s")
+    peer = peer or {}
+    origin_s, peer_origin_s = summary.get("loop_start_time_s"), peer.get("loop_start_time_s")
     if origin_s is not None and peer_origin_s is not None and peer.get("duration_s"):
         at_end = origin_s + trip_s >= peer_origin_s + peer["duration_s"]
     else:
