@@ -60,12 +60,14 @@ SLAVE_SCHEMA: Schema = {
             "false: one node step per tick.",
         ),
         "max_steps_per_tick": Field(
-            "int", "The most node steps one tick takes to catch up with the master's samples.",
+            "int", "The node steps one tick takes to catch up with the master's samples while "
+            "the backlog is within max_backlog_samples.",
             minimum=1, maximum=16,
         ),
         "max_backlog_samples": Field(
             "int", "The most master samples owed to later ticks when one tick cannot take them "
-            "all (each delays the tool by Ts); beyond, they are given up and counted.",
+            "all (each delays the tool by Ts); beyond, the tick takes them at once (a longer "
+            "tick, counted), never giving them up.",
             minimum=0, maximum=1024,
         ),
     },

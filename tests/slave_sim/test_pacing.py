@@ -146,14 +146,41 @@ def test_a_lost_sample_is_stepped_with_the_force_between_its_neighbours() -> Non
     assert pacing.caught_up_steps == 3
 
 
-def test_the_backlog_keeps_each_samples_force_in_order_and_gives_up_the_oldest() -> None:
+def test_a_full_backlog_is_taken_at_once_in_order_and_nothing_is_given_up() -> None:
     pacing = MasterSamplePacing(PacingSettings(True, 2, max_backlog_samples=2))
     pacing.plan(True, [_sample(1, 0, 0.0)])
     plan = pacing.plan(True, [_sample(1, seq, float(seq)) for seq in range(1, 8)])
-    # 7 samples: 3 given up (the oldest), 2 stepped, 2 owed
-    assert [step[0] for step in plan] == [4.0, 5.0]
-    assert pacing.dropped_samples == 3 and pacing.backlog == 2
+    # 7 samples delivered: 2 steps as usual, 3 more at once (the backlog holds 2), 2 owed
+    assert [step[0] for step in plan] == [1.0, 2.0, 3.0, 4.0, 5.0]
+    assert pacing.dropped_samples == 0 and pacing.backlog == 2
+    assert pacing.burst_steps == 3 and pacing.max_tick_steps == 5
     assert [step[0] for step in pacing.plan(True, [])] == [6.0, 7.0]
+    assert pacing.summary()["pacing_burst_steps"] == 3
+
+
+def test_a_slave_that_stalls_steps_every_master_sample_exactly_once() -> None:
+    """The master's samples arrive one per master tick; the slave's ticks stall in bursts
+    (a loaded host): every sample is still stepped exactly once, in order, and the backlog
+    never exceeds its bound. Giving samples up would leave the tool behind for good."""
+    settings = PacingSettings(True, 4, max_backlog_samples=8)
+    pacing = MasterSamplePacing(settings)
+    stepped: list[float] = []
+    pending: list[Sample] = []
+    seq = 0
+    for tick in range(600):
+        pending.append(_sample(1, seq, float(seq)))
+        seq += 1
+        stalled = (tick // 50) % 3 == 2 and tick % 50 < 30  # 30 master ticks without a slave tick
+        if stalled:
+            continue
+        stepped += [step[0] for step in pacing.plan(True, pending)]
+        pending = []
+        assert pacing.backlog <= settings.max_backlog_samples
+    stepped += [step[0] for step in pacing.plan(True, pending)]
+    while pacing.backlog:
+        stepped += [step[0] for step in pacing.plan(True, [])]
+    assert stepped == [float(n) for n in range(seq)]
+    assert pacing.dropped_samples == 0 and pacing.burst_steps > 0
 
 
 def test_a_stale_sample_among_new_ones_is_skipped() -> None:
