@@ -17,6 +17,8 @@ from pathlib import Path
 import pytest
 
 WAIT_S = 60.0
+#: When the tool's delay steps from 2 to 40 ms one way, s (CONFIG's delay_profile).
+STEP_AT_S = 1.5
 
 
 def _free_port() -> int:
@@ -27,7 +29,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-CONFIG = """
+CONFIG = f"""
 [slave]
 scenario = "constant-rate"
 environment = "linear"
@@ -38,7 +40,7 @@ device = "cpu"
 max_message_age_s = 0.3     # the step leaves a 38 ms silence; the watchdog is not the test
 
 [link.master.injection]
-delay_profile = "step 0:0.002 1.5:0.040"
+delay_profile = "step 0:0.002 {STEP_AT_S}:0.040"
 
 [link.slave.injection]
 delay_s = 0.002
@@ -139,20 +141,21 @@ def test_a_delay_step_switches_the_passivity_layer_on_at_both_sides(tmp_path: Pa
     assert summary["tdpa_input_energy_J"] > 0.0
     assert slave_summary["tdpa_received_J"] <= summary["tdpa_sent_J"]
     assert summary["tdpa_received_J"] <= slave_summary["tdpa_sent_J"]
-    # Aligned within what the layer allows. The paper scheme's approach ends about 1.2 mm
-    # apart (this machine, quiet) and the switch at rest keeps that. But under a sustained push
-    # at three times the delay margin the layer trades alignment for passivity: every timing
-    # disturbance its controllers dissipate yields the handle along the push, and its drift
-    # corrections, paid from an account the push keeps empty, cannot take that back. So the
-    # end gap grows with the timing variation of a loaded machine and with how much of the
-    # motion the layer ran through (an early echo switches it on during the approach): the
-    # lockstep, deterministic, gives 5.5 mm when the layer is on in motion at the step
-    # (docs/control.md section 2); beside two CPU hogs these runs ended 0.7-3.9 mm apart.
+    # Aligned at the end where the layer went on at the step, at rest, and the loops kept
+    # pace: the paper scheme's offset of the approach, which the switch keeps (about 1.2 mm
+    # quiet, 1.6-1.8 mm beside two niced CPU hogs). Where a loaded machine's echo switched
+    # the layer on earlier, it ran through the approach and the step: beyond the margin under a
+    # sustained push it trades alignment for passivity, more so the more the timing varies
+    # (the lockstep, deterministic: 4.7-5.6 mm; beside two CPU hogs -16 to +3 mm), and where the
+    # slave stalled for tens of ms more again. That is reported, not asserted
+    # (docs/control.md section 2, "The offset under timing variation").
     switched = next(e for e in slave_summary["events"] if e["kind"] == "tdpa_on")
     assert switched["stored_energy_J"] >= 0.0 and len(switched["position_gap_m"]) == 2
     gap_m = max(abs(v) for v in slave_summary["final_position_gap_m"])
-    if slave_summary["pacing_burst_steps"] == 0:
-        assert gap_m < 6e-3
-    else:  # stalls of tens of ms, beyond any real-time claim: reported, not asserted
-        warnings.warn(f"loaded run ({slave_summary['pacing_burst_steps']} burst steps on the "
-                      f"slave): final gap {gap_m * 1e3:.2f} mm", stacklevel=1)
+    at_the_step = request["time_s"] >= STEP_AT_S
+    if at_the_step and slave_summary["pacing_burst_steps"] == 0:
+        assert gap_m < 3e-3
+    else:
+        warnings.warn(f"loaded run (layer on at {request['time_s']:.3f} s, "
+                      f"{slave_summary['pacing_burst_steps']} burst steps on the slave): "
+                      f"final gap {gap_m * 1e3:.2f} mm, not held to 3 mm", stacklevel=1)
