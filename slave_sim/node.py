@@ -364,13 +364,3 @@ class SlaveNode:
     def tracking_error_m(self, state: SlaveState, handle_position_m: np.ndarray) -> np.ndarray:
         """yt - Ah1 yh for every lane (lanes, 2), m."""
         return state.tool_position_m() - self._position_ratio * np.asarray(handle_position_m)
-
-    def stored_energy_J(self, state: SlaveState) -> np.ndarray:
-        """The energy stored in every lane's virtual tool (lanes,), J: its kinetic energy
-        ``Mt |v|^2 / 2`` plus its own spring's ``Kt |y|^2 / 2`` (the tool plant's storage;
-        the environment, outside the network, is not counted). The passivity layer credits
-        it when it is switched on (common/model/passivity.py ``PassivityPort.switch``)."""
-        mass = 1.0 / self._inv_mass
-        velocity, position = state.tool_velocity_m_s(), state.tool_position_m()
-        return 0.5 * (np.einsum("ij,j->i", velocity * velocity, mass)
-                      + np.einsum("ij,j->i", position * position, self._stiffness))

@@ -388,23 +388,14 @@ class SlaveTick:
                 self._switch(now_s, lane, on)
 
     def _switch(self, now_s: float, lane: int, on: bool) -> None:
-        """Switch ``lane``'s standby passivity layer on or off, with its event (which says
-        how far apart the sides were, ``position_gap_m`` = yt - Ah1 yh, m, and the energy
-        stored in the virtual tool, J); on, its account starts with that energy."""
+        """Switch ``lane``'s standby passivity layer on or off, with its event."""
         mask = np.zeros(self.lanes, bool)
         mask[lane] = True
-        state = self.state
-        stored_J = self.node.stored_energy_J(state)
-        gap_m = self.node.tracking_error_m(state, state.handle_position_m)[lane]
-        state.passivity.switch(mask, on, stored_J)
+        self.state.passivity.switch(mask, on)
         self.supervisors[lane].events.append({
             "time_s": now_s, "kind": "tdpa_on" if on else "tdpa_off",
             "reason": "the master's governor switched the passivity layer "
-            + ("on" if on else "off")
-            + f" (sides {float(np.hypot(*gap_m)) * 1e3:.2f} mm apart, tool storing "
-              f"{float(stored_J[lane]) * 1e3:.3f} mJ)",
-            "position_gap_m": [float(gap_m[0]), float(gap_m[1])],
-            "stored_energy_J": float(stored_J[lane])})
+            + ("on" if on else "off")})
 
     def control_samples(self, plan: Sequence[Step]) -> SlaveTickOutput:
         """The node stage once per entry of ``plan`` (slave_sim/pacing.py; lane 0: the

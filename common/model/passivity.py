@@ -140,26 +140,17 @@ class PassivityPort:
         port.active[...] = active
         return port
 
-    def switch(self, lanes: np.ndarray, on: bool, stored_J: np.ndarray | None = None
-               ) -> np.ndarray:
+    def switch(self, lanes: np.ndarray, on: bool) -> np.ndarray:
         """Switch the layer on (``on``) or off in ``lanes`` ((lanes,) bool mask); returns the
-        lanes whose state changed. Switching on starts their account with ``stored_J``
-        ((lanes,), J; None: nothing), the energy stored inside the network at this port at
-        the switch (the slave: its virtual tool's, slave_sim/node.py ``stored_energy_J``),
-        which the network may give out without having taken it in since: passivity from the
-        switch on, with the storage it had then. It is bounded (non-finite or negative counts
-        as nothing, and the credit cap applies). No correction or damper force is under way;
-        the monotone counters (``sent_J``, ``peer_sent_J``) carry on."""
+        lanes whose state changed. Switching on starts their account empty (safe: nothing may
+        be given out that was not taken in since) with no correction or damper force under
+        way; the monotone counters (``sent_J``, ``peer_sent_J``) carry on."""
         mask = np.asarray(lanes, bool)
         changed = mask & (self.active != on)
         if on:
-            stored = (np.zeros(changed.shape) if stored_J is None
-                      else np.broadcast_to(np.asarray(stored_J, float), changed.shape))
-            stored = np.where(np.isfinite(stored), np.maximum(stored, 0.0), 0.0)
-            self.tank_J[changed] = stored[changed]
+            self.tank_J[changed] = 0.0
             self.correction_m[changed] = 0.0
             self.damper_force_N[changed] = 0.0
-            self._cap_credit()
         self.active[changed] = on
         return changed
 

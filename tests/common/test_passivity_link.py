@@ -42,23 +42,3 @@ def test_a_peer_configured_in_the_other_mode_is_refused_a_switched_one_is_not() 
     with pytest.raises(LinkOpenError, match='mode = "tdpa"'):
         PassivityLink(False).check(_message(0.0))
     PassivityLink(False).check(_message(0.0, flags=Flags.TDPA_SWITCHED | Flags.FORCES_ENABLED))
-
-
-def test_switching_on_credits_the_energy_stored_in_the_network_bounded() -> None:
-    """The account starts with the storage it is given at the switch (the slave's virtual
-    tool): finite and non-negative only, within the credit cap; lanes not switched keep
-    theirs, and switching off and on again starts from the new storage, not the old account."""
-    settings = PassivitySettings()
-    port = PassivityPort.create(settings, 0.00054, 4, active=False)
-    port.tank_J[...] = 0.0
-    stored = np.array([0.003, float("nan"), -0.002, 2.0 * settings.credit_max_J])
-    changed = port.switch(np.array([True, True, True, True]), True, stored)
-    assert changed.tolist() == [True] * 4
-    assert port.tank_J.tolist() == pytest.approx([0.003, 0.0, 0.0, settings.credit_max_J])
-    assert port.forgotten_energy_J[3] == pytest.approx(settings.credit_max_J)
-    # already on: nothing changes, whatever storage is offered
-    port.switch(np.ones(4, bool), True, np.full(4, 0.1))
-    assert port.tank_J[0] == pytest.approx(0.003)
-    port.switch(np.array([True, False, False, False]), False)
-    port.switch(np.array([True, False, False, False]), True, np.full(4, 0.001))
-    assert port.tank_J.tolist() == pytest.approx([0.001, 0.0, 0.0, settings.credit_max_J])

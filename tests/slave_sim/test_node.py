@@ -286,25 +286,3 @@ def test_the_tdpa_tool_drifts_to_the_handle_and_its_speed_shows_it(model) -> Non
         assert state.passivity.tank_J[0] >= -1e-9  # nothing taken the port did not hold
         ends[environment] = np.abs(out.tracking_error_m).max()
     assert ends["clay"] <= 1e-6 and ends["linear"] > 1e-4, ends
-
-
-def test_the_stored_energy_is_the_tool_plants_and_a_switch_on_credits_it(model) -> None:
-    """``stored_energy_J`` is the virtual tool's ``Mt |v|^2 / 2 + Kt |y|^2 / 2`` per lane, and
-    the slave's standby layer, switched on by the master's flag, starts its account with it."""
-    from haptic.common.model.passivity import PassivitySettings
-    from haptic.slave_sim.tool import tool_constants
-
-    node = SlaveNode(model, load_scenario("constant-rate"), "linear",
-                     passivity=PassivitySettings(), passivity_standby=True)
-    state = node.initial_state(2)
-    assert node.stored_energy_J(state).tolist() == [0.0, 0.0]
-    for _ in range(400):  # push lane 0 along x, lane 1 along y
-        node.step(state, np.array([[-2.0, 0.0], [0.0, -1.0]]), state.handle_position_m.copy(),
-                  np.zeros(2))
-    mass, _, stiffness = tool_constants(model)
-    velocity, position = state.tool_velocity_m_s(), state.tool_position_m()
-    expected = 0.5 * ((velocity ** 2) @ mass + (position ** 2) @ stiffness)
-    assert np.all(expected > 1e-6)
-    assert node.stored_energy_J(state) == pytest.approx(expected, rel=1e-12)
-    state.passivity.switch(np.ones(2, bool), True, node.stored_energy_J(state))
-    assert state.passivity.tank_J == pytest.approx(np.minimum(expected, 0.5), rel=1e-12)
