@@ -388,14 +388,19 @@ class SlaveTick:
                 self._switch(now_s, lane, on)
 
     def _switch(self, now_s: float, lane: int, on: bool) -> None:
-        """Switch ``lane``'s standby passivity layer on or off, with its event."""
+        """Switch ``lane``'s standby passivity layer on or off, with its event, which says how
+        far apart the sides were (``position_gap_m`` = yt - Ah1 yh, m)."""
         mask = np.zeros(self.lanes, bool)
         mask[lane] = True
-        self.state.passivity.switch(mask, on)
+        state = self.state
+        gap_m = self.node.tracking_error_m(state, state.handle_position_m)[lane]
+        state.passivity.switch(mask, on)
         self.supervisors[lane].events.append({
             "time_s": now_s, "kind": "tdpa_on" if on else "tdpa_off",
             "reason": "the master's governor switched the passivity layer "
-            + ("on" if on else "off")})
+            + ("on" if on else "off")
+            + f" (the sides {float(np.hypot(*gap_m)) * 1e3:.2f} mm apart)",
+            "position_gap_m": [float(gap_m[0]), float(gap_m[1])]})
 
     def control_samples(self, plan: Sequence[Step]) -> SlaveTickOutput:
         """The node stage once per entry of ``plan`` (slave_sim/pacing.py; lane 0: the

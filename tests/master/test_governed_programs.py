@@ -146,11 +146,11 @@ def test_a_delay_step_switches_the_passivity_layer_on_at_both_sides(tmp_path: Pa
     # quiet, 1.6-1.8 mm beside two niced CPU hogs). Where a loaded machine's echo switched
     # the layer on earlier, it ran through the approach and the step: beyond the margin under a
     # sustained push it trades alignment for passivity, more so the more the timing varies
-    # (the lockstep, deterministic: 4.7-5.6 mm; beside two CPU hogs -16 to +3 mm), and where the
+    # (the lockstep, deterministic: 5.5-6.6 mm; beside two CPU hogs -16 to +3 mm), and where the
     # slave stalled for tens of ms more again. That is reported, not asserted
     # (docs/control.md section 2, "The offset under timing variation").
     switched = next(e for e in slave_summary["events"] if e["kind"] == "tdpa_on")
-    assert switched["stored_energy_J"] >= 0.0 and len(switched["position_gap_m"]) == 2
+    assert len(switched["position_gap_m"]) == 2 and "mm apart" in switched["reason"]
     gap_m = max(abs(v) for v in slave_summary["final_position_gap_m"])
     at_the_step = request["time_s"] >= STEP_AT_S
     if at_the_step and slave_summary["pacing_burst_steps"] == 0:
@@ -158,4 +158,5 @@ def test_a_delay_step_switches_the_passivity_layer_on_at_both_sides(tmp_path: Pa
     else:
         warnings.warn(f"loaded run (layer on at {request['time_s']:.3f} s, "
                       f"{slave_summary['pacing_burst_steps']} burst steps on the slave): "
-                      f"final gap {gap_m * 1e3:.2f} mm, not held to 3 mm", stacklevel=1)
+                      f"{switched['reason']}; final gap {gap_m * 1e3:.2f} mm, not held to "
+                      "3 mm", stacklevel=1)
