@@ -13,7 +13,9 @@ echo age (s), returns the gain k to use, and appends events.
   period (the loop's own sample), which errs on the safe side.
 - **tau*(k).** A table from the sampled-data analysis made at start
   (common/analysis/margin_table.py). A gain k is *usable* at round trip ``rtt`` while
-  ``rtt <= safety_factor * tau*(k)``.
+  ``rtt <= safety_factor * tau*(k)``. An unusable round trip is acted on at once above
+  ``urgent_factor * tau*(k)``, else once it has stayed unusable for ``confirm_s``: the band
+  between is inside the margin, and a scheduling blip is not the loop's delay.
 - **lower_k.** When the gain in use is not usable at the round trip now, the target becomes
   the largest table gain that is; k moves to it as a first-order lag (98 % in
   ``ramp_time_s``), so the compensators' inputs change smoothly. Both sides use the same k:
@@ -55,6 +57,8 @@ class GovernorSettings:
     enabled: bool = False
     action: str = "lower_k"
     safety_factor: float = 0.7
+    urgent_factor: float = 0.9
+    confirm_s: float = 0.02
     ramp_time_s: float = 0.1
     hold_s: float = 2.0
     recover_after_s: float = 5.0
@@ -66,6 +70,10 @@ class GovernorSettings:
             raise ValueError(f"action must be one of {', '.join(GOVERNOR_ACTIONS)}")
         if not 0.0 < self.safety_factor <= 1.0:
             raise ValueError("safety_factor must be in (0, 1]")
+        if not self.safety_factor <= self.urgent_factor <= 1.0:
+            raise ValueError("urgent_factor must be in [safety_factor, 1]")
+        if not 0.0 <= self.confirm_s <= 1.0:
+            raise ValueError("confirm_s must be in [0, 1] s")
         if not self.ramp_time_s > 0.0 or not self.hold_s > 0.0:
             raise ValueError("ramp_time_s and hold_s must be > 0")
 
@@ -125,6 +133,7 @@ class MarginGovernor:
         self.events: list[dict[str, Any]] = []
         self._peak = _Peak(settings.hold_s)
         self._recover_since: float | None = None
+        self._above_since: float | None = None
         self._last_time_s: float | None = None
         self._lowers_k = settings.action == "lower_k" or not tdpa_available
 
@@ -162,17 +171,25 @@ class MarginGovernor:
             self.max_rtt_s = rtt
         mode_request = None
         settings = self.settings
-        # 1. the gain in use (or the one being approached) must be usable at the round trip now
+        # 1. the gain in use (or the one being approached) must be usable at the round trip now:
+        # acted on at once above urgent_factor tau*, else once it has stayed unusable for
+        # confirm_s (a scheduling blip of a few ms is not the loop's delay)
         current = max(self.gain_k, self.target_k)
-        if not self.usable(current, rtt):
+        usable = self.usable(current, rtt)
+        if usable:
+            self._above_since = None
+        elif self._above_since is None:
+            self._above_since = time_s
+        if not usable and not self._confirmed(time_s, current, rtt):
+            self._recover_since = None
+        elif not usable:
             best = self.best_gain(rtt)
             if self._lowers_k:
                 target = best if best is not None else self.table.entries[-1].k
                 if target < self.target_k:
                     self._event(time_s, "governor_lower_k",
-                                f"round trip {rtt * 1e3:.1f} ms > {settings.safety_factor:g} x "
-                                f"tau*({current:.3g}) = {self.table.margin_s(current) * 1e3:.1f}"
-                                f" ms: k {self.target_k:.3g} -> {target:.3g}"
+                                f"{self._cause(time_s, current, rtt)}: k {self.target_k:.3g} -> "
+                                f"{target:.3g}"
                                 + ("" if settings.action == "lower_k" else
                                    " (tdpa requested, but this build has no tdpa mode)"))
                     self.target_k = target
@@ -180,8 +197,7 @@ class MarginGovernor:
                 self.tdpa_requested = True
                 mode_request = "tdpa"
                 self._event(time_s, "governor_tdpa_request",
-                            f"round trip {rtt * 1e3:.1f} ms > {settings.safety_factor:g} x "
-                            f"tau*({current:.3g}) = {self.table.margin_s(current) * 1e3:.1f} ms")
+                            self._cause(time_s, current, rtt))
             self._recover_since = None
         # 2. back up (one step, or out of tdpa) once the peak allowed it long enough
         elif settings.recover_after_s > 0.0:
@@ -219,6 +235,25 @@ class MarginGovernor:
                         f"({self.table.margin_s(self.table.entries[-1].k) * 1e3:.1f} ms)")
         self.beyond_margin = beyond
         return GovernorDecision(self._ramp(dt), mode_request, beyond)
+
+    def _confirmed(self, time_s: float, k: float, rtt_s: float) -> bool:
+        """Whether an unusable round trip for gain ``k`` is acted on now: above
+        ``urgent_factor`` tau*(k), or unusable for ``confirm_s`` since ``_above_since``."""
+        if rtt_s > self.settings.urgent_factor * self.table.margin_s(k):
+            return True
+        return time_s - self._above_since >= self.settings.confirm_s - 1e-12
+
+    def _cause(self, time_s: float, k: float, rtt_s: float) -> str:
+        """Why an event fired: the round trip against the factor of tau*(k) it passed (and
+        for how long, below ``urgent_factor``)."""
+        settings, margin = self.settings, self.table.margin_s(k)
+        if rtt_s > settings.urgent_factor * margin:
+            factor, held = settings.urgent_factor, ""
+        else:
+            factor = settings.safety_factor
+            held = f" for {(time_s - self._above_since) * 1e3:.0f} ms"
+        return (f"round trip {rtt_s * 1e3:.1f} ms > {factor:g} x tau*({k:.3g}) = "
+                f"{margin * 1e3:.1f} ms{held}")
 
     def _ramp(self, dt: float) -> float:
         """Move k towards the target: a first-order lag, 98 % in ``ramp_time_s``."""

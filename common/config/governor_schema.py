@@ -16,6 +16,13 @@ GOVERNOR_SCHEMA: Schema = {
     "safety_factor": Field(
         "float", "A gain k is usable while the measured round trip is at most this fraction "
         "of its delay margin tau*(k).", minimum=0.0, exclusive_minimum=True, maximum=1.0),
+    "urgent_factor": Field(
+        "float", "A round trip above this fraction of tau*(k) is acted on at once (at least "
+        "safety_factor).", minimum=0.0, exclusive_minimum=True, maximum=1.0),
+    "confirm_s": Field(
+        "float", "Between safety_factor and urgent_factor the round trip must stay there this "
+        "long before the governor acts, s (0: at once; a scheduling blip is not the loop's "
+        "delay).", minimum=0.0, maximum=1.0),
     "ramp_time_s": Field(
         "float", "k moves to a new value as a first-order lag that gets there (98 %) in this "
         "time, s.", minimum=0.0, exclusive_minimum=True, maximum=60.0),

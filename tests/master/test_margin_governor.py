@@ -78,7 +78,8 @@ def test_it_acts_before_the_margin_on_a_slow_ramp() -> None:
             lowered_at = rtt
         t += TS
     assert lowered_at is not None and lowered_at < 0.0143  # before tau*(13)
-    assert lowered_at == pytest.approx(0.7 * 0.0143, abs=1e-4)
+    # confirm_s (20 ms) after the ramp passed 0.7 tau*: 0.2 ms further up it
+    assert lowered_at == pytest.approx(0.7 * 0.0143 + 0.01 * 0.02, abs=1e-4)
     assert decision.gain_k < 13.0
 
 
@@ -154,3 +155,56 @@ def test_the_paper_table_from_the_sampled_analysis(paper_config, paper_model) ->
     assert table.entries[0].delay_margin_s == pytest.approx(0.0143, abs=3e-4)
     assert table.entries[-1].delay_margin_s is None  # stops at the first delay-independent k
     assert table.entries[-1].k < 8.6
+
+
+def test_a_blip_below_the_urgent_factor_shorter_than_confirm_s_changes_nothing() -> None:
+    """A scheduling blip: the round trip at 11-12 ms (above 0.7 tau*(13) = 10.0 ms, below
+    0.9 tau* = 12.9 ms) for 15 ms, twice, on a steady 4.5 ms: no event, k and mode kept."""
+    for action, available in (("lower_k", False), ("tdpa", True)):
+        governor = MarginGovernor(GovernorSettings(action=action, confirm_s=0.02), TABLE,
+                                  tdpa_available=available)
+
+        def blips(t: float) -> float:
+            return 0.0115 if (0.5 <= t < 0.515 or 1.0 <= t < 1.015) else 0.0045
+
+        decision = _run(governor, blips, 2.0)
+        assert decision.gain_k == 13.0 and decision.mode_request is None
+        assert not governor.events and not governor.tdpa_requested
+        assert governor.max_rtt_s == pytest.approx(0.0115)
+
+
+def test_a_round_trip_held_in_the_band_is_acted_on_after_confirm_s() -> None:
+    """11.5 ms from 0.5 s on: the governor lowers k confirm_s later, not before."""
+    governor = MarginGovernor(GovernorSettings(confirm_s=0.02), TABLE)
+    _run(governor, lambda t: 0.0115 if t >= 0.5 else 0.0045, 0.5 + 0.02 - TS)
+    assert not governor.events and governor.target_k == 13.0
+    _run(governor, lambda t: 0.0115, 0.5 + 0.02 + 2 * TS, start_s=0.5 + 0.02 - TS)
+    assert [e["kind"] for e in governor.events] == ["governor_lower_k"]
+    assert governor.events[0]["time_s"] == pytest.approx(0.52, abs=2 * TS)
+    assert "0.7 x tau*(13)" in governor.events[0]["reason"]
+    held_ms = float(governor.events[0]["reason"].split(" for ")[1].split(" ms")[0])
+    assert 20.0 <= held_ms < 20.0 + 2 * TS * 1e3
+    assert governor.target_k == 10.4
+
+
+def test_above_the_urgent_factor_it_acts_at_once() -> None:
+    """A jump to 42 ms: acted on at the first tick that sees it, whatever confirm_s."""
+    settings = GovernorSettings(action="tdpa", confirm_s=1.0, recover_after_s=0.0)
+    governor = MarginGovernor(settings, TABLE, tdpa_available=True)
+    first = None
+    t = 0.0
+    while t < 0.6 and first is None:
+        if governor.update(t, 0.042 if t >= 0.5 else 0.0045).mode_request == "tdpa":
+            first = t
+        t += TS
+    assert first is not None and first - 0.5 < TS
+    assert "42.0 ms > 0.9 x tau*(13)" in governor.events[0]["reason"]
+
+
+def test_urgent_factor_and_confirm_s_are_checked() -> None:
+    with pytest.raises(ValueError, match="urgent_factor"):
+        GovernorSettings(safety_factor=0.7, urgent_factor=0.6)
+    with pytest.raises(ValueError, match="urgent_factor"):
+        GovernorSettings(urgent_factor=1.1)
+    with pytest.raises(ValueError, match="confirm_s"):
+        GovernorSettings(confirm_s=-0.01)
