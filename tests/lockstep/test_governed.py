@@ -227,3 +227,36 @@ def test_a_switch_in_motion_beyond_the_margin_keeps_the_ports_passive(k13, table
     in_J = master.input_energy_J[0] + slave.input_energy_J[0]
     assert out_J <= in_J + 0.5e-3
     assert not result.diverged[0] and result.peak_handle_force_N.max() < 1.3
+
+
+def test_a_switch_at_rest_under_a_sustained_push_keeps_the_approachs_offset(k13, table
+                                                                           ) -> None:
+    """The two-process governed test's scenario, deterministic: a sustained 1 N push, the
+    approach over in the paper's scheme (2.76 mm apart, its offset for this push), then the
+    step from 2 to 40 ms one way at 1.5 s. The layer goes on at rest and the sides end no
+    further apart than they were then; without the switch the loop grows without bound."""
+    from haptic.common.model.passivity import PassivitySettings
+
+    def run(governed: bool):
+        simulator = LockstepSimulator(k13, load_scenario("constant-rate"),
+                                      parse_operator_spec("constant:fx=1.0,onset=0.05"),
+                                      np.array([13.0]), "linear",
+                                      passivity=PassivitySettings(), passivity_standby=True)
+        governors = [MarginGovernor(GovernorSettings(enabled=True, action="tdpa",
+                                                     recover_after_s=0.0), table,
+                                    tdpa_available=True)] if governed else None
+        result = simulator.run(4.0, 0, to_slave=InjectionConfig(delay_s=0.002),
+                               to_master=InjectionConfig(delay_profile=parse_delay_profile(
+                                   "step 0:0.002 1.5:0.040")), governors=governors)
+        return simulator, result
+
+    simulator, result = run(True)
+    switched = [e for e in simulator.last_ticks[1].supervisors[0].events
+                if e["kind"] == "tdpa_on"]
+    assert len(switched) == 1 and 1.5 < switched[0]["time_s"] < 1.54
+    at_switch_m = np.abs(switched[0]["position_gap_m"]).max()
+    assert at_switch_m == pytest.approx(2.76e-3, abs=0.05e-3)
+    assert np.abs(result.final_position_gap_m[0]).max() <= at_switch_m + 0.05e-3
+    assert not result.diverged[0] and result.peak_handle_force_N.max() < 1.2
+    _, ungoverned = run(False)
+    assert ungoverned.diverged[0] or ungoverned.peak_handle_force_N.max() > 5.0
