@@ -180,25 +180,24 @@ class MarginGovernor:
             self._above_since = None
         elif self._above_since is None:
             self._above_since = time_s
-        if not usable and not self._confirmed(time_s, current, rtt):
+        if not usable:
             self._recover_since = None
-        elif not usable:
-            best = self.best_gain(rtt)
-            if self._lowers_k:
-                target = best if best is not None else self.table.entries[-1].k
-                if target < self.target_k:
-                    self._event(time_s, "governor_lower_k",
-                                f"{self._cause(time_s, current, rtt)}: k {self.target_k:.3g} -> "
-                                f"{target:.3g}"
-                                + ("" if settings.action == "lower_k" else
-                                   " (tdpa requested, but this build has no tdpa mode)"))
-                    self.target_k = target
-            elif not self.tdpa_requested:
-                self.tdpa_requested = True
-                mode_request = "tdpa"
-                self._event(time_s, "governor_tdpa_request",
-                            self._cause(time_s, current, rtt))
-            self._recover_since = None
+            if self._confirmed(time_s, current, rtt):
+                best = self.best_gain(rtt)
+                if self._lowers_k:
+                    target = best if best is not None else self.table.entries[-1].k
+                    if target < self.target_k:
+                        self._event(time_s, "governor_lower_k",
+                                    f"{self._cause(time_s, current, rtt)}: "
+                                    f"k {self.target_k:.3g} -> {target:.3g}"
+                                    + ("" if settings.action == "lower_k" else
+                                       " (tdpa requested, but this build has no tdpa mode)"))
+                        self.target_k = target
+                elif not self.tdpa_requested:
+                    self.tdpa_requested = True
+                    mode_request = "tdpa"
+                    self._event(time_s, "governor_tdpa_request",
+                                self._cause(time_s, current, rtt))
         # 2. back up (one step, or out of tdpa) once the peak allowed it long enough
         elif settings.recover_after_s > 0.0:
             if self._lowers_k:

@@ -197,6 +197,24 @@ def test_governed_tdpa_switches_back_off_when_the_delay_returns(k13, table) -> N
     assert not result.diverged[0] and result.peak_handle_force_N.max() < 2.0
 
 
+def _pushed_run(model, table, profile: str, governed: bool = True):
+    """A sustained 1 N push on the linear loop at k = 13, the layer on standby, the tool's
+    delay ``profile`` to the master; governed with the ``tdpa`` action (or not at all)."""
+    from haptic.common.model.passivity import PassivitySettings
+
+    simulator = LockstepSimulator(model, load_scenario("constant-rate"),
+                                  parse_operator_spec("constant:fx=1.0,onset=0.05"),
+                                  np.array([13.0]), "linear", passivity=PassivitySettings(),
+                                  passivity_standby=True)
+    governors = [MarginGovernor(GovernorSettings(enabled=True, action="tdpa",
+                                                 recover_after_s=0.0), table,
+                                tdpa_available=True)] if governed else None
+    result = simulator.run(4.0, 0, to_slave=InjectionConfig(delay_s=0.002),
+                           to_master=InjectionConfig(delay_profile=parse_delay_profile(profile)),
+                           governors=governors)
+    return simulator, result
+
+
 @pytest.mark.parametrize("one_way_s", [0.040, 0.100])
 def test_a_switch_in_motion_beyond_the_margin_keeps_the_ports_passive(k13, table,
                                                                       one_way_s) -> None:
@@ -205,18 +223,7 @@ def test_a_switch_in_motion_beyond_the_margin_keeps_the_ports_passive(k13, table
     no more than they took in. Why they start empty: a slave account credited with its tool's
     kinetic energy at the switch (tried) let the loop get going before the controllers acted,
     and their capped corrections could not catch up: 41-48 mJ more out than in, 1.66 N."""
-    from haptic.common.model.passivity import PassivitySettings
-
-    simulator = LockstepSimulator(k13, load_scenario("constant-rate"),
-                                  parse_operator_spec("constant:fx=1.0,onset=0.05"),
-                                  np.array([13.0]), "linear", passivity=PassivitySettings(),
-                                  passivity_standby=True)
-    governor = MarginGovernor(GovernorSettings(enabled=True, action="tdpa",
-                                               recover_after_s=0.0), table, tdpa_available=True)
-    profile = parse_delay_profile(f"step 0:0.002 0.3:{one_way_s}")
-    result = simulator.run(4.0, 0, to_slave=InjectionConfig(delay_s=0.002),
-                           to_master=InjectionConfig(delay_profile=profile),
-                           governors=[governor])
+    simulator, result = _pushed_run(k13, table, f"step 0:0.002 0.3:{one_way_s}")
     assert [e["kind"] for e in result.governed.events] == ["governor_tdpa_request"]
     master_tick, slave_tick = simulator.last_ticks
     moving = [e for e in slave_tick.supervisors[0].events if e["kind"] == "tdpa_on"]
@@ -235,22 +242,7 @@ def test_a_switch_at_rest_under_a_sustained_push_keeps_the_approachs_offset(k13,
     approach over in the paper's scheme (2.76 mm apart, its offset for this push), then the
     step from 2 to 40 ms one way at 1.5 s. The layer goes on at rest and the sides end no
     further apart than they were then; without the switch the loop grows without bound."""
-    from haptic.common.model.passivity import PassivitySettings
-
-    def run(governed: bool):
-        simulator = LockstepSimulator(k13, load_scenario("constant-rate"),
-                                      parse_operator_spec("constant:fx=1.0,onset=0.05"),
-                                      np.array([13.0]), "linear",
-                                      passivity=PassivitySettings(), passivity_standby=True)
-        governors = [MarginGovernor(GovernorSettings(enabled=True, action="tdpa",
-                                                     recover_after_s=0.0), table,
-                                    tdpa_available=True)] if governed else None
-        result = simulator.run(4.0, 0, to_slave=InjectionConfig(delay_s=0.002),
-                               to_master=InjectionConfig(delay_profile=parse_delay_profile(
-                                   "step 0:0.002 1.5:0.040")), governors=governors)
-        return simulator, result
-
-    simulator, result = run(True)
+    simulator, result = _pushed_run(k13, table, "step 0:0.002 1.5:0.040")
     switched = [e for e in simulator.last_ticks[1].supervisors[0].events
                 if e["kind"] == "tdpa_on"]
     assert len(switched) == 1 and 1.5 < switched[0]["time_s"] < 1.54
@@ -258,5 +250,5 @@ def test_a_switch_at_rest_under_a_sustained_push_keeps_the_approachs_offset(k13,
     assert at_switch_m == pytest.approx(2.76e-3, abs=0.05e-3)
     assert np.abs(result.final_position_gap_m[0]).max() <= at_switch_m + 0.05e-3
     assert not result.diverged[0] and result.peak_handle_force_N.max() < 1.2
-    _, ungoverned = run(False)
+    _, ungoverned = _pushed_run(k13, table, "step 0:0.002 1.5:0.040", governed=False)
     assert ungoverned.diverged[0] or ungoverned.peak_handle_force_N.max() > 5.0
