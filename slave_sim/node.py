@@ -28,11 +28,23 @@ from haptic.common.model.passivity import PassivityPort, PassivitySettings
 from haptic.common.model.synthesis import synthesize
 from haptic.common.model.teleop import TeleopModel, model_from_config
 from haptic.common.model.work_area import work_area_from_config
+from haptic.slave_sim import node_kernels as kernels
 from haptic.slave_sim.environment import make_environment
 from haptic.slave_sim.tool import POSITION_COLUMNS, VELOCITY_COLUMNS, tool_constants, tool_plant
 
 COMPENSATOR_INPUTS = ("fh_x", "fh_y", "ft_x", "ft_y")
 COMPENSATOR_OUTPUTS = ("vt_x", "vt_y")
+#: The Warp device of the node's buffers: the CPU, whose arrays numpy views share (the clay
+#: runs on its own device).
+DEVICE = "cpu"
+
+
+def _warp() -> Any:
+    import warp as wp
+
+    wp.config.log_level = wp.LOG_WARNING  # no start-up banner on stdout
+    wp.init()
+    return wp
 
 
 def slave_compensators(model: TeleopModel) -> DiscreteLTI:
@@ -51,7 +63,9 @@ def slave_compensators(model: TeleopModel) -> DiscreteLTI:
 
 @dataclass(eq=False)
 class SlaveState:
-    """Everything that changes in a slave node, lanes on the leading axis.
+    """Everything that changes in a slave node, lanes on the leading axis (``compensator``,
+    ``tool``, ``halted`` and ``drift`` are views of the node kernels' buffers: modify them in
+    place, never rebind them).
 
     ``compensator`` (lanes, n) and ``tool`` (lanes, 4: yt_x m, dyt_x m/s, yt_y, dyt_y)
     states; ``tool_force_N`` (lanes, 2) the environment force of the last step (ft);
@@ -78,6 +92,10 @@ class SlaveState:
     passivity: PassivityPort | None = None
     #: The paper mode's drift coupling filter (common/model/drift.py), else None.
     drift: np.ndarray | None = None
+    #: The kernels' buffers and recorded launches (:class:`_NodeKernels`); ``compensator``,
+    #: ``tool``, ``halted`` and ``drift`` are numpy views of its buffers: change them in
+    #: place, never rebind them.
+    kernels: Any = None
 
     @property
     def lanes(self) -> int:
@@ -154,8 +172,54 @@ class SlaveNode:
         self.environment_kind = environment or scenario.environment
         self.environment = make_environment(self.environment_kind, model, scenario, clay_impl,
                                             device)
-        self._plant_a_t = self.plant.A.T.copy()
-        self._plant_b_t = self.plant.B.T.copy()
+        self._kernel_matrices: tuple[Any, tuple, int, Any] | None = None
+        self._constants = self._kernel_constants(mass, damping, stiffness)
+        # Load (or compile, a few s the first time) the kernels now, never inside a tick.
+        _warp().load_module(kernels, device=DEVICE)
+
+    def _kernel_constants(self, mass: np.ndarray, damping: np.ndarray,
+                          stiffness: np.ndarray) -> Any:
+        """The kernels' :class:`~haptic.slave_sim.node_kernels.SlaveConstants` (SI units)."""
+        constants = kernels.SlaveConstants()
+        constants.position_ratio_x, constants.position_ratio_y = map(float,
+                                                                     self._position_ratio)
+        drift = self.drift
+        constants.drift_on = int(drift is not None)
+        if drift is not None:
+            wt = drift.bandwidth_rad_s * drift.period_s
+            constants.drift_a = (2.0 - wt) / (2.0 + wt)
+            constants.drift_b = wt / (2.0 + wt)
+            constants.drift_stiffness_N_per_m = drift.stiffness_N_per_m
+        constants.bounds_on = int(self.tool_bounds_m is not None)
+        if self.tool_bounds_m is not None:
+            low, high = self.tool_bounds_m
+            constants.low_x_m, constants.low_y_m = map(float, low)
+            constants.high_x_m, constants.high_y_m = map(float, high)
+        constants.inv_mass_x_per_kg, constants.inv_mass_y_per_kg = map(float, 1.0 / mass)
+        constants.damping_x_N_s_per_m, constants.damping_y_N_s_per_m = map(float, damping)
+        constants.stiffness_x_N_per_m, constants.stiffness_y_N_per_m = map(float, stiffness)
+        return constants
+
+    def _matrices(self) -> tuple[tuple, tuple, int, Any]:
+        """The compensators' matrices as (L, ., .) Warp arrays (L = 1: one block for every
+        lane; a stacked block gives one per lane) packed in their block layout, the plant's,
+        whether they are per lane, and the layout
+        (:class:`~haptic.slave_sim.node_kernels.CompensatorLayout`); built again when
+        :attr:`compensators` was replaced (the lockstep's lanes)."""
+        block = self.compensators
+        if self._kernel_matrices is None or self._kernel_matrices[0] is not block:
+            wp = _warp()
+            per_lane = np.ndim(block.A) == 3
+            arrays = [np.ascontiguousarray(np.asarray(m, float) if per_lane
+                                           else np.asarray(m, float)[None])
+                      for m in (block.A, block.B, block.C, block.D)]
+            layout, packed, _ = kernels.CompensatorLayout.of(*arrays)
+            compensator = tuple(wp.array(m, dtype=wp.float64, device=DEVICE) for m in packed)
+            plant = tuple(wp.array(np.ascontiguousarray(m, float), dtype=wp.float64,
+                                   device=DEVICE) for m in (self.plant.A, self.plant.B))
+            self._kernel_matrices = (block, (compensator, plant), int(per_lane), layout)
+        _, (compensator, plant), per_lane, layout = self._kernel_matrices
+        return compensator, plant, per_lane, layout
 
     @classmethod
     def from_config(cls, config: dict[str, Any], scenario: Scenario | None = None) -> SlaveNode:
@@ -186,20 +250,21 @@ class SlaveNode:
         start = np.broadcast_to(
             np.asarray(self.scenario.tool.start_position_m if start_position_m is None
                        else start_position_m, float), (lanes, 2))
-        tool = np.zeros((lanes, 4))
-        tool[:, POSITION_COLUMNS] = start
+        runtime = _NodeKernels(self, lanes)
+        runtime.tool[:, POSITION_COLUMNS] = start
         return SlaveState(
-            compensator=self.compensators.initial_state(lanes),
-            tool=tool,
+            compensator=runtime.compensator,
+            tool=runtime.tool,
             tool_force_N=np.zeros((lanes, 2)),
             actuator_force_N=np.zeros((lanes, 2)),
             handle_position_m=start / self._position_ratio,
-            halted=np.zeros(lanes, bool),
+            halted=runtime.halted,
             environment=self.environment.initial_state(lanes),
             passivity=None if self.passivity is None else PassivityPort.create(
                 self.passivity, self.sample_period_s, lanes, self.passivity.slave_keep_J,
                 active=not self.passivity_standby),
-            drift=None if self.drift is None else self.drift.initial_state(lanes),
+            drift=None if self.drift is None else runtime.drift,
+            kernels=runtime,
         )
 
     def step(self, state: SlaveState, handle_force_N: np.ndarray,
@@ -207,51 +272,44 @@ class SlaveNode:
              ) -> SlaveOutputs:
         """Advance every lane by one period Ts; inputs (lanes, 2) in N and m;
         ``peer_energy_J`` (lanes,): the master's cumulative input energy received (``tdpa``
-        mode; ignored otherwise)."""
-        inputs = np.concatenate((handle_force_N, state.tool_force_N), axis=1)
-        if state.tool_force_scale is not None:  # the master's force ramp on ft, as Ct1 has it
-            inputs[:, 2:4] *= state.tool_force_scale[:, None]
-        if state.gain_ratio is not None:
-            inputs *= state.gain_ratio[:, None]
-        actuator = self.compensators.step(state.compensator, inputs)
+        mode; ignored otherwise). The law runs in :mod:`haptic.slave_sim.node_kernels`."""
+        runtime = state.kernels
+        inputs = runtime.inputs
+        inputs[:, 0:2] = handle_force_N
+        inputs[:, 2:4] = handle_position_m
+        inputs[:, 4:6] = state.tool_force_N
+        inputs[:, 6] = 1.0 if state.tool_force_scale is None else state.tool_force_scale
+        inputs[:, 7] = 1.0 if state.gain_ratio is None else state.gain_ratio
         port = state.passivity
         if port is not None and not port.active.any():  # on standby: the paper's scheme
             if peer_energy_J is not None:
                 port.receive(peer_energy_J)  # noted, not credited: counters stay monotone
             port = None
-        if state.drift is not None:  # paper mode's slow coupling of Ah1 yh_recv - yt
-            actuator += self.drift.force(state.drift, self._position_ratio * np.asarray(
-                handle_position_m) - state.tool[:, POSITION_COLUMNS])
-        if port is not None:
-            actuator = self._passivity_force(state, port, actuator, handle_position_m,
-                                             peer_energy_J)
-        halted = state.halted.any()
-        if halted:
-            actuator[state.halted] = 0.0
         tool = state.tool
-        previous = tool[:, POSITION_COLUMNS]
         shift = None
-        if port is not None:  # tdpa: the tool moves towards Ah1 yh where that adds no energy
+        if port is None:
+            runtime.step.launch()
+            previous = runtime.motion[:, 0:2].copy()
+        else:  # tdpa: the layer acts between the compensators and the tool's motion
+            runtime.actuate.launch()
+            runtime.actuator[...] = self._passivity_force(
+                state, port, runtime.actuator.copy(), handle_position_m, peer_energy_J)
+            previous = tool[:, POSITION_COLUMNS]
+            # the tool moves towards Ah1 yh where that adds no energy
             shift = self._drift_shift(state, port, handle_position_m)
             tool[:, POSITION_COLUMNS] += shift
-        held = tool.copy() if halted else None
-        tool[...] = tool @ self._plant_a_t + actuator @ self._plant_b_t
-        if halted:
-            tool[state.halted] = held[state.halted]
-        if self.tool_bounds_m is not None:
-            self._hold_inside(tool)
+            runtime.move.launch()
+        actuator = runtime.actuator.copy()
         position = tool[:, POSITION_COLUMNS]
         velocity = tool[:, VELOCITY_COLUMNS]
-        acceleration = (actuator - self._damping * velocity
-                        - self._stiffness * position) * self._inv_mass
         result = self.environment.step(state.environment, previous, position, velocity,
-                                       acceleration)
+                                       runtime.motion[:, 2:4].copy())
         if shift is not None:  # the drift moves the tool's base, slowly: the environment
             # sees the swept positions and the plant's own speed (a force law of the speed
             # would otherwise charge the step after it was judged); the outputs the whole
             velocity = velocity + shift * self._inv_period_s
         force = result.force_N
-        if halted:
+        if state.halted.any():
             force = force.copy()
             force[state.halted] = 0.0
         state.tool_force_N = force
@@ -270,21 +328,6 @@ class SlaveNode:
             removed_volume_m3=result.removed_volume_m3,
             tracking_error_m=position - self._position_ratio * handle_position_m,
         )
-
-    def _hold_inside(self, tool: np.ndarray) -> None:
-        """The work area's wall: a tool position past a bound is put back on it and its
-        velocity into the wall zeroed, as the master clamps its handle command to the same
-        box (times Ah1), so at a bound both sides stop at the same place."""
-        low, high = self.tool_bounds_m
-        position = tool[:, POSITION_COLUMNS]
-        below = position < low
-        above = position > high
-        if not (below.any() or above.any()):
-            return
-        velocity = tool[:, VELOCITY_COLUMNS]
-        velocity[(below & (velocity < 0.0)) | (above & (velocity > 0.0))] = 0.0
-        tool[:, POSITION_COLUMNS] = np.clip(position, low, high)
-        tool[:, VELOCITY_COLUMNS] = velocity
 
     def _passivity_force(self, state: SlaveState, port: PassivityPort, actuator: np.ndarray,
                          handle_position_m: np.ndarray, peer_energy_J: np.ndarray | None
@@ -364,3 +407,49 @@ class SlaveNode:
     def tracking_error_m(self, state: SlaveState, handle_position_m: np.ndarray) -> np.ndarray:
         """yt - Ah1 yh for every lane (lanes, 2), m."""
         return state.tool_position_m() - self._position_ratio * np.asarray(handle_position_m)
+
+
+class _NodeKernels:
+    """One state's kernel buffers (Warp arrays on the CPU with numpy views of them) and the
+    recorded launches of :mod:`haptic.slave_sim.node_kernels` over them: ``step`` (both
+    stages), ``actuate`` and ``move`` (the stages apart, the TDPA layer between them)."""
+
+    def __init__(self, node: SlaveNode, lanes: int) -> None:
+        wp = _warp()
+        compensator_matrices, (plant_a, plant_b), per_lane, layout = node._matrices()
+        step_kernel, actuator_kernel = kernels.step_kernels(layout)
+        if per_lane and compensator_matrices[0].shape[0] != lanes:
+            raise ValueError(f"compensators stacked for {compensator_matrices[0].shape[0]} "
+                             f"lanes, started with {lanes}")
+        n = layout.blocks * layout.block_states  # the packed layout's states
+        f64 = wp.float64
+        inputs = wp.zeros((lanes, len(kernels.INPUT_COLUMNS)), dtype=f64, device=DEVICE)
+        compensator = wp.zeros((lanes, n), dtype=f64, device=DEVICE)
+        tool = wp.zeros((lanes, 4), dtype=f64, device=DEVICE)
+        drift = wp.zeros((lanes, 4), dtype=f64, device=DEVICE)
+        actuator = wp.zeros((lanes, 2), dtype=f64, device=DEVICE)
+        halted = wp.zeros(lanes, dtype=wp.bool, device=DEVICE)
+        motion = wp.zeros((lanes, len(kernels.MOTION_COLUMNS)), dtype=f64, device=DEVICE)
+        constants = node._constants
+        actuate_args = [inputs, *compensator_matrices, per_lane, compensator, tool, drift,
+                        actuator]
+        self.step = wp.launch(step_kernel, dim=lanes, device=DEVICE,
+                              inputs=[*actuate_args, plant_a, plant_b, halted, motion,
+                                      constants], record_cmd=True)
+        self.actuate = wp.launch(actuator_kernel, dim=lanes, device=DEVICE,
+                                 inputs=[*actuate_args, constants], record_cmd=True)
+        self.move = wp.launch(kernels.slave_motion_kernel, dim=lanes, device=DEVICE,
+                              inputs=[plant_a, plant_b, tool, halted, actuator, motion,
+                                      constants], record_cmd=True)
+        #: (lanes, 8) the step's inputs (:data:`~haptic.slave_sim.node_kernels.INPUT_COLUMNS`)
+        self.inputs = inputs.numpy()
+        self.compensator = compensator.numpy()
+        self.tool = tool.numpy()
+        self.drift = drift.numpy()
+        self.halted = halted.numpy()
+        #: (lanes, 2) vt of the step, N
+        self.actuator = actuator.numpy()
+        #: (lanes, 4) the tool before the step (m) and its acceleration after it (m/s^2)
+        self.motion = motion.numpy()
+        # the Warp arrays own the memory the views and the launches use
+        self._buffers = (inputs, compensator, tool, drift, actuator, halted, motion)

@@ -1,0 +1,317 @@
+"""NVIDIA Warp kernels of the slave node's step: the Ch2/Ct2 compensators with the paper
+mode's drift coupling, and the tool's motion (the ZOH plant, the safe state, the work area's
+wall), for every lane in one launch.
+
+One thread per lane; float64 throughout. The real-time slave runs one lane through a recorded
+CPU launch (a few us, where the numpy version of the same law cost about 35 us in
+small-array calls); the lockstep simulator runs a whole sweep's lanes through the same
+kernels, so the programs and the simulator step one implementation (slave_sim/node.py).
+
+The step is two stages, because the TDPA layer (``tdpa`` mode, in numpy:
+common/model/passivity.py) acts between them, on the actuator force and the tool's position:
+
+1. the compensators (compiled for their block layout, :func:`step_kernels`): ``vt = -Ch2 fh
+   + Ct2 ft_prev`` (inputs scaled by the master's force ramp on ft and the governed gain
+   ratio), plus the drift coupling ``kp Cp (Ah1 yh - yt)``;
+2. :func:`motion_lane`: halted lanes get no force and keep their tool; the others step the
+   tool plant ``x' = A x + B vt``; every lane is held inside the work area; the tool's
+   acceleration at the end of the step (the linear environment's input).
+
+Without an active TDPA layer the node launches both stages as one kernel. Stage 1 is compiled
+for the compensators' layout (:class:`CompensatorLayout`, :func:`step_kernels`).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+# The programs print JSON on stdout: Warp must not announce itself there.
+wp.config.log_level = wp.LOG_WARNING
+
+#: Columns of the kernel's ``inputs`` (lanes, 8): the bounded handle force (N) and position
+#: (m) the tool follows, the environment force of the previous step (N), the master's force
+#: ramp on ft (0..1) and the governed gain ratio k/k0.
+INPUT_COLUMNS = ("fh_x", "fh_y", "yh_x", "yh_y", "ft_x", "ft_y", "ft_scale", "gain_ratio")
+#: Columns of ``motion`` (lanes, 4): the tool's position before the step (m) and its
+#: acceleration at the end of it (m/s^2).
+MOTION_COLUMNS = ("previous_x", "previous_y", "acceleration_x", "acceleration_y")
+#: The largest finite float64 (numpy's ``nan_to_num`` maps +-inf there).
+_FLOAT64_MAX = 1.7976931348623157e308
+
+
+@wp.struct
+class SlaveConstants:
+    """The tool and the coupling, as the kernels read them (SI units)."""
+
+    position_ratio_x: wp.float64  # Ah1 of x, dimensionless
+    position_ratio_y: wp.float64
+    drift_on: wp.int32  # 1: the paper mode's drift coupling is on
+    drift_a: wp.float64  # Tustin low-pass: y = a y' + b (x + x')
+    drift_b: wp.float64
+    drift_stiffness_N_per_m: wp.float64
+    bounds_on: wp.int32  # 1: the tool stays inside the work area
+    low_x_m: wp.float64
+    low_y_m: wp.float64
+    high_x_m: wp.float64
+    high_y_m: wp.float64
+    inv_mass_x_per_kg: wp.float64
+    inv_mass_y_per_kg: wp.float64
+    damping_x_N_s_per_m: wp.float64
+    damping_y_N_s_per_m: wp.float64
+    stiffness_x_N_per_m: wp.float64
+    stiffness_y_N_per_m: wp.float64
+
+
+@wp.func
+def finite_or_clamped(value: wp.float64) -> wp.float64:
+    """numpy's ``nan_to_num``: NaN -> 0, +-inf -> the largest finite float64."""
+    if wp.isnan(value):
+        return wp.float64(0.0)
+    if wp.isinf(value):
+        if value > wp.float64(0.0):
+            return wp.float64(_FLOAT64_MAX)
+        return wp.float64(-_FLOAT64_MAX)
+    return value
+
+
+@wp.func
+def drift_force(lane: int, inputs: wp.array2d(dtype=wp.float64),
+                tool: wp.array2d(dtype=wp.float64), drift: wp.array2d(dtype=wp.float64),
+                constants: SlaveConstants) -> wp.vec2d:
+    """The paper mode's slow spring on ``Ah1 yh - yt`` (common/model/drift.py), N; advances
+    the lane's filter."""
+    gap_x = finite_or_clamped(constants.position_ratio_x * inputs[lane, 2] - tool[lane, 0])
+    gap_y = finite_or_clamped(constants.position_ratio_y * inputs[lane, 3] - tool[lane, 2])
+    a = constants.drift_a
+    b = constants.drift_b
+    filtered_x = a * drift[lane, 0] + b * (gap_x + drift[lane, 2])
+    filtered_y = a * drift[lane, 1] + b * (gap_y + drift[lane, 3])
+    drift[lane, 0] = filtered_x
+    drift[lane, 1] = filtered_y
+    drift[lane, 2] = gap_x
+    drift[lane, 3] = gap_y
+    return wp.vec2d(constants.drift_stiffness_N_per_m * filtered_x,
+                    constants.drift_stiffness_N_per_m * filtered_y)
+
+
+@wp.func
+def motion_lane(
+    lane: int,
+    plant_a: wp.array2d(dtype=wp.float64),
+    plant_b: wp.array2d(dtype=wp.float64),
+    tool: wp.array2d(dtype=wp.float64),
+    halted: wp.array(dtype=wp.bool),
+    actuator: wp.array2d(dtype=wp.float64),
+    motion: wp.array2d(dtype=wp.float64),
+    constants: SlaveConstants,
+):
+    """Stage 2 of one lane: the tool's step under ``actuator`` (zeroed where halted)."""
+    zero = wp.float64(0.0)
+    fx = actuator[lane, 0]
+    fy = actuator[lane, 1]
+    stopped = halted[lane]
+    if stopped:
+        fx = zero
+        fy = zero
+        actuator[lane, 0] = zero
+        actuator[lane, 1] = zero
+    s0 = tool[lane, 0]
+    s1 = tool[lane, 1]
+    s2 = tool[lane, 2]
+    s3 = tool[lane, 3]
+    motion[lane, 0] = s0
+    motion[lane, 1] = s2
+    if not stopped:
+        n0 = plant_a[0, 0] * s0 + plant_a[0, 1] * s1 + plant_a[0, 2] * s2 + plant_a[0, 3] * s3
+        n1 = plant_a[1, 0] * s0 + plant_a[1, 1] * s1 + plant_a[1, 2] * s2 + plant_a[1, 3] * s3
+        n2 = plant_a[2, 0] * s0 + plant_a[2, 1] * s1 + plant_a[2, 2] * s2 + plant_a[2, 3] * s3
+        n3 = plant_a[3, 0] * s0 + plant_a[3, 1] * s1 + plant_a[3, 2] * s2 + plant_a[3, 3] * s3
+        s0 = n0 + plant_b[0, 0] * fx + plant_b[0, 1] * fy
+        s1 = n1 + plant_b[1, 0] * fx + plant_b[1, 1] * fy
+        s2 = n2 + plant_b[2, 0] * fx + plant_b[2, 1] * fy
+        s3 = n3 + plant_b[3, 0] * fx + plant_b[3, 1] * fy
+    if constants.bounds_on != 0:  # the wall: back onto it, no velocity into it
+        if (s0 < constants.low_x_m and s1 < zero) or (s0 > constants.high_x_m and s1 > zero):
+            s1 = zero
+        if (s2 < constants.low_y_m and s3 < zero) or (s2 > constants.high_y_m and s3 > zero):
+            s3 = zero
+        s0 = wp.clamp(s0, constants.low_x_m, constants.high_x_m)
+        s2 = wp.clamp(s2, constants.low_y_m, constants.high_y_m)
+    tool[lane, 0] = s0
+    tool[lane, 1] = s1
+    tool[lane, 2] = s2
+    tool[lane, 3] = s3
+    motion[lane, 2] = (fx - constants.damping_x_N_s_per_m * s1
+                       - constants.stiffness_x_N_per_m * s0) * constants.inv_mass_x_per_kg
+    motion[lane, 3] = (fy - constants.damping_y_N_s_per_m * s3
+                       - constants.stiffness_y_N_per_m * s2) * constants.inv_mass_y_per_kg
+
+
+@wp.kernel
+def slave_motion_kernel(
+    plant_a: wp.array2d(dtype=wp.float64),
+    plant_b: wp.array2d(dtype=wp.float64),
+    tool: wp.array2d(dtype=wp.float64),
+    halted: wp.array(dtype=wp.bool),
+    actuator: wp.array2d(dtype=wp.float64),
+    motion: wp.array2d(dtype=wp.float64),
+    constants: SlaveConstants,
+):
+    """Stage 2 for every lane (after the TDPA layer acted on ``actuator`` and ``tool``)."""
+    motion_lane(wp.tid(), plant_a, plant_b, tool, halted, actuator, motion, constants)
+
+
+@dataclass(frozen=True)
+class CompensatorLayout:
+    """The compensators' block-diagonal shape, which the kernels are compiled for.
+
+    The compensators are block diagonal (one block per SISO path: common/model/lti.py
+    ``combine``). The kernels hold them as ``blocks`` blocks of ``block_states`` states each
+    (smaller blocks padded with inert states) and loop over them with loops of constant
+    length, which Warp unrolls with every index known at compile time: ten times faster on
+    the CPU than loops of run-time length over the dense matrices, with a quarter of the
+    products for the slave's four paths. The padding's zeros add exactly nothing.
+    """
+
+    blocks: int
+    block_states: int
+
+    @classmethod
+    def of(cls, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray
+           ) -> tuple[CompensatorLayout, tuple[np.ndarray, ...], np.ndarray]:
+        """The layout of ``a`` (L, n, n), ``b`` (L, n, m), ``c`` (L, p, n), ``d`` (L, p, m)
+        (every lane's non-zeros), the matrices packed for it (``a`` (L, P, Q, Q), ``b``
+        (L, P, Q, m), ``c`` (L, P, p, Q), ``d`` as it is) and, per packed state, the index of
+        the state it holds (-1: padding)."""
+        bounds = diagonal_blocks(np.any(a != 0.0, axis=0))
+        q = max([end - start for start, end in bounds] + [1])
+        lanes, p, m = a.shape[0], c.shape[1], b.shape[2]
+        packed_a = np.zeros((lanes, len(bounds), q, q))
+        packed_b = np.zeros((lanes, len(bounds), q, m))
+        packed_c = np.zeros((lanes, len(bounds), p, q))
+        state_of = np.full(len(bounds) * q, -1)
+        for index, (start, end) in enumerate(bounds):
+            size = end - start
+            packed_a[:, index, :size, :size] = a[:, start:end, start:end]
+            packed_b[:, index, :size] = b[:, start:end]
+            packed_c[:, index, :, :size] = c[:, :, start:end]
+            state_of[index * q:index * q + size] = np.arange(start, end)
+        return (cls(max(len(bounds), 1), q),
+                tuple(np.ascontiguousarray(x) for x in (packed_a, packed_b, packed_c, d)),
+                state_of)
+
+
+def diagonal_blocks(nonzero: np.ndarray) -> list[tuple[int, int]]:
+    """The finest split of a square matrix's non-zero pattern ``nonzero`` (n, n) into
+    diagonal blocks [start, end): nothing couples the states of two blocks."""
+    n = nonzero.shape[0]
+    bounds, start = [], 0
+    for split in range(1, n + 1):
+        if split == n or not (nonzero[start:split, split:].any()
+                              or nonzero[split:, start:split].any()):
+            bounds.append((start, split))
+            start = split
+    return bounds
+
+
+@functools.cache
+def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any]:
+    """The kernels compiled for ``layout``: (both stages, stage 1 alone), each in its own Warp
+    module (compiled once per layout and cached on disk)."""
+    blocks, q = layout.blocks, layout.block_states
+    block_vector = wp.types.vector(length=q, dtype=wp.float64)
+
+    @wp.func(module="unique")
+    def compensate(
+        lane: int,
+        inputs: wp.array2d(dtype=wp.float64),
+        comp_a: wp.array4d(dtype=wp.float64),
+        comp_b: wp.array4d(dtype=wp.float64),
+        comp_c: wp.array4d(dtype=wp.float64),
+        comp_d: wp.array3d(dtype=wp.float64),
+        per_lane_matrices: wp.int32,
+        compensator: wp.array2d(dtype=wp.float64),
+        tool: wp.array2d(dtype=wp.float64),
+        drift: wp.array2d(dtype=wp.float64),
+        actuator: wp.array2d(dtype=wp.float64),
+        constants: SlaveConstants,
+    ):
+        """Stage 1 of one lane: the compensators' vt (and the drift coupling) into
+        ``actuator``; y = C x + D u, x' = A x + B u, block by block."""
+        scale = inputs[lane, 6]
+        gain = inputs[lane, 7]
+        u = wp.vec4d(inputs[lane, 0] * gain, inputs[lane, 1] * gain,
+                     (inputs[lane, 4] * scale) * gain, (inputs[lane, 5] * scale) * gain)
+        m = lane * per_lane_matrices
+        out_x = comp_d[m, 0, 0] * u[0] + comp_d[m, 0, 1] * u[1] + comp_d[m, 0, 2] * u[2] + (
+            comp_d[m, 0, 3] * u[3])
+        out_y = comp_d[m, 1, 0] * u[0] + comp_d[m, 1, 1] * u[1] + comp_d[m, 1, 2] * u[2] + (
+            comp_d[m, 1, 3] * u[3])
+        for block in range(blocks):
+            x = block_vector()
+            for j in range(q):
+                x[j] = compensator[lane, block * q + j]
+            for j in range(q):
+                out_x += comp_c[m, block, 0, j] * x[j]
+                out_y += comp_c[m, block, 1, j] * x[j]
+            for i in range(q):
+                acc = comp_b[m, block, i, 0] * u[0] + comp_b[m, block, i, 1] * u[1] + (
+                    comp_b[m, block, i, 2] * u[2]) + comp_b[m, block, i, 3] * u[3]
+                for j in range(q):
+                    acc += comp_a[m, block, i, j] * x[j]
+                compensator[lane, block * q + i] = acc
+        if constants.drift_on != 0:
+            coupling = drift_force(lane, inputs, tool, drift, constants)
+            out_x += coupling[0]
+            out_y += coupling[1]
+        actuator[lane, 0] = out_x
+        actuator[lane, 1] = out_y
+
+    @wp.kernel(module="unique")
+    def slave_step_kernel(
+        inputs: wp.array2d(dtype=wp.float64),
+        comp_a: wp.array4d(dtype=wp.float64),
+        comp_b: wp.array4d(dtype=wp.float64),
+        comp_c: wp.array4d(dtype=wp.float64),
+        comp_d: wp.array3d(dtype=wp.float64),
+        per_lane_matrices: wp.int32,
+        compensator: wp.array2d(dtype=wp.float64),
+        tool: wp.array2d(dtype=wp.float64),
+        drift: wp.array2d(dtype=wp.float64),
+        actuator: wp.array2d(dtype=wp.float64),
+        plant_a: wp.array2d(dtype=wp.float64),
+        plant_b: wp.array2d(dtype=wp.float64),
+        halted: wp.array(dtype=wp.bool),
+        motion: wp.array2d(dtype=wp.float64),
+        constants: SlaveConstants,
+    ):
+        """Both stages for every lane (no active TDPA layer between them)."""
+        lane = wp.tid()
+        compensate(lane, inputs, comp_a, comp_b, comp_c, comp_d, per_lane_matrices,
+                   compensator, tool, drift, actuator, constants)
+        motion_lane(lane, plant_a, plant_b, tool, halted, actuator, motion, constants)
+
+    @wp.kernel(module="unique")
+    def slave_actuator_kernel(
+        inputs: wp.array2d(dtype=wp.float64),
+        comp_a: wp.array4d(dtype=wp.float64),
+        comp_b: wp.array4d(dtype=wp.float64),
+        comp_c: wp.array4d(dtype=wp.float64),
+        comp_d: wp.array3d(dtype=wp.float64),
+        per_lane_matrices: wp.int32,
+        compensator: wp.array2d(dtype=wp.float64),
+        tool: wp.array2d(dtype=wp.float64),
+        drift: wp.array2d(dtype=wp.float64),
+        actuator: wp.array2d(dtype=wp.float64),
+        constants: SlaveConstants,
+    ):
+        """Stage 1 for every lane (the TDPA layer then acts on ``actuator`` and ``tool``)."""
+        compensate(wp.tid(), inputs, comp_a, comp_b, comp_c, comp_d, per_lane_matrices,
+                   compensator, tool, drift, actuator, constants)
+
+    return slave_step_kernel, slave_actuator_kernel
