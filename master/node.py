@@ -43,10 +43,12 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.model.block_layout import CompensatorLayout
 from haptic.common.model.lti import DiscreteLTI, Path, combine, discretize
 from haptic.common.model.passivity import PassivityPort, PassivitySettings
 from haptic.common.model.synthesis import synthesize
 from haptic.common.model.teleop import TeleopModel
+from haptic.common.runtime.replayed_launch import ReplayedLaunch
 from haptic.master import node_kernels as kernels
 from haptic.master import passivity_kernel
 from haptic.master.settings import SafetySettings
@@ -161,6 +163,7 @@ class MasterNode:
         self._workspace_min = np.asarray(safety.workspace_min_m, float)
         self._workspace_max = np.asarray(safety.workspace_max_m, float)
         self._matrices: tuple | None = None
+        self._layout: CompensatorLayout | None = None
         self._limits: Any = None
         self._trip_reasons = (
             "non-finite handle force", "non-finite handle position", "non-finite tool force",
@@ -175,6 +178,7 @@ class MasterNode:
         # Load (or compile, about 2 s the first time) the kernel now, never inside a tick.
         self._kernel_constants()
         _warp().load_module(kernels, device=DEVICE)
+        _warp().load_module(kernels.step_kernel(self._layout).module, device=DEVICE)
         if passivity is not None:
             _warp().load_module(passivity_kernel, device=DEVICE)
 
@@ -187,8 +191,9 @@ class MasterNode:
         return cls(master_compensator(model), safety, passivity, passivity_standby)
 
     def _kernel_constants(self) -> tuple[tuple, Any]:
-        """The compensator's matrices as (L, ., .) Warp arrays and the limits struct, built
-        once per node (L = 1: one block for all lanes)."""
+        """The compensator's matrices as Warp arrays packed in their block layout
+        (:attr:`_layout`; L = 1: one block for all lanes) and the limits struct, built once
+        per node."""
         if self._matrices is None:
             wp = _warp()
             block = self.compensator
@@ -196,8 +201,9 @@ class MasterNode:
             arrays = [np.ascontiguousarray(np.asarray(m, float) if per_lane
                                            else np.asarray(m, float)[None])
                       for m in (block.A, block.B, block.C, block.D)]
+            self._layout, packed, _ = CompensatorLayout.of(*arrays)
             self._matrices = (tuple(wp.array(m, dtype=wp.float64, device=DEVICE)
-                                    for m in arrays), int(per_lane))
+                                    for m in packed), int(per_lane))
             safety = self.safety
             limits = kernels.MasterLimits()
             limits.period_s = self.period_s
@@ -228,7 +234,7 @@ class MasterNode:
                              f"activated with {lanes}")
         faulted_at_start = ~np.all(np.isfinite(position), axis=1)
         safe = np.nan_to_num(position)
-        n = int(matrices[0].shape[1])
+        n = self._layout.blocks * self._layout.block_states  # the packed layout's states
 
         def buffer(shape: tuple, dtype: Any, value: np.ndarray | None = None) -> Any:
             array = wp.zeros(shape, dtype=dtype, device=DEVICE)
@@ -238,7 +244,6 @@ class MasterNode:
 
         f64, i32 = wp.float64, wp.int32
         compensator = buffer((lanes, n), f64)
-        scratch = buffer((lanes, n), f64)
         origin, last_command = buffer((lanes, 2), f64, safe), buffer((lanes, 2), f64, safe)
         last_position, hold = buffer((lanes, 2), f64, safe), buffer((lanes, 2), f64, safe)
         small_count = buffer((lanes,), i32)
@@ -253,12 +258,12 @@ class MasterNode:
         trip_code = buffer((lanes,), i32)
         event_bits = buffer((lanes,), i32)
         event_count = buffer((1,), i32)
-        buffers = (inputs, *matrices, compensator, scratch, origin, last_command,
+        buffers = (inputs, *matrices, compensator, origin, last_command,
                    last_position, hold, small_count, enabled, ramp_elapsed, force_scale,
                    gain_ratio, faulted, limiting, command, used, trip_code, event_bits,
                    event_count)
-        launch = wp.launch(kernels.master_step_kernel, dim=lanes, device=DEVICE,
-                           inputs=[inputs, *matrices, per_lane, compensator, scratch, origin,
+        launch = wp.launch(kernels.step_kernel(self._layout), dim=lanes, device=DEVICE,
+                           inputs=[inputs, *matrices, per_lane, compensator, origin,
                                    last_command, last_position, hold, small_count, enabled,
                                    ramp_elapsed, force_scale, gain_ratio, faulted, limiting,
                                    command, used,
@@ -274,7 +279,7 @@ class MasterNode:
             faulted=faulted.numpy(),
             limiting=limiting.numpy(), command_m=command.numpy(),
             handle_force_used_N=used_view[:, 0:2], tool_force_used_N=used_view[:, 2:4],
-            inputs=inputs.numpy(), _kernel=launch, _trip_code=trip_code.numpy(),
+            inputs=inputs.numpy(), _kernel=ReplayedLaunch(launch), _trip_code=trip_code.numpy(),
             _event_bits=event_bits.numpy(), _event_count=event_count.numpy(),
             _buffers=buffers,
         )
@@ -392,11 +397,11 @@ class MasterNode:
         state.passivity = port
         state.peer_energy_J = peer.numpy()
         state.peer_target_m = target.numpy()
-        state._passivity_kernel = wp.launch(
+        state._passivity_kernel = ReplayedLaunch(wp.launch(
             passivity_kernel.master_passivity_kernel, dim=lanes, device=DEVICE,
             inputs=[inputs, peer, target, enabled, faulted, command, last_command, origin,
                     buffers[10], tank, sent, peer_sent, energy_in, energy_out, forgotten,
-                    dissipated, correction, buffers[9], buffers[11], limits], record_cmd=True)
+                    dissipated, correction, buffers[9], buffers[11], limits], record_cmd=True))
         state._buffers = (*state._buffers, *buffers, peer, target)
 
     def _collect_events(self, state: MasterNodeState) -> None:

@@ -22,12 +22,14 @@ from typing import Any
 import numpy as np
 
 from haptic.common.config.scenario import Scenario, load_scenario
+from haptic.common.model.block_layout import CompensatorLayout
 from haptic.common.model.drift import DriftCoupling
 from haptic.common.model.lti import DiscreteLTI, Path, combine, discretize
 from haptic.common.model.passivity import PassivityPort, PassivitySettings
 from haptic.common.model.synthesis import synthesize
 from haptic.common.model.teleop import TeleopModel, model_from_config
 from haptic.common.model.work_area import work_area_from_config
+from haptic.common.runtime.replayed_launch import ReplayedLaunch
 from haptic.slave_sim import node_kernels as kernels
 from haptic.slave_sim.environment import make_environment
 from haptic.slave_sim.tool import POSITION_COLUMNS, VELOCITY_COLUMNS, tool_constants, tool_plant
@@ -204,7 +206,7 @@ class SlaveNode:
         """The compensators' matrices as (L, ., .) Warp arrays (L = 1: one block for every
         lane; a stacked block gives one per lane) packed in their block layout, the plant's,
         whether they are per lane, and the layout
-        (:class:`~haptic.slave_sim.node_kernels.CompensatorLayout`); built again when
+        (:class:`~haptic.common.model.block_layout.CompensatorLayout`); built again when
         :attr:`compensators` was replaced (the lockstep's lanes)."""
         block = self.compensators
         if self._kernel_matrices is None or self._kernel_matrices[0] is not block:
@@ -213,7 +215,7 @@ class SlaveNode:
             arrays = [np.ascontiguousarray(np.asarray(m, float) if per_lane
                                            else np.asarray(m, float)[None])
                       for m in (block.A, block.B, block.C, block.D)]
-            layout, packed, _ = kernels.CompensatorLayout.of(*arrays)
+            layout, packed, _ = CompensatorLayout.of(*arrays)
             compensator = tuple(wp.array(m, dtype=wp.float64, device=DEVICE) for m in packed)
             plant = tuple(wp.array(np.ascontiguousarray(m, float), dtype=wp.float64,
                                    device=DEVICE) for m in (self.plant.A, self.plant.B))
@@ -433,14 +435,14 @@ class _NodeKernels:
         constants = node._constants
         actuate_args = [inputs, *compensator_matrices, per_lane, compensator, tool, drift,
                         actuator]
-        self.step = wp.launch(step_kernel, dim=lanes, device=DEVICE,
+        self.step = ReplayedLaunch(wp.launch(step_kernel, dim=lanes, device=DEVICE,
                               inputs=[*actuate_args, plant_a, plant_b, halted, motion,
-                                      constants], record_cmd=True)
-        self.actuate = wp.launch(actuator_kernel, dim=lanes, device=DEVICE,
-                                 inputs=[*actuate_args, constants], record_cmd=True)
-        self.move = wp.launch(kernels.slave_motion_kernel, dim=lanes, device=DEVICE,
+                                      constants], record_cmd=True))
+        self.actuate = ReplayedLaunch(wp.launch(actuator_kernel, dim=lanes, device=DEVICE,
+                                 inputs=[*actuate_args, constants], record_cmd=True))
+        self.move = ReplayedLaunch(wp.launch(kernels.slave_motion_kernel, dim=lanes, device=DEVICE,
                               inputs=[plant_a, plant_b, tool, halted, actuator, motion,
-                                      constants], record_cmd=True)
+                                      constants], record_cmd=True))
         #: (lanes, 8) the step's inputs (:data:`~haptic.slave_sim.node_kernels.INPUT_COLUMNS`)
         self.inputs = inputs.numpy()
         self.compensator = compensator.numpy()

@@ -24,11 +24,11 @@ for the compensators' layout (:class:`CompensatorLayout`, :func:`step_kernels`).
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
 import warp as wp
+
+from haptic.common.model.block_layout import CompensatorLayout
 
 # The programs print JSON on stdout: Warp must not announce itself there.
 wp.config.log_level = wp.LOG_WARNING
@@ -164,59 +164,6 @@ def slave_motion_kernel(
 ):
     """Stage 2 for every lane (after the TDPA layer acted on ``actuator`` and ``tool``)."""
     motion_lane(wp.tid(), plant_a, plant_b, tool, halted, actuator, motion, constants)
-
-
-@dataclass(frozen=True)
-class CompensatorLayout:
-    """The compensators' block-diagonal shape, which the kernels are compiled for.
-
-    The compensators are block diagonal (one block per SISO path: common/model/lti.py
-    ``combine``). The kernels hold them as ``blocks`` blocks of ``block_states`` states each
-    (smaller blocks padded with inert states) and loop over them with loops of constant
-    length, which Warp unrolls with every index known at compile time: ten times faster on
-    the CPU than loops of run-time length over the dense matrices, with a quarter of the
-    products for the slave's four paths. The padding's zeros add exactly nothing.
-    """
-
-    blocks: int
-    block_states: int
-
-    @classmethod
-    def of(cls, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray
-           ) -> tuple[CompensatorLayout, tuple[np.ndarray, ...], np.ndarray]:
-        """The layout of ``a`` (L, n, n), ``b`` (L, n, m), ``c`` (L, p, n), ``d`` (L, p, m)
-        (every lane's non-zeros), the matrices packed for it (``a`` (L, P, Q, Q), ``b``
-        (L, P, Q, m), ``c`` (L, P, p, Q), ``d`` as it is) and, per packed state, the index of
-        the state it holds (-1: padding)."""
-        bounds = diagonal_blocks(np.any(a != 0.0, axis=0))
-        q = max([end - start for start, end in bounds] + [1])
-        lanes, p, m = a.shape[0], c.shape[1], b.shape[2]
-        packed_a = np.zeros((lanes, len(bounds), q, q))
-        packed_b = np.zeros((lanes, len(bounds), q, m))
-        packed_c = np.zeros((lanes, len(bounds), p, q))
-        state_of = np.full(len(bounds) * q, -1)
-        for index, (start, end) in enumerate(bounds):
-            size = end - start
-            packed_a[:, index, :size, :size] = a[:, start:end, start:end]
-            packed_b[:, index, :size] = b[:, start:end]
-            packed_c[:, index, :, :size] = c[:, :, start:end]
-            state_of[index * q:index * q + size] = np.arange(start, end)
-        return (cls(max(len(bounds), 1), q),
-                tuple(np.ascontiguousarray(x) for x in (packed_a, packed_b, packed_c, d)),
-                state_of)
-
-
-def diagonal_blocks(nonzero: np.ndarray) -> list[tuple[int, int]]:
-    """The finest split of a square matrix's non-zero pattern ``nonzero`` (n, n) into
-    diagonal blocks [start, end): nothing couples the states of two blocks."""
-    n = nonzero.shape[0]
-    bounds, start = [], 0
-    for split in range(1, n + 1):
-        if split == n or not (nonzero[start:split, split:].any()
-                              or nonzero[split:, start:split].any()):
-            bounds.append((start, split))
-            start = split
-    return bounds
 
 
 @functools.cache

@@ -36,6 +36,7 @@ import numpy as np
 import scipy.linalg
 
 from haptic.common.model.teleop import TeleopModel
+from haptic.common.runtime.replayed_launch import ReplayedLaunch
 from haptic.master.sim.operator import OperatorModel, OperatorState
 
 AXES = ("x", "y")
@@ -249,7 +250,7 @@ class RigModel:
                                    *operator.buffers, sample], record_cmd=True)
         return RigState(plant.numpy(), applied.numpy(), grasp.numpy(), operator, rng,
                         target_m=target.numpy(), tool_force_N=tool_force.numpy(),
-                        noise_N=noise.numpy(), sample=sample.numpy(), kernel=launch,
+                        noise_N=noise.numpy(), sample=sample.numpy(), kernel=ReplayedLaunch(launch),
                         buffers=(target, tool_force, noise, plant, scratch, applied, grasp,
                                  sample))
 

@@ -33,6 +33,7 @@ from haptic.common.model.clay_contact import (
     COUPLING_STIFFNESS_N_PER_M,
     passivity_margin_N_s_per_m,
 )
+from haptic.common.runtime.replayed_launch import ReplayedLaunch
 from haptic.slave_sim.clay.clay_numpy import (
     ContactConstants,
     GeometryConstants,
@@ -402,7 +403,8 @@ class WarpClay(_ClayBase):
                               a["direction"], self._cc],
                       device=dev, record_cmd=True),
         ]
-        runtime: dict[str, Any] = {"launches": launches, "arrays": arrays}
+        runtime: dict[str, Any] = {"launches": [ReplayedLaunch(launch) for launch in launches],
+                                   "arrays": arrays}
         if dev == "cpu":  # zero-copy views on the CPU device
             runtime["host"] = {name: arrays[name].numpy() for name in self._INPUTS + self._OUTPUTS}
         else:

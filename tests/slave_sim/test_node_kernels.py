@@ -10,12 +10,12 @@ import pytest
 
 from haptic.common.config import load_config
 from haptic.common.config.scenario import load_scenario
+from haptic.common.model.block_layout import CompensatorLayout, diagonal_blocks
 from haptic.common.model.drift import DriftCoupling
 from haptic.common.model.lti import DiscreteLTI, Path, combine
 from haptic.common.model.teleop import model_from_config
 from haptic.lockstep.simulator import stacked_compensators
 from haptic.slave_sim.node import SlaveNode
-from haptic.slave_sim.node_kernels import CompensatorLayout, diagonal_blocks
 from haptic.slave_sim.tool import POSITION_COLUMNS, VELOCITY_COLUMNS, tool_constants
 
 LOW_M, HIGH_M = (-0.02, -0.015), (0.03, 0.012)
