@@ -289,6 +289,7 @@ class SlaveNode:
             port = None
         tool = state.tool
         shift = None
+        runtime.halted_count[0] = 0
         if port is None:
             runtime.step.launch()
             previous = runtime.motion[:, 0:2].copy()
@@ -302,8 +303,8 @@ class SlaveNode:
             tool[:, POSITION_COLUMNS] += shift
             runtime.move.launch()
         actuator = runtime.actuator.copy()
-        position = tool[:, POSITION_COLUMNS]
-        velocity = tool[:, VELOCITY_COLUMNS]
+        position = tool[:, 0::2].copy()  # POSITION_COLUMNS, as a slice (a faster copy)
+        velocity = tool[:, 1::2].copy()  # VELOCITY_COLUMNS
         result = self.environment.step(state.environment, previous, position, velocity,
                                        runtime.motion[:, 2:4].copy())
         if shift is not None:  # the drift moves the tool's base, slowly: the environment
@@ -311,7 +312,7 @@ class SlaveNode:
             # would otherwise charge the step after it was judged); the outputs the whole
             velocity = velocity + shift * self._inv_period_s
         force = result.force_N
-        if state.halted.any():
+        if runtime.halted_count[0]:
             force = force.copy()
             force[state.halted] = 0.0
         state.tool_force_N = force
@@ -431,27 +432,31 @@ class _NodeKernels:
         drift = wp.zeros((lanes, 4), dtype=f64, device=DEVICE)
         actuator = wp.zeros((lanes, 2), dtype=f64, device=DEVICE)
         halted = wp.zeros(lanes, dtype=wp.bool, device=DEVICE)
+        halted_count = wp.zeros(1, dtype=wp.int32, device=DEVICE)
         motion = wp.zeros((lanes, len(kernels.MOTION_COLUMNS)), dtype=f64, device=DEVICE)
         constants = node._constants
         actuate_args = [inputs, *compensator_matrices, per_lane, compensator, tool, drift,
                         actuator]
         self.step = ReplayedLaunch(wp.launch(step_kernel, dim=lanes, device=DEVICE,
-                              inputs=[*actuate_args, plant_a, plant_b, halted, motion,
-                                      constants], record_cmd=True))
+                              inputs=[*actuate_args, plant_a, plant_b, halted, halted_count,
+                                      motion, constants], record_cmd=True))
         self.actuate = ReplayedLaunch(wp.launch(actuator_kernel, dim=lanes, device=DEVICE,
                                  inputs=[*actuate_args, constants], record_cmd=True))
         self.move = ReplayedLaunch(wp.launch(kernels.slave_motion_kernel, dim=lanes, device=DEVICE,
-                              inputs=[plant_a, plant_b, tool, halted, actuator, motion,
-                                      constants], record_cmd=True))
+                              inputs=[plant_a, plant_b, tool, halted, halted_count, actuator,
+                                      motion, constants], record_cmd=True))
         #: (lanes, 8) the step's inputs (:data:`~haptic.slave_sim.node_kernels.INPUT_COLUMNS`)
         self.inputs = inputs.numpy()
         self.compensator = compensator.numpy()
         self.tool = tool.numpy()
         self.drift = drift.numpy()
         self.halted = halted.numpy()
+        #: (1,) the halted lanes of the last step (reset before each)
+        self.halted_count = halted_count.numpy()
         #: (lanes, 2) vt of the step, N
         self.actuator = actuator.numpy()
         #: (lanes, 4) the tool before the step (m) and its acceleration after it (m/s^2)
         self.motion = motion.numpy()
         # the Warp arrays own the memory the views and the launches use
-        self._buffers = (inputs, compensator, tool, drift, actuator, halted, motion)
+        self._buffers = (inputs, compensator, tool, drift, actuator, halted, halted_count,
+                         motion)

@@ -106,16 +106,19 @@ def motion_lane(
     plant_b: wp.array2d(dtype=wp.float64),
     tool: wp.array2d(dtype=wp.float64),
     halted: wp.array(dtype=wp.bool),
+    halted_count: wp.array(dtype=wp.int32),
     actuator: wp.array2d(dtype=wp.float64),
     motion: wp.array2d(dtype=wp.float64),
     constants: SlaveConstants,
 ):
-    """Stage 2 of one lane: the tool's step under ``actuator`` (zeroed where halted)."""
+    """Stage 2 of one lane: the tool's step under ``actuator`` (zeroed where halted; each
+    halted lane adds one to ``halted_count[0]``)."""
     zero = wp.float64(0.0)
     fx = actuator[lane, 0]
     fy = actuator[lane, 1]
     stopped = halted[lane]
     if stopped:
+        wp.atomic_add(halted_count, 0, 1)
         fx = zero
         fy = zero
         actuator[lane, 0] = zero
@@ -158,12 +161,14 @@ def slave_motion_kernel(
     plant_b: wp.array2d(dtype=wp.float64),
     tool: wp.array2d(dtype=wp.float64),
     halted: wp.array(dtype=wp.bool),
+    halted_count: wp.array(dtype=wp.int32),
     actuator: wp.array2d(dtype=wp.float64),
     motion: wp.array2d(dtype=wp.float64),
     constants: SlaveConstants,
 ):
     """Stage 2 for every lane (after the TDPA layer acted on ``actuator`` and ``tool``)."""
-    motion_lane(wp.tid(), plant_a, plant_b, tool, halted, actuator, motion, constants)
+    motion_lane(wp.tid(), plant_a, plant_b, tool, halted, halted_count, actuator, motion,
+                constants)
 
 
 @functools.cache
@@ -234,6 +239,7 @@ def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any]:
         plant_a: wp.array2d(dtype=wp.float64),
         plant_b: wp.array2d(dtype=wp.float64),
         halted: wp.array(dtype=wp.bool),
+        halted_count: wp.array(dtype=wp.int32),
         motion: wp.array2d(dtype=wp.float64),
         constants: SlaveConstants,
     ):
@@ -241,7 +247,8 @@ def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any]:
         lane = wp.tid()
         compensate(lane, inputs, comp_a, comp_b, comp_c, comp_d, per_lane_matrices,
                    compensator, tool, drift, actuator, constants)
-        motion_lane(lane, plant_a, plant_b, tool, halted, actuator, motion, constants)
+        motion_lane(lane, plant_a, plant_b, tool, halted, halted_count, actuator, motion,
+                    constants)
 
     @wp.kernel(module="unique")
     def slave_actuator_kernel(

@@ -92,6 +92,10 @@ def cut_kernel(
         wp.atomic_add(accumulators, lane, 1, weighted_sum)
 
 
+#: Columns of the yield kernel's ``result`` (lanes, 4).
+RESULT_COLUMNS = ("removed_volume_m3", "cutting", "engagement", "damping_N_s_per_m")
+
+
 @wp.struct
 class ContactConstants:
     """The proxy contact's constants: coupling stiffness (N/m) and damping (N s/m), sample
@@ -153,14 +157,27 @@ def yield_kernel(
     resistance: wp.array1d(dtype=wp.float64),
     direction: wp.array2d(dtype=wp.float64),
     cc: ContactConstants,
+    result: wp.array2d(dtype=wp.float64),
 ):
     """Each lane's clay resistance for the next step from this step's cut: c = B_eff e with
     e = min(1, dV / (A |dp|)); the move's direction is where the clay lies. No removal: no
-    resistance; a proxy that did not move keeps both."""
+    resistance; a proxy that did not move keeps both. Also the step's result per lane
+    (:data:`RESULT_COLUMNS`: removed volume m^3, cutting 1/0, engagement 0..1, the
+    removal-weighted damping N s/m), as ``_ClayBase._result`` computes it in numpy."""
     lane = wp.tid()
+    zero = wp.float64(0.0)
     dx = proxy[lane, 0] - proxy_prev[lane, 0]
     dy = proxy[lane, 1] - proxy_prev[lane, 1]
     step = wp.sqrt(dx * dx + dy * dy)
+    removed_volume = accumulators[lane, 0]
+    cutting = removed_volume > zero
+    result[lane, 0] = removed_volume
+    result[lane, 1] = wp.where(cutting, wp.float64(1.0), zero)
+    if step > cc.min_step:
+        result[lane, 2] = wp.min(removed_volume / (cc.reference_area * step), wp.float64(1.0))
+    else:
+        result[lane, 2] = wp.where(cutting, wp.float64(1.0), zero)
+    result[lane, 3] = wp.where(cutting, accumulators[lane, 1] / removed_volume, zero)
     if step > cc.min_step:
         removed = accumulators[lane, 0]
         if removed > wp.float64(0.0):

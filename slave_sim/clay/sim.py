@@ -124,6 +124,8 @@ class ClayState:
     resistance: Any = None
     direction: Any = None
     contact_ready: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    #: every lane's ``contact_ready`` is true (it never turns false again)
+    contact_all_ready: bool = False
     runtime: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -263,14 +265,15 @@ class _ClayBase:
         with velocity ``velocity_xy`` (lanes, 2), m/s at the new position. The proxy
         advances by the implicit contact law and cuts the clay on its way; a lane's first
         step places its proxy at ``previous_xy``."""
-        if not state.contact_ready.all():
-            state.place_proxy(previous_xy, ~state.contact_ready)
-        sums, force, before, after = self._advance(state, np.asarray(position_xy, float),
-                                                   np.asarray(velocity_xy, float))
-        return self._result(state, sums, before, after, force)
+        if not state.contact_all_ready:  # contact_ready only ever turns true
+            if not state.contact_ready.all():
+                state.place_proxy(previous_xy, ~state.contact_ready)
+            state.contact_all_ready = True
+        return self._advance(state, np.asarray(position_xy, float),
+                             np.asarray(velocity_xy, float))
 
     def _advance(self, state: ClayState, position_xy: np.ndarray, velocity_xy: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                 ) -> ClayStepResult:
         raise NotImplementedError
 
     def _result(self, state: ClayState, sums: np.ndarray, previous_xy: np.ndarray,
@@ -316,7 +319,7 @@ class NumpyClay(_ClayBase):
         return state
 
     def _advance(self, state: ClayState, position_xy: np.ndarray, velocity_xy: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                 ) -> ClayStepResult:
         force = np.zeros((state.lanes, 2))
         proxy_numpy(position_xy, velocity_xy, state.proxy, state.proxy_prev, state.resistance,
                     state.direction, force, self.contact)
@@ -324,7 +327,7 @@ class NumpyClay(_ClayBase):
                          self.geometry)
         yield_numpy(state.proxy, state.proxy_prev, sums, state.resistance, state.direction,
                     self.contact)
-        return sums, force, state.proxy_prev.copy(), state.proxy.copy()
+        return self._result(state, sums, state.proxy_prev.copy(), state.proxy.copy(), force)
 
 
 class WarpClay(_ClayBase):
@@ -370,7 +373,7 @@ class WarpClay(_ClayBase):
 
     #: Arrays copied in (CUDA) before the launches, and out after them.
     _INPUTS = ("tool", "velocity")
-    _OUTPUTS = ("force", "sums", "proxy", "proxy_prev")
+    _OUTPUTS = ("force", "proxy", "result")
 
     def initial_state(self, lanes: int = 1) -> ClayState:
         """Fresh workpieces for ``lanes`` lanes, and the recorded launches that cut them."""
@@ -380,9 +383,10 @@ class WarpClay(_ClayBase):
                            dtype=wp.float64, device=dev)
         damping = wp.array(np.repeat(self.workpiece.block_damping_N_s_per_m[None], lanes, axis=0),
                            dtype=wp.float64, device=dev)
-        arrays = {name: wp.zeros((lanes, 2), dtype=wp.float64, device=dev)
+        columns = {"result": len(self._kernels.RESULT_COLUMNS)}  # (lanes, 2) otherwise
+        arrays = {name: wp.zeros((lanes, columns.get(name, 2)), dtype=wp.float64, device=dev)
                   for name in ("tool", "velocity", "force", "sums", "proxy", "proxy_prev",
-                               "direction")}
+                               "direction", "result")}
         resistance = wp.zeros(lanes, dtype=wp.float64, device=dev)
         state = self._new_state(lanes, heights, damping)
         state.proxy, state.proxy_prev = arrays["proxy"], arrays["proxy_prev"]
@@ -400,7 +404,7 @@ class WarpClay(_ClayBase):
                       device=dev, record_cmd=True),
             wp.launch(k.yield_kernel, dim=lanes,
                       inputs=[a["proxy"], a["proxy_prev"], a["sums"], resistance,
-                              a["direction"], self._cc],
+                              a["direction"], self._cc, a["result"]],
                       device=dev, record_cmd=True),
         ]
         runtime: dict[str, Any] = {"launches": [ReplayedLaunch(launch) for launch in launches],
@@ -408,15 +412,15 @@ class WarpClay(_ClayBase):
         if dev == "cpu":  # zero-copy views on the CPU device
             runtime["host"] = {name: arrays[name].numpy() for name in self._INPUTS + self._OUTPUTS}
         else:
-            runtime["pinned"] = {name: wp.zeros((lanes, 2), dtype=wp.float64, device="cpu",
-                                                pinned=True)
+            runtime["pinned"] = {name: wp.zeros((lanes, columns.get(name, 2)),
+                                                dtype=wp.float64, device="cpu", pinned=True)
                                  for name in self._INPUTS + self._OUTPUTS}
             runtime["host"] = {name: array.numpy() for name, array in runtime["pinned"].items()}
         state.runtime = runtime
         return state
 
     def _advance(self, state: ClayState, position_xy: np.ndarray, velocity_xy: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                 ) -> ClayStepResult:
         rt = state.runtime
         host = rt["host"]
         host["tool"][...] = position_xy
@@ -433,7 +437,11 @@ class WarpClay(_ClayBase):
             for name in self._OUTPUTS:
                 wp.copy(rt["pinned"][name], rt["arrays"][name])
             wp.synchronize_device(self.device)
-        return host["sums"], host["force"], host["proxy_prev"].copy(), host["proxy"].copy()
+        result = host["result"]  # the yield kernel's bookkeeping (numpy's: _result)
+        removed = result[:, 0].copy()
+        state.removed_total_m3 += removed
+        return ClayStepResult(host["force"].copy(), result[:, 1] > 0.0, result[:, 2].copy(),
+                              removed, result[:, 3].copy(), host["proxy"].copy())
 
 
 def make_clay(scenario: Scenario, sample_period_s: float, impl: str = "warp",

@@ -166,14 +166,10 @@ def test_cut_across_two_blocks_weights_the_damping_by_removal(scenario, impl) ->
     assert result.removed_volume_m3[0] == pytest.approx(volume_a + volume_b, rel=1e-12)
 
 
-def test_result_engagement_and_damping_by_hand(scenario) -> None:
-    """The step's bookkeeping on hand-made sums: lanes 0..5."""
-    clay = NumpyClay(scenario, SAMPLE_PERIOD_S)
-    area = clay.reference_area_m2
-    assert area == pytest.approx(2 * 0.005 * 0.003, rel=1e-12)
-    lanes = 6
-    state = clay.initial_state(lanes)
-    before = np.zeros((lanes, 2))
+def _hand_made_steps(area: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Six lanes' proxy moves (before, after) (6, 2), m, and cut sums (6, 2): removed m^3,
+    damping-weighted m^3 N s/m, for the step's bookkeeping."""
+    before = np.zeros((6, 2))
     after = np.array([
         [3e-4, 4e-4],  # diagonal, 0.5 mm: half the reference cut
         [3e-4, -4e-4],  # diagonal the other way: three reference cuts, capped at 1
@@ -187,7 +183,18 @@ def test_result_engagement_and_damping_by_hand(scenario) -> None:
     removed = np.array([volume_a + volume_b, 3 * area * 5e-4, 1e-20, 0.0, 1e-30, 0.0])
     weighted = np.array([100.0 * volume_a + 40.0 * volume_b, 60.0 * removed[1],
                          80.0 * 1e-20, 0.0, 20.0 * 1e-30, 0.0])
-    sums = np.stack([removed, weighted], axis=1)
+    return before, after, np.stack([removed, weighted], axis=1)
+
+
+def test_result_engagement_and_damping_by_hand(scenario) -> None:
+    """The step's bookkeeping on hand-made sums: lanes 0..5."""
+    clay = NumpyClay(scenario, SAMPLE_PERIOD_S)
+    area = clay.reference_area_m2
+    assert area == pytest.approx(2 * 0.005 * 0.003, rel=1e-12)
+    lanes = 6
+    state = clay.initial_state(lanes)
+    before, after, sums = _hand_made_steps(area)
+    removed = sums[:, 0]
     force = np.arange(2 * lanes, dtype=float).reshape(lanes, 2)
     result = clay._result(state, sums, before, after, force)
     np.testing.assert_array_equal(result.cutting, [True, True, True, False, True, False])
@@ -200,6 +207,27 @@ def test_result_engagement_and_damping_by_hand(scenario) -> None:
     np.testing.assert_array_equal(result.proxy_position_m, after)
     with pytest.raises(dataclasses.FrozenInstanceError):
         result.engagement = np.ones(lanes)  # type: ignore[misc]
+
+
+def test_the_warp_yield_kernel_keeps_the_books_numpy_keeps(scenario) -> None:
+    """The Warp clay's bookkeeping runs in its yield kernel: on the hand-made steps its
+    result columns are numpy's (``_result``), bit for bit."""
+    reference = NumpyClay(scenario, SAMPLE_PERIOD_S)
+    clay = WarpClay(scenario, SAMPLE_PERIOD_S, device="cpu")
+    before, after, sums = _hand_made_steps(clay.reference_area_m2)
+    expected = reference._result(reference.initial_state(6), sums, before, after,
+                                 np.zeros((6, 2)))
+    state = clay.initial_state(6)
+    arrays = state.runtime["arrays"]
+    arrays["proxy_prev"].numpy()[...] = before
+    arrays["proxy"].numpy()[...] = after
+    arrays["sums"].numpy()[...] = sums
+    state.runtime["launches"][2].launch()  # the yield kernel alone
+    result = state.runtime["host"]["result"]
+    np.testing.assert_array_equal(result[:, 0], expected.removed_volume_m3)
+    np.testing.assert_array_equal(result[:, 1] > 0.0, expected.cutting)
+    np.testing.assert_array_equal(result[:, 2], expected.engagement)
+    np.testing.assert_array_equal(result[:, 3], expected.damping_N_s_per_m)
 
 
 def test_a_steady_diagonal_shallow_cut_has_partial_engagement(scenario, impl) -> None:
