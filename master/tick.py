@@ -313,14 +313,18 @@ class MasterTick:
         state = self.state
         if tool_force_N is None:
             tool_force_N = self._tool_force
-        if state is not None and enabled.any():
+        if self.lanes == 1:  # the program's lane: Python scalars are cheaper than numpy calls
+            any_on = all_on = bool(enabled[0])
+        else:
+            any_on, all_on = bool(enabled.any()), bool(enabled.all())
+        if state is not None and any_on:
             inputs = state.inputs
             inputs[:, 0:2] = handle_force_N
             inputs[:, 2:4] = handle_position_m
             inputs[:, 4:6] = tool_force_N
             events_before = len(state.events)
             self.node.step_inputs(state)
-            if enabled.all():
+            if all_on:
                 self._command[...] = state.command_m
                 self._handle_used[...] = state.handle_force_used_N
                 self._tool_used[...] = state.tool_force_used_N
@@ -334,9 +338,10 @@ class MasterTick:
                 self._tool_used[...] = np.where(enabled[:, None], state.tool_force_used_N, 0.0)
                 self._scale[...] = np.where(enabled, state.force_scale, 0.0)
             faulted = state.faulted
-            for lane in np.flatnonzero(enabled & faulted):
-                self.supervisors[lane].note_node_fault()
-                self._steady[lane] = False
+            if self.lanes > 1 or faulted[0]:
+                for lane in np.flatnonzero(enabled & faulted):
+                    self.supervisors[lane].note_node_fault()
+                    self._steady[lane] = False
         else:
             self._handle_used[...] = 0.0
             self._tool_used[...] = 0.0

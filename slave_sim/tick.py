@@ -217,14 +217,12 @@ class SlaveTick:
             follow.append(supervisors[lane].receive(message if admitted else None))
         fresh = self.fresh
         fresh[...] = False
-        if admitted_lanes:
-            fresh[admitted_lanes] = True
-            self.handle_force_N[admitted_lanes] = [guards[lane].force_N  # bounded
-                                                   for lane in admitted_lanes]
-            self.handle_position_m[admitted_lanes] = [guards[lane].position_m
-                                                      for lane in admitted_lanes]
+        if admitted_lanes:  # lane by lane: the program's one lane takes scalar writes
             gain = self._gain
             for lane in admitted_lanes:
+                fresh[lane] = True
+                self.handle_force_N[lane] = guards[lane].force_N  # bounded
+                self.handle_position_m[lane] = guards[lane].position_m
                 message = messages[lane]
                 self.echo_send_time_ns[lane] = message.send_time_ns
                 self.force_scale[lane] = message.force_scale
@@ -238,17 +236,18 @@ class SlaveTick:
                              None if all(follow) else np.array(follow))
         tool = state.tool[:, 0::2].tolist()  # (x, y) per lane, floats
         fresh_list = fresh.tolist()
-        transitions = [
-            supervisor.update(now_s, fresh_list[lane], tool[lane],
-                              0.0 if silence_s is None else silence_s[lane],
-                              True if peer_alive is None else peer_alive[lane],
-                              guards[lane].faulted)
-            for lane, supervisor in enumerate(supervisors)]
-        self.running[...] = [supervisor.running for supervisor in supervisors]
-        self._ready[...] = [supervisor.ready for supervisor in supervisors]
-        self._outside[...] = [supervisor.outside for supervisor in supervisors]
-        resume = [transition is Transition.RESUME for transition in transitions]
-        stop = [transition is Transition.STOP for transition in transitions]
+        running, ready, outside = self.running, self._ready, self._outside
+        resume, stop = [], []
+        for lane, supervisor in enumerate(supervisors):
+            transition = supervisor.update(now_s, fresh_list[lane], tool[lane],
+                                           0.0 if silence_s is None else silence_s[lane],
+                                           True if peer_alive is None else peer_alive[lane],
+                                           guards[lane].faulted)
+            running[lane] = supervisor.running
+            ready[lane] = supervisor.ready
+            outside[lane] = supervisor.outside
+            resume.append(transition is Transition.RESUME)
+            stop.append(transition is Transition.STOP)
         if any(resume):
             self.node.resume(state, None if all(resume) else np.array(resume))
         if any(stop):
@@ -424,7 +423,9 @@ class SlaveTick:
         """The node stage: Ch2/Ct2, the tool and the environment, with the bounded handle
         force where the tool runs and zero force elsewhere."""
         running = self.running
-        if running.all():
+        if self.lanes == 1:  # the program's lane: Python scalars are cheaper than numpy calls
+            force = self.handle_force_N if running[0] else self._zero_force
+        elif running.all():
             force = self.handle_force_N
         elif not running.any():
             force = self._zero_force
