@@ -49,7 +49,7 @@ from haptic.common.runtime.runner import StopSignals
 from haptic.common.runtime.runner_config import place_other_threads
 from haptic.common.runtime.stage_times import StageTimes
 from haptic.common.wire.link import Link
-from haptic.common.wire.messages import Flags
+from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags
 from haptic.common.wire.passivity_link import PassivityLink
 from haptic.master.governor_setup import governor_step
 from haptic.master.hardware.interface import HandleHardware, HardwareError
@@ -213,6 +213,7 @@ def _run_linked_master(
                 # layer's run-time switch is Flags.TDPA_SWITCHED, master/tick.py)
                 tdpa_peer = PassivityLink(node.passivity is not None
                                           and not node.passivity_standby)
+                tdpa_flag_value = int(tdpa_peer.flags)  # or'ed as ints: one lookup a tick
 
                 def step(tick: int, now_ns: int) -> None:
                     nonlocal reading
@@ -285,7 +286,9 @@ def _run_linked_master(
                     write_ns = clock()
                     # send: the force the compensator used and the handle position
                     loop.last_yh = position_for_the_wire((yhx, yhy), loop.last_yh)
-                    link.send_handle(sent, loop.last_yh, used.flags[0] | tdpa_peer.flags, gain_k,
+                    link.send_handle(sent, loop.last_yh,
+                                     FLAGS_BY_VALUE[int(used.flag_values[0]) | tdpa_flag_value],
+                                     gain_k,
                                      tdpa_peer.sent_J(tick_stages.state),
                                      float(used.force_scale[0]))
                     send_ns = clock()

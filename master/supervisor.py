@@ -110,7 +110,7 @@ class MasterSupervisor:
         """The slave reports its forces enabled and its tool is at Ah1 yh within the
         tolerance on both axes."""
         tool = self.tool
-        if tool is None or Flags.FORCES_ENABLED not in tool.flags:
+        if tool is None or not int(tool.flags) & _FORCES_ENABLED:
             return False
         tool_x_m, tool_y_m = tool.tool_position_m
         tolerance = self.sync_tolerance_m
@@ -134,11 +134,11 @@ class MasterSupervisor:
         if self._await_sync and not input_fault and synced:
             self._await_sync = False
         tool = self.tool
-        work_area_stop = tool is not None and Flags.WORK_AREA_STOP in tool.flags
+        flags = 0 if tool is None else int(tool.flags)  # int arithmetic: IntFlag's costs 1 us
+        work_area_stop = bool(flags & _WORK_AREA_STOP)
         # the slave stopped its tool while this side applies forces (its watchdog, an input
         # fault): FORCES_ENABLED gone from its messages
-        slave_stopped = (tool is not None and self.enabled
-                         and Flags.FORCES_ENABLED not in tool.flags)
+        slave_stopped = tool is not None and self.enabled and not flags & _FORCES_ENABLED
         peer_stop = work_area_stop or slave_stopped
         if peer_stop and not self._await_peer:
             self._await_peer = True

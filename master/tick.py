@@ -168,18 +168,19 @@ class MasterTick:
                               0.0 if silence_s is None else silence_s[lane],
                               True if peer_alive is None else peer_alive[lane])
             for lane, supervisor in enumerate(supervisors)]
-        self.enabled[...] = [supervisor.enabled for supervisor in supervisors]
+        enabled = self.enabled
         for lane, supervisor in enumerate(supervisors):
+            enabled[lane] = supervisor.enabled
             tool = supervisor.tool
             if tool is not None:
                 self._tool_force[lane] = tool.tool_force_N
             if transitions[lane] is Transition.HOLD:
                 self._hold[lane] = supervisor.hold_m
         self._columns_current = False
-        activate = np.array([t is Transition.ACTIVATE for t in transitions])
-        resume = np.array([t is Transition.RESUME for t in transitions])
-        if activate.any() or resume.any():
-            self._renew(now_s, np.nan_to_num(position), activate, resume)
+        activate = [t is Transition.ACTIVATE for t in transitions]
+        resume = [t is Transition.RESUME for t in transitions]
+        if any(activate) or any(resume):
+            self._renew(now_s, np.nan_to_num(position), np.array(activate), np.array(resume))
         return transitions
 
     def supervise_columns(self, now_s: float, messages: ToolColumns,

@@ -283,7 +283,8 @@ class SlaveNode:
         inputs[:, 6] = 1.0 if state.tool_force_scale is None else state.tool_force_scale
         inputs[:, 7] = 1.0 if state.gain_ratio is None else state.gain_ratio
         port = state.passivity
-        if port is not None and not port.active.any():  # on standby: the paper's scheme
+        if port is not None and not (bool(port.active[0]) if runtime.lanes == 1
+                                     else port.active.any()):  # on standby: the paper's scheme
             if peer_energy_J is not None:
                 port.receive(peer_energy_J)  # noted, not credited: counters stay monotone
             port = None
@@ -445,6 +446,7 @@ class _NodeKernels:
         self.move = ReplayedLaunch(wp.launch(kernels.slave_motion_kernel, dim=lanes, device=DEVICE,
                               inputs=[plant_a, plant_b, tool, halted, halted_count, actuator,
                                       motion, constants], record_cmd=True))
+        self.lanes = lanes
         #: (lanes, 8) the step's inputs (:data:`~haptic.slave_sim.node_kernels.INPUT_COLUMNS`)
         self.inputs = inputs.numpy()
         self.compensator = compensator.numpy()

@@ -47,7 +47,7 @@ from haptic.common.runtime.program_harness import ProgramHarness, recording_for
 from haptic.common.runtime.runner import StopSignals
 from haptic.common.runtime.stage_times import StageTimes
 from haptic.common.wire.link import Link
-from haptic.common.wire.messages import Flags
+from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags
 from haptic.common.wire.passivity_link import PassivityLink
 from haptic.common.wire.phase_lock import PhaseLock, PhaseLockSettings
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
@@ -226,6 +226,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         # energy_J on the wire; the TDPA flag says the configured mode (in paper mode the
         # layer waits on standby for the master's Flags.TDPA_SWITCHED: slave_sim/tick.py)
         tdpa_peer = PassivityLink(node.passivity is not None and not node.passivity_standby)
+        tdpa_flag_value = int(tdpa_peer.flags)  # the flags' values or'ed, one lookup a tick
 
         def step(tick: int, now_ns: int) -> None:
             now_s = harness.time_s(now_ns)
@@ -277,7 +278,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             # send: the tool force, position and velocity, the clay's status
             link.send_tool((float(ft[0]), float(ft[1])), (float(position[0]), float(position[1])),
                            (float(velocity[0]), float(velocity[1])), engagement, removed,
-                           ticked.flags[0] | tdpa_peer.flags, int(echo[0]),
+                           FLAGS_BY_VALUE[int(ticked.flag_values[0]) | tdpa_flag_value],
+                           int(echo[0]),
                            tdpa_peer.sent_J(state))
             send_ns = clock()
             # telemetry: summary figures, trace, recording, display

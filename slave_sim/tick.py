@@ -382,7 +382,7 @@ class SlaveTick:
             return
         active = port.active
         for lane in admitted_lanes:
-            on = bool(messages[lane].flags & Flags.TDPA_SWITCHED)
+            on = bool(int(messages[lane].flags) & _TDPA_SWITCHED)
             if on != bool(active[lane]):
                 self._switch(now_s, lane, on)
 

@@ -104,6 +104,12 @@ class Flags(enum.IntFlag):
 FLAGS_BY_VALUE = {value: Flags(value) for value in range(2 * max(Flags))}
 
 
+def _flags_of(value: int) -> Flags:
+    """``Flags(value)``, looked up where it can be (a decoded message's flags, every tick)."""
+    flags = FLAGS_BY_VALUE.get(value)
+    return Flags(value) if flags is None else flags
+
+
 class DropReason(enum.StrEnum):
     """Why a received message was dropped; each has its own counter in the link statistics."""
 
@@ -316,7 +322,7 @@ def decode(payload: bytes, expected_kind: int) -> Message:
         if not 0.0 <= v[6] <= 1.0:
             raise DecodeError(DropReason.MALFORMED, f"force_scale {v[6]} outside 0..1")
         return HandleState(
-            epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3]), v[4],
+            epoch, seq, send_time_ns, _flags_of(flags), (v[0], v[1]), (v[2], v[3]), v[4],
             energy_J=v[5], force_scale=v[6],
         )
     if len(body) != _TOOL_VALUES:
@@ -332,16 +338,19 @@ def decode(payload: bytes, expected_kind: int) -> Message:
     if v[8] < 0.0:
         raise DecodeError(DropReason.MALFORMED, f"energy_J {v[8]} is negative")
     return ToolState(
-        epoch, seq, send_time_ns, Flags(flags), (v[0], v[1]), (v[2], v[3]), (v[4], v[5]),
+        epoch, seq, send_time_ns, _flags_of(flags), (v[0], v[1]), (v[2], v[3]), (v[4], v[5]),
         v[6], v[7], echo, energy_J=v[8],
     )
+
+
+_TDPA = int(Flags.TDPA)
 
 
 def control_mismatch(own_mode: str, message: Message) -> str | None:
     """Why a peer's message shows it runs another control mode than ``own_mode`` ("paper"
     or "tdpa"), or None: a tdpa side paired with a paper side would wait for energy that
     never comes (and a paper side would ignore it), so the programs refuse the pairing."""
-    peer = "tdpa" if message.flags & Flags.TDPA else "paper"
+    peer = "tdpa" if int(message.flags) & _TDPA else "paper"
     if peer == own_mode:
         return None
     return (f"the peer runs [control] mode = \"{peer}\", this side \"{own_mode}\"; "
