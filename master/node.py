@@ -177,7 +177,6 @@ class MasterNode:
             "command clamped to the workspace")
         # Load (or compile, about 2 s the first time) the kernel now, never inside a tick.
         self._kernel_constants()
-        _warp().load_module(kernels, device=DEVICE)
         _warp().load_module(kernels.step_kernel(self._layout).module, device=DEVICE)
         if passivity is not None:
             _warp().load_module(passivity_kernel, device=DEVICE)

@@ -176,8 +176,9 @@ class SlaveNode:
                                             device)
         self._kernel_matrices: tuple[Any, tuple, int, Any] | None = None
         self._constants = self._kernel_constants(mass, damping, stiffness)
-        # Load (or compile, a few s the first time) the kernels now, never inside a tick.
-        _warp().load_module(kernels, device=DEVICE)
+        # Load (or compile, a few s the first time) the kernels now, never inside a tick
+        # (a lockstep that replaces the compensators loads its layout's at initial_state).
+        _warp().load_module(kernels.step_kernels(self._matrices()[3])[0].module, device=DEVICE)
 
     def _kernel_constants(self, mass: np.ndarray, damping: np.ndarray,
                           stiffness: np.ndarray) -> Any:
@@ -421,7 +422,7 @@ class _NodeKernels:
     def __init__(self, node: SlaveNode, lanes: int) -> None:
         wp = _warp()
         compensator_matrices, (plant_a, plant_b), per_lane, layout = node._matrices()
-        step_kernel, actuator_kernel = kernels.step_kernels(layout)
+        step_kernel, actuator_kernel, motion_kernel = kernels.step_kernels(layout)
         if per_lane and compensator_matrices[0].shape[0] != lanes:
             raise ValueError(f"compensators stacked for {compensator_matrices[0].shape[0]} "
                              f"lanes, started with {lanes}")
@@ -443,7 +444,7 @@ class _NodeKernels:
                                       motion, constants], record_cmd=True))
         self.actuate = ReplayedLaunch(wp.launch(actuator_kernel, dim=lanes, device=DEVICE,
                                  inputs=[*actuate_args, constants], record_cmd=True))
-        self.move = ReplayedLaunch(wp.launch(kernels.slave_motion_kernel, dim=lanes, device=DEVICE,
+        self.move = ReplayedLaunch(wp.launch(motion_kernel, dim=lanes, device=DEVICE,
                               inputs=[plant_a, plant_b, tool, halted, halted_count, actuator,
                                       motion, constants], record_cmd=True))
         self.lanes = lanes

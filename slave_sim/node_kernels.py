@@ -155,30 +155,15 @@ def motion_lane(
                        - constants.stiffness_y_N_per_m * s2) * constants.inv_mass_y_per_kg
 
 
-@wp.kernel
-def slave_motion_kernel(
-    plant_a: wp.array2d(dtype=wp.float64),
-    plant_b: wp.array2d(dtype=wp.float64),
-    tool: wp.array2d(dtype=wp.float64),
-    halted: wp.array(dtype=wp.bool),
-    halted_count: wp.array(dtype=wp.int32),
-    actuator: wp.array2d(dtype=wp.float64),
-    motion: wp.array2d(dtype=wp.float64),
-    constants: SlaveConstants,
-):
-    """Stage 2 for every lane (after the TDPA layer acted on ``actuator`` and ``tool``)."""
-    motion_lane(wp.tid(), plant_a, plant_b, tool, halted, halted_count, actuator, motion,
-                constants)
-
-
 @functools.cache
-def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any]:
-    """The kernels compiled for ``layout``: (both stages, stage 1 alone), each in its own Warp
-    module (compiled once per layout and cached on disk)."""
+def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any, Any]:
+    """The kernels compiled for ``layout``: (both stages, stage 1 alone, stage 2 alone), in
+    one Warp module of their own (one compile per layout, cached on disk)."""
     blocks, q = layout.blocks, layout.block_states
     block_vector = wp.types.vector(length=q, dtype=wp.float64)
+    module = f"{__name__}.layout_{blocks}x{q}"
 
-    @wp.func(module="unique")
+    @wp.func(module=module)
     def compensate(
         lane: int,
         inputs: wp.array2d(dtype=wp.float64),
@@ -224,7 +209,7 @@ def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any]:
         actuator[lane, 0] = out_x
         actuator[lane, 1] = out_y
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module=module)
     def slave_step_kernel(
         inputs: wp.array2d(dtype=wp.float64),
         comp_a: wp.array4d(dtype=wp.float64),
@@ -250,7 +235,7 @@ def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any]:
         motion_lane(lane, plant_a, plant_b, tool, halted, halted_count, actuator, motion,
                     constants)
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module=module)
     def slave_actuator_kernel(
         inputs: wp.array2d(dtype=wp.float64),
         comp_a: wp.array4d(dtype=wp.float64),
@@ -268,4 +253,19 @@ def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any]:
         compensate(wp.tid(), inputs, comp_a, comp_b, comp_c, comp_d, per_lane_matrices,
                    compensator, tool, drift, actuator, constants)
 
-    return slave_step_kernel, slave_actuator_kernel
+    @wp.kernel(module=module)
+    def slave_motion_kernel(
+        plant_a: wp.array2d(dtype=wp.float64),
+        plant_b: wp.array2d(dtype=wp.float64),
+        tool: wp.array2d(dtype=wp.float64),
+        halted: wp.array(dtype=wp.bool),
+        halted_count: wp.array(dtype=wp.int32),
+        actuator: wp.array2d(dtype=wp.float64),
+        motion: wp.array2d(dtype=wp.float64),
+        constants: SlaveConstants,
+    ):
+        """Stage 2 for every lane (after the TDPA layer acted on ``actuator`` and ``tool``)."""
+        motion_lane(wp.tid(), plant_a, plant_b, tool, halted, halted_count, actuator, motion,
+                    constants)
+
+    return slave_step_kernel, slave_actuator_kernel, slave_motion_kernel
