@@ -21,6 +21,7 @@ from typing import Any
 
 import warp as wp
 
+from haptic.common.model.block_kernels import block_step
 from haptic.common.model.block_layout import CompensatorLayout
 
 # The programs print JSON on stdout: Warp must not announce itself there (its struct
@@ -78,8 +79,7 @@ def step_kernel(layout: CompensatorLayout) -> Any:
     """The node's kernel compiled for the compensator's block layout
     (:class:`~haptic.common.model.block_layout.CompensatorLayout`), in its own Warp module
     (compiled once per layout and cached on disk)."""
-    blocks, q = layout.blocks, layout.block_states
-    block_vector = wp.types.vector(length=q, dtype=wp.float64)
+    compensator_step = block_step(layout)  # common/model/block_kernels.py
 
     @wp.kernel(module="unique")
     def master_step_kernel(
@@ -238,25 +238,10 @@ def step_kernel(layout: CompensatorLayout) -> Any:
         c1 = g * u1
         c2 = g * u2
         c3 = g * u3
-        m = lane * per_lane_matrices
-        out_x = comp_d[m, 0, 0] * c0 + comp_d[m, 0, 1] * c1 + comp_d[m, 0, 2] * c2 + (
-            comp_d[m, 0, 3] * c3)
-        out_y = comp_d[m, 1, 0] * c0 + comp_d[m, 1, 1] * c1 + comp_d[m, 1, 2] * c2 + (
-            comp_d[m, 1, 3] * c3)
-        for block in range(blocks):  # block by block, every loop unrolled (block_layout.py)
-            x = block_vector()
-            for j in range(q):
-                x[j] = compensator[lane, block * q + j]
-            for j in range(q):
-                out_x += comp_c[m, block, 0, j] * x[j]
-                out_y += comp_c[m, block, 1, j] * x[j]
-            if healthy:
-                for i in range(q):
-                    acc = comp_b[m, block, i, 0] * c0 + comp_b[m, block, i, 1] * c1 + (
-                        comp_b[m, block, i, 2] * c2) + comp_b[m, block, i, 3] * c3
-                    for j in range(q):
-                        acc += comp_a[m, block, i, j] * x[j]
-                    compensator[lane, block * q + i] = acc
+        out = compensator_step(lane, wp.vec4d(c0, c1, c2, c3), comp_a, comp_b, comp_c,
+                               comp_d, lane * per_lane_matrices, compensator, healthy)
+        out_x = out[0]
+        out_y = out[1]
         raw_x = origin[lane, 0] + out_x
         raw_y = origin[lane, 1] + out_y
 

@@ -28,6 +28,7 @@ from typing import Any
 
 import warp as wp
 
+from haptic.common.model.block_kernels import block_step
 from haptic.common.model.block_layout import CompensatorLayout
 
 # The programs print JSON on stdout: Warp must not announce itself there.
@@ -159,9 +160,8 @@ def motion_lane(
 def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any, Any]:
     """The kernels compiled for ``layout``: (both stages, stage 1 alone, stage 2 alone), in
     one Warp module of their own (one compile per layout, cached on disk)."""
-    blocks, q = layout.blocks, layout.block_states
-    block_vector = wp.types.vector(length=q, dtype=wp.float64)
-    module = f"{__name__}.layout_{blocks}x{q}"
+    compensator_step = block_step(layout)
+    module = f"{__name__}.layout_{layout.blocks}x{layout.block_states}"
 
     @wp.func(module=module)
     def compensate(
@@ -179,29 +179,15 @@ def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any, Any]:
         constants: SlaveConstants,
     ):
         """Stage 1 of one lane: the compensators' vt (and the drift coupling) into
-        ``actuator``; y = C x + D u, x' = A x + B u, block by block."""
+        ``actuator`` (common/model/block_kernels.py: y = C x + D u, x' = A x + B u)."""
         scale = inputs[lane, 6]
         gain = inputs[lane, 7]
         u = wp.vec4d(inputs[lane, 0] * gain, inputs[lane, 1] * gain,
                      (inputs[lane, 4] * scale) * gain, (inputs[lane, 5] * scale) * gain)
-        m = lane * per_lane_matrices
-        out_x = comp_d[m, 0, 0] * u[0] + comp_d[m, 0, 1] * u[1] + comp_d[m, 0, 2] * u[2] + (
-            comp_d[m, 0, 3] * u[3])
-        out_y = comp_d[m, 1, 0] * u[0] + comp_d[m, 1, 1] * u[1] + comp_d[m, 1, 2] * u[2] + (
-            comp_d[m, 1, 3] * u[3])
-        for block in range(blocks):
-            x = block_vector()
-            for j in range(q):
-                x[j] = compensator[lane, block * q + j]
-            for j in range(q):
-                out_x += comp_c[m, block, 0, j] * x[j]
-                out_y += comp_c[m, block, 1, j] * x[j]
-            for i in range(q):
-                acc = comp_b[m, block, i, 0] * u[0] + comp_b[m, block, i, 1] * u[1] + (
-                    comp_b[m, block, i, 2] * u[2]) + comp_b[m, block, i, 3] * u[3]
-                for j in range(q):
-                    acc += comp_a[m, block, i, j] * x[j]
-                compensator[lane, block * q + i] = acc
+        out = compensator_step(lane, u, comp_a, comp_b, comp_c, comp_d,
+                               lane * per_lane_matrices, compensator, True)
+        out_x = out[0]
+        out_y = out[1]
         if constants.drift_on != 0:
             coupling = drift_force(lane, inputs, tool, drift, constants)
             out_x += coupling[0]
