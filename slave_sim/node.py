@@ -166,10 +166,7 @@ class SlaveNode:
         self.compensators = slave_compensators(model)
         self.plant = tool_plant(model)
         mass, damping, stiffness = tool_constants(model)
-        self._inv_mass = 1.0 / mass
         self._inv_period_s = 1.0 / model.sample_period_s
-        self._damping = damping
-        self._stiffness = stiffness
         self._position_ratio = np.array([a.position_ratio_ah1 for a in model.axes])
         self.environment_kind = environment or scenario.environment
         self.environment = make_environment(self.environment_kind, model, scenario, clay_impl,
@@ -189,9 +186,7 @@ class SlaveNode:
         drift = self.drift
         constants.drift_on = int(drift is not None)
         if drift is not None:
-            wt = drift.bandwidth_rad_s * drift.period_s
-            constants.drift_a = (2.0 - wt) / (2.0 + wt)
-            constants.drift_b = wt / (2.0 + wt)
+            constants.drift_a, constants.drift_b = drift.coefficients()
             constants.drift_stiffness_N_per_m = drift.stiffness_N_per_m
         constants.bounds_on = int(self.tool_bounds_m is not None)
         if self.tool_bounds_m is not None:

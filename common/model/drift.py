@@ -32,11 +32,15 @@ class DriftCoupling:
         """The filter's state (lanes, 4): the last output (x, y) and the last input (x, y)."""
         return np.zeros((lanes, 4))
 
+    def coefficients(self) -> tuple[float, float]:
+        """The Tustin low-pass's (a, b): y = a y' + b (x + x') (also the slave's kernel's)."""
+        wt = self.bandwidth_rad_s * self.period_s
+        return (2.0 - wt) / (2.0 + wt), wt / (2.0 + wt)
+
     def force(self, state: np.ndarray, gap_m: np.ndarray) -> np.ndarray:
         """The spring force (lanes, 2), N, for the gap ``Ah1 yh_recv - yt`` (lanes, 2), m;
         advances ``state`` in place (Tustin: y = a y' + b (x + x'))."""
-        wt = self.bandwidth_rad_s * self.period_s
-        a, b = (2.0 - wt) / (2.0 + wt), wt / (2.0 + wt)
+        a, b = self.coefficients()
         gap = np.nan_to_num(gap_m)
         filtered = a * state[:, 0:2] + b * (gap + state[:, 2:4])
         state[:, 0:2] = filtered
