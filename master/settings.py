@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ipaddress
+import math
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -64,6 +65,18 @@ class CanSettings:
     def metres_from_counts(self, counts: np.ndarray) -> np.ndarray:
         """Positions in m for encoder counts."""
         return np.asarray(counts, float) * self.metres_per_count
+
+    def count_from_metres(self, position_m: float) -> int:
+        """:meth:`counts_from_metres` of one position, m (a Python int; the emulated drives'
+        per-SYNC path, where numpy's call costs more than the arithmetic)."""
+        counts = float(position_m) / self.metres_per_count
+        if not math.isfinite(counts):
+            return int(self.counts_from_metres(np.array(position_m)))
+        return round(counts)
+
+    def metres_from_count(self, count: int) -> float:
+        """:meth:`metres_from_counts` of one count, m."""
+        return float(count) * self.metres_per_count
 
 
 @dataclass(frozen=True)

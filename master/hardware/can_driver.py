@@ -20,6 +20,8 @@ import struct
 import sys
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import can
@@ -39,6 +41,7 @@ from haptic.master.hardware.interface import (
     LifecycleState,
     register_hardware,
 )
+from haptic.master.hardware.unix_can import send_burst
 from haptic.master.settings import CanSettings, master_settings
 
 AXES = ("x", "y")
@@ -71,6 +74,8 @@ class CanHandleDriver(HandleHardware):
                                       settings.force_offset_count,
                                       load_database(settings.dbc_file or None))
         self._bus: can.BusABC | None = None
+        #: Frames held by :meth:`burst` (None: frames go out as they are sent).
+        self._held: list[can.Message] | None = None
         self._state = LifecycleState.UNCONFIGURED
         self._cycle = 0
         self._drive_states = [DriveState.NOT_READY_TO_SWITCH_ON] * 2
@@ -709,6 +714,23 @@ class CanHandleDriver(HandleHardware):
 
     # --- frames ----------------------------------------------------------------------
 
+    @contextmanager
+    def burst(self) -> Iterator[None]:
+        """Hold the frames sent inside (RPDOs, :meth:`send_frame`'s) and send them back to
+        back at the end, as one burst where the bus can (``unix_datagram``: one datagram, one
+        wake-up of the devices' process instead of one per frame; any other bus: one frame
+        after the other, as without it). Nested bursts go out with the outermost."""
+        if self._held is not None:
+            yield
+            return
+        self._held = []
+        try:
+            yield
+        finally:
+            held, self._held = self._held, None
+            if held and self._bus is not None:
+                send_burst(self._bus, held)
+
     def send_frame(self, frame_id: int, data: bytes, extended: bool = False) -> None:
         """Send one frame as is on the driver's bus (a simulated rig's extra frames, e.g. its
         operator display frame); ``extended``: a 29-bit identifier. :class:`HardwareError`
@@ -716,12 +738,19 @@ class CanHandleDriver(HandleHardware):
         if self._bus is None:
             raise HardwareError("send_frame needs a configured driver")
         (self._own_extended_ids if extended else self._own_ids).add(frame_id)
-        self._bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=extended))
+        self._put(can.Message(arbitration_id=frame_id, data=data, is_extended_id=extended))
 
     def _send(self, frame_id: int, data: bytes, fd: bool = False) -> None:
+        self._put(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False,
+                              is_fd=fd, bitrate_switch=fd))
+
+    def _put(self, message: can.Message) -> None:
+        """Send ``message`` now, or hold it for the burst being sent."""
+        if self._held is not None:
+            self._held.append(message)
+            return
         assert self._bus is not None
-        self._bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False,
-                                   is_fd=fd, bitrate_switch=fd))
+        self._bus.send(message)
 
     def _send_rpdo(self, axis: int, controlword: int) -> None:
         node = self.settings.node_ids[axis]
@@ -730,8 +759,9 @@ class CanHandleDriver(HandleHardware):
         self._last_controlword[axis] = controlword
 
     def _send_both(self, controlword: int) -> None:
-        for axis in range(2):
-            self._send_rpdo(axis, controlword)
+        with self.burst():
+            for axis in range(2):
+                self._send_rpdo(axis, controlword)
 
     def _nmt(self, command: int, node: int) -> None:
         self._send(cia402.NMT_COB_ID, bytes([command, node]))

@@ -141,6 +141,13 @@ class DriveRuntime:
     last_tpdo: bytes = b""
     sync_count: int = 0
 
+    def copy(self) -> DriveRuntime:
+        """A shallow copy (its fields are scalars), without :func:`copy.copy`'s generic
+        path: the rig copies both drives for every prepared SYNC answer."""
+        clone = object.__new__(DriveRuntime)
+        clone.__dict__.update(self.__dict__)
+        return clone
+
 
 class DriveObjects:
     """The CANopen side of one emulated drive (see the module docstring).

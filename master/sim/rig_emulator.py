@@ -362,8 +362,9 @@ class EmulatedRigHardware(HandleHardware):
     def write(self, position_command_m: np.ndarray) -> None:
         if self.driver is None:
             return
-        self.driver.write(position_command_m)
-        self._send_display()
+        with self.driver.burst():  # the RPDOs and the display frame: one wake-up
+            self.driver.write(position_command_m)
+            self._send_display()
 
     def stop_motion(self, reason: str) -> None:
         if self.driver is not None:

@@ -32,7 +32,6 @@ frames, an invalid or overloaded sensor sample.
 
 from __future__ import annotations
 
-import copy
 import struct
 import threading
 import time
@@ -70,6 +69,7 @@ from haptic.master.hardware.interface import (
     LifecycleState,
     register_hardware,
 )
+from haptic.master.hardware.unix_can import send_burst
 from haptic.master.settings import CanSettings, master_settings
 from haptic.master.sim.rig_model import RigModel, RigSample, RigState
 
@@ -458,7 +458,7 @@ class SimulatedCanRig:
         sample = self.last_sample if sample is None else sample
         position = sample.handle_position_m[0, axis] if sample is not None else (
             self.state.plant[0] @ self.model.position_C[axis])
-        return int(self.settings.counts_from_metres(position))
+        return self.settings.count_from_metres(position)
 
     def _check_sync(self, data: bytes) -> frozenset[int]:
         """Each drive checks a SYNC against its 0x1019 (CiA 301): without a counter it must
@@ -490,7 +490,7 @@ class SimulatedCanRig:
         operational drive sends TPDO1 as mapped (per its transmission type) and the sensor
         its frame sampled at this SYNC. Only the model's state changes here (``undoable``:
         keep what :meth:`_discard_prepared` needs to restore it); the rest at the commit."""
-        drives = [copy.copy(drive) for drive in self.drives]
+        drives = [drive.copy() for drive in self.drives]
         frames: list[tuple[int, bytes]] = []
         targets = np.full((1, 2), np.nan)
         for axis, (drive, device) in enumerate(zip(drives, self.devices, strict=True)):
@@ -525,7 +525,7 @@ class SimulatedCanRig:
                 drive.target_counts = drive.received_target
             drive.received_controlword = drive.received_target = None
             if enabled or drive.state is DriveState.QUICK_STOP_ACTIVE:
-                targets[0, axis] = self.settings.metres_from_counts(drive.target_counts)
+                targets[0, axis] = self.settings.metres_from_count(drive.target_counts)
             # RPDO deadline (0x1400:05) in SYNC time (interpolation periods).
             timer_s = device.rpdo.event_timer_ms * 1e-3
             if enabled and timer_s > 0.0 and not received_rpdo:
@@ -536,7 +536,7 @@ class SimulatedCanRig:
                                    cia402.emcy_frame(EMCY_RPDO_TIMEOUT)))
                     drive.state, drive.error_code = DriveState.FAULT, EMCY_RPDO_TIMEOUT
                     drive.target_counts = drive.position_counts
-                    targets[0, axis] = self.settings.metres_from_counts(drive.position_counts)
+                    targets[0, axis] = self.settings.metres_from_count(drive.position_counts)
             elif received_rpdo:
                 drive.syncs_without_rpdo = 0
         undo: list[tuple[Any, str, np.ndarray]] = []
@@ -639,9 +639,8 @@ class SimulatedCanRig:
         self._sensor_status_cycles = answer.sensor_status_cycles
         self.sync_count += 1
         bus = self._bus
-        if bus is not None:
-            for message in answer.messages:
-                bus.send(message)
+        if bus is not None:  # the answers go out back to back, as one burst where it can
+            send_burst(bus, answer.messages)
 
 
 class SimulatedRigHardware(HandleHardware):

@@ -60,3 +60,76 @@ def test_saturation_is_flagged_and_a_bad_status_gives_nan() -> None:
     assert saturated and x == 32767
     force = codec.to_newtons(ForceSample(10, 10, 0, STATUS_INVALID))
     assert all(math.isnan(f) for f in force)
+
+
+# --- the struct fast path against cantools -------------------------------------------------
+
+_OTHER_LAYOUT_DBC = """VERSION ""
+NS_ :
+BS_:
+BU_: MASTER FORCE_SENSOR
+BO_ 400 ForceSensor: 8 FORCE_SENSOR
+ SG_ ForceX : 7|16@0- (1,0) [-32768|32767] "count" MASTER
+ SG_ ForceY : 23|16@0- (1,0) [-32768|32767] "count" MASTER
+ SG_ Counter : 32|8@1+ (1,0) [0|255] "" MASTER
+ SG_ Status : 40|8@1+ (1,0) [0|255] "" MASTER
+"""
+
+
+@given(x=st.integers(-32768, 32767), y=st.integers(-32768, 32767), counter=st.integers(0, 255),
+       status=st.integers(0, 255), tail=st.binary(max_size=3))
+def test_struct_codec_gives_cantools_bytes_and_values(x: int, y: int, counter: int, status: int,
+                                                      tail: bytes) -> None:
+    codec = _codec()
+    assert codec._layout is not None  # the packaged frame takes the struct path
+    values = {"ForceX": x, "ForceY": y, "Counter": counter, "Status": status}
+    payload = codec.encode(ForceSample(x, y, counter, status))
+    assert payload == codec.message.encode(values)
+    # bytes beyond the frame are ignored by both
+    decoded = codec.message.decode(payload + tail, decode_choices=False, scaling=False)
+    assert codec.decode(payload + tail) == ForceSample(decoded["ForceX"], decoded["ForceY"],
+                                                       decoded["Counter"], decoded["Status"])
+
+
+def test_struct_codec_refuses_what_cantools_refuses() -> None:
+    import cantools
+    import pytest
+
+    codec = _codec()
+    for sample in (ForceSample(40000, 0, 0, 0), ForceSample(0, -32769, 0, 0),
+                   ForceSample(0, 0, 256, 0), ForceSample(0, 0, 0, -1)):
+        with pytest.raises(cantools.database.errors.EncodeError):
+            codec.encode(sample)
+    with pytest.raises(cantools.database.errors.DecodeError):
+        codec.decode(b"\x01\x02\x03")
+
+
+def test_a_layout_struct_cannot_pack_goes_through_cantools() -> None:
+    import cantools
+
+    from haptic.master.hardware.force_sensor import packed_layout
+
+    database = cantools.database.load_string(_OTHER_LAYOUT_DBC, database_format="dbc")
+    assert packed_layout(database.get_message_by_name("ForceSensor")) is None
+    codec = ForceSensorCodec((0.005, -0.01), (12.0, -3.0), database)
+    assert codec._layout is None
+    sample = ForceSample(-1234, 4321, 7, 0)
+    payload = codec.encode(sample)
+    assert payload[:2] == (-1234).to_bytes(2, "big", signed=True)  # big-endian, as the DBC says
+    assert codec.decode(payload) == sample
+
+
+@given(fx=st.floats(-400.0, 400.0), fy=st.floats(-400.0, 400.0))
+def test_to_counts_matches_numpy_rounding_and_saturation(fx: float, fy: float) -> None:
+    codec = _codec()
+    raw = np.rint(np.array([fx, fy]) / codec.scale_N_per_count + codec.offset_count)
+    expected = np.clip(raw, -32767, 32767)
+    x, y, saturated = codec.to_counts(np.array([fx, fy]))
+    assert (x, y) == (int(expected[0]), int(expected[1]))
+    assert saturated == bool(np.any(np.abs(raw) > 32767))
+
+
+def test_to_counts_rounds_half_to_even_and_holds_infinities() -> None:
+    codec = ForceSensorCodec((1.0, 1.0), (0.0, 0.0))
+    assert codec.to_counts(np.array([2.5, -3.5]))[:2] == (2, -4)
+    assert codec.to_counts(np.array([math.inf, -math.inf])) == (32767, -32767, True)

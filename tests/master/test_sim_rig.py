@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import uuid
 
+import can
 import control
 import numpy as np
 import pytest
@@ -309,3 +310,54 @@ def test_regulating_operator_feels_the_tool_force_through_the_rig() -> None:
             hardware.read()
         # Felt 1.5 N below the 2 N target: the operator pushes above the target.
         assert hardware.rig.last_sample.operator_intent_force_N[0, 0] > 2.0
+
+
+def test_scalar_count_conversions_match_the_array_ones() -> None:
+    settings = master_settings(_config()).can
+    metres_per_count = settings.metres_per_count
+    rng = np.random.default_rng(3)
+    positions = np.concatenate([rng.uniform(-0.2, 0.2, 500),
+                                (np.arange(-5, 5) + 0.5) * metres_per_count])  # ties
+    for position in positions:
+        assert settings.count_from_metres(float(position)) == int(
+            settings.counts_from_metres(position))
+    for count in rng.integers(-2**31, 2**31, 200):
+        assert settings.metres_from_count(int(count)) == float(settings.metres_from_counts(count))
+
+
+def test_a_burst_sends_the_rpdos_and_the_extra_frames_after_them_in_order() -> None:
+    config = _config()
+    with create_hardware("sim-inproc", config) as hardware:
+        hardware.configure()
+        hardware.activate()
+        driver: CanHandleDriver = hardware.driver
+        nodes = master_settings(config).can.node_ids
+        listener = can.Bus(  # the RPDOs and the extra frame only (not the heartbeats)
+            interface="virtual", channel=config["master"]["sim"]["channel"], can_filters=[
+                {"can_id": 0x200 + nodes[0], "can_mask": 0x7FF, "extended": False},
+                {"can_id": 0x200 + nodes[1], "can_mask": 0x7FF, "extended": False},
+                {"can_id": 0x1FFFF00F, "can_mask": 0x1FFFFFFF, "extended": True}])
+        try:
+            with driver.burst():
+                driver.write(np.array([0.001, -0.002]))
+                with driver.burst():  # nested: goes out with the outer one
+                    driver.send_frame(0x1FFFF00F, b"\x01", extended=True)
+                assert listener.recv(0.05) is None  # held until the burst ends
+            ids = [listener.recv(1.0).arbitration_id for _ in range(3)]
+        finally:
+            listener.shutdown()
+        assert ids == [0x200 + nodes[0], 0x200 + nodes[1], 0x1FFFF00F]
+        reading = hardware.read()  # the drives took the burst's targets
+        assert not reading.faults
+        assert [d.target_counts for d in hardware.rig.drives] == [
+            master_settings(config).can.count_from_metres(v) for v in (0.001, -0.002)]
+
+
+def test_a_prepared_answer_copies_the_drives() -> None:
+    from haptic.master.hardware.drive_device import DriveRuntime
+
+    drive = DriveRuntime(3, target_counts=5, last_tpdo=b"\x01")
+    clone = drive.copy()
+    assert clone == drive and clone is not drive
+    clone.target_counts = 9
+    assert drive.target_counts == 5

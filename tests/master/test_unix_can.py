@@ -144,3 +144,57 @@ def test_bad_channels_are_initialisation_errors(tmp_path) -> None:
         UnixDatagramBus(str(blocker / "bus"))
     with pytest.raises(can.CanInterfaceNotImplementedError):
         UnixDatagramBus(str(tmp_path), receive_own_messages=True)
+
+
+def test_a_burst_arrives_as_its_frames_in_order_to_every_member(buses) -> None:
+    from haptic.master.hardware.unix_can import send_burst
+
+    a, b, c = buses(), buses(), buses()
+    frames = [_frame(0x181, b"\x01\x02\x03\x04\x05\x06"), _frame(0x182, b""),
+              _frame(0x190, bytes(8)),
+              can.Message(arbitration_id=0x1FFFF000, data=b"\x00\x01", is_extended_id=True),
+              can.Message(arbitration_id=0x7FF, data=bytes(range(64)), is_fd=True,
+                          bitrate_switch=True, is_extended_id=False)]
+    a.send_burst(frames)
+    a.send(_frame(0x200, b"\x09"))  # after the burst, in its place
+    for bus in (b, c):
+        got = [bus.recv(1.0) for _ in range(len(frames) + 1)]
+        assert [(m.arbitration_id, bytes(m.data), m.is_extended_id, m.is_fd) for m in got] == [
+            (f.arbitration_id, bytes(f.data), f.is_extended_id, f.is_fd)
+            for f in [*frames, _frame(0x200, b"\x09")]]
+        assert bus.malformed_datagrams == 0
+    # more frames than one datagram holds go as several, still in order
+    many = [_frame(0x300 + i, bytes([i] * 8)) for i in range(40)]
+    send_burst(a, many)
+    assert [b.recv(1.0).arbitration_id for _ in many] == [0x300 + i for i in range(40)]
+
+
+def test_send_burst_on_a_bus_without_bursts_sends_frame_by_frame() -> None:
+    from haptic.master.hardware.unix_can import send_burst
+
+    sender = can.Bus(interface="virtual", channel="burst-test")
+    receiver = can.Bus(interface="virtual", channel="burst-test")
+    try:
+        send_burst(sender, [_frame(0x181), _frame(0x182)])
+        assert [receiver.recv(1.0).arbitration_id for _ in range(2)] == [0x181, 0x182]
+    finally:
+        sender.shutdown()
+        receiver.shutdown()
+
+
+def test_partial_and_junk_datagrams_are_counted_and_never_delivered(buses) -> None:
+    import socket as socket_module
+
+    b = buses()
+    junk = socket_module.socket(socket_module.AF_UNIX, socket_module.SOCK_DGRAM)
+    try:
+        whole = b"\x81\x01\x00\x00\x00\x02\xaa\xbb"  # 0x181, 2 bytes
+        junk.sendto(b"\x01\x02", b.path)  # shorter than a header
+        junk.sendto(whole + b"\x82\x01\x00\x00\x00\x08\x01", b.path)  # then a cut frame
+        junk.sendto(b"\x83\x01\x00\x00\x00\x41" + bytes(65), b.path)  # 65 data bytes
+        got = b.recv(1.0)
+        assert (got.arbitration_id, bytes(got.data)) == (0x181, b"\xaa\xbb")
+        assert b.recv(0.1) is None
+        assert b.malformed_datagrams == 3
+    finally:
+        junk.close()
