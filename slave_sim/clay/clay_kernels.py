@@ -59,7 +59,13 @@ def cut_kernel(
 ):
     """Lower every cell of one window row under the tool to the tool's surface (capped per
     step) and add the removed volume (m^3) and the damping-weighted volume (N s/m m^3) to the
-    lane's sums. One thread per (lane, window row): the row's sums are added once."""
+    lane's sums. One thread per (lane, window row): the row's sums are added once.
+
+    The square root is taken only in the chamfer's ring: a cell whose squared distance is
+    below the inner radius's square (less a 1e-9 margin) lies on the flat bottom, one above
+    the outer radius's square (plus the margin) is outside: the same verdicts the distance
+    gives, so the cut is the one computed from the distance everywhere (numpy's, to rounding:
+    tests/slave_sim/test_clay.py)."""
     lane, j = wp.tid()
     px = tool_xy[lane, 0]
     py = tool_xy[lane, 1]
@@ -69,24 +75,38 @@ def cut_kernel(
     zero = wp.float64(0.0)
     ddy = geo.y0 + (wp.float64(iy) + half) * geo.dy - py
     ddy2 = ddy * ddy
+    outside2 = geo.outer_radius * geo.outer_radius * wp.float64(1.000000001)
+    bottom2 = wp.where(geo.inner_radius > zero,
+                       geo.inner_radius * geo.inner_radius * wp.float64(0.999999999),
+                       wp.float64(-1.0))  # no flat bottom: every cell is in the chamfer
+    if ddy2 >= outside2:
+        return  # the whole row is outside the tool
+    # the level inside the inner radius, computed as the chamfer computes it there
+    bottom = geo.bottom_height + geo.edge_height * edge_profile(wp.float64(-1.0))
     volume_sum = zero
     weighted_sum = zero
     for i in range(geo.window_x):
         ix = ix0 + i
-        block = block_id[iy, ix]
-        if block >= 0:
-            ddx = geo.x0 + (wp.float64(ix) + half) * geo.dx - px
-            distance = wp.sqrt(ddx * ddx + ddy2)
-            if distance < geo.outer_radius:
-                level = geo.bottom_height + geo.edge_height * edge_profile(
-                    (distance - geo.inner_radius) * geo.inv_edge_width)
-                height = heights[lane, iy, ix]
-                if height > level:
-                    cut = wp.min(height - level, geo.cut_cap)
-                    heights[lane, iy, ix] = height - cut
-                    volume = cut * geo.cell_area
-                    volume_sum += volume
-                    weighted_sum += volume * damping[lane, block]
+        ddx = geo.x0 + (wp.float64(ix) + half) * geo.dx - px
+        distance2 = ddx * ddx + ddy2
+        if distance2 < outside2:
+            block = block_id[iy, ix]
+            if block >= 0:
+                level = bottom
+                under = True
+                if distance2 >= bottom2:
+                    distance = wp.sqrt(distance2)
+                    under = distance < geo.outer_radius
+                    level = geo.bottom_height + geo.edge_height * edge_profile(
+                        (distance - geo.inner_radius) * geo.inv_edge_width)
+                if under:
+                    height = heights[lane, iy, ix]
+                    if height > level:
+                        cut = wp.min(height - level, geo.cut_cap)
+                        heights[lane, iy, ix] = height - cut
+                        volume = cut * geo.cell_area
+                        volume_sum += volume
+                        weighted_sum += volume * damping[lane, block]
     if volume_sum > zero:
         wp.atomic_add(accumulators, lane, 0, volume_sum)
         wp.atomic_add(accumulators, lane, 1, weighted_sum)

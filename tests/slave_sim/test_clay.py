@@ -146,8 +146,17 @@ def test_lanes_are_independent_and_take_their_own_damping(variable_rate, drive) 
     assert extra == pytest.approx(clay.reference_area_m2 * lag, rel=1e-2)
 
 
-def test_warp_kernels_and_numpy_reference_agree() -> None:
+@pytest.mark.parametrize("edge_fraction", [None, 0.98])
+def test_warp_kernels_and_numpy_reference_agree(edge_fraction: float | None) -> None:
+    """Every step's removal and force, and the heights at the end; ``edge_fraction``: a
+    chamfer nearly as wide as the tool (the kernel's flat-bottom shortcut almost unused)."""
     scenario = load_scenario("arbitrary").with_grid(400, 200)
+    if edge_fraction is not None:
+        from dataclasses import replace
+
+        tool = scenario.tool
+        scenario = replace(scenario, tool=replace(
+            tool, edge_width_m=edge_fraction * 2.0 * tool.radius_m))
     warp_clay = make_clay(scenario, SAMPLE_PERIOD_S, "warp", "cpu")
     numpy_clay = make_clay(scenario, SAMPLE_PERIOD_S, "numpy")
     assert isinstance(numpy_clay, NumpyClay)
