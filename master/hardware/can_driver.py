@@ -16,6 +16,7 @@ encoder resolution, raw sensor counts -> N with the configured scale and offset.
 
 from __future__ import annotations
 
+import math
 import struct
 import sys
 import threading
@@ -700,16 +701,20 @@ class CanHandleDriver(HandleHardware):
         if self._tripped:
             self._send_both(cia402.CW_QUICK_STOP)
             return
-        command = np.asarray(position_command_m, float)
-        counts = self._target_counts.copy()
-        finite = np.isfinite(command)
-        if not np.all(finite):
+        counts = [int(count) for count in self._target_counts]  # per axis, as scalars
+        refused = False
+        for axis in range(2):
+            value = float(position_command_m[axis])
+            if math.isfinite(value):
+                counts[axis] = self.settings.count_from_metres(value)
+            else:
+                refused = True
+        if refused:
             self._pending_faults.append("non-finite position command refused")
-        counts[finite] = self.settings.counts_from_metres(command[finite])
-        if np.any(np.abs(counts) > INT32_MAX):
+        if abs(counts[0]) > INT32_MAX or abs(counts[1]) > INT32_MAX:
             self._pending_faults.append("position command beyond the drives' int32 range")
-            counts = self._target_counts.copy()
-        self._target_counts = counts
+        else:
+            self._target_counts = np.array(counts, np.int64)
         self._send_both(cia402.CW_ENABLE_OPERATION)
 
     # --- frames ----------------------------------------------------------------------

@@ -361,3 +361,15 @@ def test_a_prepared_answer_copies_the_drives() -> None:
     assert clone == drive and clone is not drive
     clone.target_counts = 9
     assert drive.target_counts == 5
+
+
+@pytest.mark.parametrize("command_m", [1e4, -1e4, 1e15, 1e300])
+def test_a_command_beyond_the_drives_range_is_refused_never_sent(command_m: float) -> None:
+    with create_hardware("sim-inproc", _config()) as hardware:
+        hardware.configure()
+        hardware.activate()
+        before = [d.target_counts for d in hardware.rig.drives]
+        hardware.write(np.array([command_m, 0.001]))  # never raises
+        reading = hardware.read()
+        assert "position command beyond the drives' int32 range" in reading.faults
+        assert [d.target_counts for d in hardware.rig.drives] == before  # both held
