@@ -43,6 +43,7 @@ import sys
 import tempfile
 import time
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -326,8 +327,10 @@ def _annotation_spans(source: str) -> list[tuple[tuple[int, int], tuple[int, int
     return spans
 
 
-def mutants(path: str) -> list[Mutant]:
-    """Every mutant of ``path`` (relative to the repository), in source order."""
+def mutants(path: str, keep_line: Callable[[str], bool] | None = None) -> list[Mutant]:
+    """Every mutant of ``path`` (relative to the repository), in source order; with
+    ``keep_line``, only those of the lines (stripped) it keeps: the same mutants, without
+    making the others (each is a whole re-parse of the file)."""
     from cosmic_ray.ast import ast_nodes, get_ast
     from cosmic_ray.mutating import MutationVisitor
     from cosmic_ray.plugins import get_operator
@@ -343,6 +346,7 @@ def mutants(path: str) -> list[Mutant]:
             for index, (start, _end) in enumerate(operator.mutation_positions(node)):
                 line = start[0]
                 if (_keep(name, index) and not lines[line - 1].rstrip().endswith(PRAGMA)
+                        and (keep_line is None or keep_line(lines[line - 1].strip()))
                         and not any(a <= start < b for a, b in annotations)):
                     mutated = MutationVisitor.mutate_code(source, operator, occurrence)
                     if mutated is not None and mutated != source:
