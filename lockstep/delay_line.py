@@ -103,6 +103,10 @@ class DelayLine:
             initial, float).reshape(lanes, channels)
         self._lanes = np.arange(lanes)
         self._constant = bool(np.all(schedule == schedule[:, :1])) if steps else True
+        # a lane's source never decreases: from this tick on every lane has a message
+        started = np.flatnonzero((schedule >= 0).all(axis=1)) if steps else np.array([], int)
+        self._all_started_from = int(started[0]) if started.size else steps
+        self._rows = self.buffer.reshape(self.history * lanes, channels)  # a view
 
     def send(self, tick: int, message: np.ndarray) -> None:
         """Store the message every lane sends at ``tick``."""
@@ -116,5 +120,8 @@ class DelayLine:
             if first < 0:
                 return self.initial
             return self.buffer[first % self.history].copy()
+        if tick >= self._all_started_from:  # one gather from the flat rows
+            return np.take(self._rows, (source % self.history) * self._lanes.size
+                           + self._lanes, axis=0)
         rows = self.buffer[source % self.history, self._lanes]
         return np.where((source >= 0)[:, None], rows, self.initial)

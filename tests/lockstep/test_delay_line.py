@@ -40,3 +40,22 @@ def test_lost_messages_leave_the_previous_one() -> None:
         line.send(tick, np.array([[float(tick)]]))
         received = line.receive(tick)[0, 0]
         assert received == (schedule[tick] if schedule[tick] >= 0 else 0.0)
+
+
+def test_every_lane_reads_its_own_newest_message_before_and_after_all_have_one() -> None:
+    """Lanes of different delays, jitter and loss: each lane reads the message its schedule
+    names (the initial value before its first), through the run-up and after it."""
+    delays = np.array([0, 1, 4, 7, 2])
+    injection = InjectionConfig(jitter_s=0.002, loss_probability=0.1)
+    schedule = source_schedule(300, delays, 1, TS, injection, np.random.default_rng(5))
+    initial = np.arange(5 * 3, dtype=float).reshape(5, 3) - 100.0
+    line = DelayLine(schedule, 3, initial)
+    assert 0 < line._all_started_from < 300
+    for tick in range(300):
+        line.send(tick, tick + np.arange(5)[:, None] * 0.01 + np.arange(3) * 0.001)
+        received = line.receive(tick)
+        for lane in range(5):
+            source = schedule[tick, lane]
+            expected = initial[lane] if source < 0 else (
+                source + lane * 0.01 + np.arange(3) * 0.001)
+            np.testing.assert_array_equal(received[lane], expected)
