@@ -103,14 +103,23 @@ class ForceSensorCodec:
 
     def encode(self, sample: ForceSample) -> bytes:
         """Frame payload for ``sample`` (raises on values outside the signals' ranges)."""
-        values = {"ForceX": sample.raw_x_count, "ForceY": sample.raw_y_count,
-                  "Counter": sample.counter, "Status": sample.status}
+        return self.encode_counts(sample.raw_x_count, sample.raw_y_count, sample.counter,
+                                  sample.status)
+
+    def encode_counts(self, raw_x_count: int, raw_y_count: int, counter: int,
+                      status: int) -> bytes:
+        """:meth:`encode` of the sample's four fields (the emulated sensor's path at each
+        SYNC, without building a :class:`ForceSample`)."""
+        values = {"ForceX": raw_x_count, "ForceY": raw_y_count, "Counter": counter,
+                  "Status": status}
         layout = self._layout
         if layout is not None:
             ordered = [values[name] for name in layout.names]
-            if all(type(value) is int and (low is None or value >= low) and (
-                    high is None or value <= high)
-                   for value, (low, high) in zip(ordered, layout.limits, strict=True)):
+            for value, (low, high) in zip(ordered, layout.limits, strict=True):
+                if type(value) is not int or (low is not None and value < low) or (
+                        high is not None and value > high):
+                    break
+            else:
                 try:
                     return layout.codec.pack(*ordered)
                 except struct.error:

@@ -59,7 +59,6 @@ from haptic.master.hardware.drive_device import (
 from haptic.master.hardware.force_sensor import (
     STATUS_OK,
     STATUS_OVERLOAD,
-    ForceSample,
     ForceSensorCodec,
     load_database,
 )
@@ -585,13 +584,15 @@ class SimulatedCanRig:
                 status = self._sensor_status_override
                 status_cycles -= 1
             frames.append((self.codec.frame_id,
-                           self.codec.encode(ForceSample(raw_x, raw_y, counter, status))))
+                           self.codec.encode_counts(raw_x, raw_y, counter, status)))
         fd = self._sync_fd
         emcy_ids = {cia402.EMCY_BASE + drive.node_id for drive in drives}
-        messages = [can.Message(arbitration_id=frame_id, data=data, is_extended_id=False,
-                                is_fd=(fd or len(data) > 8) and frame_id not in emcy_ids,
-                                bitrate_switch=(fd or len(data) > 8) and frame_id not in emcy_ids)
-                    for frame_id, data in frames]
+        messages = []
+        for frame_id, data in frames:
+            as_fd = (fd or len(data) > 8) and frame_id not in emcy_ids
+            messages.append(can.Message(arbitration_id=frame_id, data=data,
+                                        is_extended_id=False, is_fd=as_fd,
+                                        bitrate_switch=as_fd))
         return _SyncAnswer(drives, sample, messages, (counter + 1) % 256, drop_sensor,
                            status_cycles, undo, rng_undo)
 
