@@ -104,7 +104,7 @@ class DelayLine:
         self._lanes = np.arange(lanes)
         self._constant = bool(np.all(schedule == schedule[:, :1])) if steps else True
         # a lane's source never decreases: from this tick on every lane has a message
-        started = np.flatnonzero((schedule >= 0).all(axis=1)) if steps else np.array([], int)
+        started = np.flatnonzero((schedule >= 0).all(axis=1))
         self._all_started_from = int(started[0]) if started.size else steps
         self._rows = self.buffer.reshape(self.history * lanes, channels)  # a view
 
