@@ -138,7 +138,20 @@ def _assert_message_age_trips(trips: list[dict]) -> None:
         assert float(found.group(1)) >= SHIPPED_AGE_MS, trip
 
 
+def _tolerate_a_loaded_machine(pair: Pair) -> None:
+    """Timeouts for a machine that may be loaded (two CPU-bound processes on 2 cores starve
+    the loops for 30-150 ms), where a test is not about them: watchdogs of 0.1 s on both
+    sides, and for the emulated drives (a stalled emulator or master faulted them, a latched
+    safe state: the PDOs of a SYNC missing after 2 ms, even after 50 ms, or the heartbeat
+    consumers' 0.3 s) a PDO wait of 0.25 s and heartbeat consumers of 5 s, as other tests on
+    them do (test_sim_rig.py)."""
+    pair.config.write_text(pair.config.read_text() + "[link.watchdog]\nmax_message_age_s = 0.1\n"
+                           "[master.can]\nheartbeat_timeout_s = 5.0\npdo_timeout_s = 0.25\n")
+
+
 def test_two_processes_exchange_forces_and_positions(pair, tmp_path) -> None:
+    # what is tested is the exchange, not the timeouts
+    _tolerate_a_loaded_machine(pair)
     trace = tmp_path / "master_trace.npz"
     out = tmp_path / "slave_out"
     slave = pair.slave(3.5, tmp_path / "slave.json", "--out", str(out))
@@ -151,11 +164,14 @@ def test_two_processes_exchange_forces_and_positions(pair, tmp_path) -> None:
     slave_summary = json.loads((tmp_path / "slave.json").read_text())
     for summary in (master_summary, slave_summary):
         assert set(REQUIRED_SUMMARY_KEYS) <= set(summary)
-        assert summary["steps"] > 1000
+        assert summary["steps"] > 100  # how many is the machine's speed, not asserted
         assert summary["analysis"]["stable"]
         assert _events(summary, "forces_enabled")
     assert master_summary["side"] == "master" and slave_summary["side"] == "slave"
-    assert master_summary["link_delivered"] > 1000 and slave_summary["link_delivered"] > 1000
+    # each side received most of what the other sent (no loss injected; the slave runs 0.5 s
+    # past the master's 3 s, and what either sent before the other listened is lost)
+    assert master_summary["link_delivered"] > 0.5 * slave_summary["steps"]
+    assert slave_summary["link_delivered"] > 0.5 * master_summary["steps"]
     # Forces both ways: the slave received the operator's force, the master the tool's.
     slave_trace = np.load(out / "slave_trace.npz")
     master_trace = np.load(trace)
@@ -181,14 +197,8 @@ def test_two_processes_exchange_forces_and_positions(pair, tmp_path) -> None:
 
 def test_killed_slave_trips_the_master_and_a_new_slave_resumes(pair, tmp_path) -> None:
     # What is tested is the link's watchdog and the resync, on a machine that may be loaded
-    # (two CPU-bound processes on 2 cores, and the second slave's start-up): watchdogs of
-    # 0.1 s on both sides (a loop starved for 30-120 ms tripped them before the kill), and
-    # for the emulated drives (a stalled emulator or master faulted them, a latched safe
-    # state: the PDOs of a SYNC missing after 2 ms, even after 50 ms, or the heartbeat
-    # consumers' 0.3 s) a PDO wait of 0.25 s and heartbeat consumers of 5 s, as other tests
-    # on them do (test_sim_rig.py).
-    pair.config.write_text(pair.config.read_text() + "[link.watchdog]\nmax_message_age_s = 0.1\n"
-                           "[master.can]\nheartbeat_timeout_s = 5.0\npdo_timeout_s = 0.25\n")
+    # (and the second slave's start-up): lenient timeouts (see _tolerate_a_loaded_machine).
+    _tolerate_a_loaded_machine(pair)
     master_json = tmp_path / "master.json"
     master = pair.master(None, master_json)
     # The master waits for a slave once its simulated rig (a child process) answers.
