@@ -24,6 +24,20 @@ threads share (``/proc/PID/smaps``), not found in our objects. One 10-minute run
 recording, on a machine then at load 10, grew 25 MB in both programs in its second half:
 rerun before trusting one run.
 
+Where the master's growth lives (2026-12-02, the same 2-core AMD EPYC, nothing else running):
+memray (``memray run --aggregate --native``, ``PYTHONMALLOC=malloc``; every allocation of
+Python, numpy, msgpack and Zenoh's Rust code) on the recorded master for 40 s and for 160 s:
+its live heap held at 196.8-197.4 MB from 70 s to the end, and no allocation site held more
+at the high-water mark or at exit in the longer run beyond a few kB (the run's events). The
+RSS the master adds is therefore memory the allocators keep, not live data. 10-minute runs
+from 30 s on: the master +1.3 MB (1.6 kB/s in the second half, in steps of 100-500 kB, +332 kB
+over the last 5 minutes), the slave +360 kB (1.1 kB/s, +236 kB); with ``--env
+PYTHONMALLOC=malloc`` (no pymalloc arenas) +2.2 MB and +1.2 MB, most of it in the first
+minutes (0.78 and 0.0 kB/s in the second half, +204 and +0 kB over the last 5 minutes): not
+adopted, pymalloc is faster per object. 5-minute runs with ``MALLOC_MMAP_THRESHOLD_`` and
+``MALLOC_TRIM_THRESHOLD_`` fixed at 128 kB grew the slave 4 kB/s (worse) and the master as
+without.
+
 ``--no-record`` runs the same without recording (the reference: what the recording adds).
 
 Usage: ``python bench/record_memory_bench.py [--duration S] [--settle S] [--linear]
