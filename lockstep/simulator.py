@@ -535,7 +535,7 @@ class _Arrivals:
         source = self.schedule[tick]
         fresh = (source != self._previous) | (source < 0)
         self._previous = source
-        self.last_fresh[fresh] = tick
+        np.putmask(self.last_fresh, fresh, tick)
         self.silence_s[...] = (tick - self.last_fresh) * self.period_s
         sent = np.where(source >= 0, source, tick - self.lag)
         return fresh, sent
