@@ -38,6 +38,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--rate", metavar="HZ", type=float, default=DEFAULT_MAX_RATE_HZ,
                         help=f"display rate: Zenoh polls and frames per second per browser "
                         f"(default {DEFAULT_MAX_RATE_HZ:g})")
+    parser.add_argument("--no-backoff", dest="backoff", action="store_false",
+                        help="keep the frame rate while the loops overrun (by default it "
+                        "falls to as little as an eighth until they hold their period)")
     return parser
 
 
@@ -74,7 +77,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ConfigError("--rate", f"must be > 0 Hz (got {args.rate})")
         zconf = view_zenoh_config(config, args.connect)
     prefix = config["link"]["transport"]["key_prefix"]
-    state = ViewState()
+    state = ViewState(backoff=args.backoff)
     with exit_on_link_error("haptic-view"), StopSignals() as signals, \
             ZenohSource(zconf, prefix, state, args.rate), \
             _view_server(state, args.port, args.rate) as server:

@@ -4,7 +4,8 @@ a second per browser) or one JSON snapshot (``/state``).
 
 Each browser gets a thread (``ThreadingHTTPServer``); a handler waits on the
 :class:`~haptic.view.state.ViewState` for a newer frame and sends it, so frames go out as fast
-as they arrive up to the cap. ``/stats`` reports what was served.
+as they arrive up to the cap, the cap scaled by :attr:`ViewState.scale` (the view backs off
+while a loop overruns: view/state.py). ``/stats`` reports what was served.
 """
 
 from __future__ import annotations
@@ -124,7 +125,9 @@ class ViewServer:
         elapsed = time.monotonic() - state.started
         return {"frames_sent": self.frames_sent, "clients": self.clients,
                 "state_updates": state.updates,
-                "state_update_rate_hz": state.updates / elapsed if elapsed > 0 else 0.0}
+                "state_update_rate_hz": state.updates / elapsed if elapsed > 0 else 0.0,
+                "frame_scale": state.scale, "lowest_frame_scale": state.lowest_scale,
+                "bad_loop_counts": state.bad_loop_counts}
 
     def _serve_events(self, handler: BaseHTTPRequestHandler) -> None:
         handler.send_response(200)
@@ -143,7 +146,7 @@ class ViewServer:
                     handler.wfile.write(b": idle\n\n")
                     handler.wfile.flush()
                     continue
-                wait = last_sent + self.min_interval_s - time.monotonic()
+                wait = last_sent + self.min_interval_s / self.state.scale - time.monotonic()
                 if wait > 0:
                     time.sleep(wait)
                 snapshot = self.state.snapshot(clay_seen, layout_seen)

@@ -4,6 +4,12 @@ One writer (the poller, or the replay) calls :meth:`ViewState.update`; any numbe
 (one per browser) wait on :meth:`ViewState.wait_newer` and read the snapshot, a JSON-ready
 dict. The clay travels in the snapshot only when it changed since the version the reader saw
 (``clay_version``), as base64 of the uint16 micrometre map.
+
+The view backs off as the programs' display threads do (common/runtime/display_backoff.py):
+each side's status carries its loop's ticks and overruns (``loop_steps``, ``loop_overruns``);
+while either loop overruns, :attr:`ViewState.scale` falls and the server sends frames at that
+fraction of its rate, so the page redraws less. Counts that are not non-negative integers
+are ignored (and counted in :attr:`ViewState.bad_loop_counts`): they come from the network.
 """
 
 from __future__ import annotations
@@ -11,13 +17,18 @@ from __future__ import annotations
 import base64
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
+
+from haptic.common.runtime.display_backoff import DisplayBackoff
 
 
 class ViewState:
-    """The latest frame (handle, tool, status of each side) plus the clay and the layout."""
+    """The latest frame (handle, tool, status of each side) plus the clay and the layout.
+    ``backoff``: follow the loops' overruns (:attr:`scale`); ``clock``: monotonic, s."""
 
-    def __init__(self) -> None:
+    def __init__(self, backoff: bool = True,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self._condition = threading.Condition()
         self.version = 0
         self.frame: dict[str, Any] = {"handle": None, "tool": None, "status": {}}
@@ -28,6 +39,13 @@ class ViewState:
         self.clay_version = 0
         self.updates = 0
         self.started = time.monotonic()
+        self._clock = clock
+        self._backoff = backoff
+        self._backoffs: dict[str, DisplayBackoff] = {}
+        #: the frame rate's scale (0..1]: the lowest of the sides' back-offs
+        self.scale = 1.0
+        self.lowest_scale = 1.0
+        self.bad_loop_counts = 0
 
     def update(self, *, handle: dict[str, Any] | None = None,
                tool: dict[str, Any] | None = None,
@@ -41,7 +59,11 @@ class ViewState:
             if tool is not None:
                 self.frame["tool"] = tool
             if status is not None:
-                self.frame["status"][status.get("side", "?")] = status
+                side = status.get("side", "?")
+                self.frame["status"][side] = status
+                if self._backoff and "loop_steps" in status:
+                    self._follow_loop(str(side), status.get("loop_steps"),
+                                      status.get("loop_overruns"))
             if layout is not None and layout != self.layout:
                 self.layout = layout
                 self.layout_version += 1
@@ -52,6 +74,21 @@ class ViewState:
             self.version += 1
             self.updates += 1
             self._condition.notify_all()
+
+    def _follow_loop(self, side: str, ticks: Any, overruns: Any) -> None:
+        """One side's loop counts into its back-off (under the lock)."""
+        if not all(type(value) is int and value >= 0 for value in (ticks, overruns)):
+            self.bad_loop_counts += 1
+            return
+        backoff = self._backoffs.get(side)
+        if backoff is None:
+            if len(self._backoffs) >= 2:  # a master and a slave; a stranger's side is ignored
+                self.bad_loop_counts += 1
+                return
+            backoff = self._backoffs[side] = DisplayBackoff()
+        backoff.update(self._clock(), ticks, overruns)
+        self.scale = min(item.scale for item in self._backoffs.values())
+        self.lowest_scale = min(self.lowest_scale, self.scale)
 
     def wait_newer(self, version: int, timeout_s: float) -> int:
         """Block until the version passes ``version`` (or the timeout); the current one."""
@@ -69,6 +106,7 @@ class ViewState:
                 "handle": self.frame["handle"], "tool": self.frame["tool"],
                 "status": dict(self.frame["status"]),
                 "clay_version": self.clay_version, "layout_version": self.layout_version,
+                "view_scale": self.scale,
             }
             if self.layout is not None and self.layout_version > layout_seen:
                 result["layout"] = self.layout

@@ -73,4 +73,7 @@ RUNNER_SCHEMA: Schema = {
         "int", "SCHED_FIFO priority of Zenoh's runtime threads, below realtime_priority; 0 "
         "leaves them with normal scheduling.", minimum=0, maximum=MAX_FIFO_PRIORITY,
     ),
+    "display_backoff": Field(
+        "bool", "The display thread's state and clay rates halve while the loop overruns "
+        "more than 0.1 % of its ticks, down to an eighth, and come back after 2 s without."),
 }

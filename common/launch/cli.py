@@ -201,7 +201,8 @@ def _us(value: Any) -> str:
     return "n/a" if value is None or not math.isfinite(value) else f"{value * 1e6:.1f} us"
 
 
-def _trips(summary: dict[str, Any], peer: dict[str, Any] | None = None) -> tuple[int, int]:
+def watchdog_trips_split(summary: dict[str, Any],
+                         peer: dict[str, Any] | None = None) -> tuple[int, int]:
     """(trips during the run, trips at its end): a last trip with no return of the peer
     after it is the peer stopping first when it came after the peer's loop ended (both
     summaries' ``loop_start_time_s`` + ``duration_s``, one host's clock); without the peer's
@@ -250,7 +251,7 @@ def real_time_misses(master: dict[str, Any], slave: dict[str, Any]) -> list[str]
         if error is None or not error <= MAX_PERIOD_ERROR_P99_S:
             misses.append(f"{name} period error p99 {_us(error)} > "
                           f"{MAX_PERIOD_ERROR_P99_S * 1e6:g} us")
-        during, _ = _trips(s, peer)
+        during, _ = watchdog_trips_split(s, peer)
         if during:
             misses.append(f"{name} watchdog tripped {during}x during the run")
     return misses
@@ -318,8 +319,8 @@ def combined_summary(master: dict[str, Any], slave: dict[str, Any]) -> str:
                      f"y {abs(gap[1]) * 1e3:.2f} mm (target <= {GAP_TARGET_M * 1e3:g} mm)")
     if master.get("work_area"):
         lines.append(f"  work area: {master['work_area']}")
-    m_during, m_end = _trips(master, slave)
-    s_during, s_end = _trips(slave, master)
+    m_during, m_end = watchdog_trips_split(master, slave)
+    s_during, s_end = watchdog_trips_split(slave, master)
     lines.append(
         f"  watchdog trips during the run: master {m_during}, slave {s_during} "
         f"(at the end, a side seeing its peer stop first: master {m_end}, slave {s_end})"

@@ -20,6 +20,13 @@ display rates:
 
 The thread measures its own cost (:attr:`figures`): publications made and the mean and
 largest time one took, s.
+
+Told the loop's ticks and overruns so far (:meth:`DisplayPublisher.follow_loop`) with a
+back-off (:class:`~haptic.common.runtime.display_backoff.DisplayBackoff`), the state and clay rates
+scale down while the loop overruns and back up when it holds its period: the display loses
+frames before the loop loses ticks. The status publications keep their rate (they are few
+and carry the counts: ``loop_steps``, ``loop_overruns`` and ``display_scale``, which the view
+uses to back off too).
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.runtime.display_backoff import DisplayBackoff
 from haptic.common.runtime.summary import json_safe
 
 #: Default rates, Hz.
@@ -99,6 +107,11 @@ class DisplayPublisher:
         self._layout_bytes = json.dumps(layout).encode() if layout is not None else b""
         self._factors = factors
         self._on_clay = on_clay
+        self._loop_counts: Callable[[], tuple[int, int]] | None = None
+        self.backoff: DisplayBackoff | None = None
+        #: the state and clay rates' current scale (0..1], from the back-off
+        self.scale = 1.0
+        self.lowest_scale = 1.0
         self._status: dict[str, Any] | None = None
         self._state: dict[str, Any] | None = None
         self._state_period_s = 1.0 / DEFAULT_STATE_RATE_HZ
@@ -125,6 +138,14 @@ class DisplayPublisher:
         if new_events:
             self._events = (self._events + new_events)[-50:]
 
+    def follow_loop(self, loop_counts: Callable[[], tuple[int, int]],
+                    backoff: DisplayBackoff | None = None) -> None:
+        """Publish the loop's counts (``loop_counts()``: ticks stepped and overruns so far,
+        read at the status rate) and, with ``backoff``, scale the state and clay rates by
+        it."""
+        self.backoff = backoff
+        self._loop_counts = loop_counts
+
     def start(self) -> DisplayPublisher:
         self._thread = threading.Thread(target=self._run, name=f"display-{self.side}",
                                         daemon=True)
@@ -150,7 +171,9 @@ class DisplayPublisher:
         return {"display_publications": count, "display_clay_publications":
                 self.clay_publications,
                 "display_mean_cost_s": self.busy_s / count if count else 0.0,
-                "display_max_cost_s": self.max_busy_s}
+                "display_max_cost_s": self.max_busy_s,
+                "display_backoffs": self.backoff.backoffs if self.backoff is not None else 0,
+                "display_lowest_scale": self.lowest_scale}
 
     def _run(self) -> None:
         session = self._session
@@ -165,7 +188,7 @@ class DisplayPublisher:
         while not self._stop.is_set():
             now = time.monotonic()
             if now >= next_state:
-                next_state = now + self._state_period_s
+                next_state = now + self._state_period_s / self.scale
                 state = self._state
                 if state is not None and state is not sent_state:
                     sent_state = state
@@ -175,11 +198,12 @@ class DisplayPublisher:
                     self._account(time.perf_counter() - started)
             if now >= next_status:
                 next_status = now + self._status_period_s
+                loop = self._loop_scale(now)
                 status = self._status
                 if status is not None:
                     started = time.perf_counter()
                     payload = {"side": self.side, "time_ns": time.time_ns(),
-                               "link": status, "events": self._events}
+                               "link": status, "events": self._events, **loop}
                     self._put(session, status_key,
                               json.dumps(json_safe(payload)).encode())
                     self._account(time.perf_counter() - started)
@@ -188,7 +212,7 @@ class DisplayPublisher:
                     next_layout = now + 1.0
                     self._put(session, layout_key, self._layout_bytes)
                 if now >= next_clay:
-                    next_clay = now + self._clay_period_s
+                    next_clay = now + self._clay_period_s / self.scale
                     started = time.perf_counter()
                     from haptic.common.records.heightmap_codec import (
                         downsample_heights,
@@ -206,6 +230,17 @@ class DisplayPublisher:
                         if self._on_clay is not None:
                             self._on_clay(time.time_ns(), reduced)
             self._stop.wait(min(0.005, self._state_period_s))
+
+    def _loop_scale(self, now_s: float) -> dict[str, Any]:
+        """Read the loop's counts and update the back-off's scale; the status's loop keys."""
+        loop_counts = self._loop_counts
+        if loop_counts is None:
+            return {}
+        ticks, overruns = loop_counts()
+        if self.backoff is not None:
+            self.scale = self.backoff.update(now_s, ticks, overruns)
+            self.lowest_scale = min(self.lowest_scale, self.scale)
+        return {"loop_steps": ticks, "loop_overruns": overruns, "display_scale": self.scale}
 
     def _account(self, cost_s: float) -> None:
         self.publications += 1

@@ -31,6 +31,7 @@ from typing import Any
 from haptic.common.config import ConfigError
 from haptic.common.records.run_recording import RunRecording
 from haptic.common.runtime.display import DisplayPublisher, EventCursor
+from haptic.common.runtime.display_backoff import DisplayBackoff
 from haptic.common.runtime.runner import (
     LeadFunction,
     RealTimeRunner,
@@ -105,10 +106,21 @@ class ProgramHarness:
                                  self.options.config)
 
     def attach_display(self, display: DisplayPublisher | None) -> None:
-        """Publish to the live view through ``display`` (started by the caller)."""
+        """Publish to the live view through ``display`` (started by the caller), with the
+        loop's counts; with ``[runner] display_backoff`` its rates back off while the loop
+        overruns (common/runtime/display_backoff.py)."""
         self.display = display
         if display is not None:
             self.view_every = display.state_every(self.period_s)
+            display.follow_loop(self.loop_counts, DisplayBackoff()
+                                if self.options.runner.display_backoff else None)
+
+    def loop_counts(self) -> tuple[int, int]:
+        """The loop's ticks stepped and overruns so far (0, 0 before it runs); any thread."""
+        runner = self.runner
+        if runner is None:
+            return 0, 0
+        return runner.steps, runner.overruns
 
     def time_s(self, now_ns: int) -> float:
         """A tick's time since :meth:`start`, s."""

@@ -11,6 +11,7 @@ says how (common/runtime/realtime.py explains each setting)::
     other_threads_cpus = ""  # CPUs of the program's other threads (Zenoh, display); empty = any
     gil_switch_interval_s = 0.0002  # Python's GIL switch interval while the loop runs, s (0: as is)
     zenoh_thread_priority = 0  # SCHED_FIFO priority of Zenoh's threads (below the loop's); 0: off
+    display_backoff = true   # the display's rates back off while the loop overruns
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ class RunnerSettings:
     realtime: RealtimeSettings
     zenoh_thread_priority: int = 0
     other_threads_cpus: tuple[int, ...] = ()
+    #: the display thread's rates back off while the loop overruns (display_backoff.py)
+    display_backoff: bool = True
 
 
 def runner_settings_from(config: dict[str, Any]) -> RunnerSettings:
@@ -66,6 +69,7 @@ def runner_settings_from(config: dict[str, Any]) -> RunnerSettings:
         ),
         zenoh_thread_priority=int(table["zenoh_thread_priority"]),
         other_threads_cpus=cpu_sets["other_threads_cpus"],
+        display_backoff=bool(table["display_backoff"]),
     )
 
 

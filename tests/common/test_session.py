@@ -81,17 +81,17 @@ def test_a_trip_after_the_peer_ended_is_at_the_end_however_long_this_side_ran_on
     """With both loops' start times (one host's clock), a trip is the peer stopping first
     when it came after the peer's loop ended, even where the session stopped this side much
     later (a slow machine: the master took 1.6 s to exit); one before it is a miss."""
-    from haptic.common.launch.cli import _trips, real_time_misses
+    from haptic.common.launch.cli import real_time_misses, watchdog_trips_split
 
     master = _loop_summary(loop_start_time_s=1000.0, duration_s=4.36)
     slave = _loop_summary(loop_start_time_s=999.99, duration_s=6.0,
                           events=[{"kind": "trip", "time_s": 4.376}])  # 1000.366: after
-    assert _trips(slave, master) == (0, 1)
+    assert watchdog_trips_split(slave, master) == (0, 1)
     assert real_time_misses(master, slave) == []
     early = _loop_summary(loop_start_time_s=999.99, duration_s=6.0,
                           events=[{"kind": "trip", "time_s": 4.0}])  # 1003.99: the master ran
-    assert _trips(early, master) == (1, 0)
+    assert watchdog_trips_split(early, master) == (1, 0)
     assert real_time_misses(master, early) == ["slave watchdog tripped 1x during the run"]
     # without the times, the last 1.5 s of this side's own run (the older rule)
-    assert _trips(_loop_summary(duration_s=6.0, events=[{"kind": "trip", "time_s": 4.376}])
-                  ) == (1, 0)
+    assert watchdog_trips_split(_loop_summary(
+        duration_s=6.0, events=[{"kind": "trip", "time_s": 4.376}])) == (1, 0)

@@ -1,12 +1,13 @@
 // haptic-view page: draws the workpiece (blocks in their materials, heights as shade), the
 // tool and the handle, force and velocity traces, and the link's state, from the server's
 // Server-Sent Events (/events). No external code. window.hapticView exposes counters the
-// browser test reads.
+// browser test reads. The page draws only when a frame came (at most once per animation
+// frame), so it follows the server's rate down when the view backs off for the loops.
 "use strict";
 (function () {
   const view = window.hapticView = {
     frames: 0, fps: 0, clayVersion: 0, claySumMm: null, claySumInitialMm: null,
-    layout: null, last: null,
+    layout: null, last: null, draws: 0, scale: 1,
   };
   const work = document.getElementById("work");
   const wctx = work.getContext("2d");
@@ -18,6 +19,7 @@
   let heights = null;  // Float32Array mm, rows of y
   let clayImage = null;
   let frameTimes = [];
+  let dirty = true;  // a frame came since the last drawing
 
   function text(id, value) { document.getElementById(id).textContent = value; }
   function fmt(pair, scale, digits, unit) {
@@ -174,6 +176,8 @@
     frameTimes.push(now);
     while (frameTimes.length && frameTimes[0] < now - 1000) frameTimes.shift();
     view.fps = frameTimes.length;
+    view.scale = typeof f.view_scale === "number" ? f.view_scale : 1;
+    dirty = true;
     if (f.layout) { view.layout = f.layout; showBlocks(f.layout); buildClayImage(); }
     if (f.clay) { heights = decodeClay(f.clay); view.clayVersion = f.clay_version; buildClayImage(); }
     const t = f.tool, h = f.handle;
@@ -182,7 +186,8 @@
         h ? h.handle_force_N[0] : null, t ? t.tool_velocity_m_s[0] * 1e3 : null]);
       while (samples.length && samples[0][0] < f.time_ns * 1e-9 - TRACE_S) samples.shift();
     }
-    text("fps", view.fps);
+    text("fps", view.scale < 1 ? `${view.fps} (backed off to ${(view.scale * 100).toFixed(1)} %: ` +
+      "a loop overruns)" : view.fps);
     text("tpos", fmt(t && t.tool_position_m, 1e3, 2, "mm"));
     text("hpos", fmt(h && h.handle_position_m, 1e3, 2, "mm"));
     text("tforce", fmt(t && t.tool_force_N, 1, 3, "N"));
@@ -203,8 +208,12 @@
   }
 
   function render() {
-    drawWork();
-    drawTraces();
+    if (dirty) {
+      dirty = false;
+      view.draws += 1;
+      drawWork();
+      drawTraces();
+    }
     requestAnimationFrame(render);
   }
 
