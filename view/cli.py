@@ -40,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
                         f"(default {DEFAULT_MAX_RATE_HZ:g})")
     parser.add_argument("--no-backoff", dest="backoff", action="store_false",
                         help="keep the frame rate while the loops overrun (by default it "
-                        "falls to as little as an eighth until they hold their period)")
+                        "falls to as little as a sixteenth until they hold their period)")
     return parser
 
 

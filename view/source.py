@@ -25,7 +25,8 @@ from haptic.view.state import ViewState
 
 class ZenohSource:
     """Subscribes under ``key_prefix`` on a session opened with ``zenoh_config`` and feeds
-    ``state`` at ``rate_hz``. Use as a context manager (the session is always closed)."""
+    ``state`` at ``rate_hz`` times the state's back-off scale (view/state.py). Use as a
+    context manager (the session is always closed)."""
 
     def __init__(self, zenoh_config: zenoh.Config, key_prefix: str, state: ViewState,
                  rate_hz: float = 60.0) -> None:
@@ -111,9 +112,10 @@ class ZenohSource:
         while not self._stop.is_set():
             self.poll_once()
             self.polls += 1
-            next_time += self._period_s
+            period_s = self._period_s / self._state.scale
+            next_time += period_s
             delay = next_time - time.monotonic()
-            if delay < -self._period_s:
+            if delay < -period_s:
                 next_time = time.monotonic()
             elif delay > 0:
                 self._stop.wait(delay)

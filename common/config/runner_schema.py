@@ -75,5 +75,5 @@ RUNNER_SCHEMA: Schema = {
     ),
     "display_backoff": Field(
         "bool", "The display thread's state and clay rates halve while the loop overruns "
-        "more than 0.1 % of its ticks, down to an eighth, and come back after 2 s without."),
+        "more than 0.1 % of its ticks, down to a sixteenth, and come back after 2 s without."),
 }

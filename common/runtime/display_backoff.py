@@ -20,8 +20,8 @@ from dataclasses import dataclass
 #: A loop that overruns more than this fraction of its ticks is missing its period (the
 #: loops' own target is 0.1 %).
 DEFAULT_OVERRUN_RATIO_LIMIT = 0.001
-#: The lowest scale: 60 Hz display frames become 7.5 Hz.
-DEFAULT_MIN_SCALE = 0.125
+#: The lowest scale: 60 Hz display frames become 3.75 Hz, the 10 Hz clay maps 0.6 Hz.
+DEFAULT_MIN_SCALE = 0.0625
 #: Time without overruns before the scale doubles again, s.
 DEFAULT_RECOVER_S = 2.0
 

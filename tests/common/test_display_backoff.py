@@ -21,8 +21,8 @@ def test_scale_halves_per_update_with_overruns_down_to_the_floor() -> None:
     assert backoff.update(0.0, 0, 0) == 1.0  # the baseline
     assert backoff.update(0.2, 370, 0) == 1.0  # on time: no change
     scales = [backoff.update(0.2 * i, 370 * i, 10 * (i - 2)) for i in range(3, 10)]
-    assert scales == [0.5, 0.25, 0.125, 0.125, 0.125, 0.125, 0.125]
-    assert backoff.backoffs == 3
+    assert scales == [0.5, 0.25, 0.125, 0.0625, 0.0625, 0.0625, 0.0625]
+    assert backoff.backoffs == 4
 
 
 def test_one_overrun_in_a_thousand_ticks_is_within_the_limit() -> None:
@@ -100,12 +100,12 @@ def test_display_thread_backs_off_while_its_loop_overruns_and_says_so() -> None:
     publisher.follow_loop(loop_counts, DisplayBackoff())
     publisher.offer_status({"link_received": 1}, [])
     with publisher:
-        _wait_for(lambda: publisher.scale == 0.125)
-        _wait_for(lambda: any(s.get("display_scale") == 0.125 for s in session.statuses()))
+        _wait_for(lambda: publisher.scale == 0.0625)
+        _wait_for(lambda: any(s.get("display_scale") == 0.0625 for s in session.statuses()))
     status = session.statuses()[-1]
     assert status["loop_steps"] > 0 and status["loop_overruns"] == status["loop_steps"] // 10
     figures = publisher.figures
-    assert figures["display_backoffs"] == 3 and figures["display_lowest_scale"] == 0.125
+    assert figures["display_backoffs"] == 4 and figures["display_lowest_scale"] == 0.0625
 
 
 def test_display_thread_without_backoff_keeps_its_rates_and_publishes_the_counts() -> None:
@@ -136,16 +136,16 @@ def test_view_follows_the_worse_side_and_recovers() -> None:
     state = ViewState(clock=clock)
     state.update(status=_status("master", 0, 0))
     state.update(status=_status("slave", 0, 0))
-    for i in range(1, 4):
+    for i in range(1, 5):
         clock.now_s = 0.2 * i
         state.update(status=_status("master", 370 * i, 0))
         state.update(status=_status("slave", 370 * i, 30 * i))  # the slave overruns
-    assert state.scale == 0.125 and state.snapshot()["view_scale"] == 0.125
-    for i in range(4, 40):
+    assert state.scale == 0.0625 and state.snapshot()["view_scale"] == 0.0625
+    for i in range(5, 50):
         clock.now_s = 0.2 * i
         state.update(status=_status("master", 370 * i, 0))
-        state.update(status=_status("slave", 370 * i, 90))
-    assert state.scale == 1.0 and state.lowest_scale == 0.125
+        state.update(status=_status("slave", 370 * i, 120))
+    assert state.scale == 1.0 and state.lowest_scale == 0.0625
 
 
 def test_view_ignores_loop_counts_that_are_not_counts() -> None:

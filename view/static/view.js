@@ -1,8 +1,9 @@
 // haptic-view page: draws the workpiece (blocks in their materials, heights as shade), the
 // tool and the handle, force and velocity traces, and the link's state, from the server's
 // Server-Sent Events (/events). No external code. window.hapticView exposes counters the
-// browser test reads. The page draws only when a frame came (at most once per animation
-// frame), so it follows the server's rate down when the view backs off for the loops.
+// browser test reads. The page draws only when a frame came (one animation frame asked per
+// frame received), so it follows the server's rate down when the view backs off for the
+// loops, and an idle page asks the browser for nothing.
 "use strict";
 (function () {
   const view = window.hapticView = {
@@ -19,7 +20,7 @@
   let heights = null;  // Float32Array mm, rows of y
   let clayImage = null;
   let frameTimes = [];
-  let dirty = true;  // a frame came since the last drawing
+  let drawPending = false;  // an animation frame is asked for
 
   function text(id, value) { document.getElementById(id).textContent = value; }
   function fmt(pair, scale, digits, unit) {
@@ -177,7 +178,7 @@
     while (frameTimes.length && frameTimes[0] < now - 1000) frameTimes.shift();
     view.fps = frameTimes.length;
     view.scale = typeof f.view_scale === "number" ? f.view_scale : 1;
-    dirty = true;
+    if (!drawPending) { drawPending = true; requestAnimationFrame(render); }
     if (f.layout) { view.layout = f.layout; showBlocks(f.layout); buildClayImage(); }
     if (f.clay) { heights = decodeClay(f.clay); view.clayVersion = f.clay_version; buildClayImage(); }
     const t = f.tool, h = f.handle;
@@ -208,13 +209,10 @@
   }
 
   function render() {
-    if (dirty) {
-      dirty = false;
-      view.draws += 1;
-      drawWork();
-      drawTraces();
-    }
-    requestAnimationFrame(render);
+    drawPending = false;
+    view.draws += 1;
+    drawWork();
+    drawTraces();
   }
 
   const source = new EventSource("/events");
@@ -223,5 +221,6 @@
   source.onerror = () => { const c = document.getElementById("conn");
     c.textContent = "disconnected"; c.className = "bad"; };
   source.onmessage = (event) => onFrame(JSON.parse(event.data));
-  requestAnimationFrame(render);
+  drawPending = true;
+  requestAnimationFrame(render);  // the empty workpiece until the first frame
 })();
