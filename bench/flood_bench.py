@@ -16,7 +16,8 @@ flood (``master_rate_before_flood_hz``) and the machine's load average at the st
 end (``load_average_1min``, with ``cpus``) say whether a miss is the flood's cost or a busy
 machine's.
 
-Usage: ``python bench/flood_bench.py [--rate HZ] [--flood S] [--max-samples N] [--json]``.
+Usage: ``python bench/flood_bench.py [--rate HZ] [--flood S] [--max-samples N]
+[--program-args ARGS] [--json]``.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shlex
 import socket
 import subprocess
 import sys
@@ -33,6 +35,8 @@ import uuid
 from pathlib import Path
 
 import numpy as np
+
+from haptic.common.launch.cli import watchdog_trips_split
 
 
 def _free_port() -> int:
@@ -71,7 +75,8 @@ def verdict(result: dict) -> str:
     return "met" if not misses else "not met: " + "; ".join(misses)
 
 
-def run(rate_hz: float, flood_s: float, max_samples: int, lead_s: float = 6.0) -> dict:
+def run(rate_hz: float, flood_s: float, max_samples: int, lead_s: float = 6.0,
+        program_args: tuple[str, ...] = ()) -> dict:
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     prefix = f"bench/{uuid.uuid4().hex[:8]}"
     duration_s = lead_s + flood_s + 3.0
@@ -83,7 +88,7 @@ def run(rate_hz: float, flood_s: float, max_samples: int, lead_s: float = 6.0) -
                           f'clay_impl = "numpy"\ndevice = "cpu"\n\n[link.security]\n'
                           f"max_samples_per_poll = {max_samples}\n")
         common = ["--config", str(config), "--key-prefix", prefix, "--no-status",
-                  "--peer-wait", "60", "--duration", str(duration_s)]
+                  "--peer-wait", "60", "--duration", str(duration_s), *program_args]
         processes = []
         try:
             master = subprocess.Popen(
@@ -132,14 +137,15 @@ def run(rate_hz: float, flood_s: float, max_samples: int, lead_s: float = 6.0) -
         "flood_achieved_hz": sent / flood_s, "max_samples_per_poll": max_samples,
         "master_rate_in_flood_hz": window_rate,
         "master_rate_before_flood_hz": before_rate, "master_rate_hz": summary_m["rate_hz"],
-        "master_watchdog_trips": summary_m["watchdog_trips"],
-        "slave_watchdog_trips": summary_s["watchdog_trips"],
+        # during the run: a trip at the end, when the peer stopped first, is not the flood's
+        "master_watchdog_trips": watchdog_trips_split(summary_m, summary_s)[0],
+        "slave_watchdog_trips": watchdog_trips_split(summary_s, summary_m)[0],
         "master_malformed": summary_m["link_dropped"]["malformed"],
         "master_capped_polls": summary_m.get("link_capped_polls"),
         "slave_malformed": summary_s["link_dropped"]["malformed"],
         "master_overruns": summary_m.get("overruns"),
         "cpus": os.cpu_count(), "load_average_1min": [load_start, os.getloadavg()[0]],
-        "target_rate_hz": TARGET_RATE_HZ,
+        "target_rate_hz": TARGET_RATE_HZ, "program_args": " ".join(program_args),
     }
     result["target_verdict"] = verdict(result)
     return result
@@ -151,9 +157,13 @@ def main() -> int:
     parser.add_argument("--flood", type=float, default=3.0, help="flood length, s")
     parser.add_argument("--max-samples", type=int, default=64,
                         help="[link.security] max_samples_per_poll")
+    parser.add_argument("--program-args", default="",
+                        help="extra arguments for both programs, one string (e.g. "
+                        "\"--rt-priority 40\": the loops in SCHED_FIFO, as on a rig PC)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    result = run(args.rate, args.flood, args.max_samples)
+    result = run(args.rate, args.flood, args.max_samples,
+                 program_args=tuple(shlex.split(args.program_args)))
     if args.json:
         print(json.dumps(result))
     else:
