@@ -209,7 +209,8 @@ class DisplayPublisher:
                     self._account(time.perf_counter() - started)
             if self._clay_source is not None and self._layout is not None:
                 if now >= next_layout:
-                    next_layout = now + 1.0 / self.scale
+                    # backed off too, but a late viewer gets the workpiece within 4 s
+                    next_layout = now + min(1.0 / self.scale, 4.0)
                     self._put(session, layout_key, self._layout_bytes)
                 if now >= next_clay:
                     next_clay = now + self._clay_period_s / self.scale
