@@ -108,7 +108,7 @@ def play(recordings: Sequence[Recording], state: ViewState, speed: float = 1.0,
 def replay_into_view(recordings: Sequence[Recording], port: int = 8765,
                      speed: float = 1.0) -> int:
     """Serve the live view on ``port`` and play the recordings into it; exit status 0."""
-    state = ViewState()
+    state = ViewState(backoff=False)  # no loop runs: nothing to give way to
     with StopSignals() as signals, ViewServer(state, port) as server:
         print(f"haptic-replay: {server.url} (speed x{speed:g}); Ctrl-C to stop",
               file=sys.stderr, flush=True)
