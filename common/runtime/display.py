@@ -18,8 +18,13 @@ display rates:
   reduces it with numpy, which releases the GIL). A publication is skipped while the
   previous one is still running, so the thread never queues work.
 
+Nothing is encoded or sent for a key no subscriber matches (each key has a declared Zenoh
+publisher whose matching status costs about 1 us to read): with no viewer the thread only
+reads the loop's counts and, on a recording slave, reduces the clay for the recording; a
+viewer that appears gets the workpiece layout at once.
+
 The thread measures its own cost (:attr:`figures`): publications made and the mean and
-largest time one took, s.
+largest time one took, s, and the publications skipped because nobody watched.
 
 Told the loop's ticks and overruns so far (:meth:`DisplayPublisher.follow_loop`) with a
 back-off (:class:`~haptic.common.runtime.display_backoff.DisplayBackoff`), the state and clay rates
@@ -46,6 +51,44 @@ from haptic.common.runtime.summary import json_safe
 DEFAULT_STATE_RATE_HZ = 60.0
 DEFAULT_STATUS_RATE_HZ = 5.0
 DEFAULT_CLAY_RATE_HZ = 10.0
+
+
+class _Publication:
+    """One display key's Zenoh publisher: ``put`` never raises (a display publication may
+    fail; the loop goes on) and ``matching()`` says whether any subscriber matches the key
+    (about 1 us): nothing is encoded for a key nobody watches."""
+
+    def __init__(self, session: Any, key: str) -> None:
+        self.key = key
+        self._session = session
+        try:
+            self._publisher = session.declare_publisher(key)
+        except Exception:  # noqa: BLE001 - fall back to the session's put, always watched
+            self._publisher = None
+
+    def matching(self) -> bool:
+        if self._publisher is None:
+            return True
+        try:
+            return bool(self._publisher.matching_status.matching)
+        except Exception:  # noqa: BLE001 - unknown: publish
+            return True
+
+    def put(self, payload: bytes) -> None:
+        try:
+            if self._publisher is not None:
+                self._publisher.put(payload)
+            else:
+                self._session.put(self.key, payload)
+        except Exception:  # noqa: BLE001 - a display publication may fail; the loop goes on
+            pass
+
+    def close(self) -> None:
+        if self._publisher is not None:
+            try:
+                self._publisher.undeclare()
+            except Exception:  # noqa: BLE001 - best effort while stopping
+                pass
 
 
 def encode_clay(layout: dict[str, Any], heights_bytes: bytes, sequence: int) -> bytes:
@@ -120,6 +163,8 @@ class DisplayPublisher:
         self._thread: threading.Thread | None = None
         self.publications = 0
         self.clay_publications = 0
+        #: publications not made because no subscriber matched their key
+        self.unwatched_skips = 0
         self.busy_s = 0.0
         self.max_busy_s = 0.0
 
@@ -173,17 +218,29 @@ class DisplayPublisher:
                 "display_mean_cost_s": self.busy_s / count if count else 0.0,
                 "display_max_cost_s": self.max_busy_s,
                 "display_backoffs": self.backoff.backoffs if self.backoff is not None else 0,
-                "display_lowest_scale": self.lowest_scale}
+                "display_lowest_scale": self.lowest_scale,
+                "display_unwatched_skips": self.unwatched_skips}
 
     def _run(self) -> None:
-        session = self._session
-        status_key = f"{self._prefix}/status/{self.side}"
-        state_key = f"{self._prefix}/view/{self.side}"
+        prefix = self._prefix
+        keys = {"state": f"{prefix}/view/{self.side}", "status": f"{prefix}/status/{self.side}"}
+        has_clay = self._clay_source is not None and self._layout is not None
+        if has_clay:
+            keys.update(clay=f"{prefix}/clay", layout=f"{prefix}/workpiece")
+        publishers = {name: _Publication(self._session, key) for name, key in keys.items()}
+        try:
+            self._publish(publishers, has_clay)
+        finally:
+            for publication in publishers.values():
+                publication.close()
+
+    def _publish(self, publishers: dict[str, _Publication], has_clay: bool) -> None:
+        """The thread's loop: each publication at its rate, made only while a subscriber
+        matches its key (the clay is still reduced for ``on_clay``)."""
+        state_pub, status_pub = publishers["state"], publishers["status"]
         sent_state: dict[str, Any] | None = None
-        next_state = time.monotonic()
-        clay_key = f"{self._prefix}/clay"
-        layout_key = f"{self._prefix}/workpiece"
-        next_status = next_clay = next_layout = time.monotonic()
+        next_state = next_status = next_clay = next_layout = time.monotonic()
+        layout_watched = False
         sequence = 0
         while not self._stop.is_set():
             now = time.monotonic()
@@ -192,45 +249,62 @@ class DisplayPublisher:
                 state = self._state
                 if state is not None and state is not sent_state:
                     sent_state = state
-                    started = time.perf_counter()
-                    state["time_ns"] = time.time_ns()
-                    self._put(session, state_key, json.dumps(json_safe(state)).encode())
-                    self._account(time.perf_counter() - started)
+                    if self._watched(state_pub):
+                        started = time.perf_counter()
+                        state["time_ns"] = time.time_ns()
+                        state_pub.put(json.dumps(json_safe(state)).encode())
+                        self._account(time.perf_counter() - started)
             if now >= next_status:
                 next_status = now + self._status_period_s
                 loop = self._loop_scale(now)
                 status = self._status
-                if status is not None:
+                if status is not None and self._watched(status_pub):
                     started = time.perf_counter()
                     payload = {"side": self.side, "time_ns": time.time_ns(),
                                "link": status, "events": self._events, **loop}
-                    self._put(session, status_key,
-                              json.dumps(json_safe(payload)).encode())
+                    status_pub.put(json.dumps(json_safe(payload)).encode())
                     self._account(time.perf_counter() - started)
-            if self._clay_source is not None and self._layout is not None:
-                if now >= next_layout:
-                    # backed off too, but a late viewer gets the workpiece within 4 s
+            if has_clay:
+                watched = publishers["layout"].matching()
+                if watched and (now >= next_layout or not layout_watched):
+                    # a new viewer gets the workpiece at once; then backed off too, but at
+                    # least every 4 s
                     next_layout = now + min(1.0 / self.scale, 4.0)
-                    self._put(session, layout_key, self._layout_bytes)
+                    publishers["layout"].put(self._layout_bytes)
+                layout_watched = watched
                 if now >= next_clay:
                     next_clay = now + self._clay_period_s / self.scale
-                    started = time.perf_counter()
-                    from haptic.common.records.heightmap_codec import (
-                        downsample_heights,
-                        heights_to_bytes,
-                    )
-
-                    heights = self._clay_source()
-                    if heights is not None:
-                        reduced = downsample_heights(heights, self._factors)
-                        data = heights_to_bytes(reduced)
-                        sequence += 1
-                        self._put(session, clay_key, encode_clay(self._layout, data, sequence))
-                        self.clay_publications += 1
-                        self._account(time.perf_counter() - started)
-                        if self._on_clay is not None:
-                            self._on_clay(time.time_ns(), reduced)
+                    sequence = self._clay(publishers["clay"], sequence)
             self._stop.wait(min(0.005, self._state_period_s))
+
+    def _watched(self, publication: _Publication) -> bool:
+        """Whether a subscriber matches the publication's key (else the skip is counted)."""
+        if publication.matching():
+            return True
+        self.unwatched_skips += 1
+        return False
+
+    def _clay(self, publication: _Publication, sequence: int) -> int:
+        """Reduce the clay map; publish it where watched and hand it to ``on_clay``.
+        Returns the publication's sequence number."""
+        watched = self._watched(publication)
+        if not watched and self._on_clay is None:
+            return sequence
+        started = time.perf_counter()
+        from haptic.common.records.heightmap_codec import downsample_heights, heights_to_bytes
+
+        heights = self._clay_source() if self._clay_source is not None else None
+        if heights is None:
+            return sequence
+        reduced = downsample_heights(heights, self._factors)
+        if watched:
+            sequence += 1
+            publication.put(encode_clay(self._layout, heights_to_bytes(reduced), sequence))
+            self.clay_publications += 1
+            self._account(time.perf_counter() - started)
+        if self._on_clay is not None:
+            self._on_clay(time.time_ns(), reduced)
+        return sequence
 
     def _loop_scale(self, now_s: float) -> dict[str, Any]:
         """Read the loop's counts and update the back-off's scale; the status's loop keys."""
@@ -248,10 +322,3 @@ class DisplayPublisher:
         self.busy_s += cost_s
         if cost_s > self.max_busy_s:
             self.max_busy_s = cost_s
-
-    @staticmethod
-    def _put(session: Any, key: str, payload: bytes) -> None:
-        try:
-            session.put(key, payload)
-        except Exception:  # noqa: BLE001 - a display publication may fail; the loop goes on
-            pass

@@ -8,6 +8,7 @@ import threading
 import time
 from typing import Any
 
+import numpy as np
 import pytest
 
 from haptic.common.runtime.display import DisplayPublisher
@@ -179,3 +180,64 @@ def test_server_reports_the_frame_scale() -> None:
     with ViewServer(state, port=0) as server:
         stats = server.stats()
     assert stats["frame_scale"] == 0.5 and stats["lowest_frame_scale"] == 0.5
+
+
+class _Publisher:
+    """A declared publisher of :class:`_WatchedSession`: puts go to the session; its
+    ``matching_status.matching`` is the session's ``watched``."""
+
+    def __init__(self, session: _WatchedSession, key: str) -> None:
+        self._session, self._key = session, key
+
+    @property
+    def matching_status(self) -> Any:
+        class Status:
+            matching = self._session.watched
+        return Status()
+
+    def put(self, payload: bytes) -> None:
+        self._session.put(self._key, payload)
+
+    def undeclare(self) -> None:
+        self._session.undeclared += 1
+
+
+class _WatchedSession(_Session):
+    """A session whose publishers match a subscriber only while ``watched``."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.watched = False
+        self.undeclared = 0
+
+    def declare_publisher(self, key: str) -> _Publisher:
+        return _Publisher(self, key)
+
+    def keys(self) -> list[str]:
+        with self.lock:
+            return [key for key, _ in self.puts]
+
+
+def test_nothing_is_encoded_for_keys_nobody_watches_and_a_new_viewer_gets_the_layout() -> None:
+    session = _WatchedSession()
+    clay_maps: list[Any] = []
+    heights = np.zeros((8, 16))
+    publisher = DisplayPublisher(
+        session, "t", "slave", status_rate_hz=20.0, clay_rate_hz=20.0,
+        clay_source=lambda: heights, layout={"cells_x": 16, "cells_y": 8}, factors=(1, 1),
+        on_clay=lambda time_ns, reduced: clay_maps.append(reduced))
+    publisher.follow_loop(lambda: (100, 0), DisplayBackoff())
+    publisher.offer_status({}, [])
+    publisher.offer_state({"tool_force_N": [1.0, 0.0]})
+    with publisher:
+        _wait_for(lambda: publisher.unwatched_skips >= 6 and len(clay_maps) >= 3)
+        assert session.keys() == []  # nobody watches: nothing published
+        assert publisher.publications == 0
+        session.watched = True
+        _wait_for(lambda: {"t/workpiece", "t/status/slave", "t/clay"} <= set(session.keys()))
+        publisher.offer_state({"tool_force_N": [2.0, 0.0]})
+        _wait_for(lambda: "t/view/slave" in session.keys())
+    keys = session.keys()
+    assert keys.count("t/workpiece") >= 1 and session.undeclared == 4
+    assert publisher.figures["display_unwatched_skips"] >= 6
+
