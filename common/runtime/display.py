@@ -165,6 +165,9 @@ class DisplayPublisher:
         self.clay_publications = 0
         #: publications not made because no subscriber matched their key
         self.unwatched_skips = 0
+        #: whether a viewer subscribed to the status at the last status period (the loop
+        #: builds no status figures for the display while none does)
+        self.status_watched = True
         self.busy_s = 0.0
         self.max_busy_s = 0.0
 
@@ -258,6 +261,7 @@ class DisplayPublisher:
                 next_status = now + self._status_period_s
                 loop = self._loop_scale(now)
                 status = self._status
+                self.status_watched = status_pub.matching()
                 if status is not None and self._watched(status_pub):
                     started = time.perf_counter()
                     payload = {"side": self.side, "time_ns": time.time_ns(),

@@ -135,8 +135,9 @@ class ProgramHarness:
                event_lists: Sequence[list[Any]], **figures: Any) -> None:
         """At :data:`STATUS_RATE_HZ`: the link's figures, the watchdog's state and trips,
         ``figures`` and the events new in ``event_lists``, into the recording and the
-        display."""
-        if tick % self.status_every or (self.recording is None and self.display is None):
+        display (nothing is built while neither records nor has a viewer)."""
+        if tick % self.status_every or (self.recording is None and (
+                self.display is None or not self.display.status_watched)):
             return
         values = self.link.summary()
         values["watchdog_state"] = watchdog.state.value

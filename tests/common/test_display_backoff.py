@@ -233,8 +233,10 @@ def test_nothing_is_encoded_for_keys_nobody_watches_and_a_new_viewer_gets_the_la
         _wait_for(lambda: publisher.unwatched_skips >= 6 and len(clay_maps) >= 3)
         assert session.keys() == []  # nobody watches: nothing published
         assert publisher.publications == 0
+        assert not publisher.status_watched  # the loop need not offer its status
         session.watched = True
         _wait_for(lambda: {"t/workpiece", "t/status/slave", "t/clay"} <= set(session.keys()))
+        assert publisher.status_watched
         publisher.offer_state({"tool_force_N": [2.0, 0.0]})
         _wait_for(lambda: "t/view/slave" in session.keys())
     keys = session.keys()
