@@ -168,6 +168,8 @@ class DisplayPublisher:
         #: whether a viewer subscribed to the status at the last status period (the loop
         #: builds no status figures for the display while none does)
         self.status_watched = True
+        #: the same for the state (the loop builds no state for the display while False)
+        self.state_watched = True
         self.busy_s = 0.0
         self.max_busy_s = 0.0
 
@@ -250,6 +252,7 @@ class DisplayPublisher:
             if now >= next_state:
                 next_state = now + self._state_period_s / self.scale
                 state = self._state
+                self.state_watched = state_pub.matching()
                 if state is not None and state is not sent_state:
                     sent_state = state
                     if self._watched(state_pub):

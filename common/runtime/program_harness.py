@@ -127,9 +127,11 @@ class ProgramHarness:
         return (now_ns - self.perf_start_ns) * 1e-9
 
     def offer_state(self, tick: int, state: Callable[[], dict[str, Any]]) -> None:
-        """Offer ``state()`` to the display at its rate (not built on the other ticks)."""
-        if self.display is not None and tick % self.view_every == 0:
-            self.display.offer_state(state())
+        """Offer ``state()`` to the display at its rate (not built on the other ticks, nor
+        while no viewer subscribes to it)."""
+        display = self.display
+        if display is not None and tick % self.view_every == 0 and display.state_watched:
+            display.offer_state(state())
 
     def status(self, tick: int, now_ns: int, watchdog: PeerWatchdog,
                event_lists: Sequence[list[Any]], **figures: Any) -> None:

@@ -234,11 +234,13 @@ def test_nothing_is_encoded_for_keys_nobody_watches_and_a_new_viewer_gets_the_la
         assert session.keys() == []  # nobody watches: nothing published
         assert publisher.publications == 0
         assert not publisher.status_watched  # the loop need not offer its status
+        assert not publisher.state_watched  # nor its state
         session.watched = True
         _wait_for(lambda: {"t/workpiece", "t/status/slave", "t/clay"} <= set(session.keys()))
         assert publisher.status_watched
         publisher.offer_state({"tool_force_N": [2.0, 0.0]})
         _wait_for(lambda: "t/view/slave" in session.keys())
+        assert publisher.state_watched
     keys = session.keys()
     assert keys.count("t/workpiece") >= 1 and session.undeclared == 4
     assert publisher.figures["display_unwatched_skips"] >= 6
