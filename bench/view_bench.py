@@ -67,6 +67,22 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _reap(processes: list[subprocess.Popen]) -> None:
+    """End the children still running (by their own PIDs) and reap every one."""
+    for process in processes:
+        if process.poll() is None:
+            process.kill()
+        process.wait(timeout=10)
+
+
+def _pair_figures(tmp: Path) -> tuple[dict, dict, dict[str, float]]:
+    """The master's and the slave's summaries in ``tmp`` and both loops' figures."""
+    master = json.loads((tmp / "master.json").read_text())
+    slave = json.loads((tmp / "slave.json").read_text())
+    return master, slave, {**_loop_figures(master, "master", slave),
+                           **_loop_figures(slave, "slave", master)}
+
+
 def pair_figures(duration_s: float, record: bool, display: bool) -> dict[str, float]:
     """The same networked run without the view, with or without ``--record`` and the display
     publications: the loops' rate and overruns, to attribute the cost."""
@@ -90,13 +106,9 @@ def pair_figures(duration_s: float, record: bool, display: bool) -> dict[str, fl
         for process in processes:
             process.wait(timeout=duration_s + 90)
     finally:
-        for process in processes:
-            if process.poll() is None:
-                process.kill()
-            process.wait(timeout=10)
-    master = json.loads((tmp / "master.json").read_text())
-    slave = json.loads((tmp / "slave.json").read_text())
-    return {**_loop_figures(master, "master", slave), **_loop_figures(slave, "slave", master),
+        _reap(processes)
+    master, slave, loops = _pair_figures(tmp)
+    return {**loops,
             "master_steps": master["steps"], "slave_steps": slave["steps"]}
 
 
@@ -145,12 +157,8 @@ def run_figures(duration_s: float) -> dict[str, float]:
         for process in processes[1:]:
             process.wait(timeout=duration_s + 60)
     finally:
-        for process in processes:
-            if process.poll() is None:
-                process.kill()
-            process.wait(timeout=10)
-    master = json.loads((tmp / "master.json").read_text())
-    slave = json.loads((tmp / "slave.json").read_text())
+        _reap(processes)
+    master, slave, _ = _pair_figures(tmp)
     return {"view_frames_per_s": frames / elapsed,
             "view_state_updates_per_s_since_start": stats["state_update_rate_hz"],
             "master_rate_hz": master["rate_hz"], "slave_rate_hz": slave["rate_hz"],
@@ -235,13 +243,9 @@ def browser_figures(duration_s: float, backoff: bool, chromium: str) -> dict[str
             stats = json.loads(response.read())
         processes[0].wait(timeout=60)
     finally:
-        for process in processes:
-            if process.poll() is None:
-                process.kill()
-            process.wait(timeout=10)
-    master = json.loads((tmp / "master.json").read_text())
-    slave = json.loads((tmp / "slave.json").read_text())
-    return {**_loop_figures(master, "master", slave), **_loop_figures(slave, "slave", master),
+        _reap(processes)
+    _, _, loops = _pair_figures(tmp)
+    return {**loops,
             "page_frames_per_s": seen["frames"] / elapsed,
             "page_draws_per_s": seen["draws"] / elapsed,
             "view_lowest_frame_scale": stats["lowest_frame_scale"]}
