@@ -255,7 +255,7 @@ class DisplayPublisher:
                 self.state_watched = state_pub.matching()
                 if state is not None and state is not sent_state:
                     sent_state = state
-                    if self._watched(state_pub):
+                    if self._counted(self.state_watched):
                         started = time.perf_counter()
                         state["time_ns"] = time.time_ns()
                         state_pub.put(json.dumps(json_safe(state)).encode())
@@ -265,7 +265,7 @@ class DisplayPublisher:
                 loop = self._loop_scale(now)
                 status = self._status
                 self.status_watched = status_pub.matching()
-                if status is not None and self._watched(status_pub):
+                if status is not None and self._counted(self.status_watched):
                     started = time.perf_counter()
                     payload = {"side": self.side, "time_ns": time.time_ns(),
                                "link": status, "events": self._events, **loop}
@@ -284,23 +284,23 @@ class DisplayPublisher:
                     sequence = self._clay(publishers["clay"], sequence)
             self._stop.wait(min(0.005, self._state_period_s))
 
-    def _watched(self, publication: _Publication) -> bool:
-        """Whether a subscriber matches the publication's key (else the skip is counted)."""
-        if publication.matching():
-            return True
-        self.unwatched_skips += 1
-        return False
+    def _counted(self, watched: bool) -> bool:
+        """``watched`` (a subscriber matches the key); a skipped publication is counted."""
+        if not watched:
+            self.unwatched_skips += 1
+        return watched
 
     def _clay(self, publication: _Publication, sequence: int) -> int:
         """Reduce the clay map; publish it where watched and hand it to ``on_clay``.
         Returns the publication's sequence number."""
-        watched = self._watched(publication)
+        watched = self._counted(publication.matching())
         if not watched and self._on_clay is None:
             return sequence
         started = time.perf_counter()
         from haptic.common.records.heightmap_codec import downsample_heights, heights_to_bytes
 
-        heights = self._clay_source() if self._clay_source is not None else None
+        assert self._clay_source is not None  # has_clay
+        heights = self._clay_source()
         if heights is None:
             return sequence
         reduced = downsample_heights(heights, self._factors)
