@@ -16,8 +16,12 @@ flood (``master_rate_before_flood_hz``) and the machine's load average at the st
 end (``load_average_1min``, with ``cpus``) say whether a miss is the flood's cost or a busy
 machine's.
 
+``--session-key`` runs the programs with a session key and the flooder without: with the
+transport authentication (common/wire/transport_auth.py) it has no peer (``flooder_peers``
+0) and nothing it sends reaches the programs; what is left is its CPU.
+
 Usage: ``python bench/flood_bench.py [--rate HZ] [--flood S] [--max-samples N]
-[--program-args ARGS] [--json]``.
+[--program-args ARGS] [--session-key] [--json]``.
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from haptic.common.launch.cli import watchdog_trips_split
+from haptic.common.wire.auth import write_key_file
 
 
 def _free_port() -> int:
@@ -72,11 +77,14 @@ def verdict(result: dict) -> str:
     trips = result["master_watchdog_trips"] + result["slave_watchdog_trips"]
     if trips:
         misses.append(f"{trips} watchdog trip(s)")
-    return "met" if not misses else "not met: " + "; ".join(misses)
+    outcome = "met" if not misses else "not met: " + "; ".join(misses)
+    if result.get("flooder_peers") == 0:  # a session key: it had no transport to the programs
+        outcome += " (the flooder could not join the programs' session: its messages went nowhere)"
+    return outcome
 
 
 def run(rate_hz: float, flood_s: float, max_samples: int, lead_s: float = 6.0,
-        program_args: tuple[str, ...] = ()) -> dict:
+        program_args: tuple[str, ...] = (), session_key: bool = False) -> dict:
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     prefix = f"bench/{uuid.uuid4().hex[:8]}"
     duration_s = lead_s + flood_s + 3.0
@@ -89,6 +97,8 @@ def run(rate_hz: float, flood_s: float, max_samples: int, lead_s: float = 6.0,
                           f"max_samples_per_poll = {max_samples}\n")
         common = ["--config", str(config), "--key-prefix", prefix, "--no-status",
                   "--peer-wait", "60", "--duration", str(duration_s), *program_args]
+        if session_key:  # the programs paired under a key; the flooder has none
+            common += ["--session-key", str(write_key_file(tmp / "session.key"))]
         processes = []
         try:
             master = subprocess.Popen(
@@ -131,10 +141,13 @@ def run(rate_hz: float, flood_s: float, max_samples: int, lead_s: float = 6.0,
         # the flooder's own start-up (~1 s) is inside [flood_start, flood_end]
         window_rate = _window_rate_hz(times, flood_start_s + 1.0, flood_end_s, 10)
         before_rate = _window_rate_hz(times, times[0] + 1.0, flood_start_s, 10)
-    sent = int(flood_out.split()[-1]) if flood_out.strip() else 0
+    words = flood_out.split()
+    sent = int(words[-1]) if words else 0
+    flooder_peers = int(words[1]) if len(words) >= 4 and words[0] == "peers" else None
     result = {
         "flood_rate_hz": rate_hz, "flood_s": flood_s, "flood_sent": sent,
         "flood_achieved_hz": sent / flood_s, "max_samples_per_poll": max_samples,
+        "session_key": session_key, "flooder_peers": flooder_peers,
         "master_rate_in_flood_hz": window_rate,
         "master_rate_before_flood_hz": before_rate, "master_rate_hz": summary_m["rate_hz"],
         # during the run: a trip at the end, when the peer stopped first, is not the flood's
@@ -160,10 +173,14 @@ def main() -> int:
     parser.add_argument("--program-args", default="",
                         help="extra arguments for both programs, one string (e.g. "
                         "\"--rt-priority 40\": the loops in SCHED_FIFO, as on a rig PC)")
+    parser.add_argument("--session-key", action="store_true",
+                        help="run the programs with a session key (the flooder has none: "
+                        "it cannot join their Zenoh session, common/wire/transport_auth.py)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     result = run(args.rate, args.flood, args.max_samples,
-                 program_args=tuple(shlex.split(args.program_args)))
+                 program_args=tuple(shlex.split(args.program_args)),
+                 session_key=args.session_key)
     if args.json:
         print(json.dumps(result))
     else:

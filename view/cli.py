@@ -20,7 +20,7 @@ from haptic.common.runtime.failures import exit_on_link_error
 from haptic.common.runtime.runner import StopSignals
 from haptic.common.wire.errors import LinkOpenError
 from haptic.common.wire.link import zenoh_config
-from haptic.common.wire.link_config import link_config_from
+from haptic.common.wire.link_config import LinkConfig, link_config_from
 from haptic.view.server import DEFAULT_MAX_RATE_HZ, ViewServer
 from haptic.view.source import ZenohSource
 from haptic.view.state import ViewState
@@ -35,6 +35,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="Zenoh endpoint to connect to (default: the slave's, "
                         "link.slave.endpoints.connect)")
     parser.add_argument("--key-prefix", metavar="PREFIX", help="key prefix of the rig")
+    parser.add_argument("--session-key", metavar="FILE",
+                        help="the programs' pre-shared key file (link.security."
+                        "session_key_file): with one, they admit only transports that "
+                        "authenticate with it, a viewer's too")
     parser.add_argument("--rate", metavar="HZ", type=float, default=DEFAULT_MAX_RATE_HZ,
                         help=f"display rate: Zenoh polls and frames per second per browser "
                         f"(default {DEFAULT_MAX_RATE_HZ:g})")
@@ -44,14 +48,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def view_zenoh_config(config: dict, connect: Sequence[str] | None) -> zenoh.Config:
-    """The view's Zenoh configuration: the slave's transport settings, connecting where the
-    slave connects (or to ``connect``) and listening on a free loopback port so the peers'
-    gossip can reach it."""
+def view_link_config(config: dict, connect: Sequence[str] | None) -> LinkConfig:
+    """The view's link settings: the slave's transport settings and session key, connecting
+    where the slave connects (or to ``connect``) and listening on a free loopback port so the
+    peers' gossip can reach it."""
     changes = {"listen": ("tcp/127.0.0.1:0",)}
     if connect:
         changes["connect"] = tuple(e for item in connect for e in split_endpoints(item))
-    return zenoh_config(link_config_from(config, "slave", **changes))
+    return link_config_from(config, "slave", **changes)
+
+
+def view_zenoh_config(config: dict, connect: Sequence[str] | None) -> zenoh.Config:
+    """The view's Zenoh configuration (:func:`view_link_config`)."""
+    return zenoh_config(view_link_config(config, connect))
 
 
 def _view_server(state: ViewState, port: int, rate_hz: float) -> ViewServer:
@@ -75,11 +84,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             from haptic.common.config import ConfigError
 
             raise ConfigError("--rate", f"must be > 0 Hz (got {args.rate})")
-        zconf = view_zenoh_config(config, args.connect)
+        if args.session_key is not None:
+            config = override(config, "link.security.session_key_file", args.session_key)
+        link = view_link_config(config, args.connect)
+        zconf = zenoh_config(link)
     prefix = config["link"]["transport"]["key_prefix"]
     state = ViewState(backoff=args.backoff)
     with exit_on_link_error("haptic-view"), StopSignals() as signals, \
-            ZenohSource(zconf, prefix, state, args.rate), \
+            ZenohSource(zconf, prefix, state, args.rate, transport_key=link.transport_key), \
             _view_server(state, args.port, args.rate) as server:
         print(f"haptic-view: {server.url} (keys {prefix}/...)", file=sys.stderr, flush=True)
         while not signals.requested:

@@ -20,17 +20,20 @@ import zenoh
 
 from haptic.common.runtime.display import decode_clay
 from haptic.common.wire.errors import LinkOpenError, one_line
+from haptic.common.wire.transport_auth import open_session
 from haptic.view.state import ViewState
 
 
 class ZenohSource:
     """Subscribes under ``key_prefix`` on a session opened with ``zenoh_config`` and feeds
     ``state`` at ``rate_hz`` times the state's back-off scale (view/state.py). Use as a
-    context manager (the session is always closed)."""
+    context manager (the session is always closed). ``transport_key``: the programs' session
+    key when they admit only authenticated transports (common/wire/transport_auth.py)."""
 
     def __init__(self, zenoh_config: zenoh.Config, key_prefix: str, state: ViewState,
-                 rate_hz: float = 60.0) -> None:
+                 rate_hz: float = 60.0, transport_key: bytes | None = None) -> None:
         self._config = zenoh_config
+        self._transport_key = transport_key
         self._prefix = key_prefix
         self._state = state
         self._period_s = 1.0 / rate_hz
@@ -43,7 +46,7 @@ class ZenohSource:
 
     def __enter__(self) -> ZenohSource:
         try:
-            self._session = zenoh.open(self._config)
+            self._session = open_session(self._config, self._transport_key)
         except zenoh.ZError as error:
             raise LinkOpenError(f"cannot open the Zenoh session: {one_line(error)}") from None
         ring = zenoh.handlers.RingChannel

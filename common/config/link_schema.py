@@ -139,6 +139,11 @@ SECURITY_SCHEMA: Schema = {
         "hex digits, mode 600); both sides must have the same. Empty: no authentication "
         "(one trusted host only).",
     ),
+    "transport_auth": Field(
+        "bool", "With a session key in peer mode, Zenoh admits only transports that "
+        "authenticate with credentials derived from it: a process without the key cannot "
+        "join, read or flood the session (common/wire/transport_auth.py).",
+    ),
     "max_samples_per_poll": Field(
         "int", "Flood bound: samples one poll takes from the receive ring at most; the rest "
         "wait for the next tick (a flood costs the loop a bounded time per tick).",

@@ -92,7 +92,9 @@ class ProgramHarness:
             if signals.requested:
                 self.say(f"stopped before the {self.peer} came")
                 return 0
-            self.say(f"no {self.peer} after {peer_wait_s:g} s")
+            hint = ("; Zenoh admits only a peer with the same session key: check both "
+                    "sides' --session-key" if config.transport_key is not None else "")
+            self.say(f"no {self.peer} after {peer_wait_s:g} s{hint}")
             return 1
         self.zenoh_threads.update(prioritise_zenoh_threads(self.options.runner))
         return None

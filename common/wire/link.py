@@ -51,6 +51,7 @@ from haptic.common.wire.messages import (
     send_time_bytes,
 )
 from haptic.common.wire.receive import LinkStats, ReceivePath
+from haptic.common.wire.transport_auth import open_session
 
 NO_FLAGS = Flags(0)
 #: A mismatched peer (another schema version, authentication on one side) seen this long
@@ -164,7 +165,7 @@ class Link:
             return self
         c = self.config
         try:
-            self._session = zenoh.open(zenoh_config(c))
+            self._session = open_session(zenoh_config(c), c.transport_key)
         except zenoh.ZError as error:  # a port in use, an unreachable router, a bad file
             raise LinkOpenError(
                 f"cannot open the Zenoh session (mode {c.mode}, listen "

@@ -24,6 +24,7 @@ from haptic.common.config.link_schema import (
 )
 from haptic.common.model.delay_profile import parse_delay_profile
 from haptic.common.wire.injection import InjectionConfig
+from haptic.common.wire.transport_auth import transport_key
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,9 @@ class LinkConfig:
     max_samples_per_poll: int = 64
     session_key: bytes | None = field(default=None, repr=False)
     """The pre-shared key of an authenticated link (32 bytes), or None."""
+    transport_auth: bool = True
+    """With a session key in peer mode: Zenoh admits only transports that authenticate with
+    credentials derived from it (common/wire/transport_auth.py)."""
     seed: int = 0
     injection: InjectionConfig = field(default_factory=InjectionConfig)
     zenoh_config_file: str | None = None
@@ -94,6 +98,12 @@ class LinkConfig:
     def liveliness_key(self, side: str) -> str:
         """``<prefix>/alive/<side>``."""
         return self.key(f"alive/{side}")
+
+    @property
+    def transport_key(self) -> bytes | None:
+        """The key the Zenoh transports authenticate with, or None (no session key,
+        ``transport_auth`` off, or client mode)."""
+        return transport_key(self.session_key, self.transport_auth, self.mode)
 
     def zenoh_settings(self) -> list[tuple[str, str]]:
         """The ``(key, json5 value)`` pairs this config inserts into the zenoh config, in order

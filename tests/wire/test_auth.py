@@ -1,5 +1,6 @@
 """Authenticated sessions (issue 17, common/wire/auth.py) over real Zenoh on loopback: a forged
-peer, a replaying peer, an explicit re-pairing, mismatched peers refused at start."""
+peer, a replaying peer, an explicit re-pairing, mismatched peers refused at start. The
+message layer alone; the transport authentication on top of it: test_transport_auth.py."""
 
 from __future__ import annotations
 
@@ -38,9 +39,14 @@ def _free_port() -> int:
 
 
 def _configs(master_key: bytes | None = PSK, slave_key: bytes | None = PSK):
+    """Two links with the message layer alone: their Zenoh transports admit anyone
+    (``transport_auth`` off, as where a router relays the link), so a stranger's messages
+    reach the message checks (tests/wire/test_transport_auth.py: with it on, they never
+    arrive)."""
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     prefix = f"test/{uuid.uuid4().hex[:8]}"
-    common = {"key_prefix": prefix, "congestion_control": "block", "stale_after_s": 10.0}
+    common = {"key_prefix": prefix, "congestion_control": "block", "stale_after_s": 10.0,
+              "transport_auth": False}
     master = LinkConfig(side="master", listen=(endpoint,), session_key=master_key, **common)
     slave = LinkConfig(side="slave", connect=(endpoint,), session_key=slave_key, **common)
     return master, slave, endpoint
