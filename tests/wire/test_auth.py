@@ -5,7 +5,6 @@ message layer alone; the transport authentication on top of it: test_transport_a
 from __future__ import annotations
 
 import os
-import socket
 import time
 import uuid
 
@@ -27,15 +26,9 @@ from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import LinkConfig, link_config_from
 from haptic.common.wire.messages import KIND_TOOL, SCHEMA_VERSION, ToolState
 from tests.wire.attacks import forged_payload
+from tests.wire.link_helpers import WAIT_S, free_port, pair
 
-WAIT_S = 15.0
 PSK = bytes(range(32))
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _configs(master_key: bytes | None = PSK, slave_key: bytes | None = PSK):
@@ -43,7 +36,7 @@ def _configs(master_key: bytes | None = PSK, slave_key: bytes | None = PSK):
     (``transport_auth`` off, as where a router relays the link), so a stranger's messages
     reach the message checks (tests/wire/test_transport_auth.py: with it on, they never
     arrive)."""
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     prefix = f"test/{uuid.uuid4().hex[:8]}"
     common = {"key_prefix": prefix, "congestion_control": "block", "stale_after_s": 10.0,
               "transport_auth": False}
@@ -57,15 +50,6 @@ def _raw_session(endpoint: str) -> zenoh.Session:
     config.insert_json5("connect/endpoints", f'["{endpoint}"]')
     config.insert_json5("scouting/multicast/enabled", "false")
     return zenoh.open(config)
-
-
-def _pair(*links: Link) -> None:
-    deadline = time.monotonic() + WAIT_S
-    while not all(link.peer_alive and link.paired for link in links):
-        for link in links:
-            link.poll()
-        assert time.monotonic() < deadline, "no pairing"
-        time.sleep(0.001)
 
 
 def _exchange(master: Link, slave: Link, n: int, force_N: float = 0.5) -> list[ToolState]:
@@ -136,7 +120,7 @@ def test_forged_peer_is_dropped_and_never_delivered() -> None:
     the issue's attack: every one is dropped, no peer restart is counted."""
     master_config, slave_config, endpoint = _configs()
     with Link(master_config) as master, Link(slave_config) as slave:
-        _pair(master, slave)
+        pair(master, slave)
         assert _exchange(master, slave, 30)
         with _raw_session(endpoint) as stranger:
             publisher = stranger.declare_publisher(master_config.subscribe_key)
@@ -164,7 +148,7 @@ def test_replaying_peer_is_refused() -> None:
                                               lambda s: captured.append(s.payload.to_bytes()))
         replayer = eavesdropper.declare_publisher(master_config.subscribe_key)
         with Link(slave_config) as slave:
-            _pair(master, slave)
+            pair(master, slave)
             time.sleep(0.2)
             _exchange(master, slave, 50, force_N=0.25)
             _drain(master, 0.2)
@@ -176,7 +160,7 @@ def test_replaying_peer_is_refused() -> None:
             assert master.stats().dropped["out_of_order"] - before >= 15
         # the slave restarts: a new epoch, a new session key through the pairing
         with Link(slave_config) as slave2:
-            _pair(master, slave2)
+            pair(master, slave2)
             assert master.auth.pairings == 2 and master.stats().peer_restarts == 1
             got = _exchange(master, slave2, 30, force_N=0.75)
             assert got
@@ -196,7 +180,7 @@ def test_data_with_a_new_epoch_is_not_a_restart() -> None:
     """Without the pairing, a new epoch is 'unpaired', never a restart."""
     master_config, slave_config, _ = _configs()
     with Link(master_config) as master, Link(slave_config) as slave:
-        _pair(master, slave)
+        pair(master, slave)
         _exchange(master, slave, 10)
         slave.epoch += 1  # messages of another epoch, with valid tags of this session
         _exchange(master, slave, 20)

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import tempfile
 import time
 import uuid
@@ -26,19 +25,13 @@ from haptic.common.wire.transport_auth import (
     transport_password,
 )
 from tests.wire.attacks import forged_payload
+from tests.wire.link_helpers import WAIT_S, free_port, pair
 
-WAIT_S = 15.0
 PSK = bytes(range(32))
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _configs(master_key: bytes | None = PSK, slave_key: bytes | None = PSK):
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     common = {"key_prefix": f"test/{uuid.uuid4().hex[:8]}", "congestion_control": "block",
               "stale_after_s": 10.0}
     master = LinkConfig(side="master", listen=(endpoint,), session_key=master_key, **common)
@@ -51,15 +44,6 @@ def _plain_config(endpoint: str) -> zenoh.Config:
     config.insert_json5("connect/endpoints", json.dumps([endpoint]))
     config.insert_json5("scouting/multicast/enabled", "false")
     return config
-
-
-def _pair(*links: Link) -> None:
-    deadline = time.monotonic() + WAIT_S
-    while not all(link.peer_alive and link.paired for link in links):
-        for link in links:
-            link.poll()
-        assert time.monotonic() < deadline, "no pairing"
-        time.sleep(0.001)
 
 
 def test_credentials_follow_the_key() -> None:
@@ -107,7 +91,7 @@ def test_a_stranger_cannot_join_read_or_put() -> None:
     1e9 N tool forces it puts never reach the master (not even as dropped messages)."""
     master_config, slave_config, endpoint = _configs()
     with Link(master_config) as master, Link(slave_config) as slave:
-        _pair(master, slave)
+        pair(master, slave)
         with zenoh.open(_plain_config(endpoint)) as stranger:
             heard: list[bytes] = []
             tap = stranger.declare_subscriber(master_config.publish_key,
