@@ -24,12 +24,9 @@ counters go into the summary (``input_guard``). Pure Python floats: a few us per
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any
-
-import numpy as np
 
 from haptic.common.config import ConfigError
 from haptic.common.wire.messages import HandleState
@@ -171,9 +168,10 @@ class InputGuard:
 
     def take_plain(self, count: int, force_N: tuple[float, float],
                    position_m: tuple[float, float], epoch: int, send_time_ns: int) -> None:
-        """Record ``count`` messages that :meth:`admit` takes as they are (:func:`plain_admits`;
-        the guard not faulted), the last of them with these values (N, m, its sender's epoch
-        and send time, ns): the state those :meth:`admit` calls would have left."""
+        """Record ``count`` messages that :meth:`admit` takes as they are (the lockstep's
+        quiet lanes, slave_sim/quiet_kernel.py; the guard not faulted), the last of them with
+        these values (N, m, its sender's epoch and send time, ns): the state those
+        :meth:`admit` calls would have left."""
         self.counters.checked += count
         self.force_N = force_N
         self.position_m = position_m
@@ -196,43 +194,3 @@ class InputGuard:
         return {"input_guard": {"checked": c.checked, "faults": c.faults,
                                 "saturated": c.saturated, "rate_limited": c.rate_limited,
                                 "non_finite": c.non_finite, "faulted": self.faulted}}
-
-
-def plain_admits(settings: InputGuardSettings, period_s: float, force_N: np.ndarray,
-                 position_m: np.ndarray, epoch: np.ndarray, send_time_ns: np.ndarray,
-                 last_force_N: np.ndarray, last_position_m: np.ndarray,
-                 last_epoch: np.ndarray, last_send_time_ns: np.ndarray, has_last: np.ndarray,
-                 faulted: np.ndarray) -> np.ndarray:
-    """Per lane, whether :meth:`InputGuard.admit` takes the message as it is: the guard not
-    faulted, every value finite, no force beyond the trip, the position in its box, the same
-    sender epoch as the last accepted message (``has_last``: there is one) with no jump,
-    and neither saturation nor rate limit (so the message's own force and position become
-    the guard's, with no event). Arrays are per lane: forces (lanes, 2) N, positions
-    (lanes, 2) m, epochs and send times (lanes,) int (ns). Mirrors :meth:`InputGuard.admit`
-    comparison by comparison (the lockstep's many lanes; tests/lockstep/test_quiet_lanes.py
-    runs every lane through both)."""
-    s = settings
-    limit = s.force_limit_N
-    with np.errstate(invalid="ignore", over="ignore"):
-        dt_s = np.maximum((send_time_ns - last_send_time_ns) * 1e-9, period_s)
-        allowed_m = s.velocity_trip_m_per_s * dt_s + s.jump_margin_m
-        jump = np.abs(position_m - last_position_m)
-        step = (s.force_rate_limit_N_per_s * dt_s)[:, None]
-        # per axis, as admit() compares: no trip, inside the box, no saturation, no rate limit
-        # (NaN fails every comparison; the finite checks are for infinite settings)
-        axes_ok = ((np.abs(force_N) <= s.force_trip_N)
-                   & (position_m >= _box(s.position_min_m)) & (position_m <= _box(s.position_max_m))
-                   & (force_N >= -limit) & (force_N <= limit)
-                   & (force_N >= last_force_N - step) & (force_N <= last_force_N + step)
-                   & np.isfinite(force_N) & np.isfinite(position_m))
-        # the two axes column by column (a reduction along axis 1 costs several times more)
-        return (axes_ok[:, 0] & axes_ok[:, 1] & ~faulted & has_last & (epoch == last_epoch)
-                & ~(np.maximum(jump[:, 0], jump[:, 1]) > allowed_m))
-
-
-@functools.lru_cache(maxsize=8)
-def _box(corner_m: tuple[float, float]) -> np.ndarray:
-    """A corner of the plausible box as a (2,) array, m (made once per setting)."""
-    corner = np.array(corner_m, float)
-    corner.flags.writeable = False
-    return corner

@@ -24,8 +24,6 @@ from __future__ import annotations
 import enum
 from typing import Any
 
-import numpy as np
-
 from haptic.common.runtime.watchdog import PeerWatchdog, WatchdogState
 from haptic.common.wire.messages import Flags, HandleState
 
@@ -92,9 +90,9 @@ class SlaveSupervisor:
     def steady(self) -> bool:
         """The tool runs with the watchdog ``ok``, the master's forces on and nothing
         stopped, rejoining or faulted: while the link stays fresh, every message is admitted
-        as it is with FORCES_ENABLED and the tool stays in its work area
-        (:func:`quiet_lanes`), :meth:`receive` only stores the handle's position and
-        :meth:`update` changes nothing and returns ``NONE``."""
+        as it is with FORCES_ENABLED and the tool stays in its work area (the lockstep's
+        quiet lanes, slave_sim/quiet_kernel.py), :meth:`receive` only stores the handle's
+        position and :meth:`update` changes nothing and returns ``NONE``."""
         return (self.running and self.master_enabled and not self.outside
                 and not self.rejoining and not self.input_fault
                 and self.watchdog.state is WatchdogState.OK)
@@ -180,23 +178,3 @@ class SlaveSupervisor:
     def trips(self) -> int:
         """Watchdog trips so far."""
         return self.watchdog.trips
-
-
-def quiet_lanes(steady: np.ndarray, fresh: np.ndarray, admitted_enabled: np.ndarray,
-                silence_s: np.ndarray, max_message_age_s: np.ndarray, tool_m: np.ndarray,
-                work_area_m: np.ndarray) -> np.ndarray:
-    """The lanes whose :meth:`SlaveSupervisor.receive` would only store the handle's position
-    and whose :meth:`SlaveSupervisor.update` would change nothing and return ``NONE`` (the
-    lockstep's many lanes skip the calls; the program's one lane always makes them):
-    :meth:`SlaveSupervisor.steady` (``steady``, (lanes,) bool); where a message came
-    (``fresh``), the input guard admits it as it is and it carries FORCES_ENABLED
-    (``admitted_enabled``: slave_sim/input_guard.py ``plain_admits``); the watchdog not
-    silent (``silence_s`` not above ``max_message_age_s``, (lanes,) s); and the tool
-    (``tool_m`` (lanes, 2), m) inside its work area (``work_area_m`` (lanes, 4): x_low,
-    x_high, y_low, y_high, m). The master alive is the caller's to ensure. Mirrors
-    :meth:`SlaveSupervisor.update`; tests/lockstep/test_quiet_lanes.py runs every lane
-    through both."""
-    inside = ((work_area_m[:, 0] <= tool_m[:, 0]) & (tool_m[:, 0] <= work_area_m[:, 1])
-              & (work_area_m[:, 2] <= tool_m[:, 1]) & (tool_m[:, 1] <= work_area_m[:, 3]))
-    return (steady & ~(silence_s > max_message_age_s) & (~fresh | admitted_enabled)
-            & inside)

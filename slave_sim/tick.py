@@ -20,9 +20,8 @@ outputs with the flags to send.
 
 The simulator feeds its messages as columns (:meth:`SlaveTick.supervise_columns`): a lane
 whose guard takes its message as it is and whose supervisor is in its steady state with
-nothing to change (slave_sim/input_guard.py ``plain_admits``, slave_sim/supervisor.py
-``quiet_lanes``) only stores the message, and every other lane goes through its guard and
-supervisor as the program's does.
+nothing to change (one Warp kernel for all lanes, slave_sim/quiet_kernel.py) only stores the
+message, and every other lane goes through its guard and supervisor as the program's does.
 """
 
 from __future__ import annotations
@@ -35,11 +34,12 @@ import numpy as np
 
 from haptic.common.analysis.margin_table import follow_gain
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, HandleState
-from haptic.slave_sim.input_guard import InputGuard, plain_admits
+from haptic.slave_sim.input_guard import InputGuard
 from haptic.slave_sim.node import SlaveNode, SlaveOutputs, SlaveState
 from haptic.slave_sim.pacing import Sample, Step
+from haptic.slave_sim.quiet_kernel import QuietLanes, guard_limits
 from haptic.slave_sim.resync import ToolResync
-from haptic.slave_sim.supervisor import SlaveSupervisor, Transition, quiet_lanes
+from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
 
 #: Flag values (IntFlag arithmetic costs about 1 us per operation, too much per lane and
 #: tick in a sweep).
@@ -147,14 +147,17 @@ class SlaveTick:
         # supervisor have not seen (stale)
         self._columns_current = False
         self._steady = np.zeros(lanes, bool)
-        self._max_age_s = np.array([s.watchdog.max_age_s for s in self.supervisors])
+        self._max_age_s = np.array([s.watchdog.max_age_s for s in self.supervisors], float)
         self._work_area_m = np.array([(s.x_low_m, s.x_high_m, s.y_low_m, s.y_high_m)
-                                      for s in self.supervisors])
+                                      for s in self.supervisors], float)
         self._guard_faulted = np.zeros(lanes, bool)
         self._guard_has_last = np.zeros(lanes, bool)
         self._guard_epoch = np.zeros(lanes, np.int64)
         self._guard_send_ns = np.zeros(lanes, np.int64)
         self._unseen = np.zeros(lanes, np.int64)
+        #: the quiet lanes' kernel over these arrays (slave_sim/quiet_kernel.py), bound at
+        #: the first supervise_columns
+        self._quiet_lanes: QuietLanes | None = None
         #: lane-ticks of supervise_columns that went through their guard and supervisor,
         #: and all
         self.lane_ticks_fed = 0
@@ -258,7 +261,7 @@ class SlaveTick:
                           silence_s: np.ndarray) -> np.ndarray:
         """:meth:`supervise` for messages given as columns and the master alive (the
         lockstep's lanes; no ``earlier`` messages, no :meth:`follow_gain`): a quiet lane
-        (``plain_admits`` and ``quiet_lanes``) only takes its message's bounded values;
+        (slave_sim/quiet_kernel.py) only takes its message's bounded values;
         every other lane's guard and supervisor are fed as :meth:`supervise` feeds them,
         after they have been told what the lane took meanwhile. ``silence_s`` (lanes,), s.
         Returns the lanes whose message was an input, as :meth:`supervise` does."""
@@ -274,30 +277,16 @@ class SlaveTick:
                                  "their settings and period")
             self._pull(range(self.lanes))
             self._columns_current = True
+        quiet_lanes = self._quiet_lanes
+        if quiet_lanes is None:
+            quiet_lanes = self._quiet_lanes = self._bind_quiet_lanes()
         fresh = messages.fresh
-        admitted_plainly = fresh & plain_admits(
-            guard.settings, guard.period_s, messages.force_N, messages.position_m,
-            messages.epoch, messages.send_time_ns, self.handle_force_N,
-            self.handle_position_m, self._guard_epoch, self._guard_send_ns,
-            self._guard_has_last, self._guard_faulted)
+        # one kernel: the quiet lanes' messages taken, the others' lanes returned
+        fed = quiet_lanes.run(fresh, messages.force_N, messages.position_m, messages.flags,
+                              messages.epoch, messages.send_time_ns, messages.force_scale,
+                              silence_s)
         state = self.state
-        quiet = quiet_lanes(self._steady, fresh,
-                            admitted_plainly & ((messages.flags & _FORCES_ENABLED) != 0),
-                            silence_s, self._max_age_s, state.tool[:, 0::2],
-                            self._work_area_m)
-        taken = quiet & fresh
-        # masked copies (np.copyto with where: a third of boolean-index assignment's cost)
-        taken_rows = taken[:, None]
-        np.copyto(self.handle_force_N, messages.force_N, where=taken_rows)
-        np.copyto(self.handle_position_m, messages.position_m, where=taken_rows)
-        np.copyto(self._guard_epoch, messages.epoch, where=taken)
-        np.copyto(self._guard_send_ns, messages.send_time_ns, where=taken)
-        np.copyto(self.echo_send_time_ns, messages.send_time_ns, where=taken)
-        np.copyto(self.force_scale, messages.force_scale, where=taken)
-        self._unseen += taken
         admitted = self.fresh
-        admitted[...] = taken
-        fed = np.flatnonzero(~quiet).tolist()
         self.lane_ticks_fed += len(fed)
         self.lane_ticks += self.lanes
         follow = np.zeros(self.lanes, bool)
@@ -338,6 +327,18 @@ class SlaveTick:
             if stop.any():
                 self.node.safe_stop(state, None if stop.all() else stop)
         return admitted
+
+    def _bind_quiet_lanes(self) -> QuietLanes:
+        """The quiet lanes' kernel over this tick's arrays (the guards share their settings
+        and period: :meth:`supervise_columns` checked)."""
+        guard = self.guards[0]
+        return QuietLanes(self.lanes, guard_limits(guard.settings, guard.period_s), {
+            "guard_faulted": self._guard_faulted, "guard_has_last": self._guard_has_last,
+            "steady": self._steady, "max_age_s": self._max_age_s, "tool": self.state.tool,
+            "work_area_m": self._work_area_m, "handle_force_N": self.handle_force_N,
+            "handle_position_m": self.handle_position_m, "guard_epoch": self._guard_epoch,
+            "guard_send_ns": self._guard_send_ns, "echo_send_time_ns": self.echo_send_time_ns,
+            "force_scale": self.force_scale, "unseen": self._unseen, "admitted": self.fresh})
 
     def _tell(self, lane: int) -> None:
         """Tell ``lane``'s guard and supervisor the messages the lane took as quiet since
