@@ -15,13 +15,27 @@ same Gilbert-Elliott chain, ``preserve_order`` as a running maximum of the targe
 draws come from the seeded generator given here, vectorised over ticks and lanes, so they
 are not the same stream of numbers a real :class:`~haptic.common.wire.injection.Impairment`
 would draw.
+
+:class:`DelayLine` reads every lane in one Warp kernel launch on the CPU (a recorded launch
+over its own arrays, common/runtime/replayed_launch.py), which also gives what the receiving
+program's link would say of each lane's message (fresh, silence, send tick and time, flags):
+about 20 numpy calls a tick and line before.
 """
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Any
 
+import numpy as np
+import warp as wp
+
+from haptic.common.runtime.replayed_launch import ReplayedLaunch
 from haptic.common.wire.injection import InjectionConfig
+
+# The programs print JSON on stdout: Warp must not announce itself there.
+wp.config.log_level = wp.LOG_WARNING
+
+DEVICE = "cpu"
 
 
 def jitter_draws_s(config: InjectionConfig, shape: tuple[int, ...],
@@ -88,40 +102,131 @@ def source_schedule(steps: int, delay_samples: np.ndarray, offset_samples: int,
     return np.maximum.accumulate(source, axis=0)
 
 
-class DelayLine:
-    """A ring buffer of sent messages (lanes, channels) read through a source schedule."""
+@wp.struct
+class LineConstants:
+    """What the receive kernel needs besides the arrays (ticks, s, ns, column indices)."""
 
-    def __init__(self, schedule: np.ndarray, channels: int, initial: np.ndarray | None = None
-                 ) -> None:
-        self.schedule = schedule
-        steps, lanes = schedule.shape
+    history: wp.int64  # slots of the ring buffer
+    period_s: wp.float64  # Ts, s
+    period_ns: wp.float64  # Ts, ns (as the programs' send times are stamped)
+    message_columns: wp.int32  # the message's columns copied into ``columns``
+    flag_column: wp.int32  # the message's column holding its flags
+
+
+@wp.kernel
+def receive_kernel(schedule: wp.array2d(dtype=wp.int64), tick: wp.array(dtype=wp.int64),
+                   buffer: wp.array3d(dtype=wp.float64), initial: wp.array2d(dtype=wp.float64),
+                   runup_lag: wp.array(dtype=wp.int64), constants: LineConstants,
+                   rows: wp.array2d(dtype=wp.float64), previous: wp.array(dtype=wp.int64),
+                   last_fresh: wp.array(dtype=wp.int64), fresh: wp.array(dtype=wp.bool),
+                   silence_s: wp.array(dtype=wp.float64), sent: wp.array(dtype=wp.int64),
+                   send_time_ns: wp.array(dtype=wp.int64), flags: wp.array(dtype=wp.int64),
+                   columns: wp.array2d(dtype=wp.float64)):
+    lane = wp.tid()
+    k = tick[0]
+    source = schedule[k, lane]
+    channels = rows.shape[1]
+    if source >= wp.int64(0):
+        slot = source % constants.history
+        for c in range(channels):
+            rows[lane, c] = buffer[slot, lane, c]
+    else:
+        for c in range(channels):
+            rows[lane, c] = initial[lane, c]
+    new = source != previous[lane] or source < wp.int64(0)
+    previous[lane] = source
+    fresh[lane] = new
+    if new:
+        last_fresh[lane] = k
+    silence_s[lane] = wp.float64(k - last_fresh[lane]) * constants.period_s
+    send_tick = source
+    if source < wp.int64(0):
+        send_tick = k - runup_lag[lane]
+    sent[lane] = send_tick
+    send_time_ns[lane] = wp.int64(wp.float64(send_tick) * constants.period_ns)
+    flags[lane] = wp.int64(rows[lane, constants.flag_column])
+    for c in range(constants.message_columns):
+        columns[lane, c] = rows[lane, c]
+    columns[lane, constants.message_columns] = wp.float64(send_tick)
+
+
+class DelayLine:
+    """A ring buffer of sent messages (lanes, channels) read through a source schedule.
+
+    :meth:`receive` (one Warp launch for every lane, on the CPU) gives each lane's newest
+    message and what the receiver's link would say of it, in arrays kept between ticks
+    (valid until the next receive): :attr:`fresh` (a new message, or one of the run-up's
+    before the first), :attr:`silence_s` (s since the lane's last fresh one), :attr:`sent`
+    (its send tick; a run-up message was sent ``runup_lag`` ticks before it is read),
+    :attr:`send_time_ns` (``sent`` Ts in ns), :attr:`flags` (its ``flag_column`` as an
+    int) and :attr:`columns` (its first ``message_columns`` columns, then ``sent``).
+    ``period_s``: Ts, s.
+    """
+
+    def __init__(self, schedule: np.ndarray, channels: int, initial: np.ndarray | None = None,
+                 *, period_s: float = 1.0, runup_lag: np.ndarray | int = 0,
+                 message_columns: int | None = None, flag_column: int = 0) -> None:
+        self.schedule = np.ascontiguousarray(schedule, np.int64)
+        steps, lanes = self.schedule.shape
         ticks = np.arange(steps)[:, None]
-        lag = np.where(schedule >= 0, ticks - schedule, 0)
+        lag = np.where(self.schedule >= 0, ticks - self.schedule, 0)
         self.history = int(lag.max()) + 1 if steps else 1
         self.buffer = np.zeros((self.history, lanes, channels))
-        self.initial = np.zeros((lanes, channels)) if initial is None else np.asarray(
-            initial, float).reshape(lanes, channels)
-        self._lanes = np.arange(lanes)
-        self._constant = bool(np.all(schedule == schedule[:, :1])) if steps else True
-        # a lane's source never decreases: from this tick on every lane has a message
-        started = np.flatnonzero((schedule >= 0).all(axis=1))
-        self._all_started_from = int(started[0]) if started.size else steps
-        self._rows = self.buffer.reshape(self.history * lanes, channels)  # a view
+        self.initial = np.zeros((lanes, channels)) if initial is None else np.ascontiguousarray(
+            np.asarray(initial, float).reshape(lanes, channels))
+        message_columns = channels if message_columns is None else message_columns
+        if not (0 <= message_columns <= channels and 0 <= flag_column < max(channels, 1)):
+            raise ValueError("message_columns and flag_column must be columns of the line")
+        self.rows = np.zeros((lanes, channels))
+        self.fresh = np.zeros(lanes, bool)
+        self.silence_s = np.zeros(lanes)
+        self.sent = np.zeros(lanes, np.int64)
+        self.send_time_ns = np.zeros(lanes, np.int64)
+        self.flags = np.zeros(lanes, np.int64)
+        self.columns = np.zeros((lanes, message_columns + 1))
+        self._runup_lag = np.ascontiguousarray(np.broadcast_to(
+            np.asarray(runup_lag, np.int64), (lanes,)))
+        self._previous = np.full(lanes, -2, np.int64)
+        self._last_fresh = np.zeros(lanes, np.int64)
+        self._tick = np.zeros(1, np.int64)
+        constants = LineConstants()
+        constants.history = self.history
+        constants.period_s = float(period_s)
+        constants.period_ns = float(period_s) * 1e9
+        constants.message_columns = message_columns
+        constants.flag_column = flag_column
+        self._constants = constants
+        self._launch: ReplayedLaunch | None = None
+
+    def _bind(self) -> ReplayedLaunch:
+        """The recorded launch over this line's arrays (zero-copy views of them)."""
+        f64, i64 = wp.float64, wp.int64
+
+        def bound(array: np.ndarray, dtype: Any) -> Any:
+            return wp.array(array, dtype=dtype, device=DEVICE, copy=False)
+
+        self._bound = [
+            bound(self.schedule, i64), bound(self._tick, i64), bound(self.buffer, f64),
+            bound(self.initial, f64), bound(self._runup_lag, i64)]
+        outputs = [
+            bound(self.rows, f64), bound(self._previous, i64), bound(self._last_fresh, i64),
+            bound(self.fresh, wp.bool), bound(self.silence_s, f64), bound(self.sent, i64),
+            bound(self.send_time_ns, i64), bound(self.flags, i64), bound(self.columns, f64)]
+        self._bound += outputs
+        return ReplayedLaunch(wp.launch(
+            receive_kernel, dim=self.rows.shape[0], device=DEVICE,
+            inputs=[*self._bound[:5], self._constants, *outputs], record_cmd=True))
 
     def send(self, tick: int, message: np.ndarray) -> None:
         """Store the message every lane sends at ``tick``."""
         self.buffer[tick % self.history] = message
 
     def receive(self, tick: int) -> np.ndarray:
-        """The newest message each lane can read at ``tick`` (lanes, channels)."""
-        source = self.schedule[tick]
-        if self._constant:
-            first = int(source[0])
-            if first < 0:
-                return self.initial
-            return self.buffer[first % self.history].copy()
-        if tick >= self._all_started_from:  # one gather from the flat rows
-            return np.take(self._rows, (source % self.history) * self._lanes.size
-                           + self._lanes, axis=0)
-        rows = self.buffer[source % self.history, self._lanes]
-        return np.where((source >= 0)[:, None], rows, self.initial)
+        """The newest message each lane can read at ``tick`` (lanes, channels), with the
+        arrival figures (see the class); ticks in order, from 0."""
+        launch = self._launch
+        if launch is None:
+            launch = self._launch = self._bind()
+        self._tick[0] = tick
+        launch.launch()
+        return self.rows

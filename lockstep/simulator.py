@@ -321,26 +321,33 @@ class LockstepSimulator:
         handle_energy_column = handle_columns - 1 if tdpa else None
         master_tick, slave_tick = self.ticks(handle_start, start)
         self.last_ticks = (master_tick, slave_tick)  # the run's ticks, for inspection
+        # each line's receive also gives the arrivals: the run-up's messages were sent the
+        # line's delay (plus its structural sample) before they are read; the columns the
+        # ticks read are the message's first 6 (handle) or 7 (tool), then the send tick
         handle_line = DelayLine(source_schedule(steps, to_slave_d, 0, ts, to_slave,
                                                 line_rngs[0]), handle_columns,
                                 np.column_stack((np.zeros((lanes, 2)), handle_start,
                                                  np.full(lanes, enabled),
                                                  master_tick.state.force_scale,
                                                  np.ones((lanes, handle_columns - 6 - tdpa)),
-                                                 np.zeros((lanes, tdpa)))))
+                                                 np.zeros((lanes, tdpa)))),
+                                period_s=ts, runup_lag=to_slave_d, message_columns=6,
+                                flag_column=4)
         tool_line = DelayLine(source_schedule(steps, to_master_d, 1, ts, to_master,
                                               line_rngs[1]), 7 + tdpa,
                               np.column_stack((np.zeros((lanes, 2)), start,
                                                np.zeros((lanes, 2)), np.full(lanes, enabled),
-                                               np.zeros((lanes, tdpa)))))
+                                               np.zeros((lanes, tdpa)))),
+                              period_s=ts, runup_lag=to_master_d + 1, message_columns=7,
+                              flag_column=6)
         rig_state = self.rig.initial_state(handle_start, line_rngs[2])
         master_state = master_tick.state
         slave_state = slave_tick.state
         command = master_state.last_command_m.copy()
         if governed is not None:
             slave_state.gain_ratio = np.ones(lanes)
-        handle_arrivals = _Arrivals(handle_line.schedule, to_slave_d, 0, ts)
-        tool_arrivals = _Arrivals(tool_line.schedule, to_master_d, 1, ts)
+        handle_arrivals = _Arrivals(handle_line, ts)
+        tool_arrivals = _Arrivals(tool_line, ts)
         handle_message = np.ones((lanes, handle_columns))
 
         window = max(1, int(round(window_s / ts)))
@@ -515,36 +522,23 @@ class _WindowTally:
 
 
 class _Arrivals:
-    """Which lanes' messages are fresh at a tick (a new message, or one of the run-up's
-    before tick 0), the silence since each lane's last fresh one, and the messages as the
-    program's link would deliver them. ``schedule``: the line's source schedule (steps,
-    lanes); ``delay_samples`` (lanes,) and ``offset_samples``: the line's, for the send tick
-    of the run-up's messages."""
+    """A line's messages at a tick as the program's link would deliver them, from the line's
+    last :meth:`DelayLine.receive` (which of them are fresh, their send ticks and times,
+    their flags; ``silence_s`` is the line's)."""
 
-    def __init__(self, schedule: np.ndarray, delay_samples: np.ndarray, offset_samples: int,
-                 period_s: float) -> None:
-        self.schedule = schedule
-        self.lanes = schedule.shape[1]
+    def __init__(self, line: DelayLine, period_s: float) -> None:
+        self.line = line
+        self.lanes = line.rows.shape[0]
         self.period_s = period_s
-        self.lag = np.asarray(delay_samples, np.int64) + offset_samples
-        self.last_fresh = np.zeros(self.lanes, np.int64)
-        self.silence_s = np.zeros(self.lanes)
-        self._previous = np.full(self.lanes, -2, np.int64)
-
-    def _fresh(self, tick: int) -> tuple[np.ndarray, np.ndarray]:
-        source = self.schedule[tick]
-        fresh = (source != self._previous) | (source < 0)
-        self._previous = source
-        np.putmask(self.last_fresh, fresh, tick)
-        self.silence_s[...] = (tick - self.last_fresh) * self.period_s
-        sent = np.where(source >= 0, source, tick - self.lag)
-        return fresh, sent
+        self.silence_s = line.silence_s
+        self._no_epoch = np.zeros(self.lanes, np.int64)
 
     def tool_columns(self, tick: int, rows: np.ndarray) -> ToolColumns:
-        """The tick's tool messages as columns (``MasterTick.supervise_columns``)."""
-        fresh, sent = self._fresh(tick)
-        return ToolColumns(fresh, rows[:, 0:2], rows[:, 6].astype(np.int64),
-                           np.column_stack((rows[:, :7], sent)), self._tool_state)
+        """The tick's tool messages as columns (``MasterTick.supervise_columns``); ``rows``:
+        the line's receive at ``tick``."""
+        line = self.line
+        return ToolColumns(line.fresh, rows[:, 0:2], line.flags, line.columns,
+                           self._tool_state)
 
     def _tool_state(self, lane: int, row: np.ndarray) -> ToolState:
         """The ``ToolState`` of a ``tool_columns`` row (the tool line's first 7 columns, then
@@ -554,12 +548,12 @@ class _Arrivals:
                          FLAGS_BY_VALUE[int(flags)], (fx, fy), (x, y), (vx, vy), 0.0, 0.0)
 
     def handle_columns(self, tick: int, rows: np.ndarray) -> HandleColumns:
-        """The tick's handle messages as columns (``SlaveTick.supervise_columns``)."""
-        fresh, sent = self._fresh(tick)
-        send_time_ns = (sent * (self.period_s * 1e9)).astype(np.int64)
-        return HandleColumns(fresh, rows[:, 0:2], rows[:, 2:4], rows[:, 4].astype(np.int64),
-                             np.zeros(self.lanes, np.int64), send_time_ns, rows[:, 5],
-                             np.column_stack((rows[:, :6], sent)), self._handle_state)
+        """The tick's handle messages as columns (``SlaveTick.supervise_columns``); ``rows``:
+        the line's receive at ``tick``."""
+        line = self.line
+        return HandleColumns(line.fresh, rows[:, 0:2], rows[:, 2:4], line.flags,
+                             self._no_epoch, line.send_time_ns, rows[:, 5], line.columns,
+                             self._handle_state)
 
     def _handle_state(self, lane: int, row: np.ndarray) -> HandleState:
         """The ``HandleState`` of a ``handle_columns`` row (the handle line's first 6

@@ -44,13 +44,19 @@ def test_lost_messages_leave_the_previous_one() -> None:
 
 def test_every_lane_reads_its_own_newest_message_before_and_after_all_have_one() -> None:
     """Lanes of different delays, jitter and loss: each lane reads the message its schedule
-    names (the initial value before its first), through the run-up and after it."""
+    names (the initial value before its first), through the run-up and after it, with what
+    the receiver's link would say of it: fresh or not, the silence since the last fresh one,
+    its send tick and time, its flags and its columns with the send tick."""
     delays = np.array([0, 1, 4, 7, 2])
     injection = InjectionConfig(jitter_s=0.002, loss_probability=0.1)
     schedule = source_schedule(300, delays, 1, TS, injection, np.random.default_rng(5))
+    started = np.flatnonzero((schedule >= 0).all(axis=1))
+    assert 0 < started[0] < 300  # the run-up, then every lane with a message
     initial = np.arange(5 * 3, dtype=float).reshape(5, 3) - 100.0
-    line = DelayLine(schedule, 3, initial)
-    assert 0 < line._all_started_from < 300
+    line = DelayLine(schedule, 3, initial, period_s=TS, runup_lag=delays + 1,
+                     message_columns=2, flag_column=1)
+    previous = np.full(5, -2)
+    last_fresh = np.zeros(5, int)
     for tick in range(300):
         line.send(tick, tick + np.arange(5)[:, None] * 0.01 + np.arange(3) * 0.001)
         received = line.receive(tick)
@@ -59,3 +65,14 @@ def test_every_lane_reads_its_own_newest_message_before_and_after_all_have_one()
             expected = initial[lane] if source < 0 else (
                 source + lane * 0.01 + np.arange(3) * 0.001)
             np.testing.assert_array_equal(received[lane], expected)
+            fresh = source != previous[lane] or source < 0
+            previous[lane] = source
+            if fresh:
+                last_fresh[lane] = tick
+            sent = source if source >= 0 else tick - delays[lane] - 1
+            assert line.fresh[lane] == fresh
+            assert line.silence_s[lane] == (tick - last_fresh[lane]) * TS
+            assert line.sent[lane] == sent
+            assert line.send_time_ns[lane] == int(sent * (TS * 1e9))
+            assert line.flags[lane] == int(expected[1])
+            np.testing.assert_array_equal(line.columns[lane], [*expected[:2], sent])
