@@ -221,6 +221,11 @@ class DelayLine:
         """Store the message every lane sends at ``tick``."""
         self.buffer[tick % self.history] = message
 
+    def slot(self, tick: int) -> np.ndarray:
+        """The message every lane sends at ``tick`` (lanes, channels), to write in place (as
+        :meth:`send` would store it)."""
+        return self.buffer[tick % self.history]
+
     def receive(self, tick: int) -> np.ndarray:
         """The newest message each lane can read at ``tick`` (lanes, channels), with the
         arrival figures (see the class); ticks in order, from 0."""

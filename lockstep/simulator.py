@@ -413,11 +413,13 @@ class LockstepSimulator:
                 ticked = slave_tick.control()
                 out = ticked.out
                 ft = out.tool_force_N
-                tool_message = [ft, out.tool_position_m, out.tool_velocity_m_s,
-                                ticked.flag_values[:, None]]
+                tool_message = tool_line.slot(k)  # written in place: the message sent at k
+                tool_message[:, 0:2] = ft
+                tool_message[:, 2:4] = out.tool_position_m
+                tool_message[:, 4:6] = out.tool_velocity_m_s
+                tool_message[:, 6] = ticked.flag_values
                 if tdpa:
-                    tool_message.append(slave_tick.state.passivity.sent_J[:, None])
-                tool_line.send(k, np.column_stack(tool_message))
+                    tool_message[:, 7] = slave_tick.state.passivity.sent_J
 
                 tally.add(k, fh, ft, yh)
                 if recorded.size:

@@ -40,6 +40,8 @@ class LinearEnvironment:
             coefficients.append(np.concatenate([np.zeros(3 - poly.size), poly])[-3:])
         #: (3, n_axes): rows are the s^2 (kg), s (N s/m) and 1 (N/m) coefficients.
         self.coefficients = np.array(coefficients).T.copy()
+        #: per lane count, the result's constant columns (read-only, made once)
+        self._constants: dict[int, tuple[np.ndarray, ...]] = {}
 
     def initial_state(self, lanes: int = 1) -> None:
         """The linear environment keeps no state."""
@@ -51,8 +53,14 @@ class LinearEnvironment:
         c = self.coefficients
         force = c[0] * acceleration_xy + c[1] * velocity_xy + c[2] * position_xy
         lanes = position_xy.shape[0]
-        return ClayStepResult(force, np.ones(lanes, bool), np.ones(lanes), np.zeros(lanes),
-                              np.full(lanes, c[1, 0]))
+        constants = self._constants.get(lanes)
+        if constants is None:
+            constants = (np.ones(lanes, bool), np.ones(lanes), np.zeros(lanes),
+                         np.full(lanes, c[1, 0]))
+            for column in constants:
+                column.flags.writeable = False
+            self._constants[lanes] = constants
+        return ClayStepResult(force, *constants)
 
 
 class ClayEnvironment:
