@@ -100,8 +100,9 @@ class MasterSupervisor:
     def steady(self) -> bool:
         """Forces on with nothing latched, awaited or guarded: while the link stays fresh
         (the silence within ``max_message_age_s``), the slave alive, no hardware fault and
-        the newest tool message without ``WORK_AREA_STOP`` (:func:`quiet_lanes`),
-        :meth:`update` changes nothing but the stored message and returns ``NONE``."""
+        the newest tool message without ``WORK_AREA_STOP`` (the lockstep's quiet lanes,
+        master/quiet_kernel.py), :meth:`update` changes nothing but the stored message and
+        returns ``NONE``."""
         return (self.enabled and not self.faulted and not self._await_sync
                 and not self._await_peer and self.tool_guard is None
                 and self.watchdog.state is WatchdogState.OK)
@@ -215,19 +216,4 @@ _FORCES_ENABLED = int(Flags.FORCES_ENABLED)
 _WORK_AREA_REASON = "the slave's work-area guard stopped the tool"
 _SLAVE_STOPPED_REASON = ("the slave stopped its tool (its forces are off: its watchdog or an "
                          "input fault)")
-
-
-def quiet_lanes(steady: np.ndarray, silence_s: np.ndarray, max_message_age_s: np.ndarray,
-                newest_flags: np.ndarray) -> np.ndarray:
-    """The lanes whose :meth:`MasterSupervisor.update` would change nothing but the stored
-    message and return ``NONE`` (the lockstep's many lanes skip the call; the program's one
-    lane always makes it): :meth:`MasterSupervisor.steady` (``steady``, (lanes,) bool), the
-    watchdog not silent (``silence_s`` (lanes,) s not above ``max_message_age_s``) and the
-    newest tool message's flags (``newest_flags``, (lanes,) int, the fresh one's where a
-    message came) with ``FORCES_ENABLED`` and without ``WORK_AREA_STOP``; the slave alive and
-    no hardware fault are the caller's to ensure. Mirrors :meth:`MasterSupervisor.update`
-    line by line; the lockstep's equivalence test (tests/lockstep/test_quiet_lanes.py) runs
-    every lane through both."""
-    return (steady & ~(silence_s > max_message_age_s)
-            & ((newest_flags & (_WORK_AREA_STOP | _FORCES_ENABLED)) == _FORCES_ENABLED))
 

@@ -18,8 +18,8 @@ whose forces are off hold the supervisor's ``hold_m`` and send no force.
 The program has one lane; the simulator one lane per cell of a sweep (the node is one Warp
 kernel over every lane; one supervisor per lane). The simulator feeds its messages as
 columns (:meth:`MasterTick.supervise_columns`): a lane in the supervisor's steady state whose
-tick would change nothing (master/supervisor.py ``quiet_lanes``) only stores its message,
-and every other lane goes through its supervisor as the program's does.
+tick would change nothing (one Warp kernel for all lanes, master/quiet_kernel.py) only stores
+its message, and every other lane goes through its supervisor as the program's does.
 """
 
 from __future__ import annotations
@@ -32,7 +32,8 @@ import numpy as np
 
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, ToolState
 from haptic.master.node import MasterNode, MasterNodeState
-from haptic.master.supervisor import MasterSupervisor, Transition, quiet_lanes
+from haptic.master.quiet_kernel import QuietLanes
+from haptic.master.supervisor import MasterSupervisor, Transition
 
 #: Flag values (IntFlag arithmetic costs about 1 us per operation, too much per lane and
 #: tick in a sweep): the message to the slave carries FORCES_ENABLED or SAFE_STATE, and
@@ -118,9 +119,12 @@ class MasterTick:
         # supervisor's stored message is older than that row (a quiet lane's)
         self._columns_current = False
         self._steady = np.zeros(lanes, bool)
-        self._max_age_s = np.array([s.watchdog.max_age_s for s in self.supervisors])
+        self._max_age_s = np.array([s.watchdog.max_age_s for s in self.supervisors], float)
         self._newest_flags = np.zeros(lanes, np.int64)
         self._newest_rows: np.ndarray | None = None
+        #: the quiet lanes' kernel over these arrays (master/quiet_kernel.py), bound when the
+        #: rows' shape is known
+        self._quiet_lanes: QuietLanes | None = None
         self._stale = np.zeros(lanes, bool)
         self._build: Callable[[int, np.ndarray], ToolState] | None = None
         #: lane-ticks of supervise_columns that went through their supervisor, and all
@@ -187,7 +191,7 @@ class MasterTick:
                           handle_position_m: np.ndarray, silence_s: np.ndarray) -> np.ndarray:
         """:meth:`supervise` for messages given as columns, the slave alive and no hardware
         fault (the lockstep's lanes; supervisors without a tool guard): a quiet lane
-        (master/supervisor.py ``quiet_lanes``) only stores its message; every other lane's
+        (master/quiet_kernel.py) only stores its message; every other lane's
         supervisor is fed as :meth:`supervise` feeds it, with its stored message brought up
         to date first. ``silence_s`` (lanes,), s. Returns the lanes fed to their supervisor
         ((lanes,) bool)."""
@@ -205,19 +209,18 @@ class MasterTick:
         fresh = messages.fresh
         self._build = messages.build
         if self._newest_rows is None or self._newest_rows.shape != messages.rows.shape:
-            self._newest_rows = np.zeros_like(messages.rows)
-        newest_flags = np.where(fresh, messages.flags, self._newest_flags)
-        self._newest_flags = newest_flags
-        quiet = quiet_lanes(self._steady, silence_s, self._max_age_s, newest_flags)
-        # masked copies (np.copyto with where: a third of boolean-index assignment's cost)
-        fresh_rows = fresh[:, None]
-        np.copyto(self._newest_rows, messages.rows, where=fresh_rows)
-        np.copyto(self._tool_force, messages.force_N, where=fresh_rows)
-        self._stale |= fresh & quiet
-        fed = ~quiet
+            self._newest_rows = np.zeros_like(messages.rows, dtype=float)
+            self._quiet_lanes = QuietLanes(self.lanes, {
+                "steady": self._steady, "max_age_s": self._max_age_s,
+                "newest_flags": self._newest_flags, "newest_rows": self._newest_rows,
+                "tool_force_N": self._tool_force, "stale": self._stale})
+        assert self._quiet_lanes is not None
+        # one kernel: the fresh messages stored, the quiet lanes' marked stale
+        fed = self._quiet_lanes.run(fresh, messages.flags, messages.rows, messages.force_N,
+                                    silence_s)
         self.lane_ticks += self.lanes
-        if not fed.any():
-            return fed
+        if fed is None:
+            return np.zeros(self.lanes, bool)
         lanes = self.lanes
         activate = np.zeros(lanes, bool)
         resume = np.zeros(lanes, bool)

@@ -1,0 +1,71 @@
+"""The master's quiet-lane kernel (master/quiet_kernel.py) against its definition, tick after
+tick, with message arrays read in place, replaced by others, and not contiguous."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from haptic.common.wire.messages import Flags
+from haptic.master.quiet_kernel import QuietLanes
+
+LANES = 40
+MAX_AGE_S = 0.02
+FLAG_CHOICES = np.array([int(Flags.FORCES_ENABLED), int(Flags.SAFE_STATE),
+                         int(Flags.FORCES_ENABLED | Flags.WORK_AREA_STOP),
+                         int(Flags.FORCES_ENABLED | Flags.IN_CONTACT)])
+
+
+def _views(rng: np.random.Generator) -> dict[str, np.ndarray]:
+    return {"steady": rng.random(LANES) < 0.8, "max_age_s": np.full(LANES, MAX_AGE_S),
+            "newest_flags": rng.choice(FLAG_CHOICES, LANES),
+            "newest_rows": rng.standard_normal((LANES, 8)),
+            "tool_force_N": rng.standard_normal((LANES, 2)), "stale": np.zeros(LANES, bool)}
+
+
+def test_the_kernel_stores_fresh_messages_and_finds_the_loud_lanes() -> None:
+    rng = np.random.default_rng(2)
+    views = _views(rng)
+    expected = {name: array.copy() for name, array in views.items()}
+    quiet = QuietLanes(LANES, views)
+    fresh, flags = np.zeros(LANES, bool), np.zeros(LANES, np.int64)
+    rows, silence = np.zeros((LANES, 8)), np.zeros(LANES)
+    loud_ticks = 0
+    for tick in range(30):
+        if tick == 10:  # other arrays: the launch is recorded again
+            fresh, flags = np.zeros(LANES, bool), np.zeros(LANES, np.int64)
+            rows, silence = np.zeros((LANES, 8)), np.zeros(LANES)
+        fresh[...] = rng.random(LANES) < 0.7
+        flags[...] = rng.choice(FLAG_CHOICES, LANES)
+        rows[...] = rng.standard_normal((LANES, 8))
+        silence[...] = rng.choice([0.0, 0.01, MAX_AGE_S, 0.03], LANES)
+        force = rows[:, 0:2]  # a view, not contiguous: copied
+        if tick >= 20:  # not contiguous, another dtype: copied too
+            fed = quiet.run(fresh.astype(np.int8) != 0, flags.astype(np.int32),
+                            np.asfortranarray(rows), force, silence[::1])
+        else:
+            fed = quiet.run(fresh, flags, rows, force, silence)
+        # the definition, in numpy
+        newest_flags = np.where(fresh, flags, expected["newest_flags"])
+        expected["newest_flags"] = newest_flags
+        mask = int(Flags.FORCES_ENABLED | Flags.WORK_AREA_STOP)
+        is_quiet = (expected["steady"] & ~(silence > MAX_AGE_S)
+                    & ((newest_flags & mask) == int(Flags.FORCES_ENABLED)))
+        expected["newest_rows"][fresh] = rows[fresh]
+        expected["tool_force_N"][fresh] = rows[fresh, 0:2]
+        expected["stale"] |= fresh & is_quiet
+        for name in ("newest_flags", "newest_rows", "tool_force_N", "stale"):
+            np.testing.assert_array_equal(views[name], expected[name], err_msg=name)
+        if is_quiet.all():
+            assert fed is None
+        else:
+            loud_ticks += 1
+            np.testing.assert_array_equal(fed, ~is_quiet)
+    assert loud_ticks > 20
+
+
+def test_rows_of_another_shape_are_refused() -> None:
+    quiet = QuietLanes(LANES, _views(np.random.default_rng(0)))
+    with pytest.raises(ValueError, match="shape"):
+        quiet.run(np.zeros(LANES, bool), np.zeros(LANES, np.int64), np.zeros((LANES, 7)),
+                  np.zeros((LANES, 2)), np.zeros(LANES))
