@@ -24,12 +24,10 @@ about 20 numpy calls a tick and line before.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import warp as wp
 
-from haptic.common.runtime.replayed_launch import ReplayedLaunch
+from haptic.common.runtime.replayed_launch import ReplayedLaunch, host_array
 from haptic.common.wire.injection import InjectionConfig
 
 # The programs print JSON on stdout: Warp must not announce itself there.
@@ -202,16 +200,13 @@ class DelayLine:
         """The recorded launch over this line's arrays (zero-copy views of them)."""
         f64, i64 = wp.float64, wp.int64
 
-        def bound(array: np.ndarray, dtype: Any) -> Any:
-            return wp.array(array, dtype=dtype, device=DEVICE, copy=False)
-
-        self._bound = [
-            bound(self.schedule, i64), bound(self._tick, i64), bound(self.buffer, f64),
-            bound(self.initial, f64), bound(self._runup_lag, i64)]
-        outputs = [
-            bound(self.rows, f64), bound(self._previous, i64), bound(self._last_fresh, i64),
-            bound(self.fresh, wp.bool), bound(self.silence_s, f64), bound(self.sent, i64),
-            bound(self.send_time_ns, i64), bound(self.flags, i64), bound(self.columns, f64)]
+        self._bound = [host_array(array, dtype) for array, dtype in (
+            (self.schedule, i64), (self._tick, i64), (self.buffer, f64), (self.initial, f64),
+            (self._runup_lag, i64))]
+        outputs = [host_array(array, dtype) for array, dtype in (
+            (self.rows, f64), (self._previous, i64), (self._last_fresh, i64),
+            (self.fresh, wp.bool), (self.silence_s, f64), (self.sent, i64),
+            (self.send_time_ns, i64), (self.flags, i64), (self.columns, f64))]
         self._bound += outputs
         return ReplayedLaunch(wp.launch(
             receive_kernel, dim=self.rows.shape[0], device=DEVICE,

@@ -14,12 +14,10 @@ lane through both, bit for bit. One launch replaces about 15 numpy calls a tick.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import warp as wp
 
-from haptic.common.runtime.replayed_launch import ReplayedLaunch
+from haptic.common.runtime.replayed_launch import ReplayedLaunch, host_array
 from haptic.common.wire.messages import Flags
 
 # The programs print JSON on stdout: Warp must not announce itself there.
@@ -82,15 +80,13 @@ class QuietLanes:
         self.fed = np.zeros(lanes, bool)
         self.loud_count = np.zeros(1, np.int32)
 
-        def bound(array: np.ndarray, dtype: Any) -> Any:
-            return wp.array(array, dtype=dtype, device=DEVICE, copy=False)
-
-        arrays = [bound(self.fresh, flag), bound(self.flags, i64), bound(self.rows, f64),
-                  bound(self.force_N, f64), bound(self.silence_s, f64),
-                  bound(views["steady"], flag), bound(views["max_age_s"], f64)]
-        outputs = [bound(views["newest_flags"], i64), bound(views["newest_rows"], f64),
-                   bound(views["tool_force_N"], f64), bound(views["stale"], flag),
-                   bound(self.fed, flag), bound(self.loud_count, wp.int32)]
+        arrays = [host_array(array, dtype) for array, dtype in (
+            (self.fresh, flag), (self.flags, i64), (self.rows, f64), (self.force_N, f64),
+            (self.silence_s, f64), (views["steady"], flag), (views["max_age_s"], f64))]
+        outputs = [host_array(array, dtype) for array, dtype in (
+            (views["newest_flags"], i64), (views["newest_rows"], f64),
+            (views["tool_force_N"], f64), (views["stale"], flag), (self.fed, flag),
+            (self.loud_count, wp.int32))]
         self._warp_arrays = [*arrays, *outputs]  # they own nothing: views of the above
         self._launch = ReplayedLaunch(wp.launch(
             quiet_kernel, dim=lanes, device=DEVICE,

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from haptic.common.runtime.replayed_launch import ReplayedLaunch
+from haptic.common.runtime.replayed_launch import ReplayedLaunch, host_array
 from haptic.common.wire.messages import Flags
 from haptic.slave_sim.input_guard import InputGuardSettings
 
@@ -163,13 +163,6 @@ def guard_limits(settings: InputGuardSettings, period_s: float) -> Any:
     return limits
 
 
-def _bound(array: np.ndarray, dtype: Any) -> Any:
-    """A Warp array over ``array``'s memory (C-contiguous, never copied)."""
-    if not array.flags.c_contiguous:
-        raise ValueError("quiet lanes: a bound array must be C-contiguous")
-    return wp.array(array, dtype=dtype, device=DEVICE, copy=False)
-
-
 class QuietLanes:
     """The recorded launch over one :class:`~haptic.slave_sim.tick.SlaveTick`'s persistent
     arrays (``views``: name -> numpy array, see :func:`quiet_kernel`), and the tick's message
@@ -201,7 +194,7 @@ class QuietLanes:
             (views["echo_send_time_ns"], i64), (views["force_scale"], f64),
             (views["unseen"], i64), (views["admitted"], flag), (self.quiet, flag),
             (self.loud_count, wp.int32)]
-        self._warp_arrays = [_bound(array, dtype) for array, dtype in arrays + outputs]
+        self._warp_arrays = [host_array(array, dtype) for array, dtype in arrays + outputs]
         inputs = self._warp_arrays[:len(arrays)]
         self._launch = ReplayedLaunch(wp.launch(
             quiet_kernel, dim=lanes, device=DEVICE,

@@ -79,4 +79,15 @@ class ReplayedLaunch:
         self._replay = replay
 
 
-__all__ = ["ReplayedLaunch"]
+def host_array(array: Any, dtype: Any) -> Any:
+    """A Warp array on the CPU over ``array``'s memory (a C-contiguous numpy array, never
+    copied), for a recorded launch to read and write in place; the caller keeps ``array``
+    alive as long as the launch."""
+    import warp as wp
+
+    if not array.flags.c_contiguous:
+        raise ValueError("a Warp launch can read only a C-contiguous array in place")
+    return wp.array(array, dtype=dtype, device="cpu", copy=False)
+
+
+__all__ = ["ReplayedLaunch", "host_array"]

@@ -5,9 +5,10 @@ launch."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import warp as wp
 
-from haptic.common.runtime.replayed_launch import ReplayedLaunch
+from haptic.common.runtime.replayed_launch import ReplayedLaunch, host_array
 
 wp.config.log_level = wp.LOG_WARNING
 
@@ -73,3 +74,12 @@ def test_what_cannot_be_replayed_stays_a_plain_launch() -> None:
     for _ in range(5):
         replayed.launch()
     assert command.calls == 5 and not replayed.replaying
+
+
+def test_a_host_array_shares_the_numpy_memory_and_refuses_a_strided_view() -> None:
+    values = np.zeros((3, 2))
+    shared = host_array(values, wp.float64)
+    values[1, 1] = 5.0
+    assert shared.numpy()[1, 1] == 5.0 and shared.ptr == values.ctypes.data
+    with pytest.raises(ValueError, match="contiguous"):
+        host_array(np.zeros((3, 4))[:, 0:2], wp.float64)
