@@ -48,7 +48,7 @@ START_ALLOWANCE_S = 40.0
 #: The master steps the session's duration in rig time (``--rig-time``), so the scripted
 #: scenario runs to its end however loaded the machine is; a run this many times slower than
 #: real time still finishes (the slave's wall-time bound and the session's deadline).
-SLOWDOWN_ALLOWANCE = 4.0
+SLOWDOWN_ALLOWANCE = 8.0
 
 
 #: The largest position gap |yt - Ah1 yh| at the end of a session (issue 16), m.

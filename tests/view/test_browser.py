@@ -79,7 +79,9 @@ def test_page_shows_the_cut_in_chromium(tmp_path: Path) -> None:
     prefix = f"test/{uuid.uuid4().hex[:8]}"
     port = _free_port()
     common = ["--config", str(config), "--key-prefix", prefix]
-    run = ["--no-status", "--peer-wait", "30", "--duration", "8"]
+    # The master's peer wait covers the view's start, Chromium's launch and first page, and
+    # the slave's start (Python, Warp, Zenoh): 20-30 s on a slow, busy machine.
+    run = ["--no-status", "--peer-wait", "120", "--duration", "8"]
     processes = []
     try:
         # The master first (it listens and waits for the slave), then the view connects to
