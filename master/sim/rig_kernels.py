@@ -1,14 +1,18 @@
 """NVIDIA Warp kernels of the simulated rig: the handle axes and the scripted operator, one
 thread per lane (kept in a plain module so Warp can compile them).
 
-:func:`operator_intent` is the operator models' law (:mod:`haptic.master.sim.operator` documents
-the kinds and parameters); :data:`operator_kernel` runs it alone, :data:`rig_step_kernel`
-inside one SYNC of the rig (:mod:`haptic.master.sim.rig_model`). The model rig of the real-time
-master steps one lane per tick through a recorded launch; the lockstep simulator steps a whole
-sweep's lanes with the same kernel. Arithmetic is float64 throughout.
+:func:`operator_intent` is the operator models' law (:mod:`haptic.master.sim.operator`
+documents the kinds and parameters); :data:`operator_kernel` runs it alone,
+:func:`rig_step_kernel` (compiled for the number of plant states) inside one SYNC of the rig
+(:mod:`haptic.master.sim.rig_model`). The model rig of the real-time master steps one lane
+per tick through a recorded launch; the lockstep simulator steps a whole sweep's lanes with
+the same kernel. Arithmetic is float64 throughout.
 """
 
 from __future__ import annotations
+
+import functools
+from typing import Any
 
 import warp as wp
 
@@ -166,60 +170,77 @@ def operator_kernel(
     force[lane, 1] = uh[1]
 
 
-@wp.kernel
-def rig_step_kernel(
-    plant_a: wp.array2d(dtype=wp.float64),
-    plant_b: wp.array2d(dtype=wp.float64),
-    outputs_c: wp.array3d(dtype=wp.float64),
-    outputs_d: wp.array2d(dtype=wp.float64),
-    impedance: wp.array2d(dtype=wp.float64),
-    params: OperatorParams,
-    period_s: wp.float64,
-    target: wp.array2d(dtype=wp.float64),
-    tool_force: wp.array2d(dtype=wp.float64),
-    noise: wp.array2d(dtype=wp.float64),
-    plant: wp.array2d(dtype=wp.float64),
-    scratch: wp.array2d(dtype=wp.float64),
-    applied: wp.array2d(dtype=wp.float64),
-    grasp: wp.array2d(dtype=wp.float64),
-    time_s: wp.array(dtype=wp.float64),
-    integral: wp.array2d(dtype=wp.float64),
-    felt: wp.array2d(dtype=wp.float64),
-    sample: wp.array2d(dtype=wp.float64),
-):
-    """One SYNC of one lane: advance the axes over the last period with the command applied
-    there, apply the new target (a non-finite one is ignored per axis), sample position,
-    velocity and acceleration (``outputs_c`` (3, 2, n), ``outputs_d`` (3, 2): position,
-    velocity, acceleration), the operator's intent and the sensor force
-    ``fh = uh - (m a + b v + k (y - y_grasp))`` plus ``noise``."""
-    lane = wp.tid()
-    n = plant.shape[1]
-    for i in range(n):
-        acc = plant_b[i, 0] * applied[lane, 0] + plant_b[i, 1] * applied[lane, 1]
-        for j in range(n):
-            acc += plant_a[i, j] * plant[lane, j]
-        scratch[lane, i] = acc
-    for i in range(n):
-        plant[lane, i] = scratch[lane, i]
-    for axis in range(2):
-        if wp.isfinite(target[lane, axis]):
-            applied[lane, axis] = target[lane, axis]
-    for output in range(3):
+@functools.cache
+def rig_step_kernel(n_states: int) -> Any:
+    """The rig's kernel compiled for ``n_states`` plant states (both axes' Gh realisations
+    stacked), in its own Warp module: every loop over the state has a constant length and is
+    unrolled, the lane's state read once (a third of the cost of the loops over the arrays'
+    runtime shape at a sweep's 210 lanes, the same arithmetic in the same order)."""
+    state_vector = wp.types.vector(length=n_states, dtype=wp.float64)
+
+    @wp.kernel(module="unique")
+    def rig_step(
+        plant_a: wp.array2d(dtype=wp.float64),
+        plant_b: wp.array2d(dtype=wp.float64),
+        outputs_c: wp.array3d(dtype=wp.float64),
+        outputs_d: wp.array2d(dtype=wp.float64),
+        impedance: wp.array2d(dtype=wp.float64),
+        params: OperatorParams,
+        period_s: wp.float64,
+        target: wp.array2d(dtype=wp.float64),
+        tool_force: wp.array2d(dtype=wp.float64),
+        noise: wp.array2d(dtype=wp.float64),
+        plant: wp.array2d(dtype=wp.float64),
+        applied: wp.array2d(dtype=wp.float64),
+        grasp: wp.array2d(dtype=wp.float64),
+        time_s: wp.array(dtype=wp.float64),
+        integral: wp.array2d(dtype=wp.float64),
+        felt: wp.array2d(dtype=wp.float64),
+        sample: wp.array2d(dtype=wp.float64),
+    ):
+        """One SYNC of one lane: advance the axes over the last period with the command
+        applied there, apply the new target (a non-finite one is ignored per axis), sample
+        position, velocity and acceleration (``outputs_c`` (3, 2, n), ``outputs_d`` (3, 2):
+        position, velocity, acceleration), the operator's intent and the sensor force
+        ``fh = uh - (m a + b v + k (y - y_grasp))`` plus ``noise``."""
+        lane = wp.tid()
+        held_x = applied[lane, 0]
+        held_y = applied[lane, 1]
+        x = state_vector()
+        for j in range(n_states):
+            x[j] = plant[lane, j]
+        advanced = state_vector()
+        for i in range(n_states):
+            acc = plant_b[i, 0] * held_x + plant_b[i, 1] * held_y
+            for j in range(n_states):
+                acc += plant_a[i, j] * x[j]
+            advanced[i] = acc
+            plant[lane, i] = acc
+        if wp.isfinite(target[lane, 0]):
+            held_x = target[lane, 0]
+            applied[lane, 0] = held_x
+        if wp.isfinite(target[lane, 1]):
+            held_y = target[lane, 1]
+            applied[lane, 1] = held_y
+        held = wp.vec2d(held_x, held_y)
+        for output in range(3):
+            for axis in range(2):
+                value = outputs_d[output, axis] * held[axis]
+                for j in range(n_states):
+                    value += outputs_c[output, axis, j] * advanced[j]
+                sample[lane, 2 * output + axis] = value
+        offset_x = sample[lane, 0] - grasp[lane, 0]
+        offset_y = sample[lane, 1] - grasp[lane, 1]
+        uh = operator_intent(params, lane, period_s, offset_x, offset_y, sample[lane, 2],
+                             sample[lane, 3], tool_force[lane, 0], tool_force[lane, 1],
+                             time_s, integral, felt)
+        offsets = wp.vec2d(offset_x, offset_y)
         for axis in range(2):
-            value = outputs_d[output, axis] * applied[lane, axis]
-            for j in range(n):
-                value += outputs_c[output, axis, j] * plant[lane, j]
-            sample[lane, 2 * output + axis] = value
-    offset_x = sample[lane, 0] - grasp[lane, 0]
-    offset_y = sample[lane, 1] - grasp[lane, 1]
-    uh = operator_intent(params, lane, period_s, offset_x, offset_y, sample[lane, 2],
-                         sample[lane, 3], tool_force[lane, 0], tool_force[lane, 1], time_s,
-                         integral, felt)
-    offsets = wp.vec2d(offset_x, offset_y)
-    for axis in range(2):
-        arm = impedance[axis, 0] * sample[lane, 4 + axis] + (
-            impedance[axis, 1] * sample[lane, 2 + axis]) + impedance[axis, 2] * offsets[axis]
-        force = uh[axis] - arm
-        sample[lane, 6 + axis] = uh[axis]
-        sample[lane, 8 + axis] = force
-        sample[lane, 10 + axis] = force + noise[lane, axis]
+            arm = impedance[axis, 0] * sample[lane, 4 + axis] + (
+                impedance[axis, 1] * sample[lane, 2 + axis]) + impedance[axis, 2] * offsets[axis]
+            force = uh[axis] - arm
+            sample[lane, 6 + axis] = uh[axis]
+            sample[lane, 8 + axis] = force
+            sample[lane, 10 + axis] = force + noise[lane, axis]
+
+    return rig_step

@@ -167,6 +167,7 @@ class RigModel:
         from haptic.master.sim import rig_kernels
 
         _warp().load_module(rig_kernels, device="cpu")
+        _warp().load_module(rig_kernels.rig_step_kernel(self.n_states).module, device="cpu")
 
     def _axis_blocks(self, gh: control.TransferFunction, name: str) -> dict[str, np.ndarray]:
         realisation = control.ss(gh)
@@ -238,20 +239,19 @@ class RigModel:
         target = buffer(2, np.nan)
         tool_force, noise = buffer(2), buffer(2)
         plant = buffer(self.n_states, position @ self._equilibrium)
-        scratch = buffer(self.n_states)
         applied = buffer(2, position / self.dc_gains)
         grasp = buffer(2, position)
         sample = buffer(2 * len(rig_kernels.SAMPLE_PAIRS))
         operator = self.operator.initial_state(lanes)
-        launch = wp.launch(rig_kernels.rig_step_kernel, dim=lanes, device="cpu",
+        launch = wp.launch(rig_kernels.rig_step_kernel(self.n_states), dim=lanes, device="cpu",
                            inputs=[*self._kernel_constants(),
                                    self.operator.kernel_params(self.period_s), self.period_s,
-                                   target, tool_force, noise, plant, scratch, applied, grasp,
+                                   target, tool_force, noise, plant, applied, grasp,
                                    *operator.buffers, sample], record_cmd=True)
         return RigState(plant.numpy(), applied.numpy(), grasp.numpy(), operator, rng,
                         target_m=target.numpy(), tool_force_N=tool_force.numpy(),
                         noise_N=noise.numpy(), sample=sample.numpy(), kernel=ReplayedLaunch(launch),
-                        buffers=(target, tool_force, noise, plant, scratch, applied, grasp,
+                        buffers=(target, tool_force, noise, plant, applied, grasp,
                                  sample))
 
     def step(self, state: RigState, target_m: np.ndarray, tool_force_N: np.ndarray) -> RigSample:
