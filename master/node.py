@@ -409,26 +409,30 @@ class MasterNode:
         state._event_count[0] = 0
         step, time_s = state.step, state.step * self.period_s
         codes, bits = state._trip_code, state._event_bits
+        events = state.events
         tripped = np.flatnonzero(codes >= 0)
-        for lane in sorted(tripped, key=lambda lane: (codes[lane] // 2, lane)):
-            code = int(codes[lane])
-            state.events.append(SafetyEvent(step, time_s, int(lane), "trip",
-                                            self._trip_reasons[code // 2], AXES[code % 2]))
+        if tripped.size:
+            for lane, code in sorted(zip(tripped.tolist(), codes[tripped].tolist(), strict=True),
+                                     key=lambda pair: (pair[1] // 2, pair[0])):
+                events.append(SafetyEvent(step, time_s, lane, "trip",
+                                          self._trip_reasons[code // 2], AXES[code % 2]))
         flagged = np.flatnonzero(bits)
+        if not flagged.size:
+            return
+        # Python ints (one conversion per flagged lane), in the layer's order
+        lanes_values = list(zip(flagged.tolist(), bits[flagged].tolist(), strict=True))
         for which in (0, 1, "enable", 2, 3):
-            for lane in flagged:
-                value = int(bits[lane])
+            for lane, value in lanes_values:
                 if which == "enable":
                     if value >> kernels.ENABLE_BIT & 1:
-                        state.events.append(SafetyEvent(
-                            step, time_s, int(lane), "enable", "forces enabled after "
+                        events.append(SafetyEvent(
+                            step, time_s, lane, "enable", "forces enabled after "
                             f"{self.safety.ramp_small_samples} small-force samples"))
                     continue
                 for axis in (0, 1):
                     if value >> (2 * which + axis) & 1:
-                        state.events.append(SafetyEvent(step, time_s, int(lane), "saturate",
-                                                        self._limit_reasons[which],
-                                                        AXES[axis]))
+                        events.append(SafetyEvent(step, time_s, lane, "saturate",
+                                                  self._limit_reasons[which], AXES[axis]))
 
 
 def _mask(lanes: np.ndarray, count: int) -> np.ndarray:

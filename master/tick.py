@@ -322,7 +322,8 @@ class MasterTick:
         if self.lanes == 1:  # the program's lane: Python scalars are cheaper than numpy calls
             any_on = all_on = bool(enabled[0])
         else:
-            any_on, all_on = bool(enabled.any()), bool(enabled.all())
+            on = np.count_nonzero(enabled)  # one cheap call instead of any() and all()
+            any_on, all_on = on > 0, on == self.lanes
         if state is not None and any_on:
             inputs = state.inputs
             inputs[:, 0:2] = handle_force_N
@@ -344,7 +345,7 @@ class MasterTick:
                 self._tool_used[...] = np.where(enabled[:, None], state.tool_force_used_N, 0.0)
                 self._scale[...] = np.where(enabled, state.force_scale, 0.0)
             faulted = state.faulted
-            if self.lanes > 1 or faulted[0]:
+            if faulted[0] if self.lanes == 1 else np.count_nonzero(faulted):
                 for lane in np.flatnonzero(enabled & faulted):
                     self.supervisors[lane].note_node_fault()
                     self._steady[lane] = False
@@ -360,7 +361,7 @@ class MasterTick:
                 self._command[0] = self._hold[0]
         else:
             self._flag_values[...] = _flag_value(enabled, switched)
-            if not enabled.all():
+            if np.count_nonzero(enabled) != self.lanes:
                 off = ~enabled
                 self._command[off] = self._hold[off]
         values = self._flag_values

@@ -308,9 +308,10 @@ class SlaveTick:
             switched = admitted & (((messages.flags & _TDPA_SWITCHED) != 0) != port.active)
             for lane in np.flatnonzero(switched).tolist():
                 self._switch(now_s, lane, not bool(port.active[lane]))
-        if follow.any():  # to the held handle, cutting (slave_sim/resync.py)
+        following = np.count_nonzero(follow)
+        if following:  # to the held handle, cutting (slave_sim/resync.py)
             self.resync.step(state, self.handle_position_m, now_s,
-                             None if follow.all() else follow)
+                             None if following == self.lanes else follow)
         if fed:
             tool = state.tool[:, 0::2].tolist()
             resume = np.zeros(self.lanes, bool)
@@ -428,9 +429,9 @@ class SlaveTick:
         running = self.running
         if self.lanes == 1:  # the program's lane: Python scalars are cheaper than numpy calls
             force = self.handle_force_N if running[0] else self._zero_force
-        elif running.all():
+        elif (count := np.count_nonzero(running)) == self.lanes:
             force = self.handle_force_N
-        elif not running.any():
+        elif not count:
             force = self._zero_force
         else:
             force = np.where(running[:, None], self.handle_force_N, 0.0)
