@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.wire.lane_flags import lane_flag_values
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, ToolState
 from haptic.master.node import MasterNode, MasterNodeState
 from haptic.master.quiet_kernel import QuietLanes
@@ -44,9 +45,9 @@ _TDPA_SWITCHED = int(Flags.TDPA_SWITCHED)
 
 
 def _flag_value(enabled: Any, switched: Any) -> Any:
-    """The flags of the message to the slave, as an int (Python bools: one lane) or an int
-    array ((lanes,) bool arrays): FORCES_ENABLED where forces are on, else SAFE_STATE, and
-    TDPA_SWITCHED where the governor has the layer switched on (the bits are disjoint)."""
+    """The flags of the program's one lane's message to the slave, as an int (Python bools):
+    FORCES_ENABLED where forces are on, else SAFE_STATE, and TDPA_SWITCHED where the governor
+    has the layer switched on (the bits are disjoint). Many lanes: ``lane_flag_values``."""
     return (_SAFE_STATE + (_FORCES_ENABLED - _SAFE_STATE) * enabled
             + _TDPA_SWITCHED * switched)
 
@@ -360,7 +361,7 @@ class MasterTick:
             if not on:
                 self._command[0] = self._hold[0]
         else:
-            self._flag_values[...] = _flag_value(enabled, switched)
+            lane_flag_values(self._flag_values, enabled, ((_TDPA_SWITCHED, switched),))
             if np.count_nonzero(enabled) != self.lanes:
                 off = ~enabled
                 self._command[off] = self._hold[off]

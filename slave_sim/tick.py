@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from haptic.common.analysis.margin_table import follow_gain
+from haptic.common.wire.lane_flags import lane_flag_values
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, HandleState
 from haptic.slave_sim.input_guard import InputGuard
 from haptic.slave_sim.node import SlaveNode, SlaveOutputs, SlaveState
@@ -49,10 +50,10 @@ _TDPA_SWITCHED = int(Flags.TDPA_SWITCHED)
 
 
 def _flag_value(ready: Any, cutting: Any, outside: Any, switched: Any) -> Any:
-    """The flags of the message to the master, as an int (Python bools: one lane) or an int
-    array ((lanes,) bool arrays): FORCES_ENABLED when this side is ready, else SAFE_STATE;
-    IN_CONTACT while cutting; WORK_AREA_STOP while the work-area guard holds the tool;
-    TDPA_SWITCHED while a standby passivity layer is switched on (the bits are disjoint)."""
+    """The flags of the program's one lane's message to the master, as an int (Python
+    bools; many lanes: ``lane_flag_values``): FORCES_ENABLED when this side is ready, else
+    SAFE_STATE; IN_CONTACT while cutting; WORK_AREA_STOP while the work-area guard holds the
+    tool; TDPA_SWITCHED while a standby passivity layer is switched on (the bits are disjoint)."""
     return (_SAFE_STATE + (_FORCES_ENABLED - _SAFE_STATE) * ready + _IN_CONTACT * cutting
             + _WORK_AREA_STOP * outside + _TDPA_SWITCHED * switched)
 
@@ -444,5 +445,7 @@ class SlaveTick:
             values[0] = _flag_value(bool(self._ready[0]), bool(out.cutting[0]),
                                     bool(self._outside[0]), bool(switched[0]))
         else:
-            values[...] = _flag_value(self._ready, out.cutting, self._outside, switched)
+            lane_flag_values(values, self._ready, ((_IN_CONTACT, out.cutting),
+                                                   (_WORK_AREA_STOP, self._outside),
+                                                   (_TDPA_SWITCHED, switched)))
         return SlaveTickOutput(out, running, values)
