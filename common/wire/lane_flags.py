@@ -3,7 +3,7 @@
 A message's flags are FORCES_ENABLED where its side is ready, else SAFE_STATE, plus one
 disjoint bit per condition (common/wire/messages.py ``Flags``). Per tick the conditions are
 mostly all off or all on across a sweep's lanes, so each costs one count, and a numpy
-multiply only where the lanes differ.
+multiply only where the lanes differ; the bits all lanes share are added in one call.
 """
 
 from __future__ import annotations
@@ -24,12 +24,15 @@ def lane_flag_values(out: np.ndarray, ready: np.ndarray,
     ``conditions`` holds (masks (lanes,), bool or 0/1 floats; bits disjoint from each other and from
     those two). Returns ``out``."""
     lanes = out.shape[0]
-    np.multiply(ready, _FORCES_ENABLED - _SAFE_STATE, out=out)
-    out += _SAFE_STATE
+    out[...] = ready  # 0 or 1 (a cast copy: a multiply of bools is several times dearer)
+    if _FORCES_ENABLED - _SAFE_STATE != 1:
+        out *= _FORCES_ENABLED - _SAFE_STATE
+    constant = _SAFE_STATE  # the bits every lane has, added at once
     for bit, mask in conditions:
         count = np.count_nonzero(mask)
         if count == lanes:
-            out += bit
+            constant += bit
         elif count:
             out += bit * (mask if mask.dtype == bool else mask != 0)
+    out += constant
     return out
