@@ -79,20 +79,22 @@ def source_schedule(steps: int, delay_samples: np.ndarray, offset_samples: int,
         raise ValueError("delays must be >= 0 samples")
     lanes = delays.size
     ticks = np.arange(steps, dtype=np.int64)[:, None]
+    if injection is None or not injection.active:
+        # every message arrives, each line's lag fixed: tick t reads the one sent at
+        # t - offset - delay (what the scatter below gives, without its cost)
+        return np.maximum(ticks - offset_samples - delays[None, :], -1)
     target = np.broadcast_to(ticks + offset_samples + delays[None, :], (steps, lanes)).copy()
-    lost = np.zeros((steps, lanes), bool)
-    if injection is not None and injection.active:
-        if rng is None:
-            raise ValueError("injecting jitter or loss needs a seeded generator")
-        extra_s = injection.delay_s + jitter_draws_s(injection, (steps, lanes), rng)
-        profile = injection.delay_profile
-        if profile is not None:
-            extra_s = extra_s + np.array([profile.delay_s(j * period_s)
-                                          for j in range(steps)])[:, None]
-        target += np.ceil(extra_s / period_s - 1e-9).astype(np.int64)
-        if injection.preserve_order:
-            target = np.maximum.accumulate(target, axis=0)
-        lost = loss_mask(injection, (steps, lanes), rng)
+    if rng is None:
+        raise ValueError("injecting jitter or loss needs a seeded generator")
+    extra_s = injection.delay_s + jitter_draws_s(injection, (steps, lanes), rng)
+    profile = injection.delay_profile
+    if profile is not None:
+        extra_s = extra_s + np.array([profile.delay_s(j * period_s)
+                                      for j in range(steps)])[:, None]
+    target += np.ceil(extra_s / period_s - 1e-9).astype(np.int64)
+    if injection.preserve_order:
+        target = np.maximum.accumulate(target, axis=0)
+    lost = loss_mask(injection, (steps, lanes), rng)
     source = np.full((steps, lanes), -1, np.int64)
     delivered = (~lost) & (target < steps)
     rows, lane_index = np.nonzero(delivered)

@@ -76,3 +76,20 @@ def test_every_lane_reads_its_own_newest_message_before_and_after_all_have_one()
             assert line.send_time_ns[lane] == int(sent * (TS * 1e9))
             assert line.flags[lane] == int(expected[1])
             np.testing.assert_array_equal(line.columns[lane], [*expected[:2], sent])
+
+
+def test_a_plain_schedule_is_the_scatter_of_an_injected_one_that_adds_nothing() -> None:
+    """Without injection the schedule is computed directly (tick t reads t - offset - delay);
+    an injection that is active but adds no whole sample (1e-12 s) goes through the scatter
+    of arrivals: the two agree, run-up included."""
+    rng = np.random.default_rng(0)
+    nothing = InjectionConfig(delay_s=1e-12)
+    assert nothing.active
+    for steps in (0, 1, 7, 300):
+        for offset in (0, 1):
+            for delays in ([0], [5], np.arange(0, 40, 3), [400]):
+                plain = source_schedule(steps, delays, offset, TS)
+                scattered = source_schedule(steps, delays, offset, TS, nothing, rng)
+                assert plain.dtype == scattered.dtype == np.int64
+                assert np.array_equal(plain, scattered), (steps, offset, delays)
+    assert source_schedule(6, [2], 1, TS)[:, 0].tolist() == [-1, -1, -1, 0, 1, 2]
