@@ -195,7 +195,7 @@ class MasterTick:
         (master/quiet_kernel.py) only stores its message; every other lane's
         supervisor is fed as :meth:`supervise` feeds it, with its stored message brought up
         to date first. ``silence_s`` (lanes,), s. Returns the lanes fed to their supervisor
-        ((lanes,) bool)."""
+        ((lanes,) bool, valid until the next tick)."""
         supervisors = self.supervisors
         if not self._columns_current:
             if any(supervisor.tool_guard is not None for supervisor in supervisors):
@@ -220,8 +220,8 @@ class MasterTick:
         fed = self._quiet_lanes.run(fresh, messages.flags, messages.rows, messages.force_N,
                                     silence_s)
         self.lane_ticks += self.lanes
-        if fed is None:
-            return np.zeros(self.lanes, bool)
+        if fed is None:  # every lane quiet: the kernel's own (all False) lanes, no new array
+            return self._quiet_lanes.fed
         lanes = self.lanes
         activate = np.zeros(lanes, bool)
         resume = np.zeros(lanes, bool)
