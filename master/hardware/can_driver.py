@@ -532,13 +532,17 @@ class CanHandleDriver(HandleHardware):
             self._stop_cycles += 1
         self._discard_late_frames(self._pending_faults, self._sync_drive_fault)
         now = time.monotonic()
-        if now >= self._heartbeat_due_s:
-            self._send(HEARTBEAT_BASE + self.settings.master_node_id, self._master_heartbeat)
-            self._heartbeat_due_s = max(self._heartbeat_due_s + self._heartbeat_period_s, now)
+        self._heartbeat_if_due(now)
         bus.send(self._next_sync())
         self._cycle += 1
         self._sync_sent_s = now
         self._sync_pending = True
+
+    def _heartbeat_if_due(self, now: float) -> None:
+        """Send the master's heartbeat when it is due (``now``: time.monotonic(), s)."""
+        if now >= self._heartbeat_due_s:
+            self._send(HEARTBEAT_BASE + self.settings.master_node_id, self._master_heartbeat)
+            self._heartbeat_due_s = max(self._heartbeat_due_s + self._heartbeat_period_s, now)
 
     def read(self) -> HandleReading:
         """Collect the PDOs of the pending SYNC (:meth:`sync`; sent now when none is
@@ -570,10 +574,18 @@ class CanHandleDriver(HandleHardware):
         have_sensor = False
         deadline = now + self.pdo_timeout_s
         while not (have_drive[0] and have_drive[1] and have_sensor):
-            # past the deadline, only what has arrived already (a late read after sync())
-            message = bus.recv(timeout=max(deadline - time.monotonic(), 0.0))
+            # past the deadline, only what has arrived already (a late read after sync());
+            # a long wait (pdo_timeout_s above the heartbeat period: the simulated rig's
+            # drives share a busy machine) keeps the heartbeat going, or the drives' consumer
+            # would take a master waiting for them for a lost one
+            clock = time.monotonic()
+            message = bus.recv(timeout=max(min(deadline, self._heartbeat_due_s) - clock, 0.0))
             if message is None:
-                break
+                clock = time.monotonic()
+                if clock >= deadline:
+                    break
+                self._heartbeat_if_due(clock)
+                continue
             kind, axis = dispatch.get(message.arbitration_id, _OTHER)
             if kind == _TPDO:
                 data = message.data

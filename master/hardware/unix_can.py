@@ -16,8 +16,17 @@ Membership: each bus binds ``DIRECTORY/<pid>-<n>.sock`` and sends each frame to 
 socket in the directory: before each send it looks at the directory's modification time (one
 ``fstat``, under 1 us) and lists it again when that changed or is too recent to tell
 (:data:`RESCAN_S`, the file system's clock is coarse). A member whose socket is gone or
-refuses is forgotten; a member whose receive queue is full misses that frame (the sender never
-blocks, as a CAN controller drops what nobody acknowledges in time).
+refuses is forgotten.
+
+A full receive queue: a Unix datagram socket queues only ``net.unix.max_dgram_qlen``
+datagrams (10 by default), where a real CAN controller's FIFO and the host's socket queue hold
+hundreds of frames, so a member descheduled for a few ms (a busy machine) would lose frames a
+real bus delivers: a SYNC the emulated drives never answer, a heartbeat their consumer misses.
+The sender therefore waits for room, at most ``full_queue_wait_s`` (default
+:data:`FULL_QUEUE_WAIT_S`); a frame still not taken then is dropped (``dropped_datagrams``),
+and that member is marked congested: until it takes a frame again, frames to it are dropped at
+once instead of waiting (``full_queue_waits`` counts the waits), so a member that stopped
+reading costs a sender one wait, not one per frame.
 
 Wire format, one or more frames per datagram, each: arbitration id (u32 little-endian),
 flags (u8: 1 extended, 2 remote, 4 error, 8 FD, 16 bit-rate switch, 32 error state
@@ -58,6 +67,8 @@ _COUNTER = itertools.count()
 #: A directory modified less than this long ago is listed again before each send (changes
 #: within one tick of the file system's coarse clock share a modification time), s.
 RESCAN_S = 0.05
+#: How long a send waits for room in a member's full receive queue before it drops the frame, s.
+FULL_QUEUE_WAIT_S = 0.02
 
 
 def _encode(msg: can.Message) -> bytes:
@@ -86,9 +97,12 @@ class UnixDatagramBus(can.BusABC):
     docstring). ``receive_own_messages`` is not supported (a member never hears itself)."""
 
     def __init__(self, channel: Any = None, receive_own_messages: bool = False,
-                 **kwargs: Any) -> None:
+                 full_queue_wait_s: float = FULL_QUEUE_WAIT_S, **kwargs: Any) -> None:
         if not channel:
             raise can.CanInitializationError("unix_datagram needs a channel: a directory")
+        if not 0.0 <= float(full_queue_wait_s) <= 10.0:
+            raise can.CanInitializationError(
+                f"unix_datagram: full_queue_wait_s must be 0..10 s (got {full_queue_wait_s})")
         if receive_own_messages:
             raise can.CanInterfaceNotImplementedError(
                 "unix_datagram: receiving own messages is not supported")
@@ -107,6 +121,19 @@ class UnixDatagramBus(can.BusABC):
             raise can.CanInitializationError(
                 f"unix_datagram: cannot bind {self.path}: {error}") from error
         self._socket.setblocking(False)
+        # sends that wait for room in a full queue: blocking, bounded by SO_SNDTIMEO
+        self._waiting_socket = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        wait_us = int(round(float(full_queue_wait_s) * 1e6))
+        self._waiting_socket.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO,
+                                        struct.pack("ll", wait_us // 1_000_000,
+                                                    wait_us % 1_000_000))
+        self.full_queue_wait_s = float(full_queue_wait_s)
+        #: Members whose queue stayed full for a whole wait: no waiting until they take one.
+        self._congested: set[str] = set()
+        #: Sends that found a member's queue full and waited for room.
+        self.full_queue_waits = 0
+        #: Datagrams (a frame or a burst) a member never got: its queue stayed full.
+        self.dropped_datagrams = 0
         self._directory_fd = os.open(self.directory, os.O_RDONLY | os.O_DIRECTORY)
         self._members: set[str] = set()
         #: Frames of the last datagram not yet returned by recv (a burst), in order.
@@ -143,7 +170,25 @@ class UnixDatagramBus(can.BusABC):
             except (FileNotFoundError, ConnectionRefusedError):
                 self._members.discard(member)  # it left (its file may stay: a stale one)
             except BlockingIOError:
-                pass  # its queue is full: it misses this frame
+                self._send_to_full_queue(datagram, member)
+            else:
+                if self._congested:
+                    self._congested.discard(member)
+
+    def _send_to_full_queue(self, datagram: bytes, member: str) -> None:
+        """``member``'s queue is full: wait for room (at most ``full_queue_wait_s``) unless it
+        is congested, else drop the datagram (module docstring)."""
+        if member in self._congested or self.full_queue_wait_s == 0.0:
+            self.dropped_datagrams += 1
+            return
+        self.full_queue_waits += 1
+        try:
+            self._waiting_socket.sendto(datagram, member)
+        except (FileNotFoundError, ConnectionRefusedError):
+            self._members.discard(member)
+        except (BlockingIOError, TimeoutError):
+            self.dropped_datagrams += 1
+            self._congested.add(member)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         """Send ``msg`` to every other member (never blocks: a member whose queue is full
@@ -212,6 +257,7 @@ class UnixDatagramBus(can.BusABC):
         self._closed = True
         super().shutdown()
         self._socket.close()
+        self._waiting_socket.close()
         os.close(self._directory_fd)
         try:
             os.unlink(self.path)

@@ -126,8 +126,12 @@ def run_emulator(rig: SimulatedCanRig, bus_options: dict[str, Any],
         rig.serve(should_stop, POLL_S, report)
     finally:
         bus.shutdown()
+    # unix_datagram only: frames a member's full queue made wait, or never took
+    queue = (f", {bus.full_queue_waits} sends waited for a full queue, "
+             f"{bus.dropped_datagrams} datagrams dropped"
+             if hasattr(bus, "dropped_datagrams") else "")
     print(f"haptic-rig-sim: stopped after {rig.sync_count} SYNCs ({rig.prepared_syncs} "
-          f"answered as prepared), {errors} frame errors", file=out, flush=True)
+          f"answered as prepared), {errors} frame errors{queue}", file=out, flush=True)
     return 0
 
 

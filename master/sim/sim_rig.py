@@ -245,19 +245,34 @@ class SimulatedCanRig:
               on_error: Callable[[str], None] | None = None) -> None:
         """Block on the bus and answer each frame until ``should_stop()`` is true (checked
         after each frame and at least every ``poll_s`` s). Between frames the drives'
-        heartbeats go out and their heartbeat consumers are checked (:meth:`poll_timers`). A
-        frame that raises is recorded in :attr:`errors` (and passed to ``on_error``) and
-        serving goes on."""
+        heartbeats go out and their heartbeat consumers are checked (:meth:`poll_timers`),
+        after the frames already queued are handled: a drive's consumer runs on frames as
+        they arrive, so a heartbeat that came while this process was not scheduled counts
+        (a busy machine must not look like a lost master). A frame that raises is recorded in
+        :attr:`errors` (and passed to ``on_error``) and serving goes on."""
         while not should_stop():
             bus = self._bus
             if bus is None:
                 return
             now_s = time.monotonic()
             if now_s >= self._timers_due_s:  # only when a heartbeat or a check is due
+                self._handle_queued(bus, on_error)
+                now_s = time.monotonic()
                 self._timers_due_s = now_s + max(0.0, self.poll_timers(now_s))
             message = bus.recv(timeout=min(poll_s, max(0.0, self._timers_due_s - now_s)))
             if message is None:
                 continue
+            error = self.handle_message(message)
+            if error is not None and on_error is not None:
+                on_error(error)
+
+    def _handle_queued(self, bus: can.BusABC, on_error: Callable[[str], None] | None,
+                       limit: int = 256) -> None:
+        """Handle the frames already received (at most ``limit``), without waiting."""
+        for _ in range(limit):
+            message = bus.recv(timeout=0.0)
+            if message is None:
+                return
             error = self.handle_message(message)
             if error is not None and on_error is not None:
                 on_error(error)

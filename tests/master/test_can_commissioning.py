@@ -6,6 +6,7 @@ LocalNodes from the packaged EDS) on python-can's virtual bus."""
 from __future__ import annotations
 
 import dataclasses
+import threading
 import time
 import uuid
 from pathlib import Path
@@ -208,6 +209,39 @@ def test_a_stalled_master_stops_the_drives_by_their_heartbeat_consumer() -> None
             hardware.write(before + 0.005)
             reading = hardware.read()
         np.testing.assert_allclose(reading.position_m, before, atol=2e-6)
+    finally:
+        hardware.cleanup()
+
+
+def test_a_master_waiting_for_stalled_drives_keeps_its_heartbeat() -> None:
+    """The simulated drives share a busy machine and stall 0.45 s (their thread cannot take
+    a frame): the master's read waits for their PDOs (the sim's pdo_timeout_s is 0.5 s,
+    longer than their heartbeat consumer time, 0.3 s), and its heartbeat goes on while it
+    waits, so the drives, running again, do not take it for a lost master (no EMCY
+    0x8130)."""
+    hardware = _active(_config())
+    try:
+        rig = hardware.rig
+        hardware.write(np.array([0.0, 0.0]))
+        hardware.read()
+        stalled = threading.Event()
+
+        def stall() -> None:
+            with rig._lock:  # noqa: SLF001 - the drives' thread waits on it: a stall
+                stalled.set()
+                time.sleep(0.45)
+
+        staller = threading.Thread(target=stall)
+        staller.start()
+        stalled.wait(5.0)
+        reading = hardware.read()  # waits for the PDOs until the drives run again
+        staller.join(5.0)
+        assert not any("0x8130" in fault for fault in reading.faults)
+        for _ in range(400):  # 0.2 s of cycles after the stall
+            hardware.write(np.array([0.0, 0.0]))
+            reading = hardware.read()
+            assert not any("0x8130" in fault for fault in reading.faults)
+        assert [d.error_code for d in rig.drives] == [0, 0]
     finally:
         hardware.cleanup()
 

@@ -440,3 +440,47 @@ def test_haptic_master_drives_an_emulator_started_by_hand(tmp_path, capsys) -> N
         finally:
             _end(process)
     assert process.returncode == 0
+
+
+def _serve_for(rig: SimulatedCanRig, seconds: float) -> None:
+    stop_at = time.monotonic() + seconds
+    rig.serve(lambda: time.monotonic() > stop_at, 0.01)
+
+
+def _emcy_ids(bus: can.BusABC) -> list[int]:
+    ids = []
+    while (message := bus.recv(0.0)) is not None:
+        if cia402.EMCY_BASE < message.arbitration_id <= cia402.EMCY_BASE + 0x7F:
+            ids.append(message.arbitration_id)
+    return ids
+
+
+def test_a_heartbeat_that_came_while_the_emulator_was_not_scheduled_counts(tmp_path) -> None:
+    """A busy machine: the master's heartbeat arrives on time but waits in the emulator's
+    queue while the emulator is descheduled past the consumer time; when it runs again it
+    takes the frames already there before it judges the consumer, so no EMCY 0x8130 (the
+    heartbeat was not lost). A heartbeat that really stops still trips it."""
+    rig = SimulatedCanRig.from_config(load_config(), "unused")
+    master = can.Bus(interface="unix_datagram", channel=str(tmp_path))
+    emulator = can.Bus(interface="unix_datagram", channel=str(tmp_path))
+    try:
+        rig.attach(emulator)
+        for device in rig.devices:  # consume the master's heartbeat (node 127), 300 ms
+            device.node.sdo[0x1016][1].raw = (127 << 16) | 300
+            device.refresh()
+        heartbeat = can.Message(arbitration_id=0x77F, data=b"\x05", is_extended_id=False)
+        master.send(heartbeat)
+        _serve_for(rig, 0.05)  # the consumers start
+        assert _emcy_ids(master) == []  # (the master reads what the drives sent)
+        time.sleep(0.2)
+        master.send(heartbeat)  # on time; the emulator is not running
+        time.sleep(0.2)  # it runs again 0.4 s after the first heartbeat
+        _serve_for(rig, 0.05)
+        assert _emcy_ids(master) == []
+        time.sleep(0.4)  # now the master is silent past the consumer time
+        _serve_for(rig, 0.05)
+        assert sorted(_emcy_ids(master)) == [cia402.EMCY_BASE + device.node_id
+                                             for device in rig.devices]
+    finally:
+        master.shutdown()
+        emulator.shutdown()

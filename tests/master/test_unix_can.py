@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -100,7 +101,12 @@ def test_a_member_that_does_not_read_never_blocks_a_sender(buses) -> None:
     for _ in range(5000):  # far beyond any datagram queue
         a.send(_frame())
     assert time.monotonic() - started < 30.0  # returned: frames beyond b's queue are dropped
+    assert a.full_queue_waits == 1  # one wait for room, then b is congested: no more waits
+    assert 4900 < a.dropped_datagrams < 5000
     assert b.recv(1.0) is not None
+    dropped = a.dropped_datagrams
+    a.send(_frame())  # b took a frame (its queue has room): the next send goes through
+    assert a.dropped_datagrams == dropped and a.full_queue_waits == 1
 
 
 def test_buses_in_other_directories_never_hear_each_other(buses, tmp_path) -> None:
@@ -198,3 +204,46 @@ def test_partial_and_junk_datagrams_are_counted_and_never_delivered(buses) -> No
         assert b.malformed_datagrams == 3
     finally:
         junk.close()
+
+
+def test_a_full_queue_makes_the_sender_wait_for_room_instead_of_losing_frames(tmp_path) -> None:
+    """A receiver descheduled for a moment (here: it reads 50 ms late) gets every frame,
+    in order: the sender waits for room in its queue (10 datagrams by default on Linux)."""
+    a = can.Bus(interface="unix_datagram", channel=str(tmp_path), full_queue_wait_s=5.0)
+    b = can.Bus(interface="unix_datagram", channel=str(tmp_path))
+    received: list[int] = []
+
+    def late_reader() -> None:
+        time.sleep(0.05)
+        while len(received) < 40:
+            message = b.recv(5.0)
+            if message is None:
+                return
+            received.append(message.data[0])
+
+    reader = threading.Thread(target=late_reader)
+    try:
+        reader.start()
+        for index in range(40):
+            a.send(_frame(data=bytes([index])))
+        reader.join(10.0)
+        assert received == list(range(40))
+        assert a.dropped_datagrams == 0 and a.full_queue_waits > 0
+    finally:
+        reader.join(10.0)
+        a.shutdown()
+        b.shutdown()
+
+
+def test_full_queue_wait_is_bounded_and_checked(tmp_path) -> None:
+    with pytest.raises(can.CanInitializationError, match="full_queue_wait_s"):
+        can.Bus(interface="unix_datagram", channel=str(tmp_path), full_queue_wait_s=-1.0)
+    a = can.Bus(interface="unix_datagram", channel=str(tmp_path), full_queue_wait_s=0.0)
+    b = can.Bus(interface="unix_datagram", channel=str(tmp_path))
+    try:
+        for _ in range(50):
+            a.send(_frame())
+        assert a.full_queue_waits == 0 and a.dropped_datagrams > 0  # no wait: dropped at once
+    finally:
+        a.shutdown()
+        b.shutdown()
