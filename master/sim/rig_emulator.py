@@ -226,7 +226,7 @@ class EmulatedRigHardware(HandleHardware):
     ``start_timeout_s`` for its ready line, then configures the driver; ``cleanup()`` (also
     run when configure fails) ends the emulator by its PID (SIGTERM, SIGKILL after
     :data:`STOP_TIMEOUT_S`), reaps it and removes the run's bus directory. The emulator runs
-    in its own session (a terminal's Ctrl-C goes to the master, which ends it) and ends by
+    in its own process group (a terminal's Ctrl-C goes to the master, which ends it) and ends by
     itself when the master is gone. Its output is read on a thread, so it never blocks;
     :attr:`process` stays set after the cleanup, reaped. ``present_tool_force`` sends the
     operator display frame.
@@ -290,11 +290,15 @@ class EmulatedRigHardware(HandleHardware):
             if "port" in bus_options:
                 command += ["--can-port", str(bus_options["port"])]
             try:
-                # Its own session: a terminal's Ctrl-C reaches the master, which ends it.
+                # Its own process group: a terminal's Ctrl-C reaches the master, which ends
+                # it. Not its own session: with the kernel's autogroup (one scheduling group
+                # per session), a group of one mostly sleeping process was left unscheduled
+                # for 0.2-0.8 s beside two CPU hogs, SYNCs waiting in its queue (docs/master.md)
+                # - in the session's group it answered within 14 ms.
                 self.process = subprocess.Popen(
                     command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                     stderr=subprocess.STDOUT, text=True, errors="replace",
-                    start_new_session=True)
+                    process_group=0)
             except OSError as error:
                 raise HardwareError(f"cannot start haptic-rig-sim: {error}") from None
             assert self.process.stdout is not None

@@ -173,6 +173,10 @@ def test_the_sim_backend_configures_enables_and_follows_commands() -> None:
         assert process is not None and process.poll() is None
         # its wake-ups never preempt the loops: SCHED_BATCH
         assert os.sched_getscheduler(process.pid) == os.SCHED_BATCH
+        # a process group of its own (a terminal's Ctrl-C reaches only the master), in the
+        # master's session: with autogroup, a session of its own was starved on a busy machine
+        assert os.getpgid(process.pid) == process.pid != os.getpgid(0)
+        assert os.getsid(process.pid) == os.getsid(0)
         directory = Path(hardware.bus_options["channel"])
         assert hardware.bus_options["interface"] == "unix_datagram" and directory.is_dir()
         reading = hardware.read()
