@@ -191,8 +191,9 @@ class UnixDatagramBus(can.BusABC):
             self._congested.add(member)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        """Send ``msg`` to every other member (never blocks: a member whose queue is full
-        misses it)."""
+        """Send ``msg`` to every other member; a member whose queue is full makes it wait
+        at most ``full_queue_wait_s`` (once per congestion, module docstring), then misses
+        it. ``timeout`` is not used."""
         del timeout
         self._broadcast(_encode(msg))
 
