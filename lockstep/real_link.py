@@ -25,7 +25,7 @@ from __future__ import annotations
 import socket
 import time
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -219,6 +219,4 @@ def run_cell_at(model: TeleopModel, gain_k: float, margin_factor: float,
         if on_side or attempt == attempts:
             break
         injected_s = max(0.0, injected_s - (measured - target_s))
-    return RealLinkCell(cell.gain_k, cell.injected_round_trip_s, cell.measured_round_trip_s,
-                        cell.growing, cell.analytic_stable, cell.analytic_margin_s,
-                        cell.energy_ratio, cell.overruns, cell.steps, attempt)
+    return replace(cell, attempts=attempt)
