@@ -112,6 +112,10 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--control", choices=("paper", "tdpa"), default="paper",
                        help="the paper's scheme or the passivity layer (docs/control.md)")
     sweep.add_argument("--seed", type=int, default=0)
+    sweep.add_argument("--workers", type=int, default=None, metavar="N",
+                       help="processes to split the lanes between, whole gains each (the "
+                       "same result, bit for bit; default: one per CPU, each with at least "
+                       "100 lanes)")
     sweep.add_argument("--out", type=Path, default=None, help="write sweep.csv and "
                        "sweep.png here")
     sweep.add_argument("--json", action="store_true")
@@ -283,7 +287,13 @@ CLAY_SWEEP_DURATION_S = 2.25
 
 def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
     """Run the sweep, write its files, print its figures; 1 when --check fails."""
-    from haptic.lockstep.sweep import SweepSettings, plot_heatmap, run_sweep_grid, write_csv
+    from haptic.lockstep.sweep import (
+        SweepSettings,
+        auto_workers,
+        plot_heatmap,
+        run_sweep_grid,
+        write_csv,
+    )
 
     delays = args.delays or _floats("0:0.02:0.001")
     for value in delays:
@@ -298,12 +308,16 @@ def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
         _check_seconds("--jitter", value)
     if any(not 0.0 <= value < 1.0 for value in args.loss):
         raise ConfigError("--loss", "every loss probability must be in [0, 1)")
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError("--workers", "must be >= 1")
     model = model_from_config(config)
     reference = 1.0 if args.mode == "clay" else 0.25
     settings = SweepSettings(gains_k=tuple(args.gains), delays_s=tuple(delays), mode=args.mode,
                              duration_s=args.duration, reference_start_s=reference,
                              seed=args.seed, control=args.control, bursty=args.bursty)
-    summary, results = run_sweep_grid(model, settings, tuple(args.jitter), tuple(args.loss))
+    workers = args.workers or auto_workers(len(args.gains) * len(delays))
+    summary, results = run_sweep_grid(model, settings, tuple(args.jitter), tuple(args.loss),
+                                      workers)
     result = results[0]
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -190,6 +190,41 @@ class LockstepResult:
         return self.steps * self.sample_period_s * len(self.gains_k)
 
 
+def concatenate_results(parts: Sequence[LockstepResult]) -> LockstepResult:
+    """One result of the lanes of ``parts`` in order (runs of the same steps, period and
+    windows over disjoint lanes, e.g. a sweep split over processes): every per-lane array
+    joined along its lane axis, the safety events summed. Parts with recorded traces or
+    governors are refused (their lanes index the part)."""
+    if not parts:
+        raise ValueError("concatenate_results needs at least one part")
+    first = parts[0]
+    if any(p.recorded_lanes.size or p.governed is not None for p in parts):
+        raise ValueError("parts with recorded lanes or governors cannot be joined")
+    if any((p.steps, p.sample_period_s, p.stats.window_samples)
+           != (first.steps, first.sample_period_s, first.stats.window_samples) for p in parts):
+        raise ValueError("parts must share steps, period and windows")
+
+    def joined(name: str, axis: int = 0, source: Any = None) -> Any:
+        values = [getattr(p if source is None else source(p), name) for p in parts]
+        if any(value is None for value in values):
+            return None
+        return np.concatenate(values, axis=axis)
+
+    stats = WindowStats(first.stats.window_samples, *(
+        joined(f.name, 1, lambda p: p.stats) for f in fields(WindowStats)
+        if f.name != "window_samples"))
+    return LockstepResult(
+        sample_period_s=first.sample_period_s, steps=first.steps, gains_k=joined("gains_k"),
+        round_trip_delay_samples=joined("round_trip_delay_samples"), stats=stats,
+        peak_handle_force_N=joined("peak_handle_force_N"),
+        peak_tool_force_N=joined("peak_tool_force_N"),
+        position_error_rms_m=joined("position_error_rms_m"), diverged=joined("diverged"),
+        recorded_lanes=first.recorded_lanes.copy(),
+        safety_events=sum(p.safety_events for p in parts),
+        force_error_rms_N=joined("force_error_rms_N"),
+        final_position_gap_m=joined("final_position_gap_m"))
+
+
 def stacked_compensators(model: TeleopModel, gains_k: np.ndarray
                          ) -> tuple[DiscreteLTI | StackedLTI, DiscreteLTI | StackedLTI]:
     """Master and slave compensator blocks for per-lane gains: plain blocks when every
@@ -281,7 +316,8 @@ class LockstepSimulator:
             seed: int = 0, excitation_N: np.ndarray | None = None, window_s: float = 0.25,
             record_lanes: np.ndarray | None = None,
             governors: Sequence[MarginGovernor] | None = None,
-            every_lane_supervised: bool = False) -> LockstepResult:
+            every_lane_supervised: bool = False,
+            schedules: tuple[np.ndarray, np.ndarray] | None = None) -> LockstepResult:
         """Run every lane for ``duration_s``.
 
         ``round_trip_delay_samples`` (scalar or (lanes,)): whole samples, split d1 = n // 2
@@ -295,15 +331,22 @@ class LockstepSimulator:
         guard each tick, as the program does, instead of letting the lanes with nothing to
         change only store their messages (``supervise_columns``; the same run, bit for bit,
         several times slower: tests/lockstep/test_quiet_lanes.py).
+        ``schedules``: the handle and tool lines' source schedules (steps, lanes) to use
+        instead of drawing them (:func:`line_schedules` of the same arguments gives the ones
+        drawn here): a sweep split over processes draws them once for every lane and hands
+        each part its columns, so the split run is the whole run, bit for bit.
         """
         ts = self.period_s
         steps = int(round(duration_s / ts))
         lanes = self.lanes
         delays = np.broadcast_to(np.asarray(round_trip_delay_samples, np.int64), (lanes,))
-        rng = np.random.default_rng(seed)
-        line_rngs = rng.spawn(3)
+        line_rngs = np.random.default_rng(seed).spawn(3)
         to_slave_d = delays // 2
         to_master_d = delays - to_slave_d
+        if schedules is None:
+            schedules = line_schedules(steps, ts, delays, to_slave, to_master, seed)
+        elif any(np.shape(schedule) != (steps, lanes) for schedule in schedules):
+            raise ValueError(f"schedules must be two ({steps}, {lanes}) arrays")
         governed = None if governors is None else GovernedLanes(governors, self.gains_k, steps)
         tdpa = int(self.passivity is not None)  # the messages carry the cumulative input energy
         start = np.broadcast_to(np.asarray(self.scenario.tool.start_position_m, float),
@@ -324,8 +367,7 @@ class LockstepSimulator:
         # each line's receive also gives the arrivals: the run-up's messages were sent the
         # line's delay (plus its structural sample) before they are read; the columns the
         # ticks read are the message's first 6 (handle) or 7 (tool), then the send tick
-        handle_line = DelayLine(source_schedule(steps, to_slave_d, 0, ts, to_slave,
-                                                line_rngs[0]), handle_columns,
+        handle_line = DelayLine(schedules[0], handle_columns,
                                 np.column_stack((np.zeros((lanes, 2)), handle_start,
                                                  np.full(lanes, enabled),
                                                  master_tick.state.force_scale,
@@ -333,8 +375,7 @@ class LockstepSimulator:
                                                  np.zeros((lanes, tdpa)))),
                                 period_s=ts, runup_lag=to_slave_d, message_columns=6,
                                 flag_column=4)
-        tool_line = DelayLine(source_schedule(steps, to_master_d, 1, ts, to_master,
-                                              line_rngs[1]), 7 + tdpa,
+        tool_line = DelayLine(schedules[1], 7 + tdpa,
                               np.column_stack((np.zeros((lanes, 2)), start,
                                                np.zeros((lanes, 2)), np.full(lanes, enabled),
                                                np.zeros((lanes, tdpa)))),
@@ -446,6 +487,20 @@ class LockstepSimulator:
             final_position_gap_m=(slave_tick.state.tool[:, [0, 2]] - ratio * yh) if steps else
             np.zeros((lanes, 2)),
         )
+
+
+def line_schedules(steps: int, period_s: float, round_trip_delay_samples: np.ndarray,
+                   to_slave: InjectionConfig | None, to_master: InjectionConfig | None,
+                   seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The handle and tool lines' source schedules (steps, lanes) of a run
+    (:meth:`LockstepSimulator.run`'s delays split d1 = n // 2, d2 = n - d1, its injections and
+    seed): the handle line's from the seed's first spawned generator, the tool line's from
+    its second (the third is the rig's)."""
+    delays = np.atleast_1d(np.asarray(round_trip_delay_samples, np.int64))
+    to_slave_d = delays // 2
+    handle_rng, tool_rng, _ = np.random.default_rng(seed).spawn(3)
+    return (source_schedule(steps, to_slave_d, 0, period_s, to_slave, handle_rng),
+            source_schedule(steps, delays - to_slave_d, 1, period_s, to_master, tool_rng))
 
 
 class _WindowTally:

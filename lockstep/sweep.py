@@ -14,6 +14,10 @@ Modes:
 
 from __future__ import annotations
 
+import concurrent.futures
+import multiprocessing
+import os
+import threading
 import time
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -29,7 +33,12 @@ from haptic.common.model.passivity import PassivitySettings
 from haptic.common.model.synthesis import SynthesisError
 from haptic.common.model.teleop import TeleopModel
 from haptic.common.wire.injection import InjectionConfig
-from haptic.lockstep.simulator import LockstepSimulator
+from haptic.lockstep.simulator import (
+    LockstepResult,
+    LockstepSimulator,
+    concatenate_results,
+    line_schedules,
+)
 from haptic.lockstep.verdict import GROWTH_THRESHOLD, growth_verdict
 from haptic.master.sim.operator import parse_operator_spec
 
@@ -132,6 +141,7 @@ class SweepResult:
             "simulated_seconds": round(self.simulated_seconds, 3),
             "wall_seconds": round(self.wall_seconds, 3),
             "sim_per_wall": round(self.simulated_seconds / max(self.wall_seconds, 1e-9), 1),
+            "workers": int(self.extra.get("workers", 1)),
         }
 
     def rows(self) -> list[dict]:
@@ -238,37 +248,137 @@ def _within(delay_s: float, margin_s: float) -> bool:
     return abs(delay_s - margin_s) <= BAND * margin_s
 
 
-def run_sweep(model: TeleopModel, settings: SweepSettings) -> SweepResult:
-    """Run every cell of the grid as one lane and compare with the analysis."""
+@dataclass(frozen=True)
+class _LaneJob:
+    """What every part of a sweep's lanes runs with (units in the names)."""
+
+    model: TeleopModel
+    settings: SweepSettings
+    lane_gains: np.ndarray
+    lane_delays: np.ndarray
+    schedules: tuple[np.ndarray, np.ndarray]
+    parts: tuple[tuple[int, int], ...]  # (first lane, end) of each part
+
+
+#: The job the forked workers run (set in the parent just before they fork, so nothing of it
+#: is pickled; read only in the workers).
+_FORKED_JOB: _LaneJob | None = None
+
+
+def _simulate_lanes(job: _LaneJob, first: int, end: int) -> LockstepResult:
+    """Lanes ``first:end`` of ``job`` in one lockstep simulation."""
+    settings = job.settings
+    if settings.mode == "linear":
+        scenario = load_scenario("constant-rate")
+        operator = parse_operator_spec("constant:fx=0,fy=0")
+        environment = "linear"
+        steps = int(round(settings.duration_s / job.model.sample_period_s))
+        excitation = np.zeros((min(PULSE_SAMPLES, steps), 2))
+        excitation[:] = PULSE_FORCE_N
+    else:
+        scenario = load_scenario("constant-rate")
+        operator = parse_operator_spec(CLAY_OPERATOR)
+        environment = "clay"
+        excitation = None
+    injection = sweep_injection(settings)
+    passivity = PassivitySettings() if settings.control == "tdpa" else None
+    simulator = LockstepSimulator(job.model, scenario, operator, job.lane_gains[first:end],
+                                  environment, clay_impl="warp", device="cpu",
+                                  passivity=passivity)
+    return simulator.run(settings.duration_s, job.lane_delays[first:end], to_slave=injection,
+                         to_master=injection, seed=settings.seed, excitation_N=excitation,
+                         window_s=settings.window_s,
+                         schedules=tuple(s[:, first:end] for s in job.schedules))
+
+
+def _forked_part(index: int) -> LockstepResult:
+    """A worker's part of the forked job."""
+    assert _FORKED_JOB is not None, "a sweep worker must be forked with its job"
+    return _simulate_lanes(_FORKED_JOB, *_FORKED_JOB.parts[index])
+
+
+def lane_parts(lane_gains: np.ndarray, workers: int) -> tuple[tuple[int, int], ...]:
+    """Contiguous (first, end) lane ranges for ``workers`` processes, split between gains
+    (each part holds whole gains, so each runs the stacked compensators of its own gains;
+    as even as whole gains allow); fewer parts than workers when there are fewer gains."""
+    starts = [0] + [i for i in range(1, lane_gains.size) if lane_gains[i] != lane_gains[i - 1]]
+    count = max(1, min(workers, len(starts)))
+    bounds = [0]
+    for part in range(1, count):
+        target = lane_gains.size * part / count
+        cut = min(starts[1:], key=lambda start: abs(start - target))
+        if cut > bounds[-1]:
+            bounds.append(cut)
+    bounds.append(lane_gains.size)
+    return tuple(zip(bounds[:-1], bounds[1:], strict=True))
+
+
+#: The fewest lanes worth a process of their own: a tick costs about 90 us whatever the lane
+#: count plus about 0.8 us a lane (2-core AMD EPYC VM), and a forked worker costs about
+#: 0.2 s to start, so fewer lanes per worker lose more than they gain.
+MIN_LANES_PER_WORKER = 100
+
+
+def auto_workers(lanes: int) -> int:
+    """The sweep's workers by default: one per available CPU, each with at least
+    :data:`MIN_LANES_PER_WORKER` lanes."""
+    return max(1, min(available_workers(), lanes // MIN_LANES_PER_WORKER))
+
+
+def available_workers() -> int:
+    """The CPUs this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def _run_lanes(job: _LaneJob) -> LockstepResult:
+    """Every lane of ``job``: the first part in this process, each other one in a worker
+    forked for it meanwhile (the results joined in lane order: bit for bit the one-process
+    run, the schedules having been drawn for every lane)."""
+    global _FORKED_JOB
+    if len(job.parts) == 1:
+        return _simulate_lanes(job, *job.parts[0])
+    _FORKED_JOB = job
+    try:
+        context = multiprocessing.get_context("fork")
+        with concurrent.futures.ProcessPoolExecutor(len(job.parts) - 1,
+                                                    mp_context=context) as pool:
+            others = [pool.submit(_forked_part, index) for index in range(1, len(job.parts))]
+            parts = [_simulate_lanes(job, *job.parts[0])]
+            parts.extend(future.result() for future in others)
+    finally:
+        _FORKED_JOB = None
+    return concatenate_results(parts)
+
+
+def can_fork_workers() -> bool:
+    """Whether sweep workers may be forked here: on a platform with fork, from a process with
+    no other thread (a thread holding a lock at the fork would leave it held in the child)."""
+    return "fork" in multiprocessing.get_all_start_methods() and threading.active_count() == 1
+
+
+def run_sweep(model: TeleopModel, settings: SweepSettings, workers: int = 1) -> SweepResult:
+    """Run every cell of the grid as one lane and compare with the analysis. ``workers`` > 1
+    splits the lanes between that many forked processes (whole gains each; the same result,
+    bit for bit), where :func:`can_fork_workers`; ``wall_seconds`` counts the workers' start
+    and the joining of their results."""
     ts = model.sample_period_s
     gains = np.asarray(settings.gains_k, float)
     delay_samples = np.unique(np.rint(np.asarray(settings.delays_s, float) / ts).astype(int))
     lane_gains = np.repeat(gains, delay_samples.size)
     lane_delays = np.tile(delay_samples, gains.size)
-    if settings.mode == "linear":
-        scenario = load_scenario("constant-rate")
-        operator = parse_operator_spec("constant:fx=0,fy=0")
-        environment = "linear"
-        steps = int(round(settings.duration_s / ts))
-        excitation = np.zeros((min(PULSE_SAMPLES, steps), 2))
-        excitation[:] = PULSE_FORCE_N
-    elif settings.mode == "clay":
-        scenario = load_scenario("constant-rate")
-        operator = parse_operator_spec(CLAY_OPERATOR)
-        environment = "clay"
-        excitation = None
-    else:
+    if settings.mode not in MODES:
         raise ValueError(f"mode must be one of {', '.join(MODES)}")
     if settings.control not in CONTROL_MODES:
         raise ValueError(f"control must be one of {', '.join(CONTROL_MODES)}")
     injection = sweep_injection(settings)
     started = time.perf_counter()
-    passivity = PassivitySettings() if settings.control == "tdpa" else None
-    simulator = LockstepSimulator(model, scenario, operator, lane_gains, environment,
-                                  clay_impl="warp", device="cpu", passivity=passivity)
-    result = simulator.run(settings.duration_s, lane_delays, to_slave=injection,
-                           to_master=injection, seed=settings.seed, excitation_N=excitation,
-                           window_s=settings.window_s)
+    steps = int(round(settings.duration_s / ts))
+    schedules = line_schedules(steps, ts, lane_delays, injection, injection, settings.seed)
+    parts = lane_parts(lane_gains, workers if can_fork_workers() else 1)
+    result = _run_lanes(_LaneJob(model, settings, lane_gains, lane_delays, schedules, parts))
     wall = time.perf_counter() - started
     threshold = CLAY_GROWTH_THRESHOLD if settings.mode == "clay" else GROWTH_THRESHOLD
     verdict = growth_verdict(result, settings.reference_start_s, threshold)
@@ -300,15 +410,17 @@ def run_sweep(model: TeleopModel, settings: SweepSettings) -> SweepResult:
                                    result.peak_tool_force_N.max(axis=1)).reshape(shape),
     )
     swept.extra["per_cell"] = per_cell(swept, result)
+    swept.extra["workers"] = len(parts)
     return swept
 
 
 def run_sweep_grid(model: TeleopModel, settings: SweepSettings, jitters_s: tuple[float, ...],
-                   losses: tuple[float, ...]) -> tuple[dict, list[SweepResult]]:
-    """The sweep at every (jitter, loss) pair, one run each: the summary sums today's counts
-    over the runs and lists every cell in ``per_cell``."""
+                   losses: tuple[float, ...], workers: int = 1) -> tuple[dict, list[SweepResult]]:
+    """The sweep at every (jitter, loss) pair, one run each (``workers``: as
+    :func:`run_sweep`): the summary sums today's counts over the runs and lists every cell in
+    ``per_cell``."""
     results = [run_sweep(model, replace(settings, jitter_s=float(jitter),
-                                        loss_probability=float(loss)))
+                                        loss_probability=float(loss)), workers)
                for jitter in jitters_s for loss in losses]
     summaries = [result.summary() for result in results]
     summary = dict(summaries[0])
