@@ -18,10 +18,10 @@ fails on a real-link cell that disagrees with the analysis outside the 10 % band
 measured round trip still lies in the band is reported so, not judged.
 
 Usage: ``python bench/latency_sweep.py [--quick] [--mode linear|clay] [--json] [--check]
-[--out DIR] [--real-link] [--workers N]``. ``--json`` prints one object with ``cells``, ``agree``, ``disagree``,
-``disagree_outside_band``, ``simulated_seconds``, ``wall_seconds``, ``sim_per_wall``,
-``workers`` (the processes the lanes were split between: ``--workers N``, by default one per
-CPU with at least 100 lanes each);
+[--out DIR] [--real-link] [--workers N]``. ``--json`` prints one object with ``cells``,
+``agree``, ``disagree``, ``disagree_outside_band``, ``simulated_seconds``, ``wall_seconds``,
+``sim_per_wall``, ``workers`` (the processes the lanes were split between: ``--workers N``,
+by default one per CPU with at least 100 lanes each);
 ``--check`` exits 1 when any cell disagrees with the analysis further than 10 % from the
 analytic boundary. The speed target (200 simulated s per wall s on the 2-core machine) is
 reported, never enforced: machines differ.
