@@ -77,6 +77,10 @@ class CanHandleDriver(HandleHardware):
         self._bus: can.BusABC | None = None
         #: Frames held by :meth:`burst` (None: frames go out as they are sent).
         self._held: list[can.Message] | None = None
+        #: Frames :meth:`until_sync` holds for the next SYNC's burst (sent before anything
+        #: else that goes out first, so the frames keep their order).
+        self._for_sync: list[can.Message] = []
+        self._holding_for_sync = False
         self._state = LifecycleState.UNCONFIGURED
         self._cycle = 0
         self._drive_states = [DriveState.NOT_READY_TO_SWITCH_ON] * 2
@@ -510,6 +514,7 @@ class CanHandleDriver(HandleHardware):
     def _close_bus(self) -> None:
         self._stop_idle_heartbeat()
         self._sync_pending = False
+        self._for_sync = []
         if self._bus is not None:
             self._bus.shutdown()
             self._bus = None
@@ -532,8 +537,9 @@ class CanHandleDriver(HandleHardware):
             self._stop_cycles += 1
         self._discard_late_frames(self._pending_faults, self._sync_drive_fault)
         now = time.monotonic()
-        self._heartbeat_if_due(now)
-        bus.send(self._next_sync())
+        with self.burst():  # with the frames held for it (:meth:`until_sync`): one burst
+            self._heartbeat_if_due(now)
+            self._put(self._next_sync())
         self._cycle += 1
         self._sync_sent_s = now
         self._sync_pending = True
@@ -736,7 +742,8 @@ class CanHandleDriver(HandleHardware):
         """Hold the frames sent inside (RPDOs, :meth:`send_frame`'s) and send them back to
         back at the end, as one burst where the bus can (``unix_datagram``: one datagram, one
         wake-up of the devices' process instead of one per frame; any other bus: one frame
-        after the other, as without it). Nested bursts go out with the outermost."""
+        after the other, as without it). Nested bursts go out with the outermost; frames
+        held for the next SYNC (:meth:`until_sync`) go out first."""
         if self._held is not None:
             yield
             return
@@ -745,8 +752,31 @@ class CanHandleDriver(HandleHardware):
             yield
         finally:
             held, self._held = self._held, None
-            if held and self._bus is not None:
-                send_burst(self._bus, held)
+            if self._holding_for_sync:
+                self._for_sync.extend(held)
+            elif self._bus is not None:
+                held = self._for_sync + held
+                self._for_sync = []
+                if held:
+                    send_burst(self._bus, held)
+
+    @contextmanager
+    def until_sync(self) -> Iterator[None]:
+        """Hold the frames sent inside until the next SYNC and send them in its burst, just
+        before it (the simulated rig's ``unix_datagram`` bus: its devices' process is woken
+        once a cycle instead of twice, and the loop's tick no longer pays that wake-up). The
+        drives latch synchronous RPDOs and apply them at the SYNC, so they act exactly as if
+        the frames had come right away. Anything else sent meanwhile sends them first, in
+        order; closing the bus drops them."""
+        if self._holding_for_sync:
+            yield
+            return
+        self._holding_for_sync = True
+        try:
+            with self.burst():
+                yield
+        finally:
+            self._holding_for_sync = False
 
     def send_frame(self, frame_id: int, data: bytes, extended: bool = False) -> None:
         """Send one frame as is on the driver's bus (a simulated rig's extra frames, e.g. its
@@ -762,11 +792,16 @@ class CanHandleDriver(HandleHardware):
                               is_fd=fd, bitrate_switch=fd))
 
     def _put(self, message: can.Message) -> None:
-        """Send ``message`` now, or hold it for the burst being sent."""
+        """Send ``message`` now (after the frames held for the SYNC), or hold it for the
+        burst being sent."""
         if self._held is not None:
             self._held.append(message)
             return
         assert self._bus is not None
+        if self._for_sync:
+            held, self._for_sync = [*self._for_sync, message], []
+            send_burst(self._bus, held)
+            return
         self._bus.send(message)
 
     def _send_rpdo(self, axis: int, controlword: int) -> None:

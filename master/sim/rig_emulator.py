@@ -370,7 +370,9 @@ class EmulatedRigHardware(HandleHardware):
     def write(self, position_command_m: np.ndarray) -> None:
         if self.driver is None:
             return
-        with self.driver.burst():  # the RPDOs and the display frame: one wake-up
+        # the RPDOs and the display frame go out with the next SYNC, in one datagram: one
+        # wake-up of the emulator a cycle, and none in the loop's tick
+        with self.driver.until_sync():
             self.driver.write(position_command_m)
             self._send_display()
 

@@ -203,6 +203,58 @@ def test_the_sim_backend_configures_enables_and_follows_commands() -> None:
     hardware.cleanup()  # a second cleanup is harmless
 
 
+def test_the_sim_backend_sends_its_targets_in_the_next_syncs_datagram() -> None:
+    """The master's write (RPDOs and the operator display frame) waits for the next SYNC and
+    goes with it in one datagram: one wake-up of the emulator a cycle, none in the tick."""
+    import socket
+
+    from haptic.master.hardware.unix_can import _HEADER
+
+    config = _config()
+    nodes = master_settings(config).can.node_ids
+    hardware = create_hardware("sim", config)
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    try:
+        hardware.configure()
+        hardware.activate()
+        listener.bind(str(Path(hardware.bus_options["channel"]) / "listener.sock"))
+        listener.settimeout(1.0)
+        time.sleep(1.1)  # the members rescan a directory whose clock has not moved (RESCAN_S)
+        def datagrams(wait_s: float) -> list[list[int]]:
+            """The frame ids of each datagram received within ``wait_s``."""
+            got, deadline = [], time.monotonic() + wait_s
+            while (left := deadline - time.monotonic()) > 0.0:
+                listener.settimeout(left)
+                try:
+                    datagram = listener.recv(4096)
+                except TimeoutError:
+                    break
+                ids, offset = [], 0
+                while offset < len(datagram):
+                    frame_id, _, length = _HEADER.unpack_from(datagram, offset)
+                    ids.append(frame_id)
+                    offset += _HEADER.size + length
+                got.append(ids)
+            return got
+
+        rpdos = [0x200 + nodes[0], 0x200 + nodes[1]]
+        hardware.read()
+        datagrams(0.05)  # what came before the write (the queue holds only 10 datagrams)
+        hardware.present_tool_force(np.array([0.5, 0.0]))
+        hardware.write(np.array([0.0, 0.0]))
+        held = datagrams(0.1)  # the emulator's heartbeats may come; the write may not
+        assert not any(set(ids) & {*rpdos, OPERATOR_DISPLAY_ID} for ids in held), held
+        hardware.read()
+        with_sync = [ids for ids in datagrams(0.3) if cia402.SYNC_COB_ID in ids]
+        assert len(with_sync) == 1, with_sync
+        ids = with_sync[0]
+        assert ids[:2] == rpdos and ids[-1] == cia402.SYNC_COB_ID
+        assert OPERATOR_DISPLAY_ID in ids
+    finally:
+        listener.close()
+        hardware.cleanup()
+
+
 def test_the_emulated_operator_feels_the_presented_tool_force() -> None:
     """A regulating operator (target 2 N) holding the handle still (drives not enabled), so
     the sensor reads its intent force: steady while the displayed tool force is at the target,
