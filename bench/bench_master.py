@@ -19,7 +19,9 @@ whole control cycle (read + node step + operator display + RPDOs), back to back
 then spin the last ``[runner] spin_s``, 0.1 ms; re-anchored after a stall), and paced with
 each SYNC sent ``[master.can] sync_lead_s`` ahead of its tick (``paced_sync_lead``: the read
 then only collects the answers, as in the master program), with p50/p99/max, the overruns
-and the runner's period error.
+and the runner's period error. On the emulator rigs the cycle's RPDOs and display frame wait
+for the next SYNC and go out in its burst (``CanHandleDriver.until_sync``, docs/master.md): the
+read that sends that SYNC (without a lead) pays for them.
 Figures are wall-clock on this machine (noisy: other programs on a 2-core machine move them
 a lot, so the 1-minute load average is printed with them). Nothing is asserted.
 """
