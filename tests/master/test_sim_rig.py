@@ -325,82 +325,85 @@ def test_scalar_count_conversions_match_the_array_ones() -> None:
         assert settings.metres_from_count(int(count)) == float(settings.metres_from_counts(count))
 
 
-def test_a_burst_sends_the_rpdos_and_the_extra_frames_after_them_in_order() -> None:
+def _rpdo_listener(config: dict, nodes: tuple[int, int], sync: bool = False) -> can.BusABC:
+    """A member of the in-process rig's virtual bus that hears the drives' RPDOs, the extra
+    frame 0x1FFFF00F and, with ``sync``, the SYNC (not the heartbeats)."""
+    filters = [{"can_id": 0x200 + node, "can_mask": 0x7FF, "extended": False} for node in nodes]
+    if sync:
+        filters.append({"can_id": 0x080, "can_mask": 0x7FF, "extended": False})
+    filters.append({"can_id": 0x1FFFF00F, "can_mask": 0x1FFFFFFF, "extended": True})
+    return can.Bus(interface="virtual", channel=config["master"]["sim"]["channel"],
+                   can_filters=filters)
+
+
+@pytest.fixture
+def active_rig():
+    """(config, the in-process rig's hardware, active, its driver, the drives' node ids)."""
     config = _config()
     with create_hardware("sim-inproc", config) as hardware:
         hardware.configure()
         hardware.activate()
-        driver: CanHandleDriver = hardware.driver
-        nodes = master_settings(config).can.node_ids
-        listener = can.Bus(  # the RPDOs and the extra frame only (not the heartbeats)
-            interface="virtual", channel=config["master"]["sim"]["channel"], can_filters=[
-                {"can_id": 0x200 + nodes[0], "can_mask": 0x7FF, "extended": False},
-                {"can_id": 0x200 + nodes[1], "can_mask": 0x7FF, "extended": False},
-                {"can_id": 0x1FFFF00F, "can_mask": 0x1FFFFFFF, "extended": True}])
-        try:
-            with driver.burst():
-                driver.write(np.array([0.001, -0.002]))
-                with driver.burst():  # nested: goes out with the outer one
-                    driver.send_frame(0x1FFFF00F, b"\x01", extended=True)
-                assert listener.recv(0.05) is None  # held until the burst ends
-            ids = [listener.recv(1.0).arbitration_id for _ in range(3)]
-        finally:
-            listener.shutdown()
-        assert ids == [0x200 + nodes[0], 0x200 + nodes[1], 0x1FFFF00F]
-        reading = hardware.read()  # the drives took the burst's targets
+        yield config, hardware, hardware.driver, master_settings(config).can.node_ids
+
+
+def test_a_burst_sends_the_rpdos_and_the_extra_frames_after_them_in_order(active_rig) -> None:
+    config, hardware, driver, nodes = active_rig
+    listener = _rpdo_listener(config, nodes)  # the RPDOs and the extra frame
+    try:
+        with driver.burst():
+            driver.write(np.array([0.001, -0.002]))
+            with driver.burst():  # nested: goes out with the outer one
+                driver.send_frame(0x1FFFF00F, b"\x01", extended=True)
+            assert listener.recv(0.05) is None  # held until the burst ends
+        ids = [listener.recv(1.0).arbitration_id for _ in range(3)]
+    finally:
+        listener.shutdown()
+    assert ids == [0x200 + nodes[0], 0x200 + nodes[1], 0x1FFFF00F]
+    reading = hardware.read()  # the drives took the burst's targets
+    assert not reading.faults
+    assert [d.target_counts for d in hardware.rig.drives] == [
+        master_settings(config).can.count_from_metres(v) for v in (0.001, -0.002)]
+
+
+def test_frames_held_until_the_sync_go_out_just_before_it_and_before_anything_later(
+        active_rig) -> None:
+    """until_sync(): the frames wait for the next SYNC and lead its burst; a frame sent in
+    between (a quick stop) sends them first, so the later command still wins."""
+    config, hardware, driver, nodes = active_rig
+    listener = _rpdo_listener(config, nodes, sync=True)  # and the SYNC
+    try:
+        with driver.until_sync():
+            driver.write(np.array([0.001, -0.002]))
+            driver.send_frame(0x1FFFF00F, b"\x01", extended=True)
+        assert listener.recv(0.05) is None  # held for the SYNC
+        driver.sync()
+        ids = [listener.recv(1.0).arbitration_id for _ in range(4)]
+        assert ids == [0x200 + nodes[0], 0x200 + nodes[1], 0x1FFFF00F, 0x080]
+        reading = hardware.read()  # the drives took the held targets at that SYNC
         assert not reading.faults
         assert [d.target_counts for d in hardware.rig.drives] == [
             master_settings(config).can.count_from_metres(v) for v in (0.001, -0.002)]
-
-
-def test_frames_held_until_the_sync_go_out_just_before_it_and_before_anything_later() -> None:
-    """until_sync(): the frames wait for the next SYNC and lead its burst; a frame sent in
-    between (a quick stop) sends them first, so the later command still wins."""
-    config = _config()
-    with create_hardware("sim-inproc", config) as hardware:
-        hardware.configure()
-        hardware.activate()
-        driver: CanHandleDriver = hardware.driver
-        nodes = master_settings(config).can.node_ids
-        listener = can.Bus(  # the RPDOs, the extra frame and the SYNC (not the heartbeats)
-            interface="virtual", channel=config["master"]["sim"]["channel"], can_filters=[
-                {"can_id": 0x200 + nodes[0], "can_mask": 0x7FF, "extended": False},
-                {"can_id": 0x200 + nodes[1], "can_mask": 0x7FF, "extended": False},
-                {"can_id": 0x080, "can_mask": 0x7FF, "extended": False},
-                {"can_id": 0x1FFFF00F, "can_mask": 0x1FFFFFFF, "extended": True}])
-        try:
-            with driver.until_sync():
-                driver.write(np.array([0.001, -0.002]))
-                driver.send_frame(0x1FFFF00F, b"\x01", extended=True)
-            assert listener.recv(0.05) is None  # held for the SYNC
-            driver.sync()
-            ids = [listener.recv(1.0).arbitration_id for _ in range(4)]
-            assert ids == [0x200 + nodes[0], 0x200 + nodes[1], 0x1FFFF00F, 0x080]
-            reading = hardware.read()  # the drives took the held targets at that SYNC
-            assert not reading.faults
-            assert [d.target_counts for d in hardware.rig.drives] == [
-                master_settings(config).can.count_from_metres(v) for v in (0.001, -0.002)]
-            # a frame sent on its own while targets wait for the SYNC goes out after them
-            with driver.until_sync():
-                driver.write(np.array([0.001, -0.002]))
-            driver.send_frame(0x1FFFF00F, b"\x02", extended=True)
-            assert [listener.recv(1.0).arbitration_id for _ in range(3)] == [
-                0x200 + nodes[0], 0x200 + nodes[1], 0x1FFFF00F]
-            # a quick stop sent while targets wait for the SYNC goes out after them
-            with driver.until_sync():
-                driver.write(np.array([0.002, -0.003]))
-            driver.stop_motion("test")
-            got = [listener.recv(1.0) for _ in range(4)]
-            assert [m.arbitration_id for m in got] == [0x200 + nodes[0], 0x200 + nodes[1]] * 2
-            controlwords = [int.from_bytes(bytes(m.data[:2]), "little") for m in got]
-            assert controlwords[2:] == [0x0002, 0x0002]  # quick stop last
-            assert controlwords[:2] != [0x0002, 0x0002]
-            hardware.read()
-            hardware.read()
-            assert all(d.state is DriveState.QUICK_STOP_ACTIVE or
-                       d.state is DriveState.SWITCH_ON_DISABLED for d in hardware.rig.drives)
-        finally:
-            listener.shutdown()
+        # a frame sent on its own while targets wait for the SYNC goes out after them
+        with driver.until_sync():
+            driver.write(np.array([0.001, -0.002]))
+        driver.send_frame(0x1FFFF00F, b"\x02", extended=True)
+        assert [listener.recv(1.0).arbitration_id for _ in range(3)] == [
+            0x200 + nodes[0], 0x200 + nodes[1], 0x1FFFF00F]
+        # a quick stop sent while targets wait for the SYNC goes out after them
+        with driver.until_sync():
+            driver.write(np.array([0.002, -0.003]))
+        driver.stop_motion("test")
+        got = [listener.recv(1.0) for _ in range(4)]
+        assert [m.arbitration_id for m in got] == [0x200 + nodes[0], 0x200 + nodes[1]] * 2
+        controlwords = [int.from_bytes(bytes(m.data[:2]), "little") for m in got]
+        assert controlwords[2:] == [0x0002, 0x0002]  # quick stop last
+        assert controlwords[:2] != [0x0002, 0x0002]
+        hardware.read()
+        hardware.read()
+        assert all(d.state is DriveState.QUICK_STOP_ACTIVE or
+                   d.state is DriveState.SWITCH_ON_DISABLED for d in hardware.rig.drives)
+    finally:
+        listener.shutdown()
 
 
 def test_a_prepared_answer_copies_the_drives() -> None:
