@@ -755,10 +755,7 @@ class CanHandleDriver(HandleHardware):
             if self._holding_for_sync:
                 self._for_sync.extend(held)
             elif self._bus is not None:
-                held = self._for_sync + held
-                self._for_sync = []
-                if held:
-                    send_burst(self._bus, held)
+                self._send_now(held)
 
     @contextmanager
     def until_sync(self) -> Iterator[None]:
@@ -797,12 +794,14 @@ class CanHandleDriver(HandleHardware):
         if self._held is not None:
             self._held.append(message)
             return
+        self._send_now([message])
+
+    def _send_now(self, frames: list[can.Message]) -> None:
+        """Send ``frames`` as one burst, after the frames held for the SYNC (their place)."""
         assert self._bus is not None
-        if self._for_sync:
-            held, self._for_sync = [*self._for_sync, message], []
-            send_burst(self._bus, held)
-            return
-        self._bus.send(message)
+        frames, self._for_sync = self._for_sync + frames, []
+        if frames:
+            send_burst(self._bus, frames)
 
     def _send_rpdo(self, axis: int, controlword: int) -> None:
         node = self.settings.node_ids[axis]
