@@ -175,6 +175,8 @@ class MasterNode:
             f"handle force saturated at {limit:g} N", f"tool force saturated at {limit:g} N",
             f"command rate limited to {safety.velocity_limit_m_per_s:g} m/s",
             "command clamped to the workspace")
+        #: each ``event_bits`` value's events (:meth:`_event_plan`), decoded once
+        self._event_plans: dict[int, tuple[tuple[int, str, str, str | None], ...]] = {}
         # Load (or compile, about 2 s the first time) the kernel now, never inside a tick.
         self._kernel_constants()
         _warp().load_module(kernels.step_kernel(self._layout).module, device=DEVICE)
@@ -256,7 +258,7 @@ class MasterNode:
         inputs = buffer((lanes, 6), f64)
         trip_code = buffer((lanes,), i32)
         event_bits = buffer((lanes,), i32)
-        event_count = buffer((1,), i32)
+        event_count = buffer((2,), i32)  # lanes with an event, lanes that tripped
         buffers = (inputs, *matrices, compensator, origin, last_command,
                    last_position, hold, small_count, enabled, ramp_elapsed, force_scale,
                    gain_ratio, faulted, limiting, command, used, trip_code, event_bits,
@@ -406,12 +408,14 @@ class MasterNode:
     def _collect_events(self, state: MasterNodeState) -> None:
         """Turn the kernel's event codes into :class:`SafetyEvent` in the safety layer's
         order: trips, handle and tool force saturation, the gate opening, rate, workspace."""
-        state._event_count[0] = 0
+        counts = state._event_count
+        trips = counts[1]
+        counts[0] = counts[1] = 0
         step, time_s = state.step, state.step * self.period_s
         codes, bits = state._trip_code, state._event_bits
         events = state.events
-        tripped = np.flatnonzero(codes >= 0)
-        if tripped.size:
+        if trips:
+            tripped = np.flatnonzero(codes >= 0)
             for lane, code in sorted(zip(tripped.tolist(), codes[tripped].tolist(), strict=True),
                                      key=lambda pair: (pair[1] // 2, pair[0])):
                 events.append(SafetyEvent(step, time_s, lane, "trip",
@@ -419,20 +423,40 @@ class MasterNode:
         flagged = np.flatnonzero(bits)
         if not flagged.size:
             return
-        # Python ints (one conversion per flagged lane), in the layer's order
-        lanes_values = list(zip(flagged.tolist(), bits[flagged].tolist(), strict=True))
-        for which in (0, 1, "enable", 2, 3):
-            for lane, value in lanes_values:
-                if which == "enable":
-                    if value >> kernels.ENABLE_BIT & 1:
-                        events.append(SafetyEvent(
-                            step, time_s, lane, "enable", "forces enabled after "
-                            f"{self.safety.ramp_small_samples} small-force samples"))
-                    continue
-                for axis in (0, 1):
-                    if value >> (2 * which + axis) & 1:
-                        events.append(SafetyEvent(step, time_s, lane, "saturate",
-                                                  self._limit_reasons[which], AXES[axis]))
+        # one pass over the flagged lanes (Python ints), each value's events looked up; a
+        # stable sort by the layer's order keeps the lanes, then the axes, ascending
+        plans = self._event_plans
+        found = []
+        for lane, value in zip(flagged.tolist(), bits[flagged].tolist(), strict=True):
+            plan = plans.get(value)
+            if plan is None:
+                plan = plans[value] = self._event_plan(value)
+            found.extend((rank, lane, kind, reason, axis) for rank, kind, reason, axis in plan)
+        if len(flagged) > 1:
+            found.sort(key=_rank)
+        events.extend(SafetyEvent(step, time_s, lane, kind, reason, axis)
+                      for _, lane, kind, reason, axis in found)
+
+    def _event_plan(self, value: int) -> tuple[tuple[int, str, str, str | None], ...]:
+        """The events one lane's ``event_bits`` value stands for, as (rank in the safety
+        layer's order, kind, reason, axis): handle and tool force saturation, the gate
+        opening, rate, workspace; x before y."""
+        plan: list[tuple[int, str, str, str | None]] = []
+        for rank, which in enumerate((0, 1, "enable", 2, 3)):
+            if which == "enable":
+                if value >> kernels.ENABLE_BIT & 1:
+                    plan.append((rank, "enable", "forces enabled after "
+                                 f"{self.safety.ramp_small_samples} small-force samples", None))
+                continue
+            for axis in (0, 1):
+                if value >> (2 * which + axis) & 1:
+                    plan.append((rank, "saturate", self._limit_reasons[which], AXES[axis]))
+        return tuple(plan)
+
+
+def _rank(found: tuple) -> int:
+    """The sort key of :meth:`MasterNode._collect_events`' entries: their rank."""
+    return found[0]
 
 
 def _mask(lanes: np.ndarray, count: int) -> np.ndarray:

@@ -10,8 +10,9 @@ programs and the simulator step exactly one implementation. Arithmetic is float6
 Outputs that need Python (safety events with their reasons) are coded as integers per lane:
 ``trip_code`` (the trip that latched this step, ``reason * 2 + axis``, or -1) and
 ``event_bits`` (saturation onsets, bit ``2 * limit + axis``; :data:`ENABLE_BIT` when the
-force gate opened). Any lane with an event adds one to ``event_count[0]``, so the caller reads
-one integer per step and decodes only when it is non-zero.
+force gate opened). Any lane with an event adds one to ``event_count[0]``, and a lane that
+tripped also to ``event_count[1]``, so the caller reads one integer per step, decodes only
+when it is non-zero, and scans for trips only when there were any.
 """
 
 from __future__ import annotations
@@ -287,5 +288,7 @@ def step_kernel(layout: CompensatorLayout) -> Any:
         event_bits[lane] = bits
         if code >= 0 or bits != 0:
             wp.atomic_add(event_count, 0, 1)
+        if code >= 0:
+            wp.atomic_add(event_count, 1, 1)
 
     return master_step_kernel
