@@ -52,8 +52,9 @@ from typing import Any
 import numpy as np
 import zenoh
 
-from haptic.common.config import exit_on_config_error
+from haptic.common.config import exit_on_config_error, load_config
 from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
+from haptic.common.runtime.realtime import cpu_latency_request
 from haptic.common.runtime.runner import RealTimeRunner, StopSignals
 from haptic.common.runtime.runner_config import place_other_threads, prioritise_zenoh_threads
 from haptic.common.runtime.stage_times import in_tick_order
@@ -396,19 +397,25 @@ def benchmark(
     echo: bool = False,
     rig: str = "model",
     cpu_layout: str = "partitioned",
+    cpu_latency_limit_us: int | None = None,
 ) -> dict[str, Any]:
     """The whole benchmark; returns the result dict (the ``--json`` shape of issue 5, with
-    per-direction details added)."""
-    before = raw_ping_pong()
-    paced_before = raw_ping_pong(PACED_ROUND_TRIPS, 50, period_s=ts_s)
-    master, slave = run_pair(
-        master_cmd or default_command("master", echo, rig),
-        slave_cmd or default_command("slave", echo), duration_s, extra_args,
-        cpu_layout=cpu_layout,
-    )
-    raw = summarise_one_way(np.concatenate([before, raw_ping_pong()]))
-    paced = summarise_one_way(np.concatenate(
-        [paced_before, raw_ping_pong(PACED_ROUND_TRIPS, 50, period_s=ts_s)]))
+    per-direction details added). The raw ping-pong runs under the CPU latency request the
+    programs hold (``cpu_latency_limit_us``, us; None: the configured default), so that the
+    ratio compares the link with Zenoh on the same machine state."""
+    if cpu_latency_limit_us is None:
+        cpu_latency_limit_us = int(load_config()["runner"]["cpu_latency_limit_us"])
+    with cpu_latency_request(cpu_latency_limit_us) as (held_us, latency_warning):
+        before = raw_ping_pong()
+        paced_before = raw_ping_pong(PACED_ROUND_TRIPS, 50, period_s=ts_s)
+        master, slave = run_pair(
+            master_cmd or default_command("master", echo, rig),
+            slave_cmd or default_command("slave", echo), duration_s, extra_args,
+            cpu_layout=cpu_layout,
+        )
+        raw = summarise_one_way(np.concatenate([before, raw_ping_pong()]))
+        paced = summarise_one_way(np.concatenate(
+            [paced_before, raw_ping_pong(PACED_ROUND_TRIPS, 50, period_s=ts_s)]))
     to_slave = _direction(slave)   # the slave receives master -> slave
     to_master = _direction(master)
     link = {
@@ -441,6 +448,9 @@ def benchmark(
         "link_to_raw_paced_p50_ratio": (
             link["one_way_p50_s"] / paced["one_way_p50_s"]
             if link["one_way_p50_s"] is not None and paced["one_way_p50_s"] > 0 else None),
+        # the CPU latency request held through the run (us; None: none or refused)
+        "cpu_latency_limit_us": held_us,
+        "cpu_latency_warning": latency_warning,
     }
 
 
@@ -452,6 +462,9 @@ def print_table(result: dict[str, Any]) -> None:
     print(f"loop benchmark, {result['duration_s']:g} s on loopback, nodes: "
           f"{result.get('nodes', '?')}, CPU layout {result.get('cpu_layout', '?')} "
           f"({' '.join(result.get('run_options', []))})")
+    held = result.get("cpu_latency_limit_us")
+    print(f"  CPU latency request: {'none' if held is None else f'{held} us'}"
+          + (f" ({result['cpu_latency_warning']})" if result.get("cpu_latency_warning") else ""))
     for side in ("master", "slave"):
         f = result[side]
         print(
@@ -526,11 +539,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--extra", default="", help="extra arguments for both commands (one shell string)"
     )
+    parser.add_argument("--cpu-latency-us", type=int, default=None, metavar="US",
+                        help="the CPU latency request held through the run and by both "
+                        "programs, us (-1: none; default: the configured "
+                        "runner.cpu_latency_limit_us)")
     parser.add_argument("--period", type=float, default=None, metavar="S",
                         help="sample period Ts of both programs, s (default: the configured "
                         "0.54 ms); the compensators are synthesised at this period")
     args = parser.parse_args(argv)
     extra = shlex.split(args.extra)
+    if args.cpu_latency_us is not None:
+        if args.cpu_latency_us < -1:
+            print("config error: --cpu-latency-us: must be -1 (none) or >= 0 us (got "
+                  f"{args.cpu_latency_us})", file=sys.stderr)
+            return 2
+        extra += ["--cpu-latency-us", str(args.cpu_latency_us)]
     ts_s = 0.00054
     with tempfile.TemporaryDirectory() as folder:
         if args.period is not None:
@@ -567,6 +590,7 @@ def _run(args: argparse.Namespace, extra: list[str], ts_s: float) -> dict[str, A
         rig=args.rig,
         cpu_layout=args.cpu_layout or (
             "free" if args.echo or args.master_cmd or args.slave_cmd else "partitioned"),
+        cpu_latency_limit_us=args.cpu_latency_us,
     )
 
 

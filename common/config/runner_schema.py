@@ -69,6 +69,11 @@ RUNNER_SCHEMA: Schema = {
         "waits for the GIL held by another thread; 0 leaves it as it is (Python's default is "
         "5 ms).", minimum=0.0, maximum=0.1, check=_switch_interval_check,
     ),
+    "cpu_latency_limit_us": Field(
+        "int", "The CPUs' idle exit latency limit held while the loop runs (Linux PM QoS, "
+        "/dev/cpu_dma_latency), us: 0 keeps idle CPUs polling, so a wake-up from another "
+        "CPU is answered at once; -1 makes no request.", minimum=-1, maximum=10_000_000,
+    ),
     "zenoh_thread_priority": Field(
         "int", "SCHED_FIFO priority of Zenoh's runtime threads, below realtime_priority; 0 "
         "leaves them with normal scheduling.", minimum=0, maximum=MAX_FIFO_PRIORITY,

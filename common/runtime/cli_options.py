@@ -52,6 +52,7 @@ _RUNNER_FLAGS = {
     "loop_cpus": ("--loop-cpus", "loop_cpus"),
     "other_cpus": ("--other-cpus", "other_threads_cpus"),
     "zenoh_priority": ("--zenoh-priority", "zenoh_thread_priority"),
+    "cpu_latency_us": ("--cpu-latency-us", "cpu_latency_limit_us"),
 }
 # flag dest -> key under [link]
 _LINK_FLAGS = {
@@ -129,6 +130,9 @@ def add_loop_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--zenoh-priority", metavar="N", type=int,
                        help="SCHED_FIFO priority of Zenoh's threads, below --rt-priority; 0: "
                        "normal scheduling (runner.zenoh_thread_priority)")
+    group.add_argument("--cpu-latency-us", metavar="US", type=int,
+                       help="idle CPUs' exit latency limit held for the run, us (Linux PM QoS); "
+                       "0: idle CPUs poll; -1: no request (runner.cpu_latency_limit_us)")
 
 
 def add_connection_options(parser: argparse.ArgumentParser) -> None:

@@ -1,4 +1,5 @@
-"""Operating-system scheduling of a real-time loop thread: tight timers, SCHED_FIFO, CPUs.
+"""Operating-system scheduling of a real-time loop thread: tight timers, SCHED_FIFO, CPUs,
+and the CPUs' idle states.
 
 The control loop sleeps for most of each period and spins only for the last ``spin_s``. How
 long it must spin is set by how late a sleep wakes up, and that is set by the OS:
@@ -27,20 +28,34 @@ long it must spin is set by how late a sleep wakes up, and that is set by the OS
   (5 ms by default) while the loop runs: a loop that wants the GIL back from another thread
   of the process (the display's JSON encoding) then waits at most about this long. 0 leaves
   the interval as it is.
+- :attr:`RealtimeSettings.cpu_latency_limit_us` (>= 0) holds a Linux PM QoS request on
+  ``/dev/cpu_dma_latency`` for the run, as ``cyclictest`` does: an idle CPU may only enter
+  idle states that it leaves within that many us, so with 0 it polls instead of halting. Each
+  hop of the tick (the master's SYNC to the drives and their answer, every Zenoh message)
+  wakes a process on another CPU, and waking a halted CPU is what costs most on a virtual
+  machine: on the project's 2-core VM (haltpoll idle with ``guest_halt_poll_ns=0``) a
+  cross-CPU pipe round trip took 60-68 us (p50) and 27-47 us of CPU per wake-up, 7.4 us and
+  6 us with the request (``bench/wakeup_bench.py``); ``bench/loop_bench.py`` went from
+  1670-1700 Hz with 12 % overruns to 1844-1849 Hz with 1 %. The request is system-wide and
+  ends when the file is closed (on exit, also a crash). It needs write access to the device
+  (root, or a udev rule as in deploy/README.md); refused, the run goes on with the idle
+  states as they are and the refusal is reported. -1 makes no request.
 
-Everything applies to the *calling thread* only (on Linux, pid 0 means the calling thread for
-these calls), so the Zenoh and CAN threads a program started before keep normal scheduling.
-Threads the loop thread starts later inherit it. :class:`LoopThreadScheduling` restores the
-previous settings on exit.
+Everything but the CPU latency request applies to the *calling thread* only (on Linux, pid 0
+means the calling thread for these calls), so the Zenoh and CAN threads a program started
+before keep normal scheduling. Threads the loop thread starts later inherit it.
+:class:`LoopThreadScheduling` restores the previous settings on exit.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import os
+import struct
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 from haptic.common.config.runner_schema import MAX_FIFO_PRIORITY
@@ -50,7 +65,8 @@ PR_SET_TIMERSLACK = 29
 PR_GET_TIMERSLACK = 30
 #: The timer slack of tight timers, ns (0 would mean "back to the default" to the kernel).
 TIGHT_TIMER_SLACK_NS = 1
-#: Highest SCHED_FIFO priority Linux accepts.
+#: Linux's PM QoS CPU latency device: a request (a native int, us) holds while it is open.
+CPU_LATENCY_DEVICE = "/dev/cpu_dma_latency"
 
 
 @dataclass(frozen=True)
@@ -60,13 +76,16 @@ class RealtimeSettings:
     ``priority``: SCHED_FIFO priority 1..99 of the loop thread, 0 for normal scheduling;
     ``tight_timers``: set the thread's timer slack to 1 ns; ``cpus``: CPU indices the loop
     thread may run on (empty: any); ``gil_switch_interval_s``: Python's GIL switch interval
-    while the loop runs, s (0: left as it is; a process-wide setting).
+    while the loop runs, s (0: left as it is; a process-wide setting);
+    ``cpu_latency_limit_us``: the CPUs' idle exit latency limit held for the run, us (a
+    system-wide PM QoS request; 0: idle CPUs poll; -1: no request).
     """
 
     priority: int = 0
     tight_timers: bool = True
     cpus: tuple[int, ...] = ()
     gil_switch_interval_s: float = 0.0
+    cpu_latency_limit_us: int = -1
 
     def __post_init__(self) -> None:
         if not 0 <= self.priority <= MAX_FIFO_PRIORITY:
@@ -76,6 +95,9 @@ class RealtimeSettings:
                 f"gil_switch_interval_s must be >= 0 (got {self.gil_switch_interval_s})")
         if any(cpu < 0 for cpu in self.cpus):
             raise ValueError(f"cpus must be CPU indices >= 0 (got {self.cpus})")
+        if self.cpu_latency_limit_us < -1:
+            raise ValueError("cpu_latency_limit_us must be -1 (no request) or >= 0 us "
+                             f"(got {self.cpu_latency_limit_us})")
 
 
 @dataclass
@@ -83,7 +105,8 @@ class AppliedScheduling:
     """What the loop thread really got. ``policy`` is ``SCHED_FIFO`` or ``SCHED_OTHER``,
     ``priority`` its priority (0 for SCHED_OTHER), ``timer_slack_ns`` the thread's timer slack
     in ns (None where it cannot be read), ``cpus`` the CPUs it may run on (None: unknown);
-    ``warnings``: each setting that was refused, and why."""
+    ``cpu_latency_limit_us`` the CPU latency limit held for the run, us (None: no request
+    held); ``warnings``: each setting that was refused, and why."""
 
     policy: str = "SCHED_OTHER"
     priority: int = 0
@@ -91,6 +114,7 @@ class AppliedScheduling:
     cpus: tuple[int, ...] | None = None
     warnings: list[str] = field(default_factory=list)
     gil_switch_interval_s: float | None = None
+    cpu_latency_limit_us: int | None = None
 
     def describe(self) -> str:
         """One line, e.g. ``SCHED_FIFO 40, timer slack 1 ns, CPUs 0,1``."""
@@ -100,6 +124,8 @@ class AppliedScheduling:
             parts.append(f"timer slack {self.timer_slack_ns} ns")
         if self.cpus is not None:
             parts.append("CPUs " + ",".join(str(c) for c in self.cpus))
+        if self.cpu_latency_limit_us is not None:
+            parts.append(f"CPU latency limit {self.cpu_latency_limit_us} us")
         return ", ".join(parts)
 
     def as_summary(self) -> dict[str, object]:
@@ -110,6 +136,7 @@ class AppliedScheduling:
             "scheduling_priority": self.priority,
             "timer_slack_ns": self.timer_slack_ns,
             "gil_switch_interval_s": self.gil_switch_interval_s,
+            "cpu_latency_limit_us": self.cpu_latency_limit_us,
             "scheduling_warnings": list(self.warnings),
         }
 
@@ -167,6 +194,22 @@ class OsScheduling:
             raise OSError("CPU affinity is not supported on this platform")
         os.sched_setaffinity(0, cpus)
 
+    def request_cpu_latency(self, limit_us: int) -> int:
+        """Open the PM QoS device and write ``limit_us``; returns the open file descriptor
+        (the request holds until it is closed)."""
+        if not sys.platform.startswith("linux"):
+            raise OSError("the CPU latency request is a Linux setting")
+        fd = os.open(CPU_LATENCY_DEVICE, os.O_WRONLY | os.O_CLOEXEC)
+        try:
+            os.write(fd, struct.pack("i", limit_us))
+        except OSError:
+            os.close(fd)
+            raise
+        return fd
+
+    def release_cpu_latency(self, fd: int) -> None:
+        os.close(fd)
+
 
 class LoopThreadScheduling:
     """Context manager: apply ``settings`` to the calling thread on entry (each refusal is a
@@ -180,6 +223,7 @@ class LoopThreadScheduling:
         self._previous_scheduler: tuple[int, int] | None = None
         self._previous_affinity: set[int] | None = None
         self._previous_switch_interval_s: float | None = None
+        self._cpu_latency_fd: int | None = None
 
     def __enter__(self) -> AppliedScheduling:
         s, calls, applied = self.settings, self._os, self.applied
@@ -208,6 +252,14 @@ class LoopThreadScheduling:
         if s.gil_switch_interval_s > 0.0:
             self._previous_switch_interval_s = sys.getswitchinterval()
             sys.setswitchinterval(s.gil_switch_interval_s)
+        if s.cpu_latency_limit_us >= 0:
+            try:
+                self._cpu_latency_fd = calls.request_cpu_latency(s.cpu_latency_limit_us)
+                applied.cpu_latency_limit_us = s.cpu_latency_limit_us
+            except (OSError, AttributeError) as error:
+                applied.warnings.append(
+                    f"CPU latency limit {s.cpu_latency_limit_us} us refused ({error}): idle "
+                    "states as they are")
         self._read_back()
         return applied
 
@@ -234,6 +286,12 @@ class LoopThreadScheduling:
     def __exit__(self, *_exc: object) -> None:
         calls = self._os
         # each restore on its own: one that fails must not keep the others from running
+        if self._cpu_latency_fd is not None:
+            try:
+                calls.release_cpu_latency(self._cpu_latency_fd)
+            except OSError:
+                pass
+            self._cpu_latency_fd = None
         if self._previous_switch_interval_s is not None:
             try:
                 sys.setswitchinterval(self._previous_switch_interval_s)
@@ -256,6 +314,28 @@ class LoopThreadScheduling:
                 calls.set_timer_slack_ns(self._previous_slack)
             except OSError:
                 pass
+
+
+@contextlib.contextmanager
+def cpu_latency_request(limit_us: int, os_calls: OsScheduling | None = None
+                        ) -> Iterator[tuple[int | None, str | None]]:
+    """Hold the CPU latency request ``limit_us`` (us; -1: none) for the ``with`` block, as
+    the runner does for a loop (benchmarks that compare with the loops measure under the same
+    request). Yields ``(limit held or None, warning or None)``; a refusal is the warning."""
+    calls = os_calls if os_calls is not None else OsScheduling()
+    if limit_us < 0:
+        yield None, None
+        return
+    try:
+        fd = calls.request_cpu_latency(limit_us)
+    except (OSError, AttributeError) as error:
+        yield None, f"CPU latency limit {limit_us} us refused ({error}): idle states as they are"
+        return
+    try:
+        yield limit_us, None
+    finally:
+        with contextlib.suppress(OSError):
+            calls.release_cpu_latency(fd)
 
 
 def place_process_threads(

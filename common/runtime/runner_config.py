@@ -10,6 +10,7 @@ says how (common/runtime/realtime.py explains each setting)::
     loop_cpus = ""           # CPUs of the loop thread, e.g. "1" or "0,1"; empty = any
     other_threads_cpus = ""  # CPUs of the program's other threads (Zenoh, display); empty = any
     gil_switch_interval_s = 0.0002  # Python's GIL switch interval while the loop runs, s (0: as is)
+    cpu_latency_limit_us = 0  # idle CPUs' exit latency limit held for the run, us; -1: none
     zenoh_thread_priority = 0  # SCHED_FIFO priority of Zenoh's threads (below the loop's); 0: off
     display_backoff = true   # the display's rates back off while the loop overruns
 """
@@ -66,6 +67,7 @@ def runner_settings_from(config: dict[str, Any]) -> RunnerSettings:
             tight_timers=bool(table["tight_timers"]),
             cpus=cpu_sets["loop_cpus"],
             gil_switch_interval_s=float(table["gil_switch_interval_s"]),
+            cpu_latency_limit_us=int(table["cpu_latency_limit_us"]),
         ),
         zenoh_thread_priority=int(table["zenoh_thread_priority"]),
         other_threads_cpus=cpu_sets["other_threads_cpus"],

@@ -36,6 +36,8 @@ def test_json_shape(capsys, monkeypatch):
     assert result["raw_zenoh_paced"]["period_s"] == 0.00054
     assert result["link_to_raw_p50_ratio"] > 0
     assert result["cpu_layout"] == "partitioned"
+    # the programs' default request, held by the bench too (or refused, and said why)
+    assert (result["cpu_latency_limit_us"] == 0) != bool(result["cpu_latency_warning"])
     assert result["slave"]["step_p50_s"] > 0
 
 

@@ -78,6 +78,15 @@ class FakeOs(OsScheduling):
         self._call("set_affinity", set(cpus))
         self.affinity = set(cpus)
 
+    def request_cpu_latency(self, limit_us: int) -> int:
+        self._call("request_cpu_latency", limit_us)
+        self.latency_requests = [*getattr(self, "latency_requests", []), limit_us]
+        return 42
+
+    def release_cpu_latency(self, fd: int) -> None:
+        self._call("release_cpu_latency", fd)
+        self.latency_requests = self.latency_requests[:-1]
+
 
 def state(fake: FakeOs) -> tuple[int, int, int, set[int]]:
     return fake.slack_ns, fake.policy, fake.priority, fake.affinity
@@ -120,6 +129,13 @@ def test_settings_accept_priorities_0_to_99(priority):
 def test_settings_reject_priorities_outside_0_to_99(priority):
     with pytest.raises(ValueError, match="priority"):
         RealtimeSettings(priority=priority)
+
+
+def test_settings_take_a_cpu_latency_limit_or_none():
+    assert RealtimeSettings().cpu_latency_limit_us == -1  # no request unless asked
+    assert RealtimeSettings(cpu_latency_limit_us=0).cpu_latency_limit_us == 0
+    with pytest.raises(ValueError, match="cpu_latency_limit_us"):
+        RealtimeSettings(cpu_latency_limit_us=-2)
 
 
 def test_settings_reject_negative_cpus():
@@ -263,6 +279,46 @@ def test_applied_is_what_the_os_reports_not_what_was_asked():
     assert state(fake) == (DEFAULT_SLACK_NS, SCHED_OTHER, 0, {0, 1, 2, 3})
 
 
+def test_the_cpu_latency_request_is_held_for_the_run_and_released():
+    fake = FakeOs()
+    with LoopThreadScheduling(RealtimeSettings(cpu_latency_limit_us=0), fake) as applied:
+        assert fake.latency_requests == [0]
+        assert applied.cpu_latency_limit_us == 0 and applied.warnings == []
+        assert applied.describe().endswith("CPU latency limit 0 us")
+    assert fake.latency_requests == []
+    assert ("release_cpu_latency", 42) in fake.calls  # the descriptor it was given
+    fake = FakeOs()
+    with LoopThreadScheduling(RealtimeSettings(), fake) as applied:  # -1: no request
+        assert applied.cpu_latency_limit_us is None
+    assert [name for name, _ in fake.calls if "latency" in name] == []
+
+
+def test_a_refused_cpu_latency_request_is_a_warning_and_nothing_is_released():
+    fake = FakeOs(refuse={"request_cpu_latency": PermissionError(13, "Permission denied")})
+    settings = RealtimeSettings(priority=40, cpu_latency_limit_us=0)
+    with LoopThreadScheduling(settings, fake) as applied:
+        assert applied.cpu_latency_limit_us is None
+        assert applied.warnings == [
+            "CPU latency limit 0 us refused ([Errno 13] Permission denied): idle states as "
+            "they are"]
+        assert applied.policy == "SCHED_FIFO"  # the rest applies
+    assert "release_cpu_latency" not in [name for name, _ in fake.calls]
+
+
+def test_cpu_latency_request_holds_for_the_block_or_says_why_not():
+    fake = FakeOs()
+    with realtime.cpu_latency_request(0, fake) as (held, warning):
+        assert (held, warning, fake.latency_requests) == (0, None, [0])
+    assert fake.latency_requests == []
+    with realtime.cpu_latency_request(-1, fake) as (held, warning):
+        assert (held, warning) == (None, None)
+    assert [name for name, _ in fake.calls].count("request_cpu_latency") == 1
+    refusing = FakeOs(refuse={"request_cpu_latency": PermissionError(13, "Permission denied")})
+    with realtime.cpu_latency_request(5, refusing) as (held, warning):
+        assert held is None and warning.startswith("CPU latency limit 5 us refused")
+    assert "release_cpu_latency" not in [name for name, _ in refusing.calls]
+
+
 def test_describe_and_summary():
     applied = AppliedScheduling(
         policy="SCHED_FIFO", priority=40, timer_slack_ns=1, cpus=(0, 1),
@@ -276,6 +332,7 @@ def test_describe_and_summary():
         "scheduling_priority": 40,
         "timer_slack_ns": 1,
         "gil_switch_interval_s": 0.0002,
+        "cpu_latency_limit_us": None,
         "scheduling_warnings": ["CPU affinity [7] refused: bad"],
     }
     summary["scheduling_warnings"].append("x")  # a copy: the summary never aliases the state
@@ -353,6 +410,25 @@ def test_real_affinity_inside_and_restored():
     assert inside == {allowed[0]} and applied.cpus == (allowed[0],)
     assert sorted(after) == allowed
     assert sorted(os.sched_getaffinity(0)) == allowed
+
+
+@linux_only
+def test_real_cpu_latency_request_holds_during_the_run_only():
+    device = realtime.CPU_LATENCY_DEVICE
+    if not os.access(device, os.R_OK | os.W_OK):
+        pytest.skip(f"{device} is not readable and writable here (needs root or a udev rule)")
+
+    def current_us() -> int:  # the system's effective limit, us (no request: 2e9)
+        with open(device, "rb") as qos:
+            return int.from_bytes(qos.read(4), sys.byteorder, signed=True)
+
+    before = current_us()
+    with LoopThreadScheduling(RealtimeSettings(tight_timers=False,
+                                               cpu_latency_limit_us=0)) as applied:
+        inside = current_us()
+    assert applied.cpu_latency_limit_us == 0 and applied.warnings == []
+    assert inside == 0
+    assert current_us() == before
 
 
 # --- the runner reports its scheduling ---------------------------------------------------

@@ -22,6 +22,7 @@ VALID = {
     "other_threads_cpus": '"0"',
     "gil_switch_interval_s": "0.0005",
     "zenoh_thread_priority": "5",
+    "cpu_latency_limit_us": "-1",
 }
 
 
@@ -69,7 +70,7 @@ def test_defaults():
     assert settings == RunnerSettings(
         spin_s=0.0001,
         realtime=RealtimeSettings(priority=0, tight_timers=True, cpus=(),
-                                  gil_switch_interval_s=0.0002),
+                                  gil_switch_interval_s=0.0002, cpu_latency_limit_us=0),
     )
     assert load_config()["runner"]["loop_cpus"] == ""
     assert settings.other_threads_cpus == ()
@@ -104,6 +105,8 @@ def test_a_file_sets_the_whole_table(tmp_path):
         ({"gil_switch_interval_s": "-0.001"}, "runner.gil_switch_interval_s"),
         ({"gil_switch_interval_s": "1.0"}, "runner.gil_switch_interval_s"),
         ({"gil_switch_interval_s": "5e-7"}, "runner.gil_switch_interval_s"),
+        ({"cpu_latency_limit_us": "-2"}, "runner.cpu_latency_limit_us"),
+        ({"cpu_latency_limit_us": "0.5"}, "runner.cpu_latency_limit_us"),
     ],
 )
 def test_bad_values_name_the_key(tmp_path, changes, key):
@@ -140,14 +143,15 @@ def parse(argv: list[str], config_file=None):
 
 def test_flags_set_the_runner():
     options = parse(["--spin-s", "0.00005", "--rt-priority", "0", "--loop-cpus", "0",
-                     "--other-cpus", "0"])
+                     "--other-cpus", "0", "--cpu-latency-us", "-1"])
     assert options.runner == RunnerSettings(
         spin_s=0.00005,
         realtime=RealtimeSettings(priority=0, tight_timers=True, cpus=(0,),
-                                  gil_switch_interval_s=0.0002),
+                                  gil_switch_interval_s=0.0002, cpu_latency_limit_us=-1),
         other_threads_cpus=(0,),
     )
     assert options.config["runner"]["realtime_priority"] == 0
+    assert options.config["runner"]["cpu_latency_limit_us"] == -1
 
 
 def test_no_flags_keep_the_defaults():
