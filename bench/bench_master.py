@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import time
 import uuid
 
@@ -39,6 +38,7 @@ import numpy as np
 
 from haptic.common.config import load_config, override
 from haptic.common.model.teleop import model_from_config
+from haptic.common.runtime.machine import cpu_model
 from haptic.common.runtime.runner import FreeRunningClock, RealTimeRunner
 from haptic.master.hardware.interface import HandleHardware, create_hardware
 from haptic.master.node import MasterNode
@@ -59,18 +59,6 @@ def _percentiles_us(samples_s: np.ndarray) -> dict[str, float]:
     us = np.asarray(samples_s) * 1e6
     return {"mean_us": float(us.mean()), "p50_us": float(np.percentile(us, 50)),
             "p99_us": float(np.percentile(us, 99)), "max_us": float(us.max())}
-
-
-def cpu_model() -> str:
-    """The CPU's model name (/proc/cpuinfo), or the platform's processor string."""
-    try:
-        with open("/proc/cpuinfo") as cpuinfo:
-            for line in cpuinfo:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def bench_blocks(config: dict, cycles: int, lanes: int) -> dict[str, dict[str, float]]:

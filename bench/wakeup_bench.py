@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.runtime.machine import cpu_model
 from haptic.common.runtime.realtime import cpu_latency_request
 
 #: The child: pinned to its CPU, echo every byte until the pipe closes.
@@ -39,20 +40,6 @@ os.write(outbound, b"r")
 while os.read(inbound, 1):
     os.write(outbound, b"x")
 """
-
-
-def cpu_model() -> str:
-    """The CPU's model name (/proc/cpuinfo), or the platform's processor string."""
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as info:
-            for line in info:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    import platform
-
-    return platform.processor() or "unknown"
 
 
 def _cpu_s(usage: resource.struct_rusage) -> float:
