@@ -34,9 +34,9 @@ long it must spin is set by how late a sleep wakes up, and that is set by the OS
   hop of the tick (the master's SYNC to the drives and their answer, every Zenoh message)
   wakes a process on another CPU, and waking a halted CPU is what costs most on a virtual
   machine: on the project's 2-core VM (haltpoll idle with ``guest_halt_poll_ns=0``) a
-  cross-CPU pipe round trip took 60-68 us (p50) and 27-47 us of CPU per wake-up, 7.4 us and
-  6 us with the request (``bench/wakeup_bench.py``); ``bench/loop_bench.py`` went from
-  1670-1700 Hz with 12 % overruns to 1844-1849 Hz with 1 %. The request is system-wide and
+  cross-CPU pipe round trip took 60-109 us (p50) and 27-86 us of CPU per wake-up, 6.5-7.4 us
+  and 5-6 us with the request (``bench/wakeup_bench.py``), and ``bench/loop_bench.py``'s
+  overruns fell from 8-10 % to 1.4-8 % (docs/link.md 6.2). The request is system-wide and
   ends when the file is closed (on exit, also a crash). It needs write access to the device
   (root, or a udev rule as in deploy/README.md); refused, the run goes on with the idle
   states as they are and the refusal is reported. -1 makes no request.
