@@ -223,7 +223,7 @@ class LoopThreadScheduling:
         self._previous_scheduler: tuple[int, int] | None = None
         self._previous_affinity: set[int] | None = None
         self._previous_switch_interval_s: float | None = None
-        self._cpu_latency_fd: int | None = None
+        self._cpu_latency: contextlib.ExitStack | None = None
 
     def __enter__(self) -> AppliedScheduling:
         s, calls, applied = self.settings, self._os, self.applied
@@ -253,13 +253,12 @@ class LoopThreadScheduling:
             self._previous_switch_interval_s = sys.getswitchinterval()
             sys.setswitchinterval(s.gil_switch_interval_s)
         if s.cpu_latency_limit_us >= 0:
-            try:
-                self._cpu_latency_fd = calls.request_cpu_latency(s.cpu_latency_limit_us)
-                applied.cpu_latency_limit_us = s.cpu_latency_limit_us
-            except (OSError, AttributeError) as error:
-                applied.warnings.append(
-                    f"CPU latency limit {s.cpu_latency_limit_us} us refused ({error}): idle "
-                    "states as they are")
+            self._cpu_latency = contextlib.ExitStack()
+            held, warning = self._cpu_latency.enter_context(
+                cpu_latency_request(s.cpu_latency_limit_us, calls))
+            applied.cpu_latency_limit_us = held
+            if warning is not None:
+                applied.warnings.append(warning)
         self._read_back()
         return applied
 
@@ -286,12 +285,9 @@ class LoopThreadScheduling:
     def __exit__(self, *_exc: object) -> None:
         calls = self._os
         # each restore on its own: one that fails must not keep the others from running
-        if self._cpu_latency_fd is not None:
-            try:
-                calls.release_cpu_latency(self._cpu_latency_fd)
-            except OSError:
-                pass
-            self._cpu_latency_fd = None
+        if self._cpu_latency is not None:
+            self._cpu_latency.close()  # the request released (a failed release is ignored)
+            self._cpu_latency = None
         if self._previous_switch_interval_s is not None:
             try:
                 sys.setswitchinterval(self._previous_switch_interval_s)
