@@ -105,10 +105,14 @@ class SpilledChunkIndexes:
 class _UnbufferedFile:
     """A write-only file whose every ``write`` reaches the kernel before it returns, followed
     by a provisional trailer (:func:`_provisional_trailer`) in the same ``pwrite``: the MCAP
-    writer writes whole records per call, so at every instant the file is complete records
+    writer writes whole records per call, so between two writes the file is complete records
     plus a valid footer, and what a SIGKILL leaves behind opens with the standard readers up
-    to its last completed chunk. The next write starts over the trailer; :meth:`final` stops
-    the trailers before the writer's own summary and footer. Not an ``io.RawIOBase``, so the
+    to its last completed chunk. During a ``pwrite`` (microseconds) the kernel makes the
+    write visible page by page, and a SIGKILL landing inside it may cut it short at a page:
+    a reader racing it may find the file ending inside it and must read again, and the rare
+    cut file reads with ``read_recording`` (up to its last whole chunk), not the standard
+    readers. The next write starts over the trailer; :meth:`final` stops the trailers
+    before the writer's own summary and footer. Not an ``io.RawIOBase``, so the
     MCAP writer does not wrap it in a buffer."""
 
     _TRAILER = _provisional_trailer()
