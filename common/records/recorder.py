@@ -107,13 +107,13 @@ class _UnbufferedFile:
     by a provisional trailer (:func:`_provisional_trailer`) in the same ``pwrite``: the MCAP
     writer writes whole records per call, so between two writes the file is complete records
     plus a valid footer, and what a SIGKILL leaves behind opens with the standard readers up
-    to its last completed chunk. During a ``pwrite`` (microseconds) the kernel makes the
-    write visible page by page, and a SIGKILL landing inside it may cut it short at a page:
-    a reader racing it may find the file ending inside it and must read again, and the rare
-    cut file reads with ``read_recording`` (up to its last whole chunk), not the standard
-    readers. The next write starts over the trailer; :meth:`final` stops the trailers
-    before the writer's own summary and footer. Not an ``io.RawIOBase``, so the
-    MCAP writer does not wrap it in a buffer."""
+    to its last completed chunk. A reader of the live file reads it in pieces: a write
+    landing between two of them gives it the start of one version and the rest of the next,
+    and it must read again. A SIGKILL landing inside a ``pwrite`` (microseconds) may cut the
+    write short at a page; such a rare file reads with ``read_recording`` (up to its last
+    whole chunk), not with the standard readers. The next write starts over the trailer;
+    :meth:`final` stops the trailers before the writer's own summary and footer. Not an
+    ``io.RawIOBase``, so the MCAP writer does not wrap it in a buffer."""
 
     _TRAILER = _provisional_trailer()
 

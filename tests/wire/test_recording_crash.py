@@ -2,10 +2,12 @@
 file opens with the ``mcap`` package's own ``make_reader(...).iter_messages()`` up to its last
 complete chunk, between any two of its writes, and a closed file still has its summary.
 
-A reader that races the writer can catch one write in progress: the kernel makes a write
-visible page by page, so for the few microseconds of a ``pwrite`` the file ends inside it (a
-CI run read such a file: ``RecordLengthLimitExceeded``). The live reads here retry that case,
-count it, and must find the file whole on a retry."""
+A reader that races the writer can see two versions of the file at once: it reads in
+pieces, and a chunk written over the provisional trailer between two of its reads gives it the
+old trailer's start and the new chunk's middle (a CI run read such a file:
+``RecordLengthLimitExceeded``; beside two CPU hogs about one live read in three does here,
+where 4 KiB chunks go out every few ms). The live reads here retry that case and must find
+the file whole on a retry."""
 
 from __future__ import annotations
 
@@ -47,15 +49,15 @@ def _standard_read(path: Path) -> list[float]:
 
 
 def _live_read(path: Path, torn_reads: list[str]) -> int:
-    """Messages a standard reader finds in a file being written, retried while it catches a
-    write in progress (each such read's error appended to ``torn_reads``)."""
+    """Messages a standard reader finds in a file being written, retried while a write
+    lands during its read (each such read's error appended to ``torn_reads``)."""
     for _ in range(20):
         try:
             return len(_standard_read(path))
         except (McapError, struct.error) as error:
             torn_reads.append(type(error).__name__)
             time.sleep(0.002)
-    raise AssertionError(f"20 reads in a row caught a write in progress: {torn_reads[-20:]}")
+    raise AssertionError(f"20 reads in a row raced a write: {torn_reads[-20:]}")
 
 
 def test_sigkilled_recording_opens_with_make_reader(tmp_path: Path) -> None:
@@ -82,7 +84,6 @@ def test_sigkilled_recording_opens_with_make_reader(tmp_path: Path) -> None:
     assert values[:3] == [0.0, 0.001, 0.002]
     assert all(abs(b - a - 1e-3) < 1e-9 for a, b in zip(values, values[1:], strict=False))
     assert live_reads and live_reads == sorted(live_reads)
-    assert len(torn_reads) <= len(live_reads), torn_reads  # a race, not the file's state
     recording = read_recording(path)
     assert not recording.complete and recording.counts()["/master/state"] == len(values)
     _doctor_finds_no_error(path, len(values))
