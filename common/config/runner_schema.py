@@ -78,6 +78,11 @@ RUNNER_SCHEMA: Schema = {
         "int", "SCHED_FIFO priority of Zenoh's runtime threads, below realtime_priority; 0 "
         "leaves them with normal scheduling.", minimum=0, maximum=MAX_FIFO_PRIORITY,
     ),
+    "zenoh_threads_batch": Field(
+        "bool", "Zenoh's runtime threads in SCHED_BATCH beside a loop with normal "
+        "scheduling (realtime_priority 0): their wake-ups never preempt a running thread (the "
+        "loops, the emulated drives). Ignored with a SCHED_FIFO loop, which they cannot "
+        "preempt anyway, and when zenoh_thread_priority puts them in SCHED_FIFO."),
     "display_backoff": Field(
         "bool", "The display thread's state and clay rates halve while the loop overruns "
         "more than 0.1 % of its ticks, down to a sixteenth, and come back after 2 s without."),

@@ -12,6 +12,7 @@ says how (common/runtime/realtime.py explains each setting)::
     gil_switch_interval_s = 0.0002  # Python's GIL switch interval while the loop runs, s (0: as is)
     cpu_latency_limit_us = 0  # idle CPUs' exit latency limit held for the run, us; -1: none
     zenoh_thread_priority = 0  # SCHED_FIFO priority of Zenoh's threads (below the loop's); 0: off
+    zenoh_threads_batch = true  # Zenoh's threads in SCHED_BATCH beside a normal (not FIFO) loop
     display_backoff = true   # the display's rates back off while the loop overruns
 """
 
@@ -24,6 +25,7 @@ from haptic.common.config import ConfigError
 from haptic.common.config.runner_schema import parse_cpus
 from haptic.common.runtime.realtime import (
     RealtimeSettings,
+    batch_threads,
     place_process_threads,
     raise_threads,
 )
@@ -36,6 +38,9 @@ class RunnerSettings:
     spin_s: float
     realtime: RealtimeSettings
     zenoh_thread_priority: int = 0
+    #: Zenoh's threads in SCHED_BATCH when ``zenoh_thread_priority`` and the loop's
+    #: ``realtime_priority`` are 0
+    zenoh_threads_batch: bool = True
     other_threads_cpus: tuple[int, ...] = ()
     #: the display thread's rates back off while the loop overruns (display_backoff.py)
     display_backoff: bool = True
@@ -70,6 +75,7 @@ def runner_settings_from(config: dict[str, Any]) -> RunnerSettings:
             cpu_latency_limit_us=int(table["cpu_latency_limit_us"]),
         ),
         zenoh_thread_priority=int(table["zenoh_thread_priority"]),
+        zenoh_threads_batch=bool(table["zenoh_threads_batch"]),
         other_threads_cpus=cpu_sets["other_threads_cpus"],
         display_backoff=bool(table["display_backoff"]),
     )
@@ -87,11 +93,19 @@ def place_other_threads(settings: RunnerSettings) -> dict[str, object]:
 
 
 def prioritise_zenoh_threads(settings: RunnerSettings) -> dict[str, object]:
-    """Apply ``zenoh_thread_priority`` (call it once the link is up: Zenoh starts its receive
-    threads with the first connection). Returns the run summary's keys (empty when off)."""
+    """Apply ``zenoh_thread_priority``, else ``zenoh_threads_batch`` where the loop is not
+    configured for SCHED_FIFO (call it once the link is up: Zenoh starts its receive threads
+    with the first connection; threads they start later inherit it). Returns the run
+    summary's keys (empty when nothing changes)."""
     priority = settings.zenoh_thread_priority
     if not priority:
-        return {}
+        # a SCHED_FIFO loop is never preempted by them anyway: batching would only delay
+        # one Zenoh thread behind another (the link's p50 rose in loop_bench's layouts)
+        if not settings.zenoh_threads_batch or settings.realtime.priority > 0:
+            return {}
+        changed, warnings = batch_threads()
+        return {"zenoh_threads_batch": True, "zenoh_threads_batched": changed,
+                "zenoh_thread_warnings": warnings}
     changed, warnings = raise_threads(priority)
     return {"zenoh_thread_priority": priority, "zenoh_threads_raised": changed,
             "zenoh_thread_warnings": warnings}

@@ -566,6 +566,36 @@ def test_raise_threads_selects_threads_by_name_and_reports_refusals():
             thread.join()
 
 
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task") or not hasattr(os, "SCHED_BATCH"),
+                    reason="needs Linux /proc and SCHED_BATCH")
+def test_batch_threads_puts_the_named_threads_in_sched_batch_and_no_other():
+    from haptic.common.runtime.realtime import batch_threads
+
+    stop = threading.Event()
+    ids: dict[str, int] = {}
+    threads = [_named_thread(name, stop, ids) for name in ("qbrx-test", "qbtx-test", "other")]
+    for thread in threads:
+        thread.start()
+    try:
+        deadline = time.monotonic() + 5.0
+        while len(ids) < 3 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        recorder = ThreadRecorder(refuse={ids["qbtx-test"]})
+        changed, warnings = batch_threads(("qbrx-", "qbtx-"), recorder)
+        assert changed == 1 and recorder.calls == [(ids["qbrx-test"], os.SCHED_BATCH, 0)]
+        assert len(warnings) == 1 and "qbtx-test" in warnings[0]
+        # for real (no privilege needed): the named threads change, the others do not
+        changed, warnings = batch_threads(("qbrx-", "qbtx-"))
+        assert (changed, warnings) == (2, [])
+        assert os.sched_getscheduler(ids["qbrx-test"]) == os.SCHED_BATCH
+        assert os.sched_getscheduler(ids["qbtx-test"]) == os.SCHED_BATCH
+        assert os.sched_getscheduler(ids["other"]) == os.SCHED_OTHER
+    finally:
+        stop.set()
+        for thread in threads:
+            thread.join()
+
+
 def test_raise_threads_rejects_a_priority_out_of_range():
     from haptic.common.runtime.realtime import raise_threads
 

@@ -23,6 +23,7 @@ VALID = {
     "gil_switch_interval_s": "0.0005",
     "zenoh_thread_priority": "5",
     "cpu_latency_limit_us": "-1",
+    "zenoh_threads_batch": "false",
 }
 
 
@@ -83,6 +84,7 @@ def test_a_file_sets_the_whole_table(tmp_path):
         realtime=RealtimeSettings(priority=10, tight_timers=False, cpus=(0,),
                                   gil_switch_interval_s=0.0005),
         zenoh_thread_priority=5,
+        zenoh_threads_batch=False,
         other_threads_cpus=(0,),
     )
 
@@ -107,6 +109,7 @@ def test_a_file_sets_the_whole_table(tmp_path):
         ({"gil_switch_interval_s": "5e-7"}, "runner.gil_switch_interval_s"),
         ({"cpu_latency_limit_us": "-2"}, "runner.cpu_latency_limit_us"),
         ({"cpu_latency_limit_us": "0.5"}, "runner.cpu_latency_limit_us"),
+        ({"zenoh_threads_batch": '"yes"'}, "runner.zenoh_threads_batch"),
     ],
 )
 def test_bad_values_name_the_key(tmp_path, changes, key):
@@ -204,10 +207,19 @@ def test_zenoh_thread_priority_must_stay_below_the_loop(tmp_path):
     assert runner_settings_from(config).zenoh_thread_priority == 30
 
 
-def test_prioritise_zenoh_threads_is_off_by_default():
+def test_zenoh_threads_are_batched_by_default_and_not_when_turned_off():
     from haptic.common.runtime.runner_config import prioritise_zenoh_threads, runner_settings_from
 
-    assert prioritise_zenoh_threads(runner_settings_from(load_config(None))) == {}
+    config = load_config(None)
+    settings = runner_settings_from(config)
+    assert settings.zenoh_thread_priority == 0 and settings.zenoh_threads_batch
+    summary = prioritise_zenoh_threads(settings)
+    assert summary["zenoh_threads_batch"] is True and summary["zenoh_thread_warnings"] == []
+    config["runner"]["realtime_priority"] = 40  # a FIFO loop: they cannot preempt it
+    assert prioritise_zenoh_threads(runner_settings_from(config)) == {}
+    config["runner"]["realtime_priority"] = 0
+    config["runner"]["zenoh_threads_batch"] = False
+    assert prioritise_zenoh_threads(runner_settings_from(config)) == {}
 
 
 def test_place_other_threads_is_off_by_default():

@@ -167,6 +167,9 @@ def test_two_processes_exchange_forces_and_positions(pair, tmp_path) -> None:
         assert summary["steps"] > 100  # how many is the machine's speed, not asserted
         assert summary["analysis"]["stable"]
         assert _events(summary, "forces_enabled")
+        # Zenoh's threads in SCHED_BATCH by default (no privilege needed), no refusal
+        assert summary["zenoh_threads_batch"] and summary["zenoh_threads_batched"] > 0
+        assert summary["zenoh_thread_warnings"] == []
     assert master_summary["side"] == "master" and slave_summary["side"] == "slave"
     # each side received most of what the other sent (no loss injected; the slave runs 0.5 s
     # past the master's 3 s, and what either sent before the other listened is lost)
