@@ -4,11 +4,12 @@ fresh thread so the test process's main thread keeps its scheduling. No timing i
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
@@ -528,30 +529,39 @@ class ThreadRecorder(OsScheduling):
         self.calls.append((thread_id, policy, priority))
 
 
-def _named_thread(name: str, stop: threading.Event, ready: dict[str, int]) -> threading.Thread:
-    def body() -> None:
-        with open("/proc/thread-self/comm", "w") as comm:  # the OS name Zenoh's threads have
+@contextlib.contextmanager
+def _named_threads(*names: str) -> Iterator[dict[str, int]]:
+    """Threads with these OS names (what Zenoh's threads are recognised by), alive inside:
+    name -> native thread id."""
+    stop = threading.Event()
+    ids: dict[str, int] = {}
+
+    def body(name: str) -> None:
+        with open("/proc/thread-self/comm", "w") as comm:
             comm.write(name)
-        ready[name] = threading.get_native_id()
+        ids[name] = threading.get_native_id()
         stop.wait(5.0)
 
-    return threading.Thread(target=body, name=name, daemon=True)
+    threads = [threading.Thread(target=body, args=(name,), daemon=True) for name in names]
+    for thread in threads:
+        thread.start()
+    try:
+        deadline = time.monotonic() + 5.0
+        while len(ids) < len(names) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        yield ids
+    finally:
+        stop.set()
+        for thread in threads:
+            thread.join()
 
 
 @pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="needs Linux /proc")
 def test_raise_threads_selects_threads_by_name_and_reports_refusals():
     from haptic.common.runtime.realtime import raise_threads
 
-    stop = threading.Event()
-    ids: dict[str, int] = {}
     # names no Zenoh thread of this test process has (earlier tests leave Zenoh's runtimes)
-    threads = [_named_thread(name, stop, ids) for name in ("qrx-test", "qtx-test", "other")]
-    for thread in threads:
-        thread.start()
-    try:
-        deadline = time.monotonic() + 5.0
-        while len(ids) < 3 and time.monotonic() < deadline:
-            time.sleep(0.01)
+    with _named_threads("qrx-test", "qtx-test", "other") as ids:
         rx_id, tx_id, other_id = ids["qrx-test"], ids["qtx-test"], ids["other"]
         recorder = ThreadRecorder(refuse={tx_id})
         changed, warnings = raise_threads(7, ("qrx-", "qtx-"), recorder)
@@ -560,10 +570,6 @@ def test_raise_threads_selects_threads_by_name_and_reports_refusals():
         assert recorder.calls[0][1:] == (os.SCHED_FIFO, 7)
         assert len(warnings) == 1 and "qtx-test" in warnings[0]
         assert other_id not in [c[0] for c in recorder.calls]
-    finally:
-        stop.set()
-        for thread in threads:
-            thread.join()
 
 
 @pytest.mark.skipif(not os.path.isdir("/proc/self/task") or not hasattr(os, "SCHED_BATCH"),
@@ -571,15 +577,7 @@ def test_raise_threads_selects_threads_by_name_and_reports_refusals():
 def test_batch_threads_puts_the_named_threads_in_sched_batch_and_no_other():
     from haptic.common.runtime.realtime import batch_threads
 
-    stop = threading.Event()
-    ids: dict[str, int] = {}
-    threads = [_named_thread(name, stop, ids) for name in ("qbrx-test", "qbtx-test", "other")]
-    for thread in threads:
-        thread.start()
-    try:
-        deadline = time.monotonic() + 5.0
-        while len(ids) < 3 and time.monotonic() < deadline:
-            time.sleep(0.01)
+    with _named_threads("qbrx-test", "qbtx-test", "other") as ids:
         recorder = ThreadRecorder(refuse={ids["qbtx-test"]})
         changed, warnings = batch_threads(("qbrx-", "qbtx-"), recorder)
         assert changed == 1 and recorder.calls == [(ids["qbrx-test"], os.SCHED_BATCH, 0)]
@@ -590,10 +588,6 @@ def test_batch_threads_puts_the_named_threads_in_sched_batch_and_no_other():
         assert os.sched_getscheduler(ids["qbrx-test"]) == os.SCHED_BATCH
         assert os.sched_getscheduler(ids["qbtx-test"]) == os.SCHED_BATCH
         assert os.sched_getscheduler(ids["other"]) == os.SCHED_OTHER
-    finally:
-        stop.set()
-        for thread in threads:
-            thread.join()
 
 
 def test_raise_threads_rejects_a_priority_out_of_range():
