@@ -24,6 +24,9 @@ about 20 numpy calls a tick and line before.
 
 from __future__ import annotations
 
+import functools
+from typing import Any
+
 import numpy as np
 import warp as wp
 
@@ -104,50 +107,56 @@ def source_schedule(steps: int, delay_samples: np.ndarray, offset_samples: int,
 
 @wp.struct
 class LineConstants:
-    """What the receive kernel needs besides the arrays (ticks, s, ns, column indices)."""
+    """What the receive kernel needs besides the arrays (ticks, s, ns)."""
 
     history: wp.int64  # slots of the ring buffer
     period_s: wp.float64  # Ts, s
     period_ns: wp.float64  # Ts, ns (as the programs' send times are stamped)
-    message_columns: wp.int32  # the message's columns copied into ``columns``
-    flag_column: wp.int32  # the message's column holding its flags
 
 
-@wp.kernel
-def receive_kernel(schedule: wp.array2d(dtype=wp.int64), tick: wp.array(dtype=wp.int64),
-                   buffer: wp.array3d(dtype=wp.float64), initial: wp.array2d(dtype=wp.float64),
-                   runup_lag: wp.array(dtype=wp.int64), constants: LineConstants,
-                   rows: wp.array2d(dtype=wp.float64), previous: wp.array(dtype=wp.int64),
-                   last_fresh: wp.array(dtype=wp.int64), fresh: wp.array(dtype=wp.bool),
-                   silence_s: wp.array(dtype=wp.float64), sent: wp.array(dtype=wp.int64),
-                   send_time_ns: wp.array(dtype=wp.int64), flags: wp.array(dtype=wp.int64),
-                   columns: wp.array2d(dtype=wp.float64)):
-    lane = wp.tid()
-    k = tick[0]
-    source = schedule[k, lane]
-    channels = rows.shape[1]
-    if source >= wp.int64(0):
-        slot = source % constants.history
-        for c in range(channels):
-            rows[lane, c] = buffer[slot, lane, c]
-    else:
-        for c in range(channels):
-            rows[lane, c] = initial[lane, c]
-    new = source != previous[lane] or source < wp.int64(0)
-    previous[lane] = source
-    fresh[lane] = new
-    if new:
-        last_fresh[lane] = k
-    silence_s[lane] = wp.float64(k - last_fresh[lane]) * constants.period_s
-    send_tick = source
-    if source < wp.int64(0):
-        send_tick = k - runup_lag[lane]
-    sent[lane] = send_tick
-    send_time_ns[lane] = wp.int64(wp.float64(send_tick) * constants.period_ns)
-    flags[lane] = wp.int64(rows[lane, constants.flag_column])
-    for c in range(constants.message_columns):
-        columns[lane, c] = rows[lane, c]
-    columns[lane, constants.message_columns] = wp.float64(send_tick)
+@functools.cache
+def receive_kernel(channels: int, message_columns: int, flag_column: int) -> Any:
+    """The receive kernel of a line of ``channels`` columns whose first ``message_columns``
+    go to ``columns`` and whose ``flag_column`` holds the flags: every loop over the columns
+    of constant length (unrolled; about half the time of the same loops over an array's
+    shape on Warp's CPU device). One Warp module per layout."""
+
+    @wp.kernel(module=f"{__name__}.receive_{channels}_{message_columns}_{flag_column}")
+    def receive(schedule: wp.array2d(dtype=wp.int64), tick: wp.array(dtype=wp.int64),
+                buffer: wp.array3d(dtype=wp.float64), initial: wp.array2d(dtype=wp.float64),
+                runup_lag: wp.array(dtype=wp.int64), constants: LineConstants,
+                rows: wp.array2d(dtype=wp.float64), previous: wp.array(dtype=wp.int64),
+                last_fresh: wp.array(dtype=wp.int64), fresh: wp.array(dtype=wp.bool),
+                silence_s: wp.array(dtype=wp.float64), sent: wp.array(dtype=wp.int64),
+                send_time_ns: wp.array(dtype=wp.int64), flags: wp.array(dtype=wp.int64),
+                columns: wp.array2d(dtype=wp.float64)):
+        lane = wp.tid()
+        k = tick[0]
+        source = schedule[k, lane]
+        if source >= wp.int64(0):
+            slot = source % constants.history
+            for c in range(channels):
+                rows[lane, c] = buffer[slot, lane, c]
+        else:
+            for c in range(channels):
+                rows[lane, c] = initial[lane, c]
+        new = source != previous[lane] or source < wp.int64(0)
+        previous[lane] = source
+        fresh[lane] = new
+        if new:
+            last_fresh[lane] = k
+        silence_s[lane] = wp.float64(k - last_fresh[lane]) * constants.period_s
+        send_tick = source
+        if source < wp.int64(0):
+            send_tick = k - runup_lag[lane]
+        sent[lane] = send_tick
+        send_time_ns[lane] = wp.int64(wp.float64(send_tick) * constants.period_ns)
+        flags[lane] = wp.int64(rows[lane, flag_column])
+        for c in range(message_columns):
+            columns[lane, c] = rows[lane, c]
+        columns[lane, message_columns] = wp.float64(send_tick)
+
+    return receive
 
 
 class DelayLine:
@@ -193,9 +202,8 @@ class DelayLine:
         constants.history = self.history
         constants.period_s = float(period_s)
         constants.period_ns = float(period_s) * 1e9
-        constants.message_columns = message_columns
-        constants.flag_column = flag_column
         self._constants = constants
+        self._kernel = receive_kernel(channels, message_columns, flag_column)
         self._launch: ReplayedLaunch | None = None
 
     def _bind(self) -> ReplayedLaunch:
@@ -211,7 +219,7 @@ class DelayLine:
             (self.send_time_ns, i64), (self.flags, i64), (self.columns, f64))]
         self._bound += outputs
         return ReplayedLaunch(wp.launch(
-            receive_kernel, dim=self.rows.shape[0], device=DEVICE,
+            self._kernel, dim=self.rows.shape[0], device=DEVICE,
             inputs=[*self._bound[:5], self._constants, *outputs], record_cmd=True))
 
     def send(self, tick: int, message: np.ndarray) -> None:

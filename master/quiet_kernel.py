@@ -14,6 +14,9 @@ lane through both, bit for bit. One launch replaces about 15 numpy calls a tick.
 
 from __future__ import annotations
 
+import functools
+from typing import Any
+
 import numpy as np
 import warp as wp
 
@@ -29,39 +32,47 @@ QUIET_MASK = int(Flags.FORCES_ENABLED) | int(Flags.WORK_AREA_STOP)
 QUIET_VALUE = int(Flags.FORCES_ENABLED)
 
 
-@wp.kernel
-def quiet_kernel(
-    fresh: wp.array(dtype=wp.bool),
-    flags: wp.array(dtype=wp.int64),
-    rows: wp.array2d(dtype=wp.float64),
-    force: wp.array2d(dtype=wp.float64),
-    silence_s: wp.array(dtype=wp.float64),
-    steady: wp.array(dtype=wp.bool),
-    max_age_s: wp.array(dtype=wp.float64),
-    quiet_mask: wp.int64,
-    quiet_value: wp.int64,
-    newest_flags: wp.array(dtype=wp.int64),
-    newest_rows: wp.array2d(dtype=wp.float64),
-    tool_force: wp.array2d(dtype=wp.float64),
-    stale: wp.array(dtype=wp.bool),
-    fed: wp.array(dtype=wp.bool),
-    loud_count: wp.array(dtype=wp.int32),
-):
-    lane = wp.tid()
-    came = fresh[lane]
-    if came:
-        newest_flags[lane] = flags[lane]
-        for column in range(rows.shape[1]):
-            newest_rows[lane, column] = rows[lane, column]
-        tool_force[lane, 0] = force[lane, 0]
-        tool_force[lane, 1] = force[lane, 1]
-    quiet = (steady[lane] and (not (silence_s[lane] > max_age_s[lane]))
-             and (newest_flags[lane] & quiet_mask) == quiet_value)
-    if came and quiet:
-        stale[lane] = True
-    fed[lane] = not quiet
-    if not quiet:
-        wp.atomic_add(loud_count, 0, 1)
+@functools.cache
+def quiet_kernel(columns: int) -> Any:
+    """The quiet-lane kernel for message rows of ``columns`` columns (the copy of a fresh
+    message unrolled: a loop over an array's shape runs about twice as long on Warp's CPU
+    device). One Warp module per column count."""
+
+    @wp.kernel(module=f"{__name__}.quiet_{columns}")
+    def quiet(
+        fresh: wp.array(dtype=wp.bool),
+        flags: wp.array(dtype=wp.int64),
+        rows: wp.array2d(dtype=wp.float64),
+        force: wp.array2d(dtype=wp.float64),
+        silence_s: wp.array(dtype=wp.float64),
+        steady: wp.array(dtype=wp.bool),
+        max_age_s: wp.array(dtype=wp.float64),
+        quiet_mask: wp.int64,
+        quiet_value: wp.int64,
+        newest_flags: wp.array(dtype=wp.int64),
+        newest_rows: wp.array2d(dtype=wp.float64),
+        tool_force: wp.array2d(dtype=wp.float64),
+        stale: wp.array(dtype=wp.bool),
+        fed: wp.array(dtype=wp.bool),
+        loud_count: wp.array(dtype=wp.int32),
+    ):
+        lane = wp.tid()
+        came = fresh[lane]
+        if came:
+            newest_flags[lane] = flags[lane]
+            for column in range(columns):
+                newest_rows[lane, column] = rows[lane, column]
+            tool_force[lane, 0] = force[lane, 0]
+            tool_force[lane, 1] = force[lane, 1]
+        quiet = (steady[lane] and (not (silence_s[lane] > max_age_s[lane]))
+                 and (newest_flags[lane] & quiet_mask) == quiet_value)
+        if came and quiet:
+            stale[lane] = True
+        fed[lane] = not quiet
+        if not quiet:
+            wp.atomic_add(loud_count, 0, 1)
+
+    return quiet
 
 
 class QuietLanes:
@@ -89,7 +100,7 @@ class QuietLanes:
             (self.loud_count, wp.int32))]
         self._warp_arrays = [*arrays, *outputs]  # they own nothing: views of the above
         self._launch = ReplayedLaunch(wp.launch(
-            quiet_kernel, dim=lanes, device=DEVICE,
+            quiet_kernel(self.rows.shape[1]), dim=lanes, device=DEVICE,
             inputs=[*arrays, QUIET_MASK, QUIET_VALUE, *outputs], record_cmd=True))
 
     def run(self, fresh: np.ndarray, flags: np.ndarray, rows: np.ndarray,
