@@ -389,7 +389,6 @@ class LockstepSimulator:
             slave_state.gain_ratio = np.ones(lanes)
         handle_arrivals = _Arrivals(handle_line, ts)
         tool_arrivals = _Arrivals(tool_line, ts)
-        handle_message = np.ones((lanes, handle_columns))
 
         window = max(1, int(round(window_s / ts)))
         force_ratio = np.array([a.force_ratio_ah2 for a in self.model.axes])
@@ -416,6 +415,8 @@ class LockstepSimulator:
                 else:
                     master_tick.supervise_columns(now_s, tool_arrivals.tool_columns(
                         k, tool_rows), yh, tool_arrivals.silence_s)
+                # the message sent at k, written in place (every column, every tick)
+                handle_message = handle_line.slot(k)
                 if governed is not None:  # k on the master now, on the slave with the message
                     master_tick.state.gain_ratio[:] = governed.update(
                         k, ts, tool_line.schedule, handle_line.schedule)
@@ -429,14 +430,14 @@ class LockstepSimulator:
                     master_tick.state.peer_energy_J[:] = tool_rows[:, 7]
                     master_tick.state.peer_target_m[:] = tool_rows[:, 2:4] / ratio
                 used = master_tick.control(fh, yh)
-                command = used.command_m.copy()
+                # a view the master's next control overwrites: the rig reads it before then
+                command = used.command_m
                 handle_message[:, 0:2] = used.handle_force_used_N
                 handle_message[:, 2:4] = yh
                 handle_message[:, 4] = used.flag_values
                 handle_message[:, 5] = used.force_scale
                 if tdpa:
                     handle_message[:, handle_energy_column] = master_tick.state.passivity.sent_J
-                handle_line.send(k, handle_message)
                 # slave: poll -> supervise -> node -> send
                 received = handle_line.receive(k)
                 yt = slave_state.tool[:, 0::2]  # t_k: read into the tally before the step
