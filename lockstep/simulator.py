@@ -590,13 +590,22 @@ class _Arrivals:
         self.period_s = period_s
         self.silence_s = line.silence_s
         self._no_epoch = np.zeros(self.lanes, np.int64)
+        # the columns of the line's outputs, made once: the same arrays every tick (updated
+        # in place by each receive), which the quiet-lane kernels then read in place
+        self._tool_columns: tuple[np.ndarray, ToolColumns] | None = None
+        self._handle_columns: tuple[np.ndarray, HandleColumns] | None = None
 
     def tool_columns(self, tick: int, rows: np.ndarray) -> ToolColumns:
         """The tick's tool messages as columns (``MasterTick.supervise_columns``); ``rows``:
         the line's receive at ``tick``."""
+        made = self._tool_columns
+        if made is not None and made[0] is rows:
+            return made[1]
         line = self.line
-        return ToolColumns(line.fresh, rows[:, 0:2], line.flags, line.columns,
-                           self._tool_state)
+        columns = ToolColumns(line.fresh, rows[:, 0:2], line.flags, line.columns,
+                              self._tool_state)
+        self._tool_columns = (rows, columns)
+        return columns
 
     def _tool_state(self, lane: int, row: np.ndarray) -> ToolState:
         """The ``ToolState`` of a ``tool_columns`` row (the tool line's first 7 columns, then
@@ -608,10 +617,15 @@ class _Arrivals:
     def handle_columns(self, tick: int, rows: np.ndarray) -> HandleColumns:
         """The tick's handle messages as columns (``SlaveTick.supervise_columns``); ``rows``:
         the line's receive at ``tick``."""
+        made = self._handle_columns
+        if made is not None and made[0] is rows:
+            return made[1]
         line = self.line
-        return HandleColumns(line.fresh, rows[:, 0:2], rows[:, 2:4], line.flags,
-                             self._no_epoch, line.send_time_ns, rows[:, 5], line.columns,
-                             self._handle_state)
+        columns = HandleColumns(line.fresh, rows[:, 0:2], rows[:, 2:4], line.flags,
+                                self._no_epoch, line.send_time_ns, rows[:, 5], line.columns,
+                                self._handle_state)
+        self._handle_columns = (rows, columns)
+        return columns
 
     def _handle_state(self, lane: int, row: np.ndarray) -> HandleState:
         """The ``HandleState`` of a ``handle_columns`` row (the handle line's first 6

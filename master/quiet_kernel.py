@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from haptic.common.runtime.replayed_launch import ReplayedLaunch, host_array
+from haptic.common.runtime.replayed_launch import InPlaceInputs, ReplayedLaunch, host_array
 from haptic.common.wire.messages import Flags
 
 # The programs print JSON on stdout: Warp must not announce itself there.
@@ -77,9 +77,9 @@ def quiet_kernel(columns: int) -> Any:
 
 class QuietLanes:
     """The recorded launch over one :class:`~haptic.master.tick.MasterTick`'s arrays
-    (``views``: name -> numpy array, see :func:`quiet_kernel`), and the tick's message
-    columns copied into buffers of its own (copies of a few hundred values cost less than
-    checking whether the kernel could read them in place)."""
+    (``views``: name -> numpy array, see :func:`quiet_kernel`); the tick's message columns
+    are copied into buffers of its own, or read in place while a caller hands the very same
+    arrays every tick (:class:`~haptic.common.runtime.replayed_launch.InPlaceInputs`)."""
 
     def __init__(self, lanes: int, views: dict[str, np.ndarray]) -> None:
         f64, i64, flag = wp.float64, wp.int64, wp.bool
@@ -91,17 +91,26 @@ class QuietLanes:
         self.fed = np.zeros(lanes, bool)
         self.loud_count = np.zeros(1, np.int32)
 
-        arrays = [host_array(array, dtype) for array, dtype in (
-            (self.fresh, flag), (self.flags, i64), (self.rows, f64), (self.force_N, f64),
-            (self.silence_s, f64), (views["steady"], flag), (views["max_age_s"], f64))]
+        held = [host_array(array, dtype) for array, dtype in (
+            (views["steady"], flag), (views["max_age_s"], f64))]
         outputs = [host_array(array, dtype) for array, dtype in (
             (views["newest_flags"], i64), (views["newest_rows"], f64),
             (views["tool_force_N"], f64), (views["stale"], flag), (self.fed, flag),
             (self.loud_count, wp.int32))]
-        self._warp_arrays = [*arrays, *outputs]  # they own nothing: views of the above
-        self._launch = ReplayedLaunch(wp.launch(
-            quiet_kernel(self.rows.shape[1]), dim=lanes, device=DEVICE,
-            inputs=[*arrays, QUIET_MASK, QUIET_VALUE, *outputs], record_cmd=True))
+        self._warp_arrays = [*held, *outputs]  # they own nothing: views of the above
+        kernel = quiet_kernel(self.rows.shape[1])
+
+        def record(messages: list) -> ReplayedLaunch:
+            return ReplayedLaunch(wp.launch(
+                kernel, dim=lanes, device=DEVICE,
+                inputs=[*messages, *held, QUIET_MASK, QUIET_VALUE, *outputs], record_cmd=True))
+
+        #: the tick's message columns: copied into these buffers, or read in place while a
+        #: caller hands the same arrays every tick (the lockstep's delay line)
+        self.inputs = InPlaceInputs(
+            (self.fresh, self.flags, self.rows, self.force_N, self.silence_s),
+            (flag, i64, f64, f64, f64), ("same_kind", "unsafe", "same_kind", "same_kind",
+                                         "same_kind"), record)
 
     def run(self, fresh: np.ndarray, flags: np.ndarray, rows: np.ndarray,
             force_N: np.ndarray, silence_s: np.ndarray) -> np.ndarray | None:
@@ -110,13 +119,8 @@ class QuietLanes:
         ((lanes,) bool, valid until the next run), or None when every lane is quiet."""
         if rows.shape != self.rows.shape:
             raise ValueError("quiet lanes: the rows must have the shape of the stored rows")
-        np.copyto(self.fresh, fresh)
-        np.copyto(self.flags, flags, casting="unsafe")  # as astype
-        np.copyto(self.rows, rows)
-        np.copyto(self.force_N, force_N)
-        np.copyto(self.silence_s, silence_s)
         self.loud_count[0] = 0
-        self._launch.launch()
+        self.inputs.launch((fresh, flags, rows, force_N, silence_s))  # flags: as astype
         return self.fed if self.loud_count[0] else None
 
 

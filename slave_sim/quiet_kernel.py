@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from haptic.common.runtime.replayed_launch import ReplayedLaunch, host_array
+from haptic.common.runtime.replayed_launch import InPlaceInputs, ReplayedLaunch, host_array
 from haptic.common.wire.messages import Flags
 from haptic.slave_sim.input_guard import InputGuardSettings
 
@@ -165,8 +165,10 @@ def guard_limits(settings: InputGuardSettings, period_s: float) -> Any:
 
 class QuietLanes:
     """The recorded launch over one :class:`~haptic.slave_sim.tick.SlaveTick`'s persistent
-    arrays (``views``: name -> numpy array, see :func:`quiet_kernel`), and the tick's message
-    columns copied into buffers of its own. :meth:`run` returns the lanes that need their
+    arrays (``views``: name -> numpy array, see :func:`quiet_kernel`); the tick's message
+    columns are copied into buffers of its own, or read in place while a caller hands the
+    very same arrays every tick (:class:`~haptic.common.runtime.replayed_launch.
+    InPlaceInputs`). :meth:`run` returns the lanes that need their
     guard and supervisor."""
 
     def __init__(self, lanes: int, limits: Any, views: dict[str, np.ndarray]) -> None:
@@ -181,10 +183,11 @@ class QuietLanes:
         self.silence_s = np.zeros(lanes)
         self.quiet = np.zeros(lanes, bool)
         self.loud_count = np.zeros(1, np.int32)
-        arrays = [
+        messages = [
             (self.fresh, flag), (self.force_N, f64), (self.position_m, f64),
             (self.flags, i64), (self.epoch, i64), (self.send_time_ns, i64),
-            (self.force_scale, f64), (self.silence_s, f64),
+            (self.force_scale, f64), (self.silence_s, f64)]
+        held = [
             (views["guard_faulted"], flag), (views["guard_has_last"], flag),
             (views["steady"], flag), (views["max_age_s"], f64), (views["tool"], f64),
             (views["work_area_m"], f64)]
@@ -194,27 +197,32 @@ class QuietLanes:
             (views["echo_send_time_ns"], i64), (views["force_scale"], f64),
             (views["unseen"], i64), (views["admitted"], flag), (self.quiet, flag),
             (self.loud_count, wp.int32)]
-        self._warp_arrays = [host_array(array, dtype) for array, dtype in arrays + outputs]
-        inputs = self._warp_arrays[:len(arrays)]
-        self._launch = ReplayedLaunch(wp.launch(
-            quiet_kernel, dim=lanes, device=DEVICE,
-            inputs=[*inputs, limits, *self._warp_arrays[len(arrays):]], record_cmd=True))
+        self._warp_arrays = [host_array(array, dtype) for array, dtype in held + outputs]
+        held_arrays = self._warp_arrays[:len(held)]
+        output_arrays = self._warp_arrays[len(held):]
+
+        def record(message_arrays: list) -> ReplayedLaunch:
+            return ReplayedLaunch(wp.launch(
+                quiet_kernel, dim=lanes, device=DEVICE,
+                inputs=[*message_arrays, *held_arrays, limits, *output_arrays],
+                record_cmd=True))
+
+        #: the tick's message columns: copied into these buffers (the integer ones as
+        #: astype), or read in place while a caller hands the same arrays every tick (the
+        #: lockstep's delay line)
+        self.inputs = InPlaceInputs(
+            [array for array, _ in messages], [kind for _, kind in messages],
+            ("same_kind", "same_kind", "same_kind", "unsafe", "unsafe", "unsafe",
+             "same_kind", "same_kind"), record)
 
     def run(self, fresh: np.ndarray, force_N: np.ndarray, position_m: np.ndarray,
             flags: np.ndarray, epoch: np.ndarray, send_time_ns: np.ndarray,
             force_scale: np.ndarray, silence_s: np.ndarray) -> list[int]:
         """One tick's messages (columns, see ``HandleColumns``) and silences (s): takes the
         quiet lanes' messages into the bound arrays and returns the other lanes, in order."""
-        np.copyto(self.fresh, fresh)
-        np.copyto(self.force_N, force_N)
-        np.copyto(self.position_m, position_m)
-        np.copyto(self.flags, flags, casting="unsafe")
-        np.copyto(self.epoch, epoch, casting="unsafe")
-        np.copyto(self.send_time_ns, send_time_ns, casting="unsafe")
-        np.copyto(self.force_scale, force_scale)
-        np.copyto(self.silence_s, silence_s)
         self.loud_count[0] = 0
-        self._launch.launch()
+        self.inputs.launch((fresh, force_N, position_m, flags, epoch, send_time_ns,
+                            force_scale, silence_s))
         if not self.loud_count[0]:
             return []
         return np.flatnonzero(~self.quiet).tolist()

@@ -1,5 +1,6 @@
 """The master's quiet-lane kernel (master/quiet_kernel.py) against its definition, tick after
-tick, with message arrays read in place, replaced by others, and not contiguous."""
+tick, with message arrays read in place, replaced by others, and not contiguous, whether the
+kernel reads them in place or copies them."""
 
 from __future__ import annotations
 
@@ -30,21 +31,24 @@ def test_the_kernel_stores_fresh_messages_and_finds_the_loud_lanes() -> None:
     quiet = QuietLanes(LANES, views)
     fresh, flags = np.zeros(LANES, bool), np.zeros(LANES, np.int64)
     rows, silence = np.zeros((LANES, 8)), np.zeros(LANES)
+    force = rows[:, 0:2]  # a view, not contiguous: read in place too
     loud_ticks = 0
+    in_place = []
     for tick in range(30):
-        if tick == 10:  # other arrays: the launch is recorded again
+        if tick == 10:  # other arrays: copied once more, then read in place
             fresh, flags = np.zeros(LANES, bool), np.zeros(LANES, np.int64)
             rows, silence = np.zeros((LANES, 8)), np.zeros(LANES)
+            force = rows[:, 0:2]
         fresh[...] = rng.random(LANES) < 0.7
         flags[...] = rng.choice(FLAG_CHOICES, LANES)
         rows[...] = rng.standard_normal((LANES, 8))
         silence[...] = rng.choice([0.0, 0.01, MAX_AGE_S, 0.03], LANES)
-        force = rows[:, 0:2]  # a view, not contiguous: copied
-        if tick >= 20:  # not contiguous, another dtype: copied too
+        if tick >= 20:  # new arrays each tick, not contiguous, another dtype: copied
             fed = quiet.run(fresh.astype(np.int8) != 0, flags.astype(np.int32),
                             np.asfortranarray(rows), force, silence[::1])
         else:
             fed = quiet.run(fresh, flags, rows, force, silence)
+        in_place.append(quiet.inputs.in_place)
         # the definition, in numpy
         newest_flags = np.where(fresh, flags, expected["newest_flags"])
         expected["newest_flags"] = newest_flags
@@ -62,6 +66,7 @@ def test_the_kernel_stores_fresh_messages_and_finds_the_loud_lanes() -> None:
             loud_ticks += 1
             np.testing.assert_array_equal(fed, ~is_quiet)
     assert loud_ticks > 20
+    assert in_place == [False, False] + [True] * 8 + [False, False] + [True] * 8 + [False] * 10
 
 
 def test_rows_of_another_shape_are_refused() -> None:
