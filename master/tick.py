@@ -318,6 +318,7 @@ class MasterTick:
         node's safety layer latches that lane's supervisor. Returns what the node used."""
         enabled = self.enabled
         state = self.state
+        outputs = None
         if tool_force_N is None:
             tool_force_N = self._tool_force
         if self.lanes == 1:  # the program's lane: Python scalars are cheaper than numpy calls
@@ -332,7 +333,10 @@ class MasterTick:
             inputs[:, 4:6] = tool_force_N
             events_before = len(state.events)
             self.node.step_inputs(state)
-            if all_on:
+            if all_on and self.lanes > 1:  # the node's own arrays (the lockstep's lanes)
+                outputs = (state.command_m, state.handle_force_used_N,
+                           state.tool_force_used_N, state.force_scale)
+            elif all_on:
                 self._command[...] = state.command_m
                 self._handle_used[...] = state.handle_force_used_N
                 self._tool_used[...] = state.tool_force_used_N
@@ -365,9 +369,9 @@ class MasterTick:
             if np.count_nonzero(enabled) != self.lanes:
                 off = ~enabled
                 self._command[off] = self._hold[off]
-        values = self._flag_values
-        return MasterTickOutput(self._command, self._handle_used, self._tool_used, self._scale,
-                                enabled, values)
+        if outputs is None:
+            outputs = (self._command, self._handle_used, self._tool_used, self._scale)
+        return MasterTickOutput(*outputs, enabled, self._flag_values)
 
     def _switched(self) -> np.ndarray:
         """(lanes,) bool: where the governor has a standby passivity layer switched on."""
