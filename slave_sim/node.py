@@ -276,8 +276,13 @@ class SlaveNode:
         inputs[:, 0:2] = handle_force_N
         inputs[:, 2:4] = handle_position_m
         inputs[:, 4:6] = state.tool_force_N
-        inputs[:, 6] = 1.0 if state.tool_force_scale is None else state.tool_force_scale
-        inputs[:, 7] = 1.0 if state.gain_ratio is None else state.gain_ratio
+        scale, gain = state.tool_force_scale, state.gain_ratio
+        if scale is not None or not runtime.unit_scale:  # 1 where none: written once
+            inputs[:, 6] = 1.0 if scale is None else scale
+            runtime.unit_scale = scale is None
+        if gain is not None or not runtime.unit_gain:
+            inputs[:, 7] = 1.0 if gain is None else gain
+            runtime.unit_gain = gain is None
         port = state.passivity
         if port is not None and not (bool(port.active[0]) if runtime.lanes == 1
                                      else port.active.any()):  # on standby: the paper's scheme
@@ -445,6 +450,10 @@ class _NodeKernels:
         self.lanes = lanes
         #: (lanes, 8) the step's inputs (:data:`~haptic.slave_sim.node_kernels.INPUT_COLUMNS`)
         self.inputs = inputs.numpy()
+        #: whether the scale and gain columns hold the 1 of a state without them (the step
+        #: then leaves them as they are)
+        self.unit_scale = False
+        self.unit_gain = False
         self.compensator = compensator.numpy()
         self.tool = tool.numpy()
         self.drift = drift.numpy()
