@@ -333,14 +333,9 @@ class MasterTick:
             inputs[:, 4:6] = tool_force_N
             events_before = len(state.events)
             self.node.step_inputs(state)
-            if all_on and self.lanes > 1:  # the node's own arrays (the lockstep's lanes)
+            if all_on:  # the node's own arrays, which its next step overwrites
                 outputs = (state.command_m, state.handle_force_used_N,
                            state.tool_force_used_N, state.force_scale)
-            elif all_on:
-                self._command[...] = state.command_m
-                self._handle_used[...] = state.handle_force_used_N
-                self._tool_used[...] = state.tool_force_used_N
-                self._scale[...] = state.force_scale
             else:  # the off lanes' steps do not count: they start afresh when forces return
                 state.events[events_before:] = [event for event in state.events[events_before:]
                                                 if enabled[event.lane]]

@@ -132,7 +132,8 @@ class InPlaceInputs:
         self._own = record(self._keep)
         self._bound: ReplayedLaunch | None = None
         self._bound_ids: tuple[int, ...] | None = None
-        self._bound_sources: tuple[np.ndarray, ...] = ()
+        #: the bound arrays and their Warp views, held so their identities stay theirs
+        self._bound_keep: tuple[Any, ...] = ()
         self._seen_ids: tuple[int, ...] | None = None
         self._seen_sources: tuple[np.ndarray, ...] = ()
         self._refused_ids: tuple[int, ...] | None = None
@@ -173,7 +174,7 @@ class InPlaceInputs:
             self._refused_ids = ids
             return
         self._bound = self._record(views)
-        self._bound_ids, self._bound_sources = ids, (sources, views)  # type: ignore[assignment]
+        self._bound_ids, self._bound_keep = ids, (sources, views)
 
 
 __all__ = ["InPlaceInputs", "ReplayedLaunch", "host_array", "host_view"]
