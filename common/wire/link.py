@@ -48,6 +48,8 @@ from haptic.common.wire.messages import (
     Message,
     ToolState,
     encode_around_send_time,
+    encode_handle_around_send_time,
+    encode_tool_around_send_time,
     send_time_bytes,
 )
 from haptic.common.wire.receive import LinkStats, ReceivePath
@@ -240,9 +242,16 @@ class Link:
         the put, so the measured one-way delay is the link's, not the encoder's. A Zenoh
         error is counted in ``send_errors``, not raised: the loop must keep its period. Raises
         ``ValueError`` for a non-finite value (the nodes never send one)."""
-        if message.KIND != self._send_kind:
+        self._check_kind(message.KIND)
+        return replace(message, send_time_ns=self._publish(*encode_around_send_time(message)))
+
+    def _check_kind(self, kind: int) -> None:
+        if kind != self._send_kind:
             raise TypeError(f"the {self.config.side} side sends kind {self._send_kind} only")
-        before, after = encode_around_send_time(message)
+
+    def _publish(self, before: bytes, after: bytes) -> int:
+        """Put the message encoded around its send time (:meth:`send`); returns that time,
+        ns (``CLOCK_REALTIME``)."""
         publisher = self._publisher
         if publisher is None:
             raise RuntimeError("link is not open")
@@ -252,7 +261,7 @@ class Link:
         if auth is not None:
             if not auth.paired:  # nothing leaves before the pairing: the peer would drop it
                 self.unpaired_sends += 1
-                return replace(message, send_time_ns=send_ns)
+                return send_ns
             payload += auth.tag(payload)
         try:
             if self._instrumentation is not None:
@@ -262,7 +271,7 @@ class Link:
             self.sent += 1
         except Exception:  # noqa: BLE001 - a failed put is a lost message, never a crash
             self.send_errors += 1
-        return replace(message, send_time_ns=send_ns)
+        return send_ns
 
     def send_handle(
         self,
@@ -275,10 +284,15 @@ class Link:
     ) -> HandleState:
         """Master: stamp and publish the handle's force (N), position (m), the Ch1 gain k
         its compensator uses (0: not said), the passivity layer's handed-over energy (J) and
-        the force ramp's factor at this sample (0..1)."""
-        message = HandleState(self.epoch, self.next_sequence(), 0, flags, handle_force_N,
-                              handle_position_m, gain_k, energy_J, force_scale)
-        return self.send(message)  # type: ignore[return-value]
+        the force ramp's factor at this sample (0..1); returns the message as sent (as
+        :meth:`send`, encoded from the fields without building it first)."""
+        self._check_kind(KIND_HANDLE)
+        epoch, seq = self.epoch, self.next_sequence()
+        send_ns = self._publish(*encode_handle_around_send_time(
+            epoch, seq, flags, handle_force_N, handle_position_m, gain_k, energy_J,
+            force_scale))
+        return HandleState(epoch, seq, send_ns, flags, handle_force_N, handle_position_m,
+                           gain_k, energy_J, force_scale)
 
     def send_tool(
         self,
@@ -293,13 +307,15 @@ class Link:
     ) -> ToolState:
         """Slave: stamp and publish the tool's force (N), position (m), velocity (m/s), the
         clay's status, the echo of the newest handle message's send time (ns; 0: none) and
-        the passivity layer's handed-over energy (J)."""
-        message = ToolState(
-            self.epoch, self.next_sequence(), 0, flags, tool_force_N, tool_position_m,
-            tool_velocity_m_s, clay_engagement, removed_volume_m3, echo_send_time_ns,
-            energy_J,
-        )
-        return self.send(message)  # type: ignore[return-value]
+        the passivity layer's handed-over energy (J); returns the message as sent."""
+        self._check_kind(KIND_TOOL)
+        epoch, seq = self.epoch, self.next_sequence()
+        send_ns = self._publish(*encode_tool_around_send_time(
+            epoch, seq, flags, tool_force_N, tool_position_m, tool_velocity_m_s,
+            clay_engagement, removed_volume_m3, echo_send_time_ns, energy_J))
+        return ToolState(epoch, seq, send_ns, flags, tool_force_N, tool_position_m,
+                         tool_velocity_m_s, clay_engagement, removed_volume_m3,
+                         echo_send_time_ns, energy_J)
 
     # -- receiving ---------------------------------------------------------------------------
 

@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import enum
 import math
+import struct
 from dataclasses import dataclass
 from typing import Any
 
@@ -214,43 +215,86 @@ Message = HandleState | ToolState
 _packer = msgpack.Packer(use_bin_type=True, use_single_float=False)
 
 
+def _header(values: int, kind: int) -> bytes:
+    """The array header, version and kind of a message with ``values`` payload values."""
+    return (_packer.pack_array_header(_HEADER_LENGTH + values) + _packer.pack(SCHEMA_VERSION)
+            + _packer.pack(kind))
+
+
+_HANDLE_HEADER = _header(_HANDLE_FLOATS, KIND_HANDLE)
+_TOOL_HEADER = _header(_TOOL_VALUES, KIND_TOOL)
+#: msgpack's float 64 (0xcb and 8 big-endian bytes) per payload float, in one pack.
+_HANDLE_BODY = struct.Struct(">" + "Bd" * _HANDLE_FLOATS)
+_TOOL_BODY = struct.Struct(">" + "Bd" * _TOOL_FLOATS)
+_F64 = 0xCB
+#: The flags' msgpack bytes by value (a positive fixint below 128, ``cc nn`` above).
+_FLAG_BYTES = tuple(msgpack.packb(value) for value in range(_MAX_FLAGS + 1))
+_pack = _packer.pack
+_isfinite = math.isfinite
+
+
+def encode_handle_around_send_time(
+    epoch: int, seq: int, flags: int, handle_force_N: tuple[float, float],
+    handle_position_m: tuple[float, float], gain_k: float, energy_J: float,
+    force_scale: float,
+) -> tuple[bytes, bytes]:
+    """:func:`encode_around_send_time` of the :class:`HandleState` of these fields (N, m, J),
+    without building it first."""
+    fx, fy = handle_force_N
+    yx, yy = handle_position_m
+    if not (_isfinite(fx) and _isfinite(fy) and _isfinite(yx) and _isfinite(yy)
+            and _isfinite(gain_k) and _isfinite(energy_J) and _isfinite(force_scale)):
+        raise ValueError("non-finite value in HandleState: "
+                         f"{[fx, fy, yx, yy, gain_k, energy_J, force_scale]}")
+    before = _HANDLE_HEADER + _pack(int(epoch)) + _pack(int(seq))
+    after = _FLAG_BYTES[int(flags)] + _HANDLE_BODY.pack(
+        _F64, fx, _F64, fy, _F64, yx, _F64, yy, _F64, gain_k, _F64, energy_J,
+        _F64, force_scale)
+    return before, after
+
+
+def encode_tool_around_send_time(
+    epoch: int, seq: int, flags: int, tool_force_N: tuple[float, float],
+    tool_position_m: tuple[float, float], tool_velocity_m_s: tuple[float, float],
+    clay_engagement: float, removed_volume_m3: float, echo_send_time_ns: int,
+    energy_J: float,
+) -> tuple[bytes, bytes]:
+    """:func:`encode_around_send_time` of the :class:`ToolState` of these fields (N, m, m/s,
+    m^3, ns, J), without building it first."""
+    fx, fy = tool_force_N
+    px, py = tool_position_m
+    vx, vy = tool_velocity_m_s
+    echo = int(echo_send_time_ns)
+    if not 0 <= echo <= _MAX_U63:
+        raise ValueError(f"echo_send_time_ns {echo} out of range")
+    if not (_isfinite(fx) and _isfinite(fy) and _isfinite(px) and _isfinite(py)
+            and _isfinite(vx) and _isfinite(vy) and _isfinite(clay_engagement)
+            and _isfinite(removed_volume_m3) and _isfinite(energy_J)):
+        values = [fx, fy, px, py, vx, vy, clay_engagement, removed_volume_m3, energy_J]
+        raise ValueError(f"non-finite value in ToolState: {values}")
+    before = _TOOL_HEADER + _pack(int(epoch)) + _pack(int(seq))
+    after = _FLAG_BYTES[int(flags)] + _TOOL_BODY.pack(
+        _F64, fx, _F64, fy, _F64, px, _F64, py, _F64, vx, _F64, vy, _F64, clay_engagement,
+        _F64, removed_volume_m3, _F64, energy_J) + _pack(echo)
+    return before, after
+
+
 def encode_around_send_time(message: Message) -> tuple[bytes, bytes]:
     """The msgpack bytes of ``message`` before and after its send time: the payload is
     ``before + send_time_bytes(t) + after`` for any send time ``t``. The sender stamps the
     time last, so the measured one-way delay starts when the message goes to Zenoh, not
-    before its encoding. Raises ``ValueError`` for a non-finite value."""
-    tail: tuple[int, ...] = ()
+    before its encoding. Every payload number is a float 64, whatever its value. Raises
+    ``ValueError`` for a non-finite value."""
     if isinstance(message, HandleState):
-        floats = (*message.handle_force_N, *message.handle_position_m, message.gain_k,
-                  message.energy_J, message.force_scale)
-    elif isinstance(message, ToolState):
-        floats = (
-            *message.tool_force_N,
-            *message.tool_position_m,
-            *message.tool_velocity_m_s,
-            message.clay_engagement,
-            message.removed_volume_m3,
-            message.energy_J,
-        )
-        echo = int(message.echo_send_time_ns)
-        if not 0 <= echo <= _MAX_U63:
-            raise ValueError(f"echo_send_time_ns {echo} out of range")
-        tail = (echo,)
-    else:
-        raise TypeError(f"not a message: {type(message).__name__}")
-    values = [float(v) for v in floats]
-    if not all(map(math.isfinite, values)):
-        raise ValueError(f"non-finite value in {type(message).__name__}: {values}")
-    pack = _packer.pack
-    before = b"".join((
-        _packer.pack_array_header(6 + len(values) + len(tail)),
-        pack(SCHEMA_VERSION),
-        pack(message.KIND),
-        pack(int(message.epoch)),
-        pack(int(message.seq)),
-    ))
-    after = b"".join((pack(int(message.flags)), *map(pack, values), *map(pack, tail)))
-    return before, after
+        return encode_handle_around_send_time(
+            message.epoch, message.seq, message.flags, message.handle_force_N,
+            message.handle_position_m, message.gain_k, message.energy_J, message.force_scale)
+    if isinstance(message, ToolState):
+        return encode_tool_around_send_time(
+            message.epoch, message.seq, message.flags, message.tool_force_N,
+            message.tool_position_m, message.tool_velocity_m_s, message.clay_engagement,
+            message.removed_volume_m3, message.echo_send_time_ns, message.energy_J)
+    raise TypeError(f"not a message: {type(message).__name__}")
 
 
 def send_time_bytes(send_time_ns: int) -> bytes:
@@ -264,10 +308,6 @@ def encode(message: Message) -> bytes:
     return before + send_time_bytes(message.send_time_ns) + after
 
 
-def _is_int(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
 def _floats(values: list[Any]) -> list[float]:
     for value in values:
         if not isinstance(value, float | int) or isinstance(value, bool):
@@ -278,6 +318,18 @@ def _floats(values: list[Any]) -> list[float]:
     return result
 
 
+def _payload_floats(values: list[Any]) -> list[float]:
+    """``values`` as finite floats (:func:`_floats`), the common case first: a sender of this
+    schema writes every payload number as a float64, which needs no conversion."""
+    if _ALL_FLOATS.issuperset(map(type, values)) and all(map(math.isfinite, values)):
+        return values
+    return _floats(values)
+
+
+_ALL_FLOATS = frozenset((float,))
+_unpackb = msgpack.unpackb
+
+
 def decode(payload: bytes, expected_kind: int) -> Message:
     """Parse and validate one message of ``expected_kind``.
 
@@ -285,36 +337,38 @@ def decode(payload: bytes, expected_kind: int) -> Message:
     wrong shape or types, values out of range), ``unknown_version``, ``wrong_kind`` or
     ``non_finite``.
     """
+    # Integer checks are ``type(x) is int``: msgpack decodes an integer as exactly ``int``
+    # and true/false as ``bool``, which is not one here.
     if len(payload) > _MAX_PAYLOAD_BYTES:
         raise DecodeError(DropReason.MALFORMED, f"{len(payload)} bytes is too long")
     try:
-        fields = msgpack.unpackb(payload, use_list=True, raw=False, strict_map_key=True)
+        fields = _unpackb(payload, use_list=True, raw=False, strict_map_key=True)
     except Exception as error:  # msgpack raises many types for corrupt input
         raise DecodeError(DropReason.MALFORMED, f"not msgpack: {type(error).__name__}") from None
-    if not isinstance(fields, list) or len(fields) < _HEADER_LENGTH:
+    if type(fields) is not list or len(fields) < _HEADER_LENGTH:
         raise DecodeError(DropReason.MALFORMED, "not an array with a header")
     version, kind, epoch, seq, send_time_ns, flags = fields[:_HEADER_LENGTH]
-    if not _is_int(version):
-        raise DecodeError(DropReason.MALFORMED, f"version {version!r} is not an integer")
-    if version != SCHEMA_VERSION:
+    if version != SCHEMA_VERSION or type(version) is not int:
+        if type(version) is not int:
+            raise DecodeError(DropReason.MALFORMED, f"version {version!r} is not an integer")
         raise DecodeError(DropReason.UNKNOWN_VERSION, f"version {version}", version)
-    if not _is_int(kind):
-        raise DecodeError(DropReason.MALFORMED, f"kind {kind!r} is not an integer")
-    if kind != expected_kind:
+    if kind != expected_kind or type(kind) is not int:
+        if type(kind) is not int:
+            raise DecodeError(DropReason.MALFORMED, f"kind {kind!r} is not an integer")
         raise DecodeError(DropReason.WRONG_KIND, f"kind {kind}, expected {expected_kind}")
-    if not (_is_int(epoch) and 0 <= epoch <= _MAX_U32):
+    if not (type(epoch) is int and 0 <= epoch <= _MAX_U32):
         raise DecodeError(DropReason.MALFORMED, f"epoch {epoch!r}")
-    if not (_is_int(seq) and 0 <= seq <= _MAX_U63):
+    if not (type(seq) is int and 0 <= seq <= _MAX_U63):
         raise DecodeError(DropReason.MALFORMED, f"seq {seq!r}")
-    if not (_is_int(send_time_ns) and 0 <= send_time_ns <= _MAX_U63):
+    if not (type(send_time_ns) is int and 0 <= send_time_ns <= _MAX_U63):
         raise DecodeError(DropReason.MALFORMED, f"send_time_ns {send_time_ns!r}")
-    if not (_is_int(flags) and 0 <= flags <= _MAX_FLAGS):
+    if not (type(flags) is int and 0 <= flags <= _MAX_FLAGS):
         raise DecodeError(DropReason.MALFORMED, f"flags {flags!r}")
     body = fields[_HEADER_LENGTH:]
     if kind == KIND_HANDLE:
         if len(body) != _HANDLE_FLOATS:
             raise DecodeError(DropReason.MALFORMED, f"handle payload has {len(body)} values")
-        v = _floats(body)
+        v = _payload_floats(body)
         if v[4] < 0.0:
             raise DecodeError(DropReason.MALFORMED, f"gain_k {v[4]} is negative")
         if v[5] < 0.0:
@@ -323,14 +377,14 @@ def decode(payload: bytes, expected_kind: int) -> Message:
             raise DecodeError(DropReason.MALFORMED, f"force_scale {v[6]} outside 0..1")
         return HandleState(
             epoch, seq, send_time_ns, _flags_of(flags), (v[0], v[1]), (v[2], v[3]), v[4],
-            energy_J=v[5], force_scale=v[6],
+            v[5], v[6],
         )
     if len(body) != _TOOL_VALUES:
         raise DecodeError(DropReason.MALFORMED, f"tool payload has {len(body)} values")
-    echo = body[_TOOL_FLOATS]
-    if not (_is_int(echo) and 0 <= echo <= _MAX_U63):
+    echo = body.pop()
+    if not (type(echo) is int and 0 <= echo <= _MAX_U63):
         raise DecodeError(DropReason.MALFORMED, f"echo_send_time_ns {echo!r}")
-    v = _floats(body[:_TOOL_FLOATS])
+    v = _payload_floats(body)
     if not 0.0 <= v[6] <= 1.0:
         raise DecodeError(DropReason.MALFORMED, f"clay_engagement {v[6]} outside 0..1")
     if v[7] < 0.0:
@@ -339,7 +393,7 @@ def decode(payload: bytes, expected_kind: int) -> Message:
         raise DecodeError(DropReason.MALFORMED, f"energy_J {v[8]} is negative")
     return ToolState(
         epoch, seq, send_time_ns, _flags_of(flags), (v[0], v[1]), (v[2], v[3]), (v[4], v[5]),
-        v[6], v[7], echo, energy_J=v[8],
+        v[6], v[7], echo, v[8],
     )
 
 

@@ -91,6 +91,47 @@ def test_encode_refuses_non_finite():
         encode(HandleState(0, 0, 0, Flags(0), (math.nan, 0.0), (0.0, 0.0)))
 
 
+flag_values = st.integers(0, 63)
+wide_send = st.integers(2**32, 2**63 - 1)  # where msgpack itself writes a uint64 too
+
+
+@settings(deadline=None)
+@given(epoch=st.integers(0, 2**32 - 1), seq=st.integers(0, 2**63 - 1), send=wide_send,
+       flags=flag_values, values=st.lists(finite, min_size=7, max_size=7))
+def test_handle_bytes_are_msgpacks_own(epoch, seq, send, flags, values):
+    """The field-wise encoder writes what msgpack writes for the message's field list."""
+    values[4:7] = abs(values[4]), abs(values[5]), min(abs(values[6]), 1.0)
+    message = HandleState(epoch, seq, send, Flags(flags), tuple(values[0:2]),
+                          tuple(values[2:4]), *values[4:7])
+    fields = [SCHEMA_VERSION, KIND_HANDLE, epoch, seq, send, flags, *values]
+    assert encode(message) == msgpack.packb(fields, use_single_float=False)
+
+
+@settings(deadline=None)
+@given(epoch=st.integers(0, 2**32 - 1), seq=st.integers(0, 2**63 - 1), send=wide_send,
+       flags=flag_values, values=st.lists(finite, min_size=9, max_size=9),
+       echo=st.integers(0, 2**63 - 1))
+def test_tool_bytes_are_msgpacks_own(epoch, seq, send, flags, values, echo):
+    values[6:9] = min(abs(values[6]), 1.0), abs(values[7]), abs(values[8])
+    message = ToolState(epoch, seq, send, Flags(flags), tuple(values[0:2]), tuple(values[2:4]),
+                        tuple(values[4:6]), values[6], values[7], echo, values[8])
+    fields = [SCHEMA_VERSION, KIND_TOOL, epoch, seq, send, flags, *values, echo]
+    assert encode(message) == msgpack.packb(fields, use_single_float=False)
+    assert decode(encode(message), KIND_TOOL) == message
+
+
+def test_payload_numbers_of_another_encoder_are_read_as_floats():
+    """A peer may write whole numbers as integers or floats as float 32: the same message."""
+    as_ints = [SCHEMA_VERSION, KIND_TOOL, 1, 2, 3, 0, 1, -2, 0, 0, 0, 0, 1, 0, 0, 0]
+    decoded = decode(msgpack.packb(as_ints), KIND_TOOL)
+    assert decoded == ToolState(1, 2, 3, Flags(0), (1.0, -2.0), (0.0, 0.0), (0.0, 0.0), 1.0,
+                                0.0, 0, 0.0)
+    assert all(type(v) is float for v in (*decoded.tool_force_N, decoded.clay_engagement))
+    handle = [SCHEMA_VERSION, KIND_HANDLE, 1, 2, 3, 0, 0.5, 0.25, 0.125, 1.5, 13.0, 0.0, 1.0]
+    assert decode(msgpack.packb(handle, use_single_float=True), KIND_HANDLE) == HandleState(
+        1, 2, 3, Flags(0), (0.5, 0.25), (0.125, 1.5), 13.0, 0.0, 1.0)
+
+
 def _valid_tool_fields() -> list:
     return [SCHEMA_VERSION, KIND_TOOL, 1, 2, 3, 0, 1.0, 2.0, 0.1, 0.2, 0.0, 0.0, 0.5, 1e-6,
             0.25, 0]
@@ -101,6 +142,9 @@ def _valid_tool_fields() -> list:
     [
         (lambda f: f.__setitem__(0, SCHEMA_VERSION + 1), DropReason.UNKNOWN_VERSION),
         (lambda f: f.__setitem__(0, "1"), DropReason.MALFORMED),
+        (lambda f: f.__setitem__(0, float(SCHEMA_VERSION)), DropReason.MALFORMED),
+        (lambda f: f.__setitem__(1, float(KIND_TOOL)), DropReason.MALFORMED),
+        (lambda f: f.__setitem__(1, True), DropReason.MALFORMED),
         (lambda f: f.__setitem__(1, KIND_HANDLE), DropReason.WRONG_KIND),
         (lambda f: f.__setitem__(3, -1), DropReason.MALFORMED),
         (lambda f: f.__setitem__(3, True), DropReason.MALFORMED),
@@ -108,6 +152,9 @@ def _valid_tool_fields() -> list:
         (lambda f: f.__setitem__(7, math.inf), DropReason.NON_FINITE),
         (lambda f: f.__setitem__(8, math.nan), DropReason.NON_FINITE),
         (lambda f: f.__setitem__(9, "x"), DropReason.MALFORMED),
+        (lambda f: f.__setitem__(10, True), DropReason.MALFORMED),
+        (lambda f: f.__setitem__(11, None), DropReason.MALFORMED),
+        (lambda f: f.__setitem__(15, 1.0), DropReason.MALFORMED),  # the echo is an integer
         (lambda f: f.__setitem__(12, 1.5), DropReason.MALFORMED),
         (lambda f: f.__setitem__(14, -1.0), DropReason.MALFORMED),  # energy is cumulative
         (lambda f: f.pop(), DropReason.MALFORMED),  # a version-2 tool payload
