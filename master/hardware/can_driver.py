@@ -21,8 +21,6 @@ import struct
 import sys
 import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import Any
 
 import can
@@ -719,7 +717,7 @@ class CanHandleDriver(HandleHardware):
         if self._tripped:
             self._send_both(cia402.CW_QUICK_STOP)
             return
-        counts = [int(count) for count in self._target_counts]  # per axis, as scalars
+        counts = self._target_counts.tolist()  # per axis, as Python ints
         refused = False
         for axis in range(2):
             value = float(position_command_m[axis])
@@ -731,49 +729,39 @@ class CanHandleDriver(HandleHardware):
             self._pending_faults.append("non-finite position command refused")
         if abs(counts[0]) > INT32_MAX or abs(counts[1]) > INT32_MAX:
             self._pending_faults.append("position command beyond the drives' int32 range")
+            counts = self._target_counts.tolist()
         else:
             self._target_counts = np.array(counts, np.int64)
-        self._send_both(cia402.CW_ENABLE_OPERATION)
+        self._send_rpdos(cia402.CW_ENABLE_OPERATION, counts)
 
     # --- frames ----------------------------------------------------------------------
 
-    @contextmanager
-    def burst(self) -> Iterator[None]:
+    def burst(self) -> _Burst:
         """Hold the frames sent inside (RPDOs, :meth:`send_frame`'s) and send them back to
         back at the end, as one burst where the bus can (``unix_datagram``: one datagram, one
         wake-up of the devices' process instead of one per frame; any other bus: one frame
         after the other, as without it). Nested bursts go out with the outermost; frames
-        held for the next SYNC (:meth:`until_sync`) go out first."""
-        if self._held is not None:
-            yield
-            return
-        self._held = []
-        try:
-            yield
-        finally:
-            held, self._held = self._held, None
-            if self._holding_for_sync:
-                self._for_sync.extend(held)
-            elif self._bus is not None:
-                self._send_now(held)
+        held for the next SYNC (:meth:`until_sync`) go out first. (A context manager of its
+        own class: a generator's costs about 1 us more, and the loop enters these each
+        tick.)"""
+        return _Burst(self)
 
-    @contextmanager
-    def until_sync(self) -> Iterator[None]:
+    def until_sync(self) -> _UntilSync:
         """Hold the frames sent inside until the next SYNC and send them in its burst, just
         before it (the simulated rig's ``unix_datagram`` bus: its devices' process is woken
         once a cycle instead of twice, and the loop's tick no longer pays that wake-up). The
         drives latch synchronous RPDOs and apply them at the SYNC, so they act exactly as if
         the frames had come right away. Anything else sent meanwhile sends them first, in
         order; closing the bus drops them."""
+        return _UntilSync(self)
+
+    def _end_burst(self) -> None:
+        """The end of the outermost :meth:`burst`: its frames go out, or wait for the SYNC."""
+        held, self._held = self._held, None
         if self._holding_for_sync:
-            yield
-            return
-        self._holding_for_sync = True
-        try:
-            with self.burst():
-                yield
-        finally:
-            self._holding_for_sync = False
+            self._for_sync.extend(held)
+        elif self._bus is not None:
+            self._send_now(held)
 
     def send_frame(self, frame_id: int, data: bytes, extended: bool = False) -> None:
         """Send one frame as is on the driver's bus (a simulated rig's extra frames, e.g. its
@@ -803,16 +791,30 @@ class CanHandleDriver(HandleHardware):
         if frames:
             send_burst(self._bus, frames)
 
+    def _send_rpdos(self, controlword: int, counts: list[int]) -> None:
+        """Both drives' RPDO1 (``controlword`` and the target ``counts``, per axis) as one
+        burst, as :meth:`burst` would send them."""
+        node_ids = self.settings.node_ids
+        fd = self._fd
+        frames = [can.Message(arbitration_id=cia402.RPDO1_BASE + node_ids[axis],
+                              data=_RPDO1.pack(controlword, counts[axis]),
+                              is_extended_id=False, is_fd=fd, bitrate_switch=fd)
+                  for axis in range(2)]
+        self._last_controlword[0] = self._last_controlword[1] = controlword
+        if self._held is not None:
+            self._held.extend(frames)
+        else:
+            self._send_now(frames)
+
     def _send_rpdo(self, axis: int, controlword: int) -> None:
+        """One drive's RPDO1 (the enable sequence's per-axis steps)."""
         node = self.settings.node_ids[axis]
         self._send(cia402.RPDO1_BASE + node,
                    _RPDO1.pack(controlword, int(self._target_counts[axis])), self._fd)
         self._last_controlword[axis] = controlword
 
     def _send_both(self, controlword: int) -> None:
-        with self.burst():
-            for axis in range(2):
-                self._send_rpdo(axis, controlword)
+        self._send_rpdos(controlword, self._target_counts.tolist())
 
     def _nmt(self, command: int, node: int) -> None:
         self._send(cia402.NMT_COB_ID, bytes([command, node]))
@@ -942,3 +944,49 @@ def _can_hardware(config: dict[str, Any]) -> HandleHardware:
                              config["model"]["sample_period_s"])
     driver.announce_bus_load = True
     return driver
+
+
+class _Burst:
+    """:meth:`CanHandleDriver.burst`'s context manager."""
+
+    __slots__ = ("_driver", "_outer")
+
+    def __init__(self, driver: CanHandleDriver) -> None:
+        self._driver = driver
+        self._outer = False
+
+    def __enter__(self) -> None:
+        driver = self._driver
+        self._outer = driver._held is None
+        if self._outer:
+            driver._held = []
+
+    def __exit__(self, *_exc: object) -> None:
+        if self._outer:
+            self._driver._end_burst()
+
+
+class _UntilSync:
+    """:meth:`CanHandleDriver.until_sync`'s context manager."""
+
+    __slots__ = ("_driver", "_burst")
+
+    def __init__(self, driver: CanHandleDriver) -> None:
+        self._driver = driver
+        self._burst: _Burst | None = None
+
+    def __enter__(self) -> None:
+        driver = self._driver
+        if driver._holding_for_sync:
+            return
+        driver._holding_for_sync = True
+        self._burst = _Burst(driver)
+        self._burst.__enter__()
+
+    def __exit__(self, *exc: object) -> None:
+        if self._burst is None:
+            return
+        try:
+            self._burst.__exit__(*exc)
+        finally:
+            self._driver._holding_for_sync = False
