@@ -779,10 +779,14 @@ class CanHandleDriver(HandleHardware):
     def _put(self, message: can.Message) -> None:
         """Send ``message`` now (after the frames held for the SYNC), or hold it for the
         burst being sent."""
+        self._put_all([message])
+
+    def _put_all(self, frames: list[can.Message]) -> None:
+        """:meth:`_put` of ``frames``, in order, as one burst when sent now."""
         if self._held is not None:
-            self._held.append(message)
+            self._held.extend(frames)
             return
-        self._send_now([message])
+        self._send_now(frames)
 
     def _send_now(self, frames: list[can.Message]) -> None:
         """Send ``frames`` as one burst, after the frames held for the SYNC (their place)."""
@@ -791,26 +795,23 @@ class CanHandleDriver(HandleHardware):
         if frames:
             send_burst(self._bus, frames)
 
+    def _rpdo_frame(self, axis: int, controlword: int, count: int) -> can.Message:
+        """``axis``'s drive RPDO1: ``controlword`` and the target position ``count``."""
+        fd = self._fd
+        return can.Message(arbitration_id=cia402.RPDO1_BASE + self.settings.node_ids[axis],
+                           data=_RPDO1.pack(controlword, count), is_extended_id=False,
+                           is_fd=fd, bitrate_switch=fd)
+
     def _send_rpdos(self, controlword: int, counts: list[int]) -> None:
         """Both drives' RPDO1 (``controlword`` and the target ``counts``, per axis) as one
         burst, as :meth:`burst` would send them."""
-        node_ids = self.settings.node_ids
-        fd = self._fd
-        frames = [can.Message(arbitration_id=cia402.RPDO1_BASE + node_ids[axis],
-                              data=_RPDO1.pack(controlword, counts[axis]),
-                              is_extended_id=False, is_fd=fd, bitrate_switch=fd)
-                  for axis in range(2)]
+        self._put_all([self._rpdo_frame(0, controlword, counts[0]),
+                       self._rpdo_frame(1, controlword, counts[1])])
         self._last_controlword[0] = self._last_controlword[1] = controlword
-        if self._held is not None:
-            self._held.extend(frames)
-        else:
-            self._send_now(frames)
 
     def _send_rpdo(self, axis: int, controlword: int) -> None:
         """One drive's RPDO1 (the enable sequence's per-axis steps)."""
-        node = self.settings.node_ids[axis]
-        self._send(cia402.RPDO1_BASE + node,
-                   _RPDO1.pack(controlword, int(self._target_counts[axis])), self._fd)
+        self._put(self._rpdo_frame(axis, controlword, int(self._target_counts[axis])))
         self._last_controlword[axis] = controlword
 
     def _send_both(self, controlword: int) -> None:
