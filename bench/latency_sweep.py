@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +42,7 @@ from haptic.common.model.teleop import model_from_config
 from haptic.lockstep.sweep import (
     SweepSettings,
     auto_workers,
+    device_problem,
     plot_heatmap,
     run_sweep,
     write_csv,
@@ -84,12 +86,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=None, metavar="N",
                         help="processes to split the lanes between (default: one per CPU, "
                         "each with at least 100 lanes; the same result, bit for bit)")
+    parser.add_argument("--device", default="cpu",
+                        help="Warp device of the clay lanes (--mode clay): cpu (default), cuda, "
+                        "cuda:N or auto; a CUDA sweep runs in one process")
     parser.add_argument("--real-link", action="store_true",
                         help="also run cells over the real Zenoh link, paced in real time "
                         "(about 3 s each)")
     args = parser.parse_args(argv)
+    problem = device_problem(args.device)
+    if problem is not None:
+        print(f"latency_sweep: --device: {problem}", file=sys.stderr)
+        return 2
     model = model_from_config(load_config())
-    settings = settings_for(args.quick, args.mode)
+    settings = replace(settings_for(args.quick, args.mode), device=args.device)
     lanes = len(settings.gains_k) * len(settings.delays_s)
     result = run_sweep(model, settings, max(1, args.workers or auto_workers(lanes)))
     summary = result.summary()
@@ -121,10 +130,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"latency sweep ({summary['mode']} loop): {summary['cells']} cells as lanes")
         print(f"  agree {summary['agree']}, disagree {summary['disagree']}, "
               f"outside the 10 % band {summary['disagree_outside_band']}")
+        processes = f"{summary['workers']} process{'es' if summary['workers'] > 1 else ''}"
+        if summary["mode"] == "clay":
+            processes += f", clay lanes on {summary['device']}"
         print(f"  simulated {summary['simulated_seconds']:.1f} s in "
               f"{summary['wall_seconds']:.2f} s wall: {summary['sim_per_wall']:.0f} simulated "
-              f"s per wall s (target {SPEED_TARGET:.0f}; {summary['workers']} "
-              f"process{'es' if summary['workers'] > 1 else ''})")
+              f"s per wall s (target {SPEED_TARGET:.0f}; {processes})")
         margins = ", ".join(f"k={g:g}: {m * 1e3:.2f} ms" if np.isfinite(m) else f"k={g:g}: none"
                             for g, m in zip(result.settings.gains_k, result.margin_s,
                                             strict=True))

@@ -116,6 +116,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="processes to split the lanes between, whole gains each (the "
                        "same result, bit for bit; default: one per CPU, each with at least "
                        "100 lanes)")
+    sweep.add_argument("--device", default="cpu",
+                       help="Warp device of the clay lanes: cpu (default), cuda, cuda:N or "
+                       "auto (a CUDA sweep runs in one process)")
     sweep.add_argument("--out", type=Path, default=None, help="write sweep.csv and "
                        "sweep.png here")
     sweep.add_argument("--json", action="store_true")
@@ -290,6 +293,7 @@ def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
     from haptic.lockstep.sweep import (
         SweepSettings,
         auto_workers,
+        device_problem,
         plot_heatmap,
         run_sweep_grid,
         write_csv,
@@ -310,11 +314,15 @@ def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
         raise ConfigError("--loss", "every loss probability must be in [0, 1)")
     if args.workers is not None and args.workers < 1:
         raise ConfigError("--workers", "must be >= 1")
+    problem = device_problem(args.device)
+    if problem is not None:
+        raise ConfigError("--device", problem)
     model = model_from_config(config)
     reference = 1.0 if args.mode == "clay" else 0.25
     settings = SweepSettings(gains_k=tuple(args.gains), delays_s=tuple(delays), mode=args.mode,
                              duration_s=args.duration, reference_start_s=reference,
-                             seed=args.seed, control=args.control, bursty=args.bursty)
+                             seed=args.seed, control=args.control, bursty=args.bursty,
+                             device=args.device)
     workers = args.workers or auto_workers(len(args.gains) * len(delays))
     summary, results = run_sweep_grid(model, settings, tuple(args.jitter), tuple(args.loss),
                                       workers)

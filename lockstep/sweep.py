@@ -27,6 +27,7 @@ import numpy as np
 from haptic.common.analysis.report import AnalysisSettings, axis_loop
 from haptic.common.analysis.stability import delay_margin
 from haptic.common.config.scenario import load_scenario
+from haptic.common.config.slave_schema import device_form_problem
 from haptic.common.model.clay_contact import clay_impedance
 from haptic.common.model.passivity import MODES as CONTROL_MODES
 from haptic.common.model.passivity import PassivitySettings
@@ -41,6 +42,7 @@ from haptic.lockstep.simulator import (
 )
 from haptic.lockstep.verdict import GROWTH_THRESHOLD, growth_verdict
 from haptic.master.sim.operator import parse_operator_spec
+from haptic.slave_sim.clay.sim import resolve_device
 
 MODES = ("linear", "clay")
 #: The test pulse of the linear mode: 1 N on both axes for 20 samples (10.8 ms).
@@ -84,6 +86,11 @@ class SweepSettings:
     #: Loss in Gilbert-Elliott bursts of mean length BURST_LENGTH_MESSAGES at the same mean
     #: rate ``loss_probability``, instead of independent losses.
     bursty: bool = False
+    #: Warp device of the clay lanes (clay mode): "cpu", "cuda", "cuda:N" or "auto" (CUDA
+    #: where a device exists). The delay lines, compensators and rig run on the CPU in every
+    #: mode; a sweep on a CUDA device runs its lanes in one process (no worker is forked
+    #: from a process that holds a CUDA context).
+    device: str = "cpu"
 
 
 @dataclass
@@ -142,6 +149,7 @@ class SweepResult:
             "wall_seconds": round(self.wall_seconds, 3),
             "sim_per_wall": round(self.simulated_seconds / max(self.wall_seconds, 1e-9), 1),
             "workers": int(self.extra.get("workers", 1)),
+            "device": str(self.extra.get("device", "cpu")),
         }
 
     def rows(self) -> list[dict]:
@@ -283,7 +291,7 @@ def _simulate_lanes(job: _LaneJob, first: int, end: int) -> LockstepResult:
     injection = sweep_injection(settings)
     passivity = PassivitySettings() if settings.control == "tdpa" else None
     simulator = LockstepSimulator(job.model, scenario, operator, job.lane_gains[first:end],
-                                  environment, clay_impl="warp", device="cpu",
+                                  environment, clay_impl="warp", device=lane_device(settings),
                                   passivity=passivity)
     return simulator.run(settings.duration_s, job.lane_delays[first:end], to_slave=injection,
                          to_master=injection, seed=settings.seed, excitation_N=excitation,
@@ -354,6 +362,30 @@ def _run_lanes(job: _LaneJob) -> LockstepResult:
     return concatenate_results(parts)
 
 
+def lane_device(settings: SweepSettings) -> str:
+    """The Warp device the sweep's clay lanes run on: "cpu" in the linear mode (it has no
+    clay), else the settings' device resolved ("auto": CUDA where a device exists)."""
+    if settings.mode != "clay":
+        return "cpu"
+    return resolve_device(settings.device)
+
+
+def device_problem(device: str) -> str | None:
+    """What stops the sweep's clay lanes running on ``device`` (None: nothing): a name that
+    is not a Warp device, or a CUDA device this machine does not have."""
+    problem = device_form_problem(device)
+    if problem is not None or not device.startswith("cuda"):
+        return problem
+    import warp as wp
+
+    wp.init()
+    count = wp.get_cuda_device_count()
+    index = int(device.partition(":")[2] or 0)
+    if index >= count:
+        return f"no CUDA device {device!r} on this machine ({count} found)"
+    return None
+
+
 def can_fork_workers() -> bool:
     """Whether sweep workers may be forked here: on a platform with fork, from a process with
     no other thread (a thread holding a lock at the fork would leave it held in the child)."""
@@ -378,7 +410,9 @@ def run_sweep(model: TeleopModel, settings: SweepSettings, workers: int = 1) -> 
     started = time.perf_counter()
     steps = int(round(settings.duration_s / ts))
     schedules = line_schedules(steps, ts, lane_delays, injection, injection, settings.seed)
-    parts = lane_parts(lane_gains, workers if can_fork_workers() else 1)
+    device = lane_device(settings)
+    forkable = can_fork_workers() and device == "cpu"
+    parts = lane_parts(lane_gains, workers if forkable else 1)
     result = _run_lanes(_LaneJob(model, settings, lane_gains, lane_delays, schedules, parts))
     wall = time.perf_counter() - started
     threshold = CLAY_GROWTH_THRESHOLD if settings.mode == "clay" else GROWTH_THRESHOLD
@@ -412,6 +446,7 @@ def run_sweep(model: TeleopModel, settings: SweepSettings, workers: int = 1) -> 
     )
     swept.extra["per_cell"] = per_cell(swept, result)
     swept.extra["workers"] = len(parts)
+    swept.extra["device"] = device
     return swept
 
 

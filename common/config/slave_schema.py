@@ -7,7 +7,8 @@ import re
 from haptic.common.config.loader import Field, Schema
 
 
-def _device(value: str) -> str | None:
+def device_form_problem(value: str) -> str | None:
+    """What is wrong with ``value`` as a Warp device name (None: nothing)."""
     if value in ("auto", "cpu", "cuda") or re.fullmatch(r"cuda:\d+", value):
         return None
     return f"must be auto, cpu, cuda or cuda:N (got {value!r})"
@@ -51,7 +52,7 @@ SLAVE_SCHEMA: Schema = {
     "clay_impl": Field("str", "Clay step implementation: warp (kernels) or numpy (reference).",
                        choices=("warp", "numpy")),
     "device": Field("str", "Warp device: auto (cuda when present, else cpu), cpu, cuda, cuda:N.",
-                    check=_device),
+                    check=device_form_problem),
     "safety": SAFETY_SCHEMA,
     "pacing": {
         "follow_master_samples": Field(
