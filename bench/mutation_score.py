@@ -243,15 +243,20 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
      "state.direction = np.zeros((lanes, 3))",
      "a third column nobody writes or reads: proxy_numpy and yield_numpy use columns 0 and 1"),
     *(("slave_sim/clay/sim.py", before, after, _CUDA) for before, after in (
-        ('runtime["pinned"] = {name: wp.zeros((lanes, 2), dtype=wp.float64, device="cpu",',
-         'runtime["pinned"] = {name: wp.zeros((lanes, 3), dtype=wp.float64, device="cpu",'),
-        ('runtime["pinned"] = {name: wp.zeros((lanes, 2), dtype=wp.float64, device="cpu",\n'
-         "pinned=True)", "pinned=False)"),
+        ('runtime["pinned"] = {name: wp.zeros((lanes, columns.get(name, 2)),',
+         'runtime["pinned"] = {name: wp.zeros((lanes, columns.get(name, 3)),'),
+        ('dtype=wp.float64, device="cpu", pinned=True)',
+         'dtype=wp.float64, device="cpu", pinned=False)'),
         ("for name in self._INPUTS + self._OUTPUTS}", "for name in self._INPUTS - self._OUTPUTS}"),
         ("for name in self._INPUTS:", "for name in []:"),
-        ('wp.copy(rt["arrays"][name], rt["pinned"][name])\nfor launch in rt["launches"]:',
-         "for launch in []:"),
+        ('for launch in runtime["launches"]:', "for launch in []:"),
         ("for name in self._OUTPUTS:", "for name in []:"))),
+    ("slave_sim/clay/sim.py",
+     "with wp.ScopedCapture(device=self.device, force_module_load=False) as capture:",
+     "with wp.ScopedCapture(device=self.device, force_module_load=True) as capture:",
+     "CUDA-only, and the same graph either way: True only loads every Warp module on the "
+     "device before the capture (the step's kernels are loaded when their launches are "
+     "recorded)"),
     ("slave_sim/clay/clay_kernels.py", "u = wp.clamp(t, wp.float64(0.0), wp.float64(1.0))",
      "u = wp.clamp(t, wp.float64(0.0), wp.float64( 2.0))",
      "the cut only reaches cells with distance < outer_radius = inner_radius + edge_width, "
