@@ -93,9 +93,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="also run cells over the real Zenoh link, paced in real time "
                         "(about 3 s each)")
     args = parser.parse_args(argv)
-    problem = device_problem(args.device)
+    problem = device_problem(args.device, args.mode)
     if problem is not None:
-        print(f"latency_sweep: --device: {problem}", file=sys.stderr)
+        print(f"config error: --device: {problem}", file=sys.stderr)
         return 2
     model = model_from_config(load_config())
     settings = replace(settings_for(args.quick, args.mode), device=args.device)

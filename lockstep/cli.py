@@ -314,7 +314,7 @@ def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
         raise ConfigError("--loss", "every loss probability must be in [0, 1)")
     if args.workers is not None and args.workers < 1:
         raise ConfigError("--workers", "must be >= 1")
-    problem = device_problem(args.device)
+    problem = device_problem(args.device, args.mode)
     if problem is not None:
         raise ConfigError("--device", problem)
     model = model_from_config(config)

@@ -88,8 +88,8 @@ class SweepSettings:
     bursty: bool = False
     #: Warp device of the clay lanes (clay mode): "cpu", "cuda", "cuda:N" or "auto" (CUDA
     #: where a device exists). The delay lines, compensators and rig run on the CPU in every
-    #: mode; a sweep on a CUDA device runs its lanes in one process (no worker is forked
-    #: from a process that holds a CUDA context).
+    #: mode. Workers are forked only for clay on the CPU: a forked child cannot use its
+    #: parent's CUDA context, so a sweep whose clay is on CUDA runs its lanes in one process.
     device: str = "cpu"
 
 
@@ -370,11 +370,12 @@ def lane_device(settings: SweepSettings) -> str:
     return resolve_device(settings.device)
 
 
-def device_problem(device: str) -> str | None:
+def device_problem(device: str, mode: str = "clay") -> str | None:
     """What stops the sweep's clay lanes running on ``device`` (None: nothing): a name that
-    is not a Warp device, or a CUDA device this machine does not have."""
+    is not a Warp device, or, in the clay mode, a CUDA device this machine does not have (the
+    linear mode has no clay and never uses the device)."""
     problem = device_form_problem(device)
-    if problem is not None or not device.startswith("cuda"):
+    if problem is not None or mode != "clay" or not device.startswith("cuda"):
         return problem
     import warp as wp
 

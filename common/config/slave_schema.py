@@ -9,7 +9,7 @@ from haptic.common.config.loader import Field, Schema
 
 def device_form_problem(value: str) -> str | None:
     """What is wrong with ``value`` as a Warp device name (None: nothing)."""
-    if value in ("auto", "cpu", "cuda") or re.fullmatch(r"cuda:\d+", value):
+    if value in ("auto", "cpu", "cuda") or re.fullmatch(r"cuda:(0|[1-9][0-9]*)", value):
         return None
     return f"must be auto, cpu, cuda or cuda:N (got {value!r})"
 

@@ -10,7 +10,13 @@ import warp as wp
 from haptic.common.config import load_config
 from haptic.common.model.teleop import model_from_config
 from haptic.lockstep.cli import main
-from haptic.lockstep.sweep import SweepSettings, device_problem, lane_device, run_sweep
+from haptic.lockstep.sweep import (
+    SweepSettings,
+    can_fork_workers,
+    device_problem,
+    lane_device,
+    run_sweep,
+)
 
 HAS_CUDA = bool(wp.get_cuda_device_count())
 
@@ -32,8 +38,12 @@ def test_device_names_are_checked(monkeypatch) -> None:
     assert device_problem("auto") is None
     assert "got 'gpu'" in device_problem("gpu")
     assert "got 'cuda:x'" in device_problem("cuda:x")
+    for odd in ("cuda:01", "cuda:00", "cuda:\u0660", "cuda:-1", "CUDA"):  # not Warp's names
+        assert device_problem(odd) is not None, odd
     monkeypatch.setattr(wp, "get_cuda_device_count", lambda: 0)
     assert device_problem("cuda") == "no CUDA device 'cuda' on this machine (0 found)"
+    assert device_problem("cuda", "linear") is None  # the linear mode has no clay
+    assert device_problem("gpu", "linear") is not None  # but its form is still checked
     monkeypatch.setattr(wp, "get_cuda_device_count", lambda: 2)
     assert device_problem("cuda") is None
     assert device_problem("cuda:1") is None
@@ -62,10 +72,24 @@ def test_sim_cli_rejects_a_device_it_cannot_use(capsys) -> None:
         assert "no CUDA device" in capsys.readouterr().err
 
 
+def test_sweep_bench_rejects_a_device_it_cannot_use(capsys) -> None:
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "bench" / "latency_sweep.py"
+    spec = importlib.util.spec_from_file_location("latency_sweep_bench", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    assert bench.main(["--mode", "clay", "--device", "cuda:01"]) == 2
+    assert capsys.readouterr().err.strip().endswith(
+        "config error: --device: must be auto, cpu, cuda or cuda:N (got 'cuda:01')")
+
+
 def test_clay_sweep_on_cpu_says_so(model) -> None:
     result = run_sweep(model, _clay_settings("cpu"), workers=2)
     summary = result.summary()
     assert summary["device"] == "cpu"
+    assert summary["workers"] == (2 if can_fork_workers() else 1)  # one part per gain
     assert summary["cells"] == 4
     assert summary["agree"] == 4  # one growing cell (k = 1.5 at 30 ms), three bounded
     assert result.growing.sum() == 1

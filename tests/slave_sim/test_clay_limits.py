@@ -364,3 +364,35 @@ def test_cuda_device_matches_numpy(scenario) -> None:
         np.testing.assert_allclose(ra.proxy_position_m, rb.proxy_position_m, rtol=0, atol=1e-15)
     assert (a.removed_total_m3 > 0).all()
     np.testing.assert_allclose(a.heights_m(), b.heights_m(), rtol=0, atol=1e-15)
+
+
+@pytest.mark.skipif(not __import__("warp").get_cuda_device_count(),
+                    reason="needs a CUDA device (the captured step)")
+def test_cuda_graph_sees_damping_and_proxy_changes_made_after_capture(scenario) -> None:
+    """The CUDA step is a graph captured with the state: block damping set and a proxy placed
+    mid-run (both written into the state's arrays in place) reach the next steps as they
+    reach numpy's."""
+    ref = _clay(scenario, "numpy")
+    cuda = make_clay(scenario, SAMPLE_PERIOD_S, "warp", "cuda")
+    a, b = cuda.initial_state(2), ref.initial_state(2)
+    velocity = np.array([[0.04, 0.0], [0.0, 0.04]])
+    position = np.array([[0.003, 0.0], [0.03, -0.006]])
+    for step in range(80):
+        if step == 30:
+            damping = b.block_damping_N_s_per_m() * np.array([[1.5], [0.5]])
+            a.set_block_damping(damping)
+            b.set_block_damping(damping)
+        if step == 50:
+            lane = np.array([True, False])
+            a.place_proxy(position, lane)
+            b.place_proxy(position, lane)
+        previous = position
+        position = previous + velocity * SAMPLE_PERIOD_S
+        ra = cuda.step(a, previous, position, velocity)
+        rb = ref.step(b, previous, position, velocity)
+        np.testing.assert_allclose(ra.force_N, rb.force_N, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(ra.damping_N_s_per_m, rb.damping_N_s_per_m, rtol=1e-9,
+                                   atol=1e-12)
+        np.testing.assert_allclose(ra.proxy_position_m, rb.proxy_position_m, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(a.block_damping_N_s_per_m(), b.block_damping_N_s_per_m())
+    np.testing.assert_allclose(a.heights_m(), b.heights_m(), rtol=0, atol=1e-15)
