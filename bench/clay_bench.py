@@ -15,10 +15,12 @@ depth and has settled), the removed volume against 2 R d times the proxy's trave
 conservation error of the removed volume. ``--check`` enforces every one of these figures,
 each against a threshold near what the model achieves (docs/clay.md).
 
-Usage: ``python bench/clay_bench.py [--quick] [--json] [--check] [--save DIR]``. ``--json``
-prints one JSON object (shape in docs/clay.md); ``--check`` exits 1 when a physics target is
-missed (timing targets are reported, never enforced: machines differ); ``--save DIR`` writes
-the physics run's workpiece as clay.npz and clay.png.
+Usage: ``python bench/clay_bench.py [--quick] [--json] [--check] [--save DIR] [--device D]``.
+``--json`` prints one JSON object (shape in docs/clay.md); ``--check`` exits 1 when a physics
+target is missed (timing targets are reported, never enforced: machines differ); ``--save
+DIR`` writes the physics run's workpiece as clay.npz and clay.png; ``--device`` puts the Warp
+clay on that device instead of the configuration's (``--device cpu`` and ``--device cuda``
+compare the two on one GPU machine).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ import numpy as np
 from haptic.common.config import load_config
 from haptic.common.config.scenario import Scenario, load_scenario
 from haptic.common.model.teleop import model_from_config
+from haptic.lockstep.sweep import device_problem
 from haptic.slave_sim.clay.sim import make_clay
 from haptic.slave_sim.node import SlaveNode
 
@@ -165,11 +168,12 @@ def physics(scenario: Scenario, sample_period_s: float, device: str,
     }
 
 
-def run(quick: bool, save_dir: Path | None) -> dict[str, Any]:
-    """The whole benchmark; returns the JSON document."""
+def run(quick: bool, save_dir: Path | None, device: str | None = None) -> dict[str, Any]:
+    """The whole benchmark; returns the JSON document. ``device``: the Warp clay's device
+    (default: the configuration's ``[slave] device``)."""
     config = load_config()
     model = model_from_config(config)
-    device_setting = config["slave"]["device"]
+    device_setting = device or config["slave"]["device"]
     base = load_scenario("variable-rate")
     steps = 3000 if quick else 20000
     rows = []
@@ -254,11 +258,20 @@ def main(argv: list[str] | None = None) -> int:
                         "removal, conservation) is missed")
     parser.add_argument("--save", type=Path, default=None, metavar="DIR",
                         help="write the physics run's workpiece as DIR/clay.npz and clay.png")
+    parser.add_argument("--device", default=None,
+                        help="Warp device of the clay: cpu, cuda, cuda:N or auto (default: "
+                        "the configuration's [slave] device, auto); on a GPU machine, "
+                        "--device cpu and --device cuda compare the two on the same host")
     args = parser.parse_args(argv)
     import warp
 
     warp.config.log_level = warp.LOG_WARNING  # no start-up banner in the report or the JSON
-    doc = run(args.quick, args.save)
+    if args.device is not None:
+        problem = device_problem(args.device)
+        if problem is not None:
+            print(f"config error: --device: {problem}", file=sys.stderr)
+            return 2
+    doc = run(args.quick, args.save, args.device)
     if args.json:
         print(json.dumps(doc, indent=2))
     else:
