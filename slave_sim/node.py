@@ -405,6 +405,13 @@ class SlaveNode:
             place_proxy(state.tool[:, POSITION_COLUMNS], index)
 
     @property
+    def clay_device(self) -> str | None:
+        """Where the clay steps: a Warp device ("cpu", "cuda", ...), "numpy", or ``None``
+        when the environment has no clay."""
+        clay = getattr(self.environment, "clay", None)
+        return None if clay is None else str(clay.device)
+
+    @property
     def position_ratio(self) -> np.ndarray:
         """Ah1 per axis (x, y), dimensionless: the tool follows ``Ah1 yh``."""
         return self._position_ratio.copy()

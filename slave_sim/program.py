@@ -206,8 +206,9 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
     run = None
     with StopSignals() as signals, Link(link_config) as link:
         harness = ProgramHarness("haptic-slave", "master", options, link, period_s, recording)
+        on = "" if node.clay_device is None else f" on {node.clay_device}"
         came = harness.wait_for_peer(args.peer_wait, signals, f"{node.scenario.name}, "
-                                     f"environment {node.environment_kind}; ")
+                                     f"environment {node.environment_kind}{on}; ")
         if came is not None:
             return came
         harness.start()
@@ -344,6 +345,7 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         **(phase_lock.summary() if phase_lock is not None else {"phase_lock_enabled": False}),
         **pacing.summary(),
         **passivity_summary(state.passivity, node.passivity_standby),
+        clay_device=node.clay_device,
         **extra_summary,
     )
     traced = trace.arrays()

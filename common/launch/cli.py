@@ -289,7 +289,9 @@ def combined_summary(master: dict[str, Any], slave: dict[str, Any]) -> str:
     cut = slave.get("cut_mean_force_N")
     if cut is not None:
         lines.append(
-            f"  in the clay ({slave.get('scenario', '?')}): {slave['cutting_time_s']:.2f} s "
+            f"  in the clay ({slave.get('scenario', '?')}"
+            f"{', on ' + slave['clay_device'] if slave.get('clay_device') else ''}): "
+            f"{slave['cutting_time_s']:.2f} s "
             f"from the first to the last removal, removed "
             f"{slave.get('removed_volume_m3', 0.0) * 1e6:.2f} cm^3"
         )

@@ -33,6 +33,13 @@ def test_session_runs_both_programs_and_writes_the_report(tmp_path) -> None:
     slave = json.loads((out / "slave.json").read_text())
     master = json.loads((out / "master.json").read_text())
     assert slave["removed_volume_m3"] > 0.0  # the tool reached the clay and cut it
+    # where the clay ran: the Warp device "auto" picked (CUDA where the host has one)
+    import warp as wp
+
+    device = "cuda" if wp.get_cuda_device_count() else "cpu"
+    assert slave["clay_device"] == device
+    assert f"in the clay (constant-rate, on {device}): " in log
+    assert f"environment clay on {device}; waiting for the master" in log
     # the README's session, whole: the master steps its 4 s in rig time however loaded the
     # machine is (a late tick stops a simulated rig's time), so the scenario runs to its end
     assert master["stop_reason"] == "steps"
