@@ -28,3 +28,11 @@ def test_json_shape_and_check(capsys, monkeypatch) -> None:
     assert {"cells", "agree", "disagree", "disagree_outside_band", "simulated_seconds",
             "wall_seconds", "sim_per_wall"} <= set(result)
     assert result["cells"] == 4 and result["disagree_outside_band"] == 0
+
+
+def test_a_device_it_cannot_use_is_refused(capsys) -> None:
+    """--device: one config-error line and exit status 2 before anything runs."""
+    bench = load_bench()
+    assert bench.main(["--mode", "clay", "--device", "cuda:01"]) == 2
+    assert capsys.readouterr().err.strip().endswith(
+        "config error: --device: must be auto, cpu, cuda or cuda:N (got 'cuda:01')")
