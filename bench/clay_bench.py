@@ -38,8 +38,7 @@ import numpy as np
 from haptic.common.config import load_config
 from haptic.common.config.scenario import Scenario, load_scenario
 from haptic.common.model.teleop import model_from_config
-from haptic.lockstep.sweep import device_problem
-from haptic.slave_sim.clay.sim import make_clay
+from haptic.slave_sim.clay.sim import device_problem, make_clay
 from haptic.slave_sim.node import SlaveNode
 
 GRIDS = ((256, 64), (1024, 256), (2048, 512))

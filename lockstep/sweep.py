@@ -42,6 +42,7 @@ from haptic.lockstep.simulator import (
 )
 from haptic.lockstep.verdict import GROWTH_THRESHOLD, growth_verdict
 from haptic.master.sim.operator import parse_operator_spec
+from haptic.slave_sim.clay.sim import device_problem as clay_device_problem
 from haptic.slave_sim.clay.sim import resolve_device
 
 MODES = ("linear", "clay")
@@ -374,17 +375,9 @@ def device_problem(device: str, mode: str = "clay") -> str | None:
     """What stops the sweep's clay lanes running on ``device`` (None: nothing): a name that
     is not a Warp device, or, in the clay mode, a CUDA device this machine does not have (the
     linear mode has no clay and never uses the device)."""
-    problem = device_form_problem(device)
-    if problem is not None or mode != "clay" or not device.startswith("cuda"):
-        return problem
-    import warp as wp
-
-    wp.init()
-    count = wp.get_cuda_device_count()
-    index = int(device.partition(":")[2] or 0)
-    if index >= count:
-        return f"no CUDA device {device!r} on this machine ({count} found)"
-    return None
+    if mode != "clay":
+        return device_form_problem(device)
+    return clay_device_problem(device)
 
 
 def can_fork_workers() -> bool:

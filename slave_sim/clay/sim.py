@@ -59,6 +59,24 @@ def resolve_device(device: str) -> str:
     return "cuda" if wp.get_cuda_device_count() > 0 else "cpu"
 
 
+def device_problem(device: str) -> str | None:
+    """What stops the clay running on ``device`` (None: nothing): a name that is not a Warp
+    device, or a CUDA device this machine does not have."""
+    from haptic.common.config.slave_schema import device_form_problem
+
+    problem = device_form_problem(device)
+    if problem is not None or not device.startswith("cuda"):
+        return problem
+    import warp as wp
+
+    wp.init()
+    count = wp.get_cuda_device_count()
+    index = int(device.partition(":")[2] or 0)
+    if index >= count:
+        return f"no CUDA device {device!r} on this machine ({count} found)"
+    return None
+
+
 @dataclass(frozen=True)
 class ClayStepResult:
     """What one clay step gives, per lane.
@@ -467,5 +485,5 @@ def make_clay(scenario: Scenario, sample_period_s: float, impl: str = "warp",
 
 __all__ = [
     "CLAY_IMPLEMENTATIONS", "NO_BLOCK", "ClayState", "ClayStepResult", "NumpyClay", "WarpClay",
-    "geometry_for", "make_clay", "resolve_device",
+    "device_problem", "geometry_for", "make_clay", "resolve_device",
 ]
