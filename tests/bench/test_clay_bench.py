@@ -4,25 +4,13 @@ The benchmark itself runs in .ci/run (``--quick --check``)."""
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 
-BENCH = Path(__file__).resolve().parents[2] / "bench" / "clay_bench.py"
 
-
-def load_bench():
-    spec = importlib.util.spec_from_file_location("clay_bench", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_a_device_it_cannot_use_is_refused(capsys, monkeypatch) -> None:
+def test_a_device_it_cannot_use_is_refused(load_bench, capsys, monkeypatch) -> None:
     import warp as wp
 
-    bench = load_bench()
+    bench = load_bench("clay_bench")
     assert bench.main(["--device", "gpu"]) == 2
     assert capsys.readouterr().err.strip().endswith(
         "config error: --device: must be auto, cpu, cuda or cuda:N (got 'gpu')")
@@ -31,8 +19,8 @@ def test_a_device_it_cannot_use_is_refused(capsys, monkeypatch) -> None:
     assert "no CUDA device 'cuda:0' on this machine (0 found)" in capsys.readouterr().err
 
 
-def test_the_device_reaches_the_timed_and_the_physics_clay(monkeypatch) -> None:
-    bench = load_bench()
+def test_the_device_reaches_the_timed_and_the_physics_clay(load_bench, monkeypatch) -> None:
+    bench = load_bench("clay_bench")
     monkeypatch.setattr(bench, "GRIDS", ((1024, 256),))  # the grid its targets are read at
     monkeypatch.setattr(bench, "time_slave_steps", lambda node, steps: np.full(8, 1e-5))
     seen = []

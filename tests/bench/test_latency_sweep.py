@@ -3,24 +3,13 @@ asks for and --check passes when every cell agrees. No figure is asserted."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 from haptic.lockstep.sweep import SweepSettings
 
-BENCH = Path(__file__).resolve().parents[2] / "bench" / "latency_sweep.py"
 
-
-def load_bench():
-    spec = importlib.util.spec_from_file_location("latency_sweep", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_json_shape_and_check(capsys, monkeypatch) -> None:
-    bench = load_bench()
+def test_json_shape_and_check(load_bench, capsys, monkeypatch) -> None:
+    bench = load_bench("latency_sweep")
     monkeypatch.setattr(bench, "settings_for", lambda quick, mode: SweepSettings(
         (3.0, 19.0), (0.0, 0.012), "linear", 1.5))
     assert bench.main(["--quick", "--json", "--check"]) == 0
@@ -30,9 +19,9 @@ def test_json_shape_and_check(capsys, monkeypatch) -> None:
     assert result["cells"] == 4 and result["disagree_outside_band"] == 0
 
 
-def test_a_device_it_cannot_use_is_refused(capsys) -> None:
+def test_a_device_it_cannot_use_is_refused(load_bench, capsys) -> None:
     """--device: one config-error line and exit status 2 before anything runs."""
-    bench = load_bench()
+    bench = load_bench("latency_sweep")
     assert bench.main(["--mode", "clay", "--device", "cuda:01"]) == 2
     assert capsys.readouterr().err.strip().endswith(
         "config error: --device: must be auto, cpu, cuda or cuda:N (got 'cuda:01')")

@@ -3,24 +3,13 @@ is asserted (timing is the benchmark's output, not a test)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
-BENCH = Path(__file__).resolve().parents[2] / "bench" / "loop_bench.py"
 
-
-def load_bench():
-    spec = importlib.util.spec_from_file_location("loop_bench", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_json_shape(capsys, monkeypatch):
-    bench = load_bench()
+def test_json_shape(load_bench, capsys, monkeypatch):
+    bench = load_bench("loop_bench")
     real = bench.raw_ping_pong
     monkeypatch.setattr(bench, "raw_ping_pong",
                         lambda *_args, period_s=0.0: real(300, 20, period_s=period_s))
@@ -41,8 +30,8 @@ def test_json_shape(capsys, monkeypatch):
     assert result["slave"]["step_p50_s"] > 0
 
 
-def test_cpu_layouts():
-    bench = load_bench()
+def test_cpu_layouts(load_bench):
+    bench = load_bench("loop_bench")
     two = bench.cpu_layout_args("partitioned", [0, 1])
     assert two == ["--rt-priority", "40", "--loop-cpus", "1", "--other-cpus", "0",
                    "--spin-s", "0.00002"]

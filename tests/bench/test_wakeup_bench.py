@@ -4,21 +4,10 @@ benchmark's output, not a test)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
-from pathlib import Path
 
 import pytest
-
-BENCH = Path(__file__).resolve().parents[2] / "bench" / "wakeup_bench.py"
-
-
-def load_bench():
-    spec = importlib.util.spec_from_file_location("wakeup_bench", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _children() -> set[int]:
@@ -29,8 +18,8 @@ def _children() -> set[int]:
 
 
 @pytest.mark.skipif(not hasattr(os, "sched_getaffinity"), reason="Linux CPU affinity")
-def test_cases_json_and_the_echo_process_reaped(capsys):
-    bench = load_bench()
+def test_cases_json_and_the_echo_process_reaped(load_bench, capsys):
+    bench = load_bench("wakeup_bench")
     affinity = os.sched_getaffinity(0)
     children = _children()
     assert bench.main(["--round-trips", "50", "--period", "0.001", "--json"]) == 0
@@ -53,8 +42,8 @@ def test_cases_json_and_the_echo_process_reaped(capsys):
     assert result["cpu_model"]
 
 
-def test_no_request_measures_as_they_are_only():
-    bench = load_bench()
+def test_no_request_measures_as_they_are_only(load_bench):
+    bench = load_bench("wakeup_bench")
     result = bench.measure(20, 0.001, cpu_latency_limit_us=-1)
     assert "requested" not in result
     lines = bench.format_result(result)
@@ -62,8 +51,8 @@ def test_no_request_measures_as_they_are_only():
     assert not any("CPU latency limit" in line for line in lines)
 
 
-def test_bad_arguments_exit_2():
-    bench = load_bench()
+def test_bad_arguments_exit_2(load_bench):
+    bench = load_bench("wakeup_bench")
     with pytest.raises(SystemExit) as exited:
         bench.main(["--cpu-latency-us", "-2"])
     assert exited.value.code == 2
