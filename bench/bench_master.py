@@ -19,9 +19,14 @@ whole control cycle (read + node step + operator display + RPDOs), back to back
 then spin the last ``[runner] spin_s``, 0.1 ms; re-anchored after a stall), and paced with
 each SYNC sent ``[master.can] sync_lead_s`` ahead of its tick (``paced_sync_lead``: the read
 then only collects the answers, as in the master program), with p50/p99/max, the overruns
-and the runner's period error. On the emulator rigs the cycle's RPDOs and display frame wait
-for the next SYNC and go out in its burst (``CanHandleDriver.until_sync``, docs/master.md): the
-read that sends that SYNC (without a lead) pays for them.
+and the runner's period error. With them, the CPU time each cycle costs, which on a small
+machine says more than the wall clock (three processes share two cores in ``haptic-session``):
+the loop thread's per read and per cycle (``read_cpu_mean_us``, ``cycle_cpu_mean_us``), and the
+emulator process's per cycle (``emulator_cpu_per_cycle_us``, from /proc; the ``inproc`` rig's
+devices are a thread of this process, in ``process_cpu_per_cycle_us``). On the emulator rigs
+the cycle's RPDOs and display frame wait for the next SYNC and go out in its burst
+(``CanHandleDriver.until_sync``, docs/master.md): the read that sends that SYNC (without a
+lead) pays for them.
 Figures are wall-clock on this machine (noisy: other programs on a 2-core machine move them
 a lot, so the 1-minute load average is printed with them). Nothing is asserted.
 """
@@ -104,19 +109,23 @@ def _run_cycles(hardware: HandleHardware, node: MasterNode, cycles: int, pace: b
     zero = np.zeros((1, 2))
     reads = np.empty(cycles)
     totals = np.empty(cycles)
+    reads_cpu = np.empty(cycles)
+    totals_cpu = np.empty(cycles)
     faulted = 0
+    thread_time = time.thread_time
 
     def step(k: int, _now_ns: int) -> None:
         nonlocal faulted
-        t0 = time.perf_counter()
+        c0, t0 = thread_time(), time.perf_counter()
         reading = hardware.read()
-        t1 = time.perf_counter()
+        c1, t1 = thread_time(), time.perf_counter()
         faulted += bool(reading.faults)
         command = node.step(state, reading.force_N[None], reading.position_m[None], zero)
         hardware.present_tool_force(zero[0])
         hardware.write(command[0])
-        t2 = time.perf_counter()
+        c2, t2 = thread_time(), time.perf_counter()
         reads[k], totals[k] = t1 - t0, t2 - t0
+        reads_cpu[k], totals_cpu[k] = c1 - c0, c2 - c0
         if k + 1 >= cycles:
             runner.request_stop("cycles")
 
@@ -127,9 +136,18 @@ def _run_cycles(hardware: HandleHardware, node: MasterNode, cycles: int, pace: b
                             lead_s=lead_s,
                             **({} if free is None else {"clock_ns": free.clock_ns,
                                                         "sleep": free.sleep}))
+    emulator_cpu_s = hardware.device_process_cpu_s()
+    own_cpu_s = time.process_time()
     stats = runner.run()
+    own_cpu_s = time.process_time() - own_cpu_s
     figures = {f"read_{k}": v for k, v in _percentiles_us(reads).items()}
     figures.update({f"cycle_{k}": v for k, v in _percentiles_us(totals).items()})
+    figures["read_cpu_mean_us"] = float(reads_cpu.mean() * 1e6)
+    figures["cycle_cpu_mean_us"] = float(totals_cpu.mean() * 1e6)
+    figures["process_cpu_per_cycle_us"] = own_cpu_s / cycles * 1e6
+    emulator_end_s = hardware.device_process_cpu_s()
+    if emulator_cpu_s is not None and emulator_end_s is not None:
+        figures["emulator_cpu_per_cycle_us"] = (emulator_end_s - emulator_cpu_s) / cycles * 1e6
     figures["cycles"] = float(cycles)
     figures["faulted_cycles"] = float(faulted)
     if pace:

@@ -123,6 +123,17 @@ def position_for_the_wire(position_m: tuple[float, float],
     return last_m
 
 
+def device_process_cpu(start_s: float | None, end_s: float | None,
+                       elapsed_s: float) -> dict[str, float]:
+    """The summary's ``rig_emulator_cpu_s`` (CPU time the devices' own process used over the
+    loop, s) and ``rig_emulator_cpu_cores`` (that over the loop's wall time): nothing where
+    the devices are not another process of this host, or a reading is missing."""
+    if start_s is None or end_s is None or not elapsed_s > 0.0:
+        return {}
+    used_s = max(end_s - start_s, 0.0)
+    return {"rig_emulator_cpu_s": used_s, "rig_emulator_cpu_cores": used_s / elapsed_s}
+
+
 def _flush_node_events(loop: _Loop, tick: MasterTick) -> None:
     """The node's safety events so far into the run's events."""
     for time_s, event in tick.take_node_events():
@@ -353,6 +364,7 @@ def _run_linked_master(
                         print(f"haptic-master: while stopping: {error}", file=sys.stderr)
                     _flush_node_events(loop, tick_stages)
 
+                device_cpu_start_s = hardware.device_process_cpu_s()
                 run = harness.run(step, lambda: harness.status_line(
                     watchdog, f"fh {loop.last_fh[0]:+.2f} N  ft {loop.last_ft[0]:+.2f} N"
                     f"{inert.status()}"
@@ -360,6 +372,8 @@ def _run_linked_master(
                     stop_safely, lead=early_sync(hardware),
                     lead_s=options.config["master"]["can"]["sync_lead_s"])
                 inert_summary = inert.summary(run.elapsed_s)
+                extra_summary.update(device_process_cpu(
+                    device_cpu_start_s, hardware.device_process_cpu_s(), run.elapsed_s))
         except HardwareError as error:
             print(f"haptic-master: hardware error: {error}", file=sys.stderr)
             status_code = 1

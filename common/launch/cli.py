@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from haptic.common.runtime.cli_options import add_retired_delay_option
+from haptic.common.runtime.machine import usable_cpu_count
 from haptic.common.wire.auth import write_key_file
 
 DEFAULT_OPERATOR = "regulate:fx=3.6,onset=0.2,max=5"
@@ -257,8 +258,44 @@ def real_time_misses(master: dict[str, Any], slave: dict[str, Any]) -> list[str]
     return misses
 
 
-def combined_summary(master: dict[str, Any], slave: dict[str, Any]) -> str:
-    """The session's lines: both loops, both link directions, forces, the cut, the watchdog."""
+#: The share of the host's CPUs the session's processes may keep busy before a missed loop
+#: target is put down to the host having too little CPU left (a loop then waits for one).
+BUSY_HOST_SHARE = 0.75
+
+
+def cpu_use_lines(master: dict[str, Any], slave: dict[str, Any], cpus: int) -> list[str]:
+    """What the session's processes took of the host's ``cpus`` CPUs while the loops ran
+    (each program's ``process_cpu_cores``, its loop thread's CPU per tick, the rig
+    emulator's): one line, and a second when together they kept the CPUs more than
+    :data:`BUSY_HOST_SHARE` busy. Empty when the programs did not report it."""
+    parts, total = [], 0.0
+    for name, s in (("master", master), ("slave", slave)):
+        cores = s.get("process_cpu_cores")
+        if cores is None or not math.isfinite(cores):
+            return []
+        total += cores
+        per_tick = s.get("loop_thread_cpu_per_step_s")
+        tick_text = ("" if per_tick is None or not math.isfinite(per_tick)
+                     else f" (loop thread {per_tick * 1e6:.0f} us a tick)")
+        parts.append(f"{name} {cores:.2f}{tick_text}")
+    emulator = master.get("rig_emulator_cpu_cores")
+    if emulator is not None and math.isfinite(emulator):
+        total += emulator
+        parts.append(f"rig emulator {emulator:.2f}")
+    share = total / cpus if cpus > 0 else math.nan
+    lines = [f"  CPU while the loops ran, in CPUs: {', '.join(parts)}; together {total:.2f} of "
+             f"this host's {cpus} ({share * 100:.0f} %)"]
+    if share > BUSY_HOST_SHARE:
+        lines.append(f"    the session kept the host's CPUs over {BUSY_HOST_SHARE * 100:.0f} % "
+                     f"busy: a loop that wakes finds them taken, so real time needs more CPUs "
+                     f"or cheaper ticks (docs/programs.md)")
+    return lines
+
+
+def combined_summary(master: dict[str, Any], slave: dict[str, Any],
+                     cpus: int | None = None) -> str:
+    """The session's lines: both loops, what they took of the host's CPUs (``cpus``, default
+    this process's usable CPUs), both link directions, forces, the cut, the watchdog."""
     from haptic.common.runtime.stage_times import format_stages
 
     lines = ["session summary"]
@@ -276,6 +313,7 @@ def combined_summary(master: dict[str, Any], slave: dict[str, Any]) -> str:
         if s.get("stages"):
             lines.append(f"  {name:6s} step p50 {_us(s.get('step_p50_s'))}  p99 "
                          f"{_us(s.get('step_p99_s'))}; " + format_stages(s["stages"]))
+    lines.extend(cpu_use_lines(master, slave, usable_cpu_count() if cpus is None else cpus))
     misses = real_time_misses(master, slave)
     lines.append("  real time: " + ("met (" + REAL_TIME_TARGETS + ")" if not misses
                                     else "MISSED: " + "; ".join(misses)))

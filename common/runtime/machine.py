@@ -1,8 +1,10 @@
 """What machine a figure was taken on: the CPU's model name, for the benchmarks' reports
-(figures from different machines are compared by it)."""
+(figures from different machines are compared by it), how many CPUs this process may use, and
+the CPU time another process of this host has used."""
 
 from __future__ import annotations
 
+import os
 import platform
 
 
@@ -16,3 +18,22 @@ def cpu_model() -> str:
     except OSError:
         pass
     return platform.processor() or "unknown"
+
+
+def usable_cpu_count() -> int:
+    """CPUs this process may run on (its affinity where the OS tells, else all of them)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def process_cpu_s(pid: int) -> float | None:
+    """User + system CPU time process ``pid`` has used so far, s (Linux /proc; None elsewhere
+    or when it is gone). Clock-tick resolution (10 ms): compare readings seconds apart."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as file:
+            fields = file.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None

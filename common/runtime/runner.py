@@ -13,6 +13,10 @@ Definitions (all on the runner's monotonic clock, :func:`time.perf_counter_ns`):
 - step time: how long the step function ran, tick start to return (``step_p50_s`` ...): the
   CPU budget a node uses of each period;
 - overrun: a step that ends after the next tick's deadline;
+- CPU: the loop thread's CPU time over the run (``loop_thread_cpu_s``: its steps, its spin
+  and the system calls it makes; per tick ``loop_thread_cpu_per_step_s``) and the whole
+  process's (``process_cpu_s``, also Zenoh's and the display's threads; as a share of one CPU,
+  ``process_cpu_cores``): the budget a tick takes from a machine the programs share;
 - stall: a tick that starts a whole period or more after its deadline (the process was not
   scheduled, or a step took very long). The schedule is then re-anchored at the late start:
   the missed ticks are counted in ``skipped_ticks`` and never fired back to back.
@@ -94,10 +98,23 @@ class RunStats:
     step_p50_s: float = math.nan
     step_p99_s: float = math.nan
     step_max_s: float = math.nan
+    loop_thread_cpu_s: float = math.nan
+    process_cpu_s: float = math.nan
 
     @property
     def overrun_ratio(self) -> float:
         return self.overruns / self.steps if self.steps else 0.0
+
+    @property
+    def loop_thread_cpu_per_step_s(self) -> float:
+        """The loop thread's CPU time per tick, s (NaN before any tick)."""
+        return self.loop_thread_cpu_s / self.steps if self.steps else math.nan
+
+    @property
+    def process_cpu_cores(self) -> float:
+        """The process's CPU time over the run's wall time: the CPUs it kept busy (NaN for a
+        run of no time)."""
+        return self.process_cpu_s / self.elapsed_s if self.elapsed_s > 0 else math.nan
 
     def as_summary(self) -> dict[str, object]:
         """The runner's keys of the run summary."""
@@ -117,6 +134,10 @@ class RunStats:
             "step_p50_s": self.step_p50_s,
             "step_p99_s": self.step_p99_s,
             "step_max_s": self.step_max_s,
+            "loop_thread_cpu_s": self.loop_thread_cpu_s,
+            "loop_thread_cpu_per_step_s": self.loop_thread_cpu_per_step_s,
+            "process_cpu_s": self.process_cpu_s,
+            "process_cpu_cores": self.process_cpu_cores,
             **(self.scheduling.as_summary() if self.scheduling is not None else {}),
         }
 
@@ -194,6 +215,8 @@ class RealTimeRunner:
         self.stalls = 0
         self.skipped_ticks = 0
         self._elapsed_ns = 0
+        self._loop_thread_cpu_s = math.nan
+        self._process_cpu_s = math.nan
         self._shift_ns = 0
 
     def shift_schedule(self, delta_ns: int) -> None:
@@ -242,6 +265,7 @@ class RealTimeRunner:
         step_times = self._step_times
         step = self._step
         self._shift_ns = 0  # a shift asked for outside a run does not carry into this one
+        thread_cpu_s, process_cpu_s = time.thread_time(), time.process_time()
         start = clock()
         end = None if self._duration_ns is None else start + self._duration_ns
         deadline = start
@@ -298,6 +322,8 @@ class RealTimeRunner:
                 last_status = after
                 next_status = after + self._status_interval_ns
         self._elapsed_ns = clock() - start
+        self._loop_thread_cpu_s = time.thread_time() - thread_cpu_s
+        self._process_cpu_s = time.process_time() - process_cpu_s
         if not self.stop_reason:
             self.stop_reason = "requested"
 
@@ -332,6 +358,8 @@ class RealTimeRunner:
             step_p50_s=self._step_times.percentile(50.0),
             step_p99_s=self._step_times.percentile(99.0),
             step_max_s=self._step_times.max_s if self._step_times.count else math.nan,
+            loop_thread_cpu_s=self._loop_thread_cpu_s,
+            process_cpu_s=self._process_cpu_s,
         )
 
 

@@ -86,6 +86,15 @@ def format_summary(summary: Mapping[str, Any]) -> str:
 
         stage_lines.append(f"step p50 {us('step_p50_s')}  p99 {us('step_p99_s')}; stages "
                            + format_stages(summary["stages"]))
+    cores = summary.get("process_cpu_cores")
+    if cores is not None and math.isfinite(cores):
+        per_tick = summary.get("loop_thread_cpu_per_step_s")
+        stage_lines.append(
+            f"CPU {cores:.2f} of a CPU"
+            + ("" if per_tick is None or not math.isfinite(per_tick)
+               else f", loop thread {per_tick * 1e6:.0f} us a tick")
+            + ("" if summary.get("rig_emulator_cpu_cores") is None
+               else f"; rig emulator {summary['rig_emulator_cpu_cores']:.2f} of a CPU"))
     return "\n".join(
         [
             f"steps {summary['steps']}  rate {summary['rate_hz']:.1f} Hz  period error p99 "

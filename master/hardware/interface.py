@@ -86,6 +86,12 @@ class HandleHardware(ABC):
     def cleanup(self) -> None:
         """-> unconfigured: close the bus (safe to call in any state)."""
 
+    def device_process_cpu_s(self) -> float | None:
+        """CPU time the process the devices run in has used so far, s, where that is another
+        process of this host (the ``sim`` backend's rig emulator, which shares the machine
+        with the loops); None otherwise (real devices, devices in this process)."""
+        return None
+
     def sync(self) -> None:
         """Start the next control cycle ahead of its :meth:`read` (the CAN backends send its
         SYNC: the devices sample and answer while the loop waits for its tick, the runner's

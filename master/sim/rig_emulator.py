@@ -40,6 +40,7 @@ import can
 import numpy as np
 
 from haptic.common.config import to_toml
+from haptic.common.runtime.machine import process_cpu_s
 from haptic.master.hardware.can_driver import CanHandleDriver
 from haptic.master.hardware.interface import (
     HandleHardware,
@@ -264,6 +265,13 @@ class EmulatedRigHardware(HandleHardware):
             self.driver = None
             self._stop_emulator()
             raise
+
+    def device_process_cpu_s(self) -> float | None:
+        """The emulator process's CPU time so far, s (None when it is not running)."""
+        process = self.process
+        if process is None or process.poll() is not None:
+            return None
+        return process_cpu_s(process.pid)
 
     def _private_bus(self) -> dict[str, Any]:
         """This run's bus: a fresh directory (unix_datagram, channel "") or a free UDP port

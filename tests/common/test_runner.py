@@ -4,6 +4,7 @@ handling in a child process."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -279,6 +280,38 @@ def test_step_time_statistics():
     summary = stats.as_summary()
     assert summary["step_p50_s"] == stats.step_p50_s
     assert summary["step_p99_s"] >= summary["step_p50_s"]
+
+
+def test_the_run_reports_the_cpu_its_loop_used() -> None:
+    """The loop thread's CPU time over the run (here a step that keeps its thread busy for
+    2 ms of its own CPU time), the process's (at least the loop thread's), and the derived
+    per-tick and per-wall-second figures in the summary."""
+    import time
+
+    def busy_step(_tick: int, _now: int) -> None:
+        until = time.thread_time() + 0.002
+        while time.thread_time() < until:
+            pass
+
+    free = FreeRunningClock()
+    runner = RealTimeRunner(0.001, busy_step, max_steps=10, spin_s=0.0,
+                            clock_ns=free.clock_ns, sleep=free.sleep, handle_signals=False,
+                            show_status=False)
+    stats = runner.run()
+    assert stats.steps == 10
+    assert stats.loop_thread_cpu_s >= 0.020
+    assert stats.process_cpu_s >= stats.loop_thread_cpu_s - 0.001
+    assert stats.loop_thread_cpu_per_step_s == pytest.approx(stats.loop_thread_cpu_s / 10)
+    summary = stats.as_summary()
+    assert summary["loop_thread_cpu_per_step_s"] >= 0.002
+    assert summary["process_cpu_cores"] == pytest.approx(stats.process_cpu_s / stats.elapsed_s)
+
+
+def test_a_runner_that_never_ran_reports_no_cpu_figures() -> None:
+    runner = RealTimeRunner(0.001, lambda tick, now: None, max_steps=1, handle_signals=False,
+                            show_status=False)
+    stats = runner.stats()
+    assert math.isnan(stats.loop_thread_cpu_per_step_s) and math.isnan(stats.process_cpu_cores)
 
 
 def test_a_shift_asked_outside_a_run_does_not_move_the_next_run():

@@ -102,3 +102,38 @@ def test_a_trip_after_the_peer_ended_is_at_the_end_however_long_this_side_ran_on
     # without the times, the last 1.5 s of this side's own run (the older rule)
     assert watchdog_trips_split(_loop_summary(
         duration_s=6.0, events=[{"kind": "trip", "time_s": 4.376}])) == (1, 0)
+
+
+def test_the_session_says_what_its_processes_took_of_the_host() -> None:
+    """The CPU line: each program's share of a CPU and its loop thread's CPU per tick, the rig
+    emulator's, their sum against the host's CPUs, and a note when that kept them busy."""
+    from haptic.common.launch.cli import BUSY_HOST_SHARE, cpu_use_lines
+
+    master = _loop_summary(process_cpu_cores=0.74, loop_thread_cpu_per_step_s=330e-6,
+                           rig_emulator_cpu_cores=0.36)
+    slave = _loop_summary(process_cpu_cores=0.73, loop_thread_cpu_per_step_s=310e-6)
+    lines = cpu_use_lines(master, slave, cpus=2)
+    assert lines[0] == ("  CPU while the loops ran, in CPUs: master 0.74 (loop thread 330 us a "
+                        "tick), slave 0.73 (loop thread 310 us a tick), rig emulator 0.36; "
+                        "together 1.83 of this host's 2 (92 %)")
+    assert len(lines) == 2 and "busy" in lines[1]
+    # the same processes on 8 CPUs leave room: no note
+    assert len(cpu_use_lines(master, slave, cpus=8)) == 1
+    # just at the share: no note; a model rig (no emulator) adds nothing for it
+    at_share = _loop_summary(process_cpu_cores=BUSY_HOST_SHARE)
+    assert len(cpu_use_lines(at_share, _loop_summary(process_cpu_cores=BUSY_HOST_SHARE),
+                             cpus=2)) == 1
+    assert "emulator" not in cpu_use_lines(at_share, at_share, cpus=2)[0]
+    # programs that did not report it (an older summary, a run of no time): no line
+    assert cpu_use_lines(_loop_summary(), slave, cpus=2) == []
+    assert cpu_use_lines(_loop_summary(process_cpu_cores=float("nan")), slave, cpus=2) == []
+
+
+def test_the_master_reports_the_rig_emulator_cpu_over_its_loop() -> None:
+    from haptic.master.program import device_process_cpu
+
+    assert device_process_cpu(1.0, 2.5, 3.0) == {"rig_emulator_cpu_s": 1.5,
+                                                 "rig_emulator_cpu_cores": 0.5}
+    assert device_process_cpu(None, 2.5, 3.0) == {}  # no emulator (real drives, model rig)
+    assert device_process_cpu(1.0, None, 3.0) == {}  # it was gone at the end
+    assert device_process_cpu(1.0, 2.0, 0.0) == {}

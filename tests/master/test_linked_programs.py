@@ -196,6 +196,14 @@ def test_two_processes_exchange_forces_and_positions(pair, tmp_path) -> None:
     assert slave_summary["phase_lock_enabled"] and slave_summary["phase_lock_unstamped"] == 0
     assert slave_summary["phase_lock_lag_s"] > 0.0
     assert slave_summary["phase_lock_total_shift_s"] != 0.0
+    # What each side's loop took of the machine, and the rig emulator (another process of
+    # this host) beside the master: the figures haptic-session adds up; how much is the
+    # machine's, not asserted
+    for summary in (master_summary, slave_summary):
+        assert 0.0 < summary["loop_thread_cpu_s"] <= summary["process_cpu_s"]
+        assert summary["process_cpu_cores"] > 0.0 and summary["loop_thread_cpu_per_step_s"] > 0
+    assert master_summary["rig_emulator_cpu_cores"] > 0.0
+    assert "rig_emulator_cpu_cores" not in slave_summary
 
 
 def test_killed_slave_trips_the_master_and_a_new_slave_resumes(pair, tmp_path) -> None:
