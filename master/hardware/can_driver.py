@@ -572,8 +572,9 @@ class CanHandleDriver(HandleHardware):
         drive_fault = self._sync_drive_fault
         self._sync_drive_fault = [False, False]
         dispatch = self._dispatch
-        position_m = np.full(2, np.nan)
-        force_N = np.full(2, np.nan)
+        metres_per_count = self.settings.metres_per_count
+        position_m = [math.nan, math.nan]
+        force_N = (math.nan, math.nan)
         have_drive = [False, False]
         have_sensor = False
         deadline = now + self.pdo_timeout_s
@@ -601,7 +602,7 @@ class CanHandleDriver(HandleHardware):
                 have_drive[axis] = True
                 self._drive_states[axis] = cia402.decode_statusword(statusword)
                 self._position_counts[axis] = counts
-                position_m[axis] = counts * self.settings.metres_per_count
+                position_m[axis] = counts * metres_per_count
                 warnings = (statusword & _WARNING_BITS) ^ _WARNING_IDLE
                 if self._drive_states[axis] is not DriveState.OPERATION_ENABLED:
                     warnings &= ~_FOLLOWS_TARGET  # bit 12 speaks only when enabled
@@ -639,7 +640,8 @@ class CanHandleDriver(HandleHardware):
             self.quick_stop("a drive fault")
             faults.extend(self._pending_faults)
             self._pending_faults = []
-        reading = HandleReading(force_N, position_m, self._cycle, tuple(faults), tuple(events))
+        reading = HandleReading(np.array(force_N), np.array(position_m), self._cycle,
+                                tuple(faults), tuple(events))
         self.last_reading = reading
         return reading
 
@@ -693,18 +695,20 @@ class CanHandleDriver(HandleHardware):
                 continue
             self.late_frames += 1
 
-    def _sensor_force(self, data: bytes, faults: list[str]) -> np.ndarray:
+    def _sensor_force(self, data: bytes, faults: list[str]) -> tuple[float, float]:
+        """The sensor frame's force (N, x and y; NaN where it is not a valid sample, with the
+        fault)."""
         try:
             sample = self.codec.decode(data)
         except Exception as error:  # cantools raises several types for a bad frame
             faults.append(f"force sensor frame malformed: {error}")
-            return np.full(2, np.nan)
+            return math.nan, math.nan
         if self._sensor_counter is not None and sample.counter != (self._sensor_counter + 1) % 256:
             faults.append(f"force sensor counter jumped from {self._sensor_counter} to "
                           f"{sample.counter} (a stale or lost sample)")
         self._sensor_counter = sample.counter
-        force = self.codec.to_newtons(sample)
-        if not np.all(np.isfinite(force)):
+        force = self.codec.newtons(sample)
+        if not (math.isfinite(force[0]) and math.isfinite(force[1])):
             faults.append(f"force sensor status {sample.status} (not ok)")
         return force
 

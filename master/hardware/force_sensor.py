@@ -140,10 +140,16 @@ class ForceSensorCodec:
     def to_newtons(self, sample: ForceSample) -> np.ndarray:
         """Force (N) along x, y; NaN on both channels unless the status is ok, so a bad
         sample can never be mistaken for a force."""
+        return np.array(self.newtons(sample))
+
+    def newtons(self, sample: ForceSample) -> tuple[float, float]:
+        """:meth:`to_newtons` as two floats (N), without an array (the driver's read at
+        each SYNC)."""
         if sample.status != STATUS_OK:
-            return np.full(2, np.nan)
-        raw = np.array([sample.raw_x_count, sample.raw_y_count], float)
-        return self.scale_N_per_count * (raw - self.offset_count)
+            return math.nan, math.nan
+        scale, offset = self._scale, self._offset
+        return (scale[0] * (sample.raw_x_count - offset[0]),
+                scale[1] * (sample.raw_y_count - offset[1]))
 
     def to_counts(self, force_N: np.ndarray) -> tuple[int, int, bool]:
         """Raw counts for a force (N): (x, y, saturated); saturates at the 16-bit range,

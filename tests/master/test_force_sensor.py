@@ -44,6 +44,23 @@ def test_counts_to_newtons_uses_scale_and_offset() -> None:
     np.testing.assert_allclose(force, [0.005 * 200, -0.01 * -100])
 
 
+@given(x=st.integers(-32768, 32767), y=st.integers(-32768, 32767), status=st.integers(0, 255))
+def test_the_drivers_scalar_newtons_are_the_arrays_values(x: int, y: int, status: int) -> None:
+    """``newtons`` (two floats, the driver's read) gives what ``to_newtons`` gives, bit for
+    bit: the same arithmetic as the array's, NaN on both channels unless the status is ok."""
+    codec = _codec()
+    sample = ForceSample(x, y, 0, status)
+    scalars = codec.newtons(sample)
+    array = codec.to_newtons(sample)
+    assert all(type(value) is float for value in scalars)
+    if status == STATUS_OK:
+        assert scalars == tuple(float(v) for v in np.array([0.005, -0.01]) * (
+            np.array([x, y], float) - np.array([12.0, -3.0])))
+    else:
+        assert all(math.isnan(value) for value in scalars)
+    np.testing.assert_array_equal(array, np.array(scalars))
+
+
 @given(fx=st.floats(-150, 150), fy=st.floats(-300, 300))
 def test_newtons_to_counts_round_trips_within_one_count(fx: float, fy: float) -> None:
     codec = _codec()
