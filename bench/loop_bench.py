@@ -17,7 +17,9 @@ handle backend (the rig block stepped in ``read()``, the regulating operator hol
 watchdog, a poll, a send per tick; no control law, no hardware): the link and runner alone.
 :func:`run_pair` takes any two commands that accept the shared run options (``--duration``,
 ``--json-summary``, ``--listen``/``--connect``, ``--key-prefix``, ``--no-status``);
-``--master-cmd`` and ``--slave-cmd`` give others.
+``--master-cmd`` and ``--slave-cmd`` give others. Each side's figures include what its process
+took of the machine, from its summary: ``process_cpu_cores`` and the loop thread's CPU per
+tick, ``loop_thread_cpu_per_step_s``.
 
 CPU layout (``--cpu-layout``, :func:`cpu_layout_args`): ``partitioned`` by default, as on a rig
 PC: both loops in SCHED_FIFO 40 on the last CPU (the slave's phase lock makes them take turns),
@@ -358,6 +360,8 @@ def _side_figures(summary: dict[str, Any], ts_s: float) -> dict[str, Any]:
                    for name, f in in_tick_order(summary.get("stages") or {})},
         "watchdog_trips": summary.get("watchdog_trips"),
         "scheduling": summary.get("scheduling"),
+        "process_cpu_cores": summary.get("process_cpu_cores"),
+        "loop_thread_cpu_per_step_s": summary.get("loop_thread_cpu_per_step_s"),
     }
 
 
@@ -474,6 +478,9 @@ def print_table(result: dict[str, Any]) -> None:
             f"({f['overrun_ratio'] * 100:.3f} %)  step p50 {_us(f.get('step_p50_s'))} p99 "
             f"{_us(f.get('step_p99_s'))}"
         )
+        if f.get("process_cpu_cores") is not None:
+            print(f"         CPU {f['process_cpu_cores']:.2f} of a CPU, loop thread "
+                  f"{_us(f.get('loop_thread_cpu_per_step_s'))} a tick")
         if f.get("stages"):
             print("         stages p50/p99: " + "  ".join(
                 f"{name} {g['p50_s'] * 1e6:.1f}/{g['p99_s'] * 1e6:.1f}"
