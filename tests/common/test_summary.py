@@ -31,6 +31,15 @@ def test_summary_has_the_required_keys_and_writes_valid_json(tmp_path):
     assert loaded["link_one_way_delay_p99_s"] is None  # NaN -> null, still valid JSON
     assert loaded["watchdog_trips"] == 2 and loaded["side"] == "master"
     assert "1851.0 Hz" in format_summary(summary)
+    assert "CPU " not in format_summary(summary)  # a run that did not report it
+
+
+def test_the_printed_summary_says_what_cpu_the_loop_used() -> None:
+    summary = make_summary({**RUN, "process_cpu_cores": 0.74, "loop_thread_cpu_per_step_s": 3.3e-4},
+                           LINK, max_abs_force_N=3.5, watchdog_trips=0, events=[])
+    assert "CPU 0.74 of a CPU, loop thread 330 us a tick" in format_summary(summary)
+    summary["rig_emulator_cpu_cores"] = 0.36
+    assert format_summary(summary).endswith("; rig emulator 0.36 of a CPU")
 
 
 def test_missing_keys_are_refused():
