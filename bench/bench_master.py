@@ -44,9 +44,12 @@ import numpy as np
 from haptic.common.config import load_config, override
 from haptic.common.model.teleop import model_from_config
 from haptic.common.runtime.machine import cpu_model
+from haptic.common.runtime.realtime import RealtimeSettings
 from haptic.common.runtime.runner import FreeRunningClock, RealTimeRunner
+from haptic.common.runtime.runner_config import runner_settings_from
 from haptic.master.hardware.interface import HandleHardware, create_hardware
 from haptic.master.node import MasterNode
+from haptic.master.program import device_process_cpu
 from haptic.master.runner import early_sync
 from haptic.master.settings import master_settings
 from haptic.master.sim.rig_model import RigModel
@@ -94,7 +97,8 @@ def bench_blocks(config: dict, cycles: int, lanes: int) -> dict[str, dict[str, f
 
 
 def _run_cycles(hardware: HandleHardware, node: MasterNode, cycles: int, pace: bool,
-                spin_s: float, lead_s: float = 0.0) -> dict[str, float]:
+                spin_s: float, lead_s: float = 0.0,
+                realtime: RealtimeSettings | None = None) -> dict[str, float]:
     """``cycles`` control cycles on configured-active ``hardware``: read, node step, present
     the (zero) tool force, write; paced at the node's Ts when ``pace`` (sleep, then spin the
     last ``spin_s``), with each SYNC sent ``lead_s`` before its tick when > 0 (the master
@@ -132,24 +136,27 @@ def _run_cycles(hardware: HandleHardware, node: MasterNode, cycles: int, pace: b
     # the programs' runner (common/runtime/runner.py); unpaced, its ticks run back to back
     free = None if pace else FreeRunningClock()
     runner = RealTimeRunner(period_s, step, spin_s=spin_s if pace else 0.0, show_status=False,
+                            realtime=realtime,
                             lead=early_sync(hardware, 0) if lead_s > 0.0 else None,
                             lead_s=lead_s,
                             **({} if free is None else {"clock_ns": free.clock_ns,
                                                         "sleep": free.sleep}))
-    emulator_cpu_s = hardware.device_process_cpu_s()
-    own_cpu_s = time.process_time()
+    emulator_start_s = hardware.device_process_cpu_s()
     stats = runner.run()
-    own_cpu_s = time.process_time() - own_cpu_s
+    emulator = device_process_cpu(emulator_start_s, hardware.device_process_cpu_s(),
+                                  stats.elapsed_s)
     figures = {f"read_{k}": v for k, v in _percentiles_us(reads).items()}
     figures.update({f"cycle_{k}": v for k, v in _percentiles_us(totals).items()})
     figures["read_cpu_mean_us"] = float(reads_cpu.mean() * 1e6)
     figures["cycle_cpu_mean_us"] = float(totals_cpu.mean() * 1e6)
-    figures["process_cpu_per_cycle_us"] = own_cpu_s / cycles * 1e6
-    emulator_end_s = hardware.device_process_cpu_s()
-    if emulator_cpu_s is not None and emulator_end_s is not None:
-        figures["emulator_cpu_per_cycle_us"] = (emulator_end_s - emulator_cpu_s) / cycles * 1e6
+    figures["process_cpu_per_cycle_us"] = stats.process_cpu_s / cycles * 1e6
+    if emulator:
+        figures["emulator_cpu_per_cycle_us"] = emulator["rig_emulator_cpu_s"] / cycles * 1e6
     figures["cycles"] = float(cycles)
     figures["faulted_cycles"] = float(faulted)
+    if stats.scheduling is not None:
+        held = stats.scheduling.cpu_latency_limit_us
+        figures["cpu_latency_limit_us"] = float("nan") if held is None else float(held)
     if pace:
         figures.update({"overruns": float(stats.overruns),
                         "overrun_fraction": stats.overruns / cycles,
@@ -171,20 +178,27 @@ def bench_can_cycle(config: dict, cycles: int, rig: str,
     model = model_from_config(config)
     safety = master_settings(config).safety
     spin_s = config["runner"]["spin_s"] if spin_s is None else spin_s
+    # the loop thread as the master program schedules it: tight timers, the GIL interval, the
+    # CPU latency request (without it every wake-up of a halted virtual CPU costs far more)
+    realtime = runner_settings_from(config).realtime
     results = {}
     with create_hardware(backend, config) as hardware:
         hardware.configure()
         hardware.activate()
         warm_up = min(cycles, 500)
-        _run_cycles(hardware, MasterNode.from_model(model, safety), warm_up, False, spin_s)
+        _run_cycles(hardware, MasterNode.from_model(model, safety), warm_up, False, spin_s,
+                    realtime=realtime)
         results[f"can_{rig}_unpaced"] = _run_cycles(
-            hardware, MasterNode.from_model(model, safety), cycles, False, spin_s)
+            hardware, MasterNode.from_model(model, safety), cycles, False, spin_s,
+            realtime=realtime)
         results[f"can_{rig}_paced_at_ts"] = _run_cycles(
-            hardware, MasterNode.from_model(model, safety), cycles, True, spin_s)
+            hardware, MasterNode.from_model(model, safety), cycles, True, spin_s,
+            realtime=realtime)
         lead_s = config["master"]["can"]["sync_lead_s"]
         if lead_s > 0.0:
             results[f"can_{rig}_paced_sync_lead"] = _run_cycles(
-                hardware, MasterNode.from_model(model, safety), cycles, True, spin_s, lead_s)
+                hardware, MasterNode.from_model(model, safety), cycles, True, spin_s, lead_s,
+                realtime=realtime)
             results[f"can_{rig}_paced_sync_lead"]["sync_lead_us"] = lead_s * 1e6
         hardware.read()  # the last lead's SYNC
         hardware.deactivate()

@@ -60,7 +60,12 @@ from haptic.common.runtime.realtime import cpu_latency_request
 from haptic.common.runtime.runner import RealTimeRunner, StopSignals
 from haptic.common.runtime.runner_config import place_other_threads, prioritise_zenoh_threads
 from haptic.common.runtime.stage_times import in_tick_order
-from haptic.common.runtime.summary import format_summary, make_summary, write_json_summary
+from haptic.common.runtime.summary import (
+    format_summary,
+    loop_cpu_text,
+    make_summary,
+    write_json_summary,
+)
 from haptic.common.runtime.watchdog import PeerWatchdog
 from haptic.common.wire.link import Link
 from haptic.common.wire.messages import Flags
@@ -478,9 +483,9 @@ def print_table(result: dict[str, Any]) -> None:
             f"({f['overrun_ratio'] * 100:.3f} %)  step p50 {_us(f.get('step_p50_s'))} p99 "
             f"{_us(f.get('step_p99_s'))}"
         )
-        if f.get("process_cpu_cores") is not None:
-            print(f"         CPU {f['process_cpu_cores']:.2f} of a CPU, loop thread "
-                  f"{_us(f.get('loop_thread_cpu_per_step_s'))} a tick")
+        cpu = loop_cpu_text(f)
+        if cpu is not None:
+            print(f"         CPU in CPUs: {cpu}")
         if f.get("stages"):
             print("         stages p50/p99: " + "  ".join(
                 f"{name} {g['p50_s'] * 1e6:.1f}/{g['p99_s'] * 1e6:.1f}"

@@ -39,6 +39,7 @@ from typing import Any
 
 from haptic.common.runtime.cli_options import add_retired_delay_option
 from haptic.common.runtime.machine import usable_cpu_count
+from haptic.common.runtime.summary import finite_figure, loop_cpu_text
 from haptic.common.wire.auth import write_key_file
 
 DEFAULT_OPERATOR = "regulate:fx=3.6,onset=0.2,max=5"
@@ -270,16 +271,13 @@ def cpu_use_lines(master: dict[str, Any], slave: dict[str, Any], cpus: int) -> l
     :data:`BUSY_HOST_SHARE` busy. Empty when the programs did not report it."""
     parts, total = [], 0.0
     for name, s in (("master", master), ("slave", slave)):
-        cores = s.get("process_cpu_cores")
-        if cores is None or not math.isfinite(cores):
+        text = loop_cpu_text(s)
+        if text is None:
             return []
-        total += cores
-        per_tick = s.get("loop_thread_cpu_per_step_s")
-        tick_text = ("" if per_tick is None or not math.isfinite(per_tick)
-                     else f" (loop thread {per_tick * 1e6:.0f} us a tick)")
-        parts.append(f"{name} {cores:.2f}{tick_text}")
-    emulator = master.get("rig_emulator_cpu_cores")
-    if emulator is not None and math.isfinite(emulator):
+        total += s["process_cpu_cores"]
+        parts.append(f"{name} {text}")
+    emulator = finite_figure(master, "rig_emulator_cpu_cores")
+    if emulator is not None:
         total += emulator
         parts.append(f"rig emulator {emulator:.2f}")
     share = total / cpus if cpus > 0 else math.nan

@@ -112,8 +112,9 @@ class RunStats:
 
     @property
     def process_cpu_cores(self) -> float:
-        """The process's CPU time over the run's wall time: the CPUs it kept busy (NaN for a
-        run of no time)."""
+        """The process's CPU time over the run's elapsed time: the CPUs it kept busy (NaN for
+        a run of no time; with a :class:`FreeRunningClock`, whose elapsed time counts the
+        sleeps it skipped, a lower bound)."""
         return self.process_cpu_s / self.elapsed_s if self.elapsed_s > 0 else math.nan
 
     def as_summary(self) -> dict[str, object]:

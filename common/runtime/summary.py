@@ -71,6 +71,24 @@ def write_json_summary(path: str | Path, summary: Mapping[str, Any]) -> None:
     target.write_text(json.dumps(json_safe(dict(summary)), indent=2, sort_keys=True) + "\n")
 
 
+def finite_figure(summary: Mapping[str, Any], key: str) -> float | None:
+    """``summary[key]`` when present and a finite number, else None (an older summary, a run
+    of no time, NaN written as null)."""
+    value = summary.get(key)
+    return value if isinstance(value, int | float) and math.isfinite(value) else None
+
+
+def loop_cpu_text(summary: Mapping[str, Any]) -> str | None:
+    """``0.74`` of a CPU the run's process took, with ``(loop thread 330 us a tick)`` where
+    known; None when the run did not report its CPU."""
+    cores = finite_figure(summary, "process_cpu_cores")
+    if cores is None:
+        return None
+    per_tick = finite_figure(summary, "loop_thread_cpu_per_step_s")
+    return f"{cores:.2f}" + ("" if per_tick is None
+                             else f" (loop thread {per_tick * 1e6:.0f} us a tick)")
+
+
 def format_summary(summary: Mapping[str, Any]) -> str:
     """A few human-readable lines of the main figures."""
 
@@ -86,15 +104,11 @@ def format_summary(summary: Mapping[str, Any]) -> str:
 
         stage_lines.append(f"step p50 {us('step_p50_s')}  p99 {us('step_p99_s')}; stages "
                            + format_stages(summary["stages"]))
-    cores = summary.get("process_cpu_cores")
-    if cores is not None and math.isfinite(cores):
-        per_tick = summary.get("loop_thread_cpu_per_step_s")
-        stage_lines.append(
-            f"CPU {cores:.2f} of a CPU"
-            + ("" if per_tick is None or not math.isfinite(per_tick)
-               else f", loop thread {per_tick * 1e6:.0f} us a tick")
-            + ("" if summary.get("rig_emulator_cpu_cores") is None
-               else f"; rig emulator {summary['rig_emulator_cpu_cores']:.2f} of a CPU"))
+    cpu = loop_cpu_text(summary)
+    if cpu is not None:
+        emulator = finite_figure(summary, "rig_emulator_cpu_cores")
+        stage_lines.append(f"CPU in CPUs: {cpu}" + (
+            "" if emulator is None else f"; rig emulator {emulator:.2f}"))
     return "\n".join(
         [
             f"steps {summary['steps']}  rate {summary['rate_hz']:.1f} Hz  period error p99 "

@@ -302,9 +302,20 @@ def test_the_run_reports_the_cpu_its_loop_used() -> None:
     assert stats.loop_thread_cpu_s >= 0.020
     assert stats.process_cpu_s >= stats.loop_thread_cpu_s - 0.001
     assert stats.loop_thread_cpu_per_step_s == pytest.approx(stats.loop_thread_cpu_s / 10)
+    assert stats.as_summary()["loop_thread_cpu_per_step_s"] >= 0.002
+
+
+def test_the_cpu_figures_per_tick_and_per_wall_second() -> None:
+    from haptic.common.runtime.runner import RunStats
+
+    stats = RunStats(steps=4000, elapsed_s=2.0, rate_hz=2000.0, period_s=0.0005,
+                     period_error_p50_s=0.0, period_error_p99_s=0.0, period_error_max_s=0.0,
+                     overruns=0, stalls=0, skipped_ticks=0, stop_reason="duration",
+                     loop_thread_cpu_s=0.8, process_cpu_s=1.5)
     summary = stats.as_summary()
-    assert summary["loop_thread_cpu_per_step_s"] >= 0.002
-    assert summary["process_cpu_cores"] == pytest.approx(stats.process_cpu_s / stats.elapsed_s)
+    assert summary["loop_thread_cpu_per_step_s"] == pytest.approx(200e-6)
+    assert summary["process_cpu_cores"] == pytest.approx(0.75)
+    assert (summary["loop_thread_cpu_s"], summary["process_cpu_s"]) == (0.8, 1.5)
 
 
 def test_a_runner_that_never_ran_reports_no_cpu_figures() -> None:

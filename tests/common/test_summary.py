@@ -37,9 +37,11 @@ def test_summary_has_the_required_keys_and_writes_valid_json(tmp_path):
 def test_the_printed_summary_says_what_cpu_the_loop_used() -> None:
     summary = make_summary({**RUN, "process_cpu_cores": 0.74, "loop_thread_cpu_per_step_s": 3.3e-4},
                            LINK, max_abs_force_N=3.5, watchdog_trips=0, events=[])
-    assert "CPU 0.74 of a CPU, loop thread 330 us a tick" in format_summary(summary)
+    assert "CPU in CPUs: 0.74 (loop thread 330 us a tick)" in format_summary(summary)
     summary["rig_emulator_cpu_cores"] = 0.36
-    assert format_summary(summary).endswith("; rig emulator 0.36 of a CPU")
+    assert format_summary(summary).endswith("; rig emulator 0.36")
+    summary["loop_thread_cpu_per_step_s"] = float("nan")  # a run of no tick
+    assert format_summary(summary).endswith("CPU in CPUs: 0.74; rig emulator 0.36")
 
 
 def test_missing_keys_are_refused():
