@@ -68,7 +68,13 @@ from haptic.master.hardware.interface import (
     LifecycleState,
     register_hardware,
 )
-from haptic.master.hardware.unix_can import send_burst
+from haptic.master.hardware.unix_can import (
+    BRS_FLAG,
+    EXTENDED_FLAG,
+    FD_FLAG,
+    RawFrame,
+    send_raw_burst,
+)
 from haptic.master.settings import CanSettings, master_settings
 from haptic.master.sim.rig_model import RigModel, RigSample, RigState
 
@@ -108,13 +114,14 @@ NMT_STOPPED_STATE = "stopped"
 @dataclass
 class _SyncAnswer:
     """What the devices do at one SYNC: the drives after it, the sample, the frames to send
-    and the sensor's counters. The model has already stepped; ``undo`` holds the rig state's
-    arrays (and ``rng_undo`` the noise generator's state) from before the step, so a prepared
-    answer can be taken back (both empty for an answer committed at once)."""
+    (raw: id, wire flags, data) and the sensor's counters. The model has already stepped;
+    ``undo`` holds the rig state's arrays (and ``rng_undo`` the noise generator's state) from
+    before the step, so a prepared answer can be taken back (both empty for an answer
+    committed at once)."""
 
     drives: list[DriveRuntime]
     sample: RigSample
-    messages: list[can.Message]
+    frames: list[RawFrame]
     sensor_counter: int
     drop_sensor: int
     sensor_status_cycles: int
@@ -126,6 +133,19 @@ def _state_arrays(state: RigState) -> list[tuple[Any, str]]:
     """(holder, attribute) of every array of the rig state and its operator state."""
     return [(holder, item.name) for holder in (state, state.operator)
             for item in fields(holder) if isinstance(getattr(holder, item.name), np.ndarray)]
+
+
+def _receive(bus: can.BusABC, timeout_s: float) -> list[RawFrame]:
+    """The frames ``bus`` has within ``timeout_s``: a whole datagram's, raw, where the bus
+    gives them so (``unix_datagram``'s ``recv_frames``), else the one frame ``recv`` gives."""
+    receive_frames = getattr(bus, "recv_frames", None)
+    if receive_frames is not None:
+        return receive_frames(timeout_s)
+    message = bus.recv(timeout=timeout_s)
+    if message is None:
+        return []
+    flags = (EXTENDED_FLAG if message.is_extended_id else 0) | (FD_FLAG if message.is_fd else 0)
+    return [(message.arbitration_id, flags, bytes(message.data))]
 
 
 class SimulatedCanRig:
@@ -181,7 +201,7 @@ class SimulatedCanRig:
         #: Each drive's last SYNC counter (0: none yet) and the counter jumps it saw.
         self.sync_counter_seen = [0, 0]
         self.sync_counter_jumps = [0, 0]
-        #: SYNCs answered with an answer prepared on the operator display frame.
+        #: SYNCs answered with an answer prepared ahead (:meth:`prepare_ahead`).
         self.prepared_syncs = 0
         self.errors: list[str] = []
         self._sensor_counter = 0
@@ -189,6 +209,8 @@ class SimulatedCanRig:
         self._sensor_status_cycles = 0
         self._drop_sensor = 0
         self._prepared: _SyncAnswer | None = None
+        #: The display frame came since the last SYNC: its answer may be prepared ahead.
+        self._answer_wanted = False
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._bus: can.BusABC | None = None
@@ -244,12 +266,17 @@ class SimulatedCanRig:
     def serve(self, should_stop: Callable[[], bool], poll_s: float = 0.05,
               on_error: Callable[[str], None] | None = None) -> None:
         """Block on the bus and answer each frame until ``should_stop()`` is true (checked
-        after each frame and at least every ``poll_s`` s). Between frames the drives'
-        heartbeats go out and their heartbeat consumers are checked (:meth:`poll_timers`),
-        after the frames already queued are handled: a drive's consumer runs on frames as
-        they arrive, so a heartbeat that came while this process was not scheduled counts
-        (a busy machine must not look like a lost master). A frame that raises is recorded in
-        :attr:`errors` (and passed to ``on_error``) and serving goes on."""
+        after the frames of each receive and at least every ``poll_s`` s). Between frames
+        the drives' heartbeats go out and their heartbeat consumers are checked
+        (:meth:`poll_timers`), after the frames already queued are handled: a drive's
+        consumer runs on frames as they arrive, so a heartbeat that came while this process
+        was not scheduled counts (a busy machine must not look like a lost master). Once the
+        operator display frame has come, the answer to the next SYNC is prepared whenever no
+        frame is waiting (:meth:`prepare_ahead`), so the SYNC only sends it. On this
+        package's ``unix_datagram`` bus the frames come as raw tuples, a whole datagram at a
+        time (no python-can message objects: about a sixth of the emulator's CPU a cycle).
+        A frame that raises is recorded in :attr:`errors` (and passed to ``on_error``) and
+        serving goes on."""
         while not should_stop():
             bus = self._bus
             if bus is None:
@@ -259,36 +286,64 @@ class SimulatedCanRig:
                 self._handle_queued(bus, on_error)
                 now_s = time.monotonic()
                 self._timers_due_s = now_s + max(0.0, self.poll_timers(now_s))
-            message = bus.recv(timeout=min(poll_s, max(0.0, self._timers_due_s - now_s)))
-            if message is None:
-                continue
-            error = self.handle_message(message)
-            if error is not None and on_error is not None:
-                on_error(error)
+            frames = _receive(bus, 0.0)  # the frames already here come first
+            if not frames:
+                if self._answer_wanted:  # idle: prepare the next SYNC's answer meanwhile
+                    self.prepare_ahead()
+                    now_s = time.monotonic()
+                frames = _receive(bus, min(poll_s, max(0.0, self._timers_due_s - now_s)))
+            self._handle_frames(frames, on_error)
 
     def _handle_queued(self, bus: can.BusABC, on_error: Callable[[str], None] | None,
                        limit: int = 256) -> None:
-        """Handle the frames already received (at most ``limit``), without waiting."""
+        """Handle the frames already received (at most ``limit`` receives), without
+        waiting."""
         for _ in range(limit):
-            message = bus.recv(timeout=0.0)
-            if message is None:
+            frames = _receive(bus, 0.0)
+            if not frames:
                 return
-            error = self.handle_message(message)
+            self._handle_frames(frames, on_error)
+
+    def _handle_frames(self, frames: list[RawFrame],
+                       on_error: Callable[[str], None] | None) -> None:
+        for frame_id, flags, data in frames:
+            error = self.handle_frame(frame_id, data, bool(flags & EXTENDED_FLAG),
+                                      bool(flags & FD_FLAG))
             if error is not None and on_error is not None:
                 on_error(error)
 
     def handle_message(self, message: can.Message) -> str | None:
         """Act on one received frame (thread-safe); returns the error text when it raised
         (also kept in :attr:`errors`), else ``None``."""
+        return self.handle_frame(message.arbitration_id, bytes(message.data),
+                                 message.is_extended_id, message.is_fd)
+
+    def handle_frame(self, frame_id: int, data: bytes, extended: bool = False,
+                     fd: bool = False) -> str | None:
+        """:meth:`handle_message` of a frame given by its id, data and format."""
         try:
             with self._lock:
-                self._handle(message.arbitration_id, bytes(message.data),
-                             message.is_extended_id, message.is_fd)
+                self._handle(frame_id, data, extended, fd)
         except Exception as error:  # keep serving; the test or user sees .errors
             text = f"{type(error).__name__}: {error}"
             self.errors.append(text)
             return text
         return None
+
+    def prepare_ahead(self) -> bool:
+        """Prepare the answer to the next SYNC now, if the operator display frame has come
+        since the last SYNC and none is prepared (thread-safe; the serving loop calls it when
+        no frame is waiting): the SYNC then only sends it. Any input that changes after it
+        takes it back. Returns whether an answer is prepared.
+
+        Preparing costs the copies that taking the model's step back needs, so it is done
+        only when idle: frames that come together with their SYNC (the ``sim`` backend holds
+        the cycle's RPDOs and display frame for the SYNC's datagram) are answered at the
+        SYNC without them."""
+        with self._lock:
+            if self._answer_wanted and self._prepared is None:
+                self._prepared = self._prepare_sync(undoable=True)
+            return self._prepared is not None
 
     def poll_timers(self, now_s: float) -> float:
         """Send the drives' heartbeats that are due and trip a drive whose heartbeat consumer
@@ -389,7 +444,7 @@ class SimulatedCanRig:
                 tool_force_N = decode_operator_display(data).reshape(1, 2)
                 self._discard_prepared()
                 self.tool_force_N = tool_force_N
-                self._prepared = self._prepare_sync(undoable=True)
+                self._answer_wanted = True  # prepared when idle (prepare_ahead), or at the SYNC
             elif frame_id == OPERATOR_READY_ID and data[:1] == b"\x01":
                 if not self.operator_grasped:
                     self.operator_grasped = True
@@ -403,6 +458,7 @@ class SimulatedCanRig:
             if refused:
                 self._discard_prepared()
             answer, self._prepared = self._prepared, None
+            self._answer_wanted = False
             if answer is None:
                 answer = self._prepare_sync(undoable=False, refused=refused)
             else:
@@ -602,13 +658,10 @@ class SimulatedCanRig:
                            self.codec.encode_counts(raw_x, raw_y, counter, status)))
         fd = self._sync_fd
         emcy_ids = {cia402.EMCY_BASE + drive.node_id for drive in drives}
-        messages = []
-        for frame_id, data in frames:
-            as_fd = (fd or len(data) > 8) and frame_id not in emcy_ids
-            messages.append(can.Message(arbitration_id=frame_id, data=data,
-                                        is_extended_id=False, is_fd=as_fd,
-                                        bitrate_switch=as_fd))
-        return _SyncAnswer(drives, sample, messages, (counter + 1) % 256, drop_sensor,
+        fd_flags = FD_FLAG | BRS_FLAG
+        raw = [(frame_id, fd_flags if (fd or len(data) > 8) and frame_id not in emcy_ids
+                else 0, data) for frame_id, data in frames]
+        return _SyncAnswer(drives, sample, raw, (counter + 1) % 256, drop_sensor,
                            status_cycles, undo, rng_undo)
 
     def _check_following_error(self, drive: DriveRuntime, device: DriveObjects,
@@ -656,7 +709,7 @@ class SimulatedCanRig:
         self.sync_count += 1
         bus = self._bus
         if bus is not None:  # the answers go out back to back, as one burst where it can
-            send_burst(bus, answer.messages)
+            send_raw_burst(bus, answer.frames)
 
 
 class SimulatedRigHardware(HandleHardware):

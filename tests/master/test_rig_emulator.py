@@ -115,10 +115,11 @@ def test_the_operator_display_payload_round_trips() -> None:
 
 
 def test_an_answer_prepared_on_the_display_frame_equals_one_computed_at_the_sync() -> None:
-    """Frames in the order the sim backend sends them (RPDOs, display, SYNC), with sensor
-    noise, a regulating operator and inputs that change after the display frame now and then
-    (the prepared answer is taken back): the same frames and samples as devices given the
-    tool force directly and computing every answer at the SYNC."""
+    """Frames in the order the sim backend sends them (RPDOs, display, SYNC), the answer
+    prepared ahead in between (as the serving loop does when no frame waits), with sensor
+    noise, a regulating operator and inputs that change after it now and then (the prepared
+    answer is taken back, and sometimes prepared anew): the same frames and samples as
+    devices given the tool force directly and computing every answer at the SYNC."""
     config = _config("regulate:fx=2,kp=0.5,ki=4,lag=0.02,max=10",
                      master__sim__force_noise_std_N=0.05, master__sim__seed=3)
     prepared, prepared_bus = _enabled_rig(config)
@@ -126,7 +127,7 @@ def test_an_answer_prepared_on_the_display_frame_equals_one_computed_at_the_sync
     nodes = prepared.settings.node_ids
     prepared_bus.sent.clear()
     direct_bus.sent.clear()
-    late_inputs = 0
+    late_inputs = prepared_anew = 0
     for cycle in range(300):
         force = np.array([0.01 * cycle, -0.5])
         target = 4 * cycle
@@ -136,10 +137,15 @@ def test_an_answer_prepared_on_the_display_frame_equals_one_computed_at_the_sync
         prepared.handle_message(_frame(OPERATOR_DISPLAY_ID, encode_operator_display(force),
                                        extended=True))
         direct.set_tool_force(decode_operator_display(encode_operator_display(force)))
+        assert prepared.prepare_ahead()  # the serving loop, idle before the SYNC
+        assert not direct.prepare_ahead()  # no display frame: nothing to prepare ahead
         if cycle % 7 == 3:  # an input after the display frame: the prepared answer goes
             late_inputs += 1
             for rig in (prepared, direct):
                 rig.handle_message(_rpdo(nodes[1], cia402.CW_ENABLE_OPERATION, -target))
+            if cycle % 14 == 3:  # idle again before the SYNC: prepared anew
+                assert prepared.prepare_ahead()
+                prepared_anew += 1
         if cycle == 151:  # a fault injected between the display frame and the SYNC
             for rig in (prepared, direct):
                 rig.inject_drive_fault(0, 0x5530)
@@ -151,7 +157,8 @@ def test_an_answer_prepared_on_the_display_frame_equals_one_computed_at_the_sync
                                           getattr(direct.last_sample, name))
     assert prepared_bus.sent == direct_bus.sent
     assert any(frame_id == cia402.EMCY_BASE + nodes[0] for frame_id, _ in prepared_bus.sent)
-    assert prepared.prepared_syncs == 300 - late_inputs - 1
+    assert late_inputs > prepared_anew > 0
+    assert prepared.prepared_syncs == 300 - late_inputs + prepared_anew - 1
     assert direct.prepared_syncs == 0
     assert not prepared.errors and not direct.errors
     moved = prepared.last_sample.operator_intent_force_N[0, 0]

@@ -188,6 +188,58 @@ def test_send_burst_on_a_bus_without_bursts_sends_frame_by_frame() -> None:
         receiver.shutdown()
 
 
+def test_raw_frames_are_the_messages_datagrams_without_the_objects(buses) -> None:
+    """``send_frames``/``recv_frames`` (the rig emulator's path): the same wire as
+    ``send_burst``/``recv``, a whole datagram per receive, in order, flags kept; what a
+    ``recv`` left of a datagram comes first; nothing within the timeout is []."""
+    from haptic.master.hardware.unix_can import BRS_FLAG, EXTENDED_FLAG, FD_FLAG
+
+    a, b = buses(), buses()
+    raw = [(0x181, 0, b"\x01\x02"), (0x1FFFF000, EXTENDED_FLAG, bytes(8)),
+           (0x7FF, FD_FLAG | BRS_FLAG, bytes(range(64))), (0x80, 0, b"")]
+    a.send_frames(raw)
+    got = [b.recv(1.0) for _ in raw]  # read as messages: the same frames
+    assert [(m.arbitration_id, m.is_extended_id, m.is_fd, m.bitrate_switch, bytes(m.data))
+            for m in got] == [(i, bool(f & EXTENDED_FLAG), bool(f & FD_FLAG),
+                               bool(f & BRS_FLAG), d) for i, f, d in raw]
+    frames = [_frame(0x181, b"\x05"), can.Message(arbitration_id=0x1FFFF000, data=b"\x07",
+                                                   is_extended_id=True)]
+    a.send_burst(frames)
+    assert b.recv_frames(1.0) == [(0x181, 0, b"\x05"), (0x1FFFF000, EXTENDED_FLAG, b"\x07")]
+    a.send_burst([*frames, _frame(0x182, b"")])
+    assert b.recv(1.0).arbitration_id == 0x181  # recv takes the first: the rest come raw
+    assert b.recv_frames(0.0) == [(0x1FFFF000, EXTENDED_FLAG, b"\x07"), (0x182, 0, b"")]
+    started = time.monotonic()
+    assert b.recv_frames(0.05) == [] and time.monotonic() - started >= 0.04
+    assert b.recv_frames(0.0) == []
+    many = [(0x300 + i, 0, bytes([i])) for i in range(40)]  # several datagrams, in order
+    a.send_frames(many)
+    received = []
+    while len(received) < len(many):
+        received += b.recv_frames(1.0)
+    assert received == many
+    with pytest.raises(ValueError, match="64"):
+        a.send_frames([(0x181, FD_FLAG, bytes(65))])
+    assert b.malformed_datagrams == 0
+
+
+def test_send_raw_burst_on_another_bus_sends_messages() -> None:
+    from haptic.master.hardware.unix_can import EXTENDED_FLAG, FD_FLAG, send_raw_burst
+
+    sender = can.Bus(interface="virtual", channel="raw-burst-test")
+    receiver = can.Bus(interface="virtual", channel="raw-burst-test")
+    try:
+        send_raw_burst(sender, [(0x181, 0, b"\x01"), (0x1FFFF000, EXTENDED_FLAG, b""),
+                                (0x7FF, FD_FLAG, bytes(12))])
+        got = [receiver.recv(1.0) for _ in range(3)]
+        assert [(m.arbitration_id, m.is_extended_id, m.is_fd, bytes(m.data)) for m in got] == [
+            (0x181, False, False, b"\x01"), (0x1FFFF000, True, False, b""),
+            (0x7FF, False, True, bytes(12))]
+    finally:
+        sender.shutdown()
+        receiver.shutdown()
+
+
 def test_partial_and_junk_datagrams_are_counted_and_never_delivered(buses) -> None:
     import socket as socket_module
 
@@ -202,6 +254,11 @@ def test_partial_and_junk_datagrams_are_counted_and_never_delivered(buses) -> No
         assert (got.arbitration_id, bytes(got.data)) == (0x181, b"\xaa\xbb")
         assert b.recv(0.1) is None
         assert b.malformed_datagrams == 3
+        junk.sendto(b"\x01\x02", b.path)  # the raw receive counts them the same way
+        junk.sendto(whole + b"\x82\x01", b.path)
+        assert b.recv_frames(1.0) == [(0x181, 0, b"\xaa\xbb")]
+        assert b.recv_frames(0.1) == []
+        assert b.malformed_datagrams == 5
     finally:
         junk.close()
 
