@@ -290,6 +290,31 @@ def cpu_use_lines(master: dict[str, Any], slave: dict[str, Any], cpus: int) -> l
     return lines
 
 
+def slowest_stage_line(master: dict[str, Any], slave: dict[str, Any],
+                       misses: list[str]) -> str | None:
+    """For each side that missed a loop target, the stage of its tick with the largest p99
+    (from its ``stages``), against its step's p99: where a late tick's time went. The master's
+    ``read`` with the emulated rig is the CAN cycle through ``haptic-rig-sim``, which the
+    line says (``--rig model`` runs the loop without it). None when no side missed or no
+    stage figures came."""
+    parts = []
+    for name, s in (("master", master), ("slave", slave)):
+        stages = s.get("stages") or {}
+        if not any(miss.startswith(name + " ") for miss in misses) or not stages:
+            continue
+        stage, figures = max(stages.items(), key=lambda item: item[1].get("p99_s", 0.0))
+        text = (f"{name} {stage} p99 {_us(figures.get('p99_s'))} of a step p99 "
+                f"{_us(s.get('step_p99_s'))}")
+        if name == "master" and stage == "read" and finite_figure(
+                s, "rig_emulator_cpu_cores") is not None:
+            text += (" (the CAN cycle, answered by the emulated drives of haptic-rig-sim; "
+                     "--rig model runs the loop without them)")
+        parts.append(text)
+    if not parts:
+        return None
+    return "    slowest stage: " + "; ".join(parts)
+
+
 def combined_summary(master: dict[str, Any], slave: dict[str, Any],
                      cpus: int | None = None) -> str:
     """The session's lines: both loops, what they took of the host's CPUs (``cpus``, default
@@ -315,6 +340,9 @@ def combined_summary(master: dict[str, Any], slave: dict[str, Any],
     misses = real_time_misses(master, slave)
     lines.append("  real time: " + ("met (" + REAL_TIME_TARGETS + ")" if not misses
                                     else "MISSED: " + "; ".join(misses)))
+    slowest = slowest_stage_line(master, slave, misses)
+    if slowest is not None:
+        lines.append(slowest)
     for name, s in (("master -> slave", slave), ("slave -> master", master)):
         loss = s.get("loss_ratio")
         loss_text = "n/a" if loss is None else f"{loss * 100:.3f} %"

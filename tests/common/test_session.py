@@ -129,6 +129,36 @@ def test_the_session_says_what_its_processes_took_of_the_host() -> None:
     assert cpu_use_lines(_loop_summary(process_cpu_cores=float("nan")), slave, cpus=2) == []
 
 
+def test_a_missed_side_names_the_stage_its_late_ticks_spent_most_in() -> None:
+    """Figures of the 16-core host's README session: the master's read (the emulated CAN
+    cycle) is named with what it is; a side that met its targets is not named."""
+    from haptic.common.launch.cli import real_time_misses, slowest_stage_line
+
+    def stages(**p99_us: float) -> dict:
+        return {name: {"p50_s": value * 0.2e-6, "p99_s": value * 1e-6}
+                for name, value in p99_us.items()}
+
+    master = _loop_summary(overrun_ratio=0.0375, step_p99_s=585e-6,
+                           rig_emulator_cpu_cores=0.31,
+                           stages=stages(read=367.9, poll=90.6, send=62.0, node=29.3))
+    slave = _loop_summary(step_p99_s=493.7e-6, stages=stages(poll=94.7, node=282.4))
+    line = slowest_stage_line(master, slave, real_time_misses(master, slave))
+    assert line == ("    slowest stage: master read p99 367.9 us of a step p99 585.0 us (the "
+                    "CAN cycle, answered by the emulated drives of haptic-rig-sim; --rig model "
+                    "runs the loop without them)")
+    slave_late = {**slave, "overrun_ratio": 0.006}
+    line = slowest_stage_line(master, slave_late, real_time_misses(master, slave_late))
+    assert line.endswith("; slave node p99 282.4 us of a step p99 493.7 us")
+    # the model rig (no emulator): the read is only named
+    model = {key: value for key, value in master.items() if key != "rig_emulator_cpu_cores"}
+    assert slowest_stage_line(model, slave, real_time_misses(model, slave)) == (
+        "    slowest stage: master read p99 367.9 us of a step p99 585.0 us")
+    # real time met, or no stage figures: no line
+    assert slowest_stage_line(_loop_summary(stages=stages(read=50.0)), slave, []) is None
+    late = _loop_summary(overrun_ratio=0.5)
+    assert slowest_stage_line(late, slave, real_time_misses(late, slave)) is None
+
+
 def test_the_master_reports_the_rig_emulator_cpu_over_its_loop() -> None:
     from haptic.master.program import device_process_cpu
 
