@@ -299,10 +299,11 @@ def slowest_stage_line(master: dict[str, Any], slave: dict[str, Any],
     stage figures came."""
     parts = []
     for name, s in (("master", master), ("slave", slave)):
-        stages = s.get("stages") or {}
+        stages = {stage: figures for stage, figures in (s.get("stages") or {}).items()
+                  if finite_figure(figures, "p99_s") is not None}
         if not any(miss.startswith(name + " ") for miss in misses) or not stages:
             continue
-        stage, figures = max(stages.items(), key=lambda item: item[1].get("p99_s", 0.0))
+        stage, figures = max(stages.items(), key=lambda item: item[1]["p99_s"])
         text = (f"{name} {stage} p99 {_us(figures.get('p99_s'))} of a step p99 "
                 f"{_us(s.get('step_p99_s'))}")
         if name == "master" and stage == "read" and finite_figure(

@@ -61,5 +61,13 @@ def in_tick_order(stages: dict[str, dict[str, float]]) -> list[tuple[str, dict[s
 
 def format_stages(stages: dict[str, dict[str, float]]) -> str:
     """One line: ``read 12.3/20.1  poll ... us (p50/p99)`` in tick order."""
-    return "  ".join(f"{name} {figures['p50_s'] * 1e6:.1f}/{figures['p99_s'] * 1e6:.1f}"
+    return "  ".join(f"{name} {_us_figure(figures.get('p50_s'))}/"
+                     f"{_us_figure(figures.get('p99_s'))}"
                      for name, figures in in_tick_order(stages)) + " us (p50/p99)"
+
+
+def _us_figure(value_s: float | None) -> str:
+    """A stage figure in us, one decimal; "n/a" where the run gave none (no tick)."""
+    if value_s is None or not math.isfinite(value_s):
+        return "n/a"
+    return f"{value_s * 1e6:.1f}"

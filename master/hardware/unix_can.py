@@ -125,10 +125,18 @@ def send_raw_burst(bus: can.BusABC, frames: Sequence[RawFrame]) -> None:
     if send_frames is not None:
         send_frames(frames)
         return
-    send_burst(bus, [can.Message(arbitration_id=frame_id, data=data,
-                                 is_extended_id=bool(flags & _EXTENDED),
-                                 is_fd=bool(flags & _FD), bitrate_switch=bool(flags & _BRS))
-                     for frame_id, flags, data in frames])
+    send_burst(bus, [_message(frame_id, flags, data) for frame_id, flags, data in frames])
+
+
+def _message(frame_id: int, flags: int, data: bytes, timestamp: float = 0.0,
+             channel: Any = None) -> can.Message:
+    """The python-can message of a raw frame (every flag of the wire kept)."""
+    return can.Message(
+        timestamp=timestamp, arbitration_id=frame_id, is_extended_id=bool(flags & _EXTENDED),
+        is_remote_frame=bool(flags & _REMOTE), is_error_frame=bool(flags & _ERROR),
+        is_fd=bool(flags & _FD), bitrate_switch=bool(flags & _BRS),
+        error_state_indicator=bool(flags & _ESI), dlc=len(data), data=data, channel=channel,
+        check=False)
 
 
 class UnixDatagramBus(can.BusABC):
@@ -248,13 +256,17 @@ class UnixDatagramBus(can.BusABC):
     def send_frames(self, frames: Sequence[RawFrame]) -> None:
         """:meth:`send_burst` of raw frames (id, flags, data): the same datagrams, without
         python-can's message objects (the rig emulator's answers)."""
-        for first in range(0, len(frames), _MAX_DATAGRAM // _MAX_FRAME):
-            chunk = frames[first:first + _MAX_DATAGRAM // _MAX_FRAME]
-            if any(len(data) > 64 for _, _, data in chunk):
-                raise ValueError("unix_datagram: a frame carries at most 64 data bytes")
-            if chunk:
-                self._broadcast(b"".join(_HEADER.pack(frame_id, flags, len(data)) + data
-                                         for frame_id, flags, data in chunk))
+        try:  # every frame checked before any goes out
+            encoded = [_HEADER.pack(frame_id, flags, len(data)) + data
+                       for frame_id, flags, data in frames if len(data) <= 64]
+        except struct.error as error:
+            raise ValueError(f"unix_datagram: a frame's id or flags out of range ({error})"
+                             ) from None
+        if len(encoded) != len(frames):
+            raise ValueError("unix_datagram: a frame carries at most 64 data bytes")
+        per_datagram = _MAX_DATAGRAM // _MAX_FRAME
+        for first in range(0, len(encoded), per_datagram):
+            self._broadcast(b"".join(encoded[first:first + per_datagram]))
 
     def _next_datagram(self, timeout: float | None) -> bytes | None:
         """The next datagram, waiting at most ``timeout`` s (None: for ever); None if none."""
@@ -312,13 +324,8 @@ class UnixDatagramBus(can.BusABC):
         frames, whole = _parse(datagram)
         if not whole:
             self.malformed_datagrams += 1
-        return [can.Message(
-            timestamp=now, arbitration_id=frame_id,
-            is_extended_id=bool(flags & _EXTENDED), is_remote_frame=bool(flags & _REMOTE),
-            is_error_frame=bool(flags & _ERROR), is_fd=bool(flags & _FD),
-            bitrate_switch=bool(flags & _BRS), error_state_indicator=bool(flags & _ESI),
-            dlc=len(data), data=data, channel=self.channel_info, check=False)
-            for frame_id, flags, data in frames]
+        return [_message(frame_id, flags, data, now, self.channel_info)
+                for frame_id, flags, data in frames]
 
     def fileno(self) -> int:
         return self._socket.fileno()

@@ -18,7 +18,9 @@ frame (docs/master.md has the figures).
 The simulated operator feels the tool force the master reflects: ``present_tool_force`` sends
 it to the emulator as the operator display frame
 (:data:`~haptic.master.sim.sim_rig.OPERATOR_DISPLAY_ID`, emulator-only) after the cycle's RPDOs,
-so the emulator prepares its answer to the next SYNC as soon as it arrives.
+all of them in the next SYNC's datagram (one wake-up of the emulator a cycle); where the display
+frame comes before its SYNC, the emulator prepares its answer while it waits
+(``SimulatedCanRig.prepare_ahead``).
 """
 
 from __future__ import annotations

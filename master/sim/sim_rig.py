@@ -21,10 +21,12 @@ serves a bus that crosses processes from its own process, ``haptic-rig-sim`` (ba
 
 The operator display frame (simulated rigs only, :data:`OPERATOR_DISPLAY_ID`) carries the
 tool force the master reflects to the simulated operator, who feels it. It is also the last
-frame the ``sim`` backend sends in a cycle, so on it the devices prepare their answer to the
-next SYNC (model step and frames), and the SYNC itself only sends the prepared frames; any
-later frame that changes an input (RPDO, NMT, SDO, fault injection) discards the prepared
-answer, which is then computed at the SYNC as before. The answer is the same either way.
+frame the ``sim`` backend sends in a cycle, so from it on the serving loop, whenever no frame
+waits, prepares the devices' answer to the next SYNC (model step and frames), and the SYNC
+itself only sends the prepared frames; any later frame that changes an input (RPDO, NMT,
+SDO, fault injection) discards the prepared answer, which is prepared anew when idle again or
+computed at the SYNC. Frames that come in the SYNC's own datagram (the ``sim`` backend's
+cycle) are answered at the SYNC. The answer is the same either way.
 
 Faults can be injected for tests and drills: a drive fault (EMCY, statusword Fault), lost
 frames, an invalid or overloaded sensor sample.
@@ -340,10 +342,15 @@ class SimulatedCanRig:
         only when idle: frames that come together with their SYNC (the ``sim`` backend holds
         the cycle's RPDOs and display frame for the SYNC's datagram) are answered at the
         SYNC without them."""
-        with self._lock:
-            if self._answer_wanted and self._prepared is None:
-                self._prepared = self._prepare_sync(undoable=True)
-            return self._prepared is not None
+        try:
+            with self._lock:
+                if self._answer_wanted and self._prepared is None:
+                    self._prepared = self._prepare_sync(undoable=True)
+                return self._prepared is not None
+        except Exception as error:  # as a frame that raises: kept, and serving goes on
+            self._answer_wanted = False  # tried once: the SYNC computes it (and reports)
+            self.errors.append(f"{type(error).__name__}: {error}")
+            return False
 
     def poll_timers(self, now_s: float) -> float:
         """Send the drives' heartbeats that are due and trip a drive whose heartbeat consumer

@@ -153,6 +153,14 @@ def test_a_missed_side_names_the_stage_its_late_ticks_spent_most_in() -> None:
     model = {key: value for key, value in master.items() if key != "rig_emulator_cpu_cores"}
     assert slowest_stage_line(model, slave, real_time_misses(model, slave)) == (
         "    slowest stage: master read p99 367.9 us of a step p99 585.0 us")
+    # a stage without figures (a run of no tick: null in the JSON) is passed over
+    slave_null = {**slave_late, "stages": {**slave["stages"], "send": {"p50_s": None,
+                                                                      "p99_s": None}}}
+    line = slowest_stage_line(master, slave_null, real_time_misses(master, slave_null))
+    assert line.endswith("; slave node p99 282.4 us of a step p99 493.7 us")
+    from haptic.common.runtime.stage_times import format_stages
+
+    assert "send n/a/n/a" in format_stages(slave_null["stages"])
     # real time met, or no stage figures: no line
     assert slowest_stage_line(_loop_summary(stages=stages(read=50.0)), slave, []) is None
     late = _loop_summary(overrun_ratio=0.5)

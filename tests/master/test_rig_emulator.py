@@ -12,6 +12,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -163,6 +164,72 @@ def test_an_answer_prepared_on_the_display_frame_equals_one_computed_at_the_sync
     assert not prepared.errors and not direct.errors
     moved = prepared.last_sample.operator_intent_force_N[0, 0]
     assert moved != 2.0  # the operator reacted to the displayed force
+
+
+def test_the_serving_loop_prepares_ahead_only_when_idle(tmp_path) -> None:
+    """On a ``unix_datagram`` bus: a display frame that comes alone is followed by an idle
+    wait, in which the answer is prepared (the SYNC sends it); a display frame in its SYNC's
+    own datagram (the sim backend's cycle) is answered at the SYNC, with no copies made to
+    take a step back. The answers reach the bus either way."""
+    rig, _ = _enabled_rig(_config())
+    emulator_bus = can.Bus(interface="unix_datagram", channel=str(tmp_path))
+    master_bus = can.Bus(interface="unix_datagram", channel=str(tmp_path))
+    stop = threading.Event()
+    thread = threading.Thread(target=rig.serve, args=(stop.is_set, 0.05), daemon=True)
+    try:
+        rig.attach(emulator_bus)
+        thread.start()
+        display = _frame(OPERATOR_DISPLAY_ID, encode_operator_display(np.array([1.0, 0.0])),
+                         extended=True)
+        syncs, prepared = rig.sync_count, rig.prepared_syncs
+
+        answer_ids = {device.tpdo.cob_id for device in rig.devices} | {rig.codec.frame_id}
+
+        def answered(count: int) -> set[int]:
+            """The answer frames' ids seen once the SYNC was answered (heartbeats go on)."""
+            seen: set[int] = set()
+            deadline = time.monotonic() + WAIT_S
+            while (rig.sync_count < count or not answer_ids <= seen) and (
+                    time.monotonic() < deadline):
+                frame = master_bus.recv(0.05)
+                if frame is not None:
+                    seen.add(frame.arbitration_id)
+            return seen
+
+        master_bus.send(display)
+        deadline = time.monotonic() + WAIT_S
+        while rig._prepared is None and time.monotonic() < deadline:  # idle: prepared
+            time.sleep(0.005)
+        master_bus.send(_frame(cia402.SYNC_COB_ID))
+        first = answered(syncs + 1)
+        assert (rig.sync_count, rig.prepared_syncs) == (syncs + 1, prepared + 1)
+        master_bus.send_burst([display, _frame(cia402.SYNC_COB_ID)])  # one datagram
+        second = answered(syncs + 2)
+        assert (rig.sync_count, rig.prepared_syncs) == (syncs + 2, prepared + 1)
+        assert answer_ids <= first and answer_ids <= second  # both TPDOs and the sensor
+        assert not rig.errors
+    finally:
+        stop.set()
+        thread.join(timeout=5.0)
+        emulator_bus.shutdown()
+        master_bus.shutdown()
+    assert not thread.is_alive()
+
+
+def test_a_preparation_that_raises_is_recorded_and_serving_goes_on(monkeypatch) -> None:
+    rig, _ = _enabled_rig(_config())
+    rig.handle_message(_frame(OPERATOR_DISPLAY_ID, encode_operator_display(np.zeros(2)),
+                              extended=True))
+
+    def broken(*args: object, **kwargs: object) -> None:
+        raise RuntimeError("model step failed")
+
+    monkeypatch.setattr(rig, "_prepare_sync", broken)
+    assert rig.prepare_ahead() is False
+    assert rig.errors == ["RuntimeError: model step failed"]
+    assert rig.prepare_ahead() is False and len(rig.errors) == 1  # tried once, not again
+    monkeypatch.undo()
+    assert rig.handle_message(_frame(cia402.SYNC_COB_ID)) is None  # the SYNC computes it
 
 
 # --- the sim backend against the emulator process ------------------------------------------

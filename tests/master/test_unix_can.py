@@ -218,23 +218,32 @@ def test_raw_frames_are_the_messages_datagrams_without_the_objects(buses) -> Non
     while len(received) < len(many):
         received += b.recv_frames(1.0)
     assert received == many
-    with pytest.raises(ValueError, match="64"):
-        a.send_frames([(0x181, FD_FLAG, bytes(65))])
+    with pytest.raises(ValueError, match="64"):  # checked before anything goes out
+        a.send_frames([(0x181, 0, b"\x01"), (0x181, FD_FLAG, bytes(65))])
+    with pytest.raises(ValueError, match="range"):
+        a.send_frames([(0x181, 0, b"\x01"), (-1, 0, b"")])
+    assert b.recv_frames(0.05) == []
     assert b.malformed_datagrams == 0
 
 
 def test_send_raw_burst_on_another_bus_sends_messages() -> None:
-    from haptic.master.hardware.unix_can import EXTENDED_FLAG, FD_FLAG, send_raw_burst
+    from haptic.master.hardware.unix_can import BRS_FLAG, EXTENDED_FLAG, FD_FLAG, send_raw_burst
 
     sender = can.Bus(interface="virtual", channel="raw-burst-test")
     receiver = can.Bus(interface="virtual", channel="raw-burst-test")
     try:
         send_raw_burst(sender, [(0x181, 0, b"\x01"), (0x1FFFF000, EXTENDED_FLAG, b""),
-                                (0x7FF, FD_FLAG, bytes(12))])
-        got = [receiver.recv(1.0) for _ in range(3)]
-        assert [(m.arbitration_id, m.is_extended_id, m.is_fd, bytes(m.data)) for m in got] == [
-            (0x181, False, False, b"\x01"), (0x1FFFF000, True, False, b""),
-            (0x7FF, False, True, bytes(12))]
+                                (0x7FF, FD_FLAG | BRS_FLAG | 32, bytes(12)), (0x182, 2, b""),
+                                (0x183, 4, b"")])
+        got = [receiver.recv(1.0) for _ in range(5)]
+        assert [(m.arbitration_id, m.is_extended_id, m.is_fd, m.bitrate_switch,
+                 m.error_state_indicator, m.is_remote_frame, m.is_error_frame, bytes(m.data))
+                for m in got] == [
+            (0x181, False, False, False, False, False, False, b"\x01"),
+            (0x1FFFF000, True, False, False, False, False, False, b""),
+            (0x7FF, False, True, True, True, False, False, bytes(12)),
+            (0x182, False, False, False, False, True, False, b""),
+            (0x183, False, False, False, False, False, True, b"")]
     finally:
         sender.shutdown()
         receiver.shutdown()
