@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import concurrent.futures
 import multiprocessing
-import os
 import threading
 import time
 from dataclasses import dataclass, field, replace
@@ -33,6 +32,7 @@ from haptic.common.model.passivity import MODES as CONTROL_MODES
 from haptic.common.model.passivity import PassivitySettings
 from haptic.common.model.synthesis import SynthesisError
 from haptic.common.model.teleop import TeleopModel
+from haptic.common.runtime.machine import usable_cpu_count
 from haptic.common.wire.injection import InjectionConfig
 from haptic.lockstep.simulator import (
     LockstepResult,
@@ -337,10 +337,7 @@ def auto_workers(lanes: int) -> int:
 
 def available_workers() -> int:
     """The CPUs this process may run on."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        return os.cpu_count() or 1
+    return usable_cpu_count()
 
 
 def _run_lanes(job: _LaneJob) -> LockstepResult:

@@ -93,8 +93,8 @@ def _parse(datagram: bytes) -> tuple[list[RawFrame], bool]:
     return frames, offset == size and bool(frames)
 
 
-def _flags(msg: can.Message) -> int:
-    """The wire's flags of ``msg``."""
+def wire_flags(msg: can.Message) -> int:
+    """The wire's flags of ``msg`` (a :data:`RawFrame`'s second item)."""
     return ((_EXTENDED if msg.is_extended_id else 0) | (_REMOTE if msg.is_remote_frame
             else 0) | (_ERROR if msg.is_error_frame else 0) | (_FD if msg.is_fd else 0)
             | (_BRS if msg.bitrate_switch else 0)
@@ -104,7 +104,7 @@ def _flags(msg: can.Message) -> int:
 def _encode(msg: can.Message) -> bytes:
     """One frame's bytes on the wire (header, then the data)."""
     data = bytes(msg.data)
-    return _HEADER.pack(msg.arbitration_id, _flags(msg), len(data)) + data
+    return _HEADER.pack(msg.arbitration_id, wire_flags(msg), len(data)) + data
 
 
 def send_burst(bus: can.BusABC, messages: Sequence[can.Message]) -> None:
@@ -248,10 +248,7 @@ class UnixDatagramBus(can.BusABC):
         """Send ``messages`` to every other member as one datagram (up to 16 frames; more
         go as further datagrams): they arrive together, in order, each a frame of its own
         to the receiver's :meth:`recv`."""
-        for first in range(0, len(messages), _MAX_DATAGRAM // _MAX_FRAME):
-            chunk = messages[first:first + _MAX_DATAGRAM // _MAX_FRAME]
-            if chunk:
-                self._broadcast(b"".join(_encode(msg) for msg in chunk))
+        self._broadcast_frames([_encode(msg) for msg in messages])
 
     def send_frames(self, frames: Sequence[RawFrame]) -> None:
         """:meth:`send_burst` of raw frames (id, flags, data): the same datagrams, without
@@ -264,6 +261,10 @@ class UnixDatagramBus(can.BusABC):
                              ) from None
         if len(encoded) != len(frames):
             raise ValueError("unix_datagram: a frame carries at most 64 data bytes")
+        self._broadcast_frames(encoded)
+
+    def _broadcast_frames(self, encoded: list[bytes]) -> None:
+        """Frames already encoded, back to back: up to 16 a datagram, in order."""
         per_datagram = _MAX_DATAGRAM // _MAX_FRAME
         for first in range(0, len(encoded), per_datagram):
             self._broadcast(b"".join(encoded[first:first + per_datagram]))
@@ -282,30 +283,10 @@ class UnixDatagramBus(can.BusABC):
                 if not select.select([self._socket], [], [], wait)[0]:
                     return None
 
-    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        if self._received:
-            return self._received.popleft(), False
-        deadline = None if timeout is None else time.monotonic() + timeout
-        while True:
-            datagram = self._next_datagram(
-                None if deadline is None else max(0.0, deadline - time.monotonic()))
-            if datagram is None:
-                return None, False
-            frames = self._decode(datagram)
-            if frames:
-                self._received.extend(frames[1:])
-                return frames[0], False
-
-    def recv_frames(self, timeout: float | None = None) -> list[RawFrame]:
-        """The frames of the next datagram with any (or those a :meth:`recv` left of the last
-        one), in order, as raw frames (id, flags, data), without python-can's message objects
-        (the rig emulator's serving loop: about 30 us less a cycle of four frames than one
-        ``recv`` each on the project's 2-core VM); [] when none came within ``timeout`` s
-        (0: only what is here; None: wait for ever). The bus's filters are not applied."""
-        if self._received:
-            messages, self._received = self._received, deque()
-            return [(message.arbitration_id, _flags(message), bytes(message.data))
-                    for message in messages]
+    def _next_frames(self, timeout: float | None) -> list[RawFrame]:
+        """The whole frames of the next datagram that has any, waiting at most ``timeout`` s
+        in all (None: for ever); [] if none came. A datagram with anything but whole frames
+        counts in ``malformed_datagrams``."""
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             datagram = self._next_datagram(
@@ -318,14 +299,29 @@ class UnixDatagramBus(can.BusABC):
             if frames:
                 return frames
 
-    def _decode(self, datagram: bytes) -> list[can.Message]:
-        """The whole frames of a datagram, in order (a partial last frame is dropped)."""
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self._received:
+            return self._received.popleft(), False
+        frames = self._next_frames(timeout)
+        if not frames:
+            return None, False
         now = time.time()
-        frames, whole = _parse(datagram)
-        if not whole:
-            self.malformed_datagrams += 1
-        return [_message(frame_id, flags, data, now, self.channel_info)
-                for frame_id, flags, data in frames]
+        messages = [_message(frame_id, flags, data, now, self.channel_info)
+                    for frame_id, flags, data in frames]
+        self._received.extend(messages[1:])
+        return messages[0], False
+
+    def recv_frames(self, timeout: float | None = None) -> list[RawFrame]:
+        """The frames of the next datagram with any (or those a :meth:`recv` left of the last
+        one), in order, as raw frames (id, flags, data), without python-can's message objects
+        (the rig emulator's serving loop: about 30 us less a cycle of four frames than one
+        ``recv`` each on the project's 2-core VM); [] when none came within ``timeout`` s
+        (0: only what is here; None: wait for ever). The bus's filters are not applied."""
+        if self._received:
+            messages, self._received = self._received, deque()
+            return [(message.arbitration_id, wire_flags(message), bytes(message.data))
+                    for message in messages]
+        return self._next_frames(timeout)
 
     def fileno(self) -> int:
         return self._socket.fileno()

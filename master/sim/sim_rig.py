@@ -76,6 +76,7 @@ from haptic.master.hardware.unix_can import (
     FD_FLAG,
     RawFrame,
     send_raw_burst,
+    wire_flags,
 )
 from haptic.master.settings import CanSettings, master_settings
 from haptic.master.sim.rig_model import RigModel, RigSample, RigState
@@ -146,8 +147,7 @@ def _receive(bus: can.BusABC, timeout_s: float) -> list[RawFrame]:
     message = bus.recv(timeout=timeout_s)
     if message is None:
         return []
-    flags = (EXTENDED_FLAG if message.is_extended_id else 0) | (FD_FLAG if message.is_fd else 0)
-    return [(message.arbitration_id, flags, bytes(message.data))]
+    return [(message.arbitration_id, wire_flags(message), bytes(message.data))]
 
 
 class SimulatedCanRig:
