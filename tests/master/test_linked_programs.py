@@ -431,15 +431,21 @@ def test_a_slave_side_outage_trips_only_the_slaves_watchdog(pair, tmp_path) -> N
 @pytest.mark.parametrize("control", ["paper", "tdpa"])
 def test_a_2_cm_sine_with_loss_and_jitter_ends_aligned(pair, tmp_path, control) -> None:
     """Issue 16's alignment target over real links, in both modes: the operator moves the
-    handle in a 2 cm sine about its start for 10 s, each direction loses 5 % of its messages
-    and adds up to 2 ms of jitter; at the end |yt - Ah1 yh| <= 1 mm. The sine's low side
-    meets the work area's wall at -10 mm (the slave's grid plus its margin), where both sides
-    stop. Asserts the gap, not the loops' rates: a slow machine only stretches the run."""
+    handle in a 2 cm sine about its start for 10.5 s of rig time, each direction loses 5 %
+    of its messages and adds up to 2 ms of jitter; at the end |yt - Ah1 yh| <= 1 mm. The
+    sine's low side meets the work area's wall at -10 mm (the slave's grid plus its margin),
+    where both sides stop. The run ends on rig time at the sine's top turning point, where
+    the handle stands still: there the gap is the sides' misalignment, not the handle's speed
+    times the link's delay (at a zero crossing, 63 mm/s times a 16 ms lag on a busy host is
+    already 1 mm). Asserts the gap, not the loops' rates: a slow machine only stretches the
+    run."""
     pair.config.write_text(pair.config.read_text() + f'[control]\nmode = "{control}"\n')
     injection = ("--loss", "0.05", "--jitter", "0.002", "--seed", "5")
     slave = pair.slave(None, tmp_path / "slave.json", *injection)
-    master = pair.master(10.0, tmp_path / "master.json", "--rig", "model", "--operator",
-                         "track:shape=sine,ax=0.02,freq=0.5", *injection)
+    # 10.5 s: sin(2 pi 0.5 Hz t) = +1, the top turning point (counted in rig ticks, so a
+    # host that stalls the loop cannot move the end off it)
+    master = pair.master(None, tmp_path / "master.json", "--rig", "model", "--rig-time",
+                         "10.5", "--operator", "track:shape=sine,ax=0.02,freq=0.5", *injection)
     status, log = _wait(master, 3 * WAIT_S)
     assert status == 0, log
     slave.send_signal(signal.SIGTERM)
@@ -452,6 +458,6 @@ def test_a_2_cm_sine_with_loss_and_jitter_ends_aligned(pair, tmp_path, control) 
     assert "x -10.0..150.0 mm" in master_summary["work_area"]
     gap_x_m, gap_y_m = summary["final_position_gap_m"]
     assert max(abs(gap_x_m), abs(gap_y_m)) <= 0.001, summary
-    # read while the tool still ran (the handle moves at the end): the master's final
-    # SAFE_STATE re-places the stopped tool at the handle, where the gap would read exactly 0
+    # read while the tool still ran: the master's final SAFE_STATE re-places the stopped
+    # tool at the handle, where the gap would read exactly 0
     assert gap_x_m != 0.0, summary
