@@ -623,6 +623,19 @@ class SimulatedCanRig:
                     for holder, name in self._state_arrays]
             if self.model.force_noise_std_N > 0.0:
                 rng_undo = self.state.rng.bit_generator.state
+        try:
+            return self._step_and_answer(drives, frames, targets, refused, undo, rng_undo)
+        except BaseException:
+            if undoable:  # the SYNC computes its answer again: from the state before the step
+                self._restore(undo, rng_undo)
+            raise
+
+    def _step_and_answer(self, drives: list[DriveRuntime], frames: list[tuple[int, bytes]],
+                         targets: np.ndarray, refused: frozenset[int],
+                         undo: list[tuple[Any, str, np.ndarray]], rng_undo: Any
+                         ) -> _SyncAnswer:
+        """:meth:`_prepare_sync` from the model's step on: the step, the drives' checks and
+        their frames, the sensor's."""
         if not self.operator_grasped:
             # the operator waits for the ready lamp: the script's clock has not started
             # (one period before its start: no intent yet, even with onset 0)
@@ -697,12 +710,15 @@ class SimulatedCanRig:
         """Take back a prepared answer (an input changed after it): the model's state as it
         was before its step."""
         answer, self._prepared = self._prepared, None
-        if answer is None:
-            return
-        for holder, name, saved in answer.undo:
+        if answer is not None:
+            self._restore(answer.undo, answer.rng_undo)
+
+    def _restore(self, undo: list[tuple[Any, str, np.ndarray]], rng_undo: Any) -> None:
+        """The model's state arrays (and its noise generator) as ``undo`` saved them."""
+        for holder, name, saved in undo:
             getattr(holder, name)[...] = saved  # in place: the arrays may be bound buffers
-        if answer.rng_undo is not None:
-            self.state.rng.bit_generator.state = answer.rng_undo
+        if rng_undo is not None:
+            self.state.rng.bit_generator.state = rng_undo
 
     def _commit_sync(self, answer: _SyncAnswer) -> None:
         """Make ``answer`` the devices' state, then send its frames (in that order, so whoever

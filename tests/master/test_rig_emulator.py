@@ -232,6 +232,37 @@ def test_a_preparation_that_raises_is_recorded_and_serving_goes_on(monkeypatch) 
     assert rig.handle_message(_frame(cia402.SYNC_COB_ID)) is None  # the SYNC computes it
 
 
+def test_a_preparation_that_raises_after_the_model_step_leaves_the_model_as_it_was(
+        monkeypatch) -> None:
+    """The SYNC computes the answer again, so a preparation that fails after the model's step
+    must take that step back: else the handle would move two periods for one SYNC."""
+    rig, _ = _enabled_rig(_config())
+    twin, _ = _enabled_rig(_config())
+    for each in (rig, twin):
+        each.handle_message(_frame(OPERATOR_DISPLAY_ID, encode_operator_display(
+            np.array([1.5, -0.5])), extended=True))
+    before = [getattr(holder, name).copy() for holder, name in rig._state_arrays]
+
+    def broken(*args: object, **kwargs: object) -> None:
+        raise RuntimeError("sensor encoding failed")
+
+    monkeypatch.setattr(rig.codec, "to_counts", broken)
+    assert rig.prepare_ahead() is False
+    assert rig.errors == ["RuntimeError: sensor encoding failed"]
+    for (holder, name), saved in zip(rig._state_arrays, before, strict=True):
+        np.testing.assert_array_equal(getattr(holder, name), saved, err_msg=name)
+    monkeypatch.undo()
+    assert rig.handle_message(_frame(cia402.SYNC_COB_ID)) is None
+    assert twin.handle_message(_frame(cia402.SYNC_COB_ID)) is None
+    assert rig.sync_count == twin.sync_count
+    np.testing.assert_array_equal(rig.last_sample.handle_position_m,
+                                  twin.last_sample.handle_position_m)
+    for (holder, name), (twin_holder, _) in zip(rig._state_arrays, twin._state_arrays,
+                                                strict=True):
+        np.testing.assert_array_equal(getattr(holder, name), getattr(twin_holder, name),
+                                      err_msg=name)
+
+
 # --- the sim backend against the emulator process ------------------------------------------
 
 
