@@ -346,53 +346,60 @@ def test_device_auto_with_one_cuda_device(monkeypatch) -> None:
     assert resolve_device("cuda:1") == "cuda:1"
 
 
-@pytest.mark.skipif(not __import__("warp").get_cuda_device_count(),
-                    reason="needs a CUDA device (the pinned staging path)")
-def test_cuda_device_matches_numpy(scenario) -> None:
-    """The CUDA path (pinned host buffers copied in and out) against the numpy reference."""
+needs_cuda = pytest.mark.skipif(not __import__("warp").get_cuda_device_count(),
+                                reason="needs a CUDA device")
+#: Two lanes cutting on the CUDA device and in the numpy reference: one along x through the
+#: deep block, one along y across the shallow blocks' seam (m/s and m).
+CUDA_LANE_VELOCITY_M_S = np.array([[0.04, 0.0], [0.0, 0.04]])
+CUDA_LANE_START_M = np.array([[0.003, 0.0], [0.03, -0.006]])
+
+
+def _cut_on_cuda_and_numpy(scenario, steps: int, before_step=None):
+    """Both clays stepped side by side for ``steps`` steps along the lanes above, every step's
+    force, damping and proxy compared; ``before_step(step, cuda_state, numpy_state,
+    position)`` changes both states first. Returns the two states."""
     ref = _clay(scenario, "numpy")
     cuda = make_clay(scenario, SAMPLE_PERIOD_S, "warp", "cuda")
     a, b = cuda.initial_state(2), ref.initial_state(2)
-    velocity = np.array([[0.04, 0.0], [0.0, 0.04]])
-    position = np.array([[0.003, 0.0], [0.03, -0.006]])
-    for _ in range(60):
+    position = CUDA_LANE_START_M
+    for step in range(steps):
+        if before_step is not None:
+            before_step(step, a, b, position)
         previous = position
-        position = previous + velocity * SAMPLE_PERIOD_S
-        ra = cuda.step(a, previous, position, velocity)
-        rb = ref.step(b, previous, position, velocity)
-        np.testing.assert_allclose(ra.force_N, rb.force_N, rtol=1e-9, atol=1e-12)
-        np.testing.assert_allclose(ra.proxy_position_m, rb.proxy_position_m, rtol=0, atol=1e-15)
-    assert (a.removed_total_m3 > 0).all()
-    np.testing.assert_allclose(a.heights_m(), b.heights_m(), rtol=0, atol=1e-15)
-
-
-@pytest.mark.skipif(not __import__("warp").get_cuda_device_count(),
-                    reason="needs a CUDA device (the captured step)")
-def test_cuda_graph_sees_damping_and_proxy_changes_made_after_capture(scenario) -> None:
-    """The CUDA step is a graph captured with the state: block damping set and a proxy placed
-    mid-run (both written into the state's arrays in place) reach the next steps as they
-    reach numpy's."""
-    ref = _clay(scenario, "numpy")
-    cuda = make_clay(scenario, SAMPLE_PERIOD_S, "warp", "cuda")
-    a, b = cuda.initial_state(2), ref.initial_state(2)
-    velocity = np.array([[0.04, 0.0], [0.0, 0.04]])
-    position = np.array([[0.003, 0.0], [0.03, -0.006]])
-    for step in range(80):
-        if step == 30:
-            damping = b.block_damping_N_s_per_m() * np.array([[1.5], [0.5]])
-            a.set_block_damping(damping)
-            b.set_block_damping(damping)
-        if step == 50:
-            lane = np.array([True, False])
-            a.place_proxy(position, lane)
-            b.place_proxy(position, lane)
-        previous = position
-        position = previous + velocity * SAMPLE_PERIOD_S
-        ra = cuda.step(a, previous, position, velocity)
-        rb = ref.step(b, previous, position, velocity)
+        position = previous + CUDA_LANE_VELOCITY_M_S * SAMPLE_PERIOD_S
+        ra = cuda.step(a, previous, position, CUDA_LANE_VELOCITY_M_S)
+        rb = ref.step(b, previous, position, CUDA_LANE_VELOCITY_M_S)
         np.testing.assert_allclose(ra.force_N, rb.force_N, rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(ra.damping_N_s_per_m, rb.damping_N_s_per_m, rtol=1e-9,
                                    atol=1e-12)
         np.testing.assert_allclose(ra.proxy_position_m, rb.proxy_position_m, rtol=0, atol=1e-15)
-    np.testing.assert_allclose(a.block_damping_N_s_per_m(), b.block_damping_N_s_per_m())
     np.testing.assert_allclose(a.heights_m(), b.heights_m(), rtol=0, atol=1e-15)
+    return a, b
+
+
+@needs_cuda
+def test_cuda_device_matches_numpy(scenario) -> None:
+    """The CUDA path (pinned host buffers copied in and out) against the numpy reference."""
+    cuda_state, _ = _cut_on_cuda_and_numpy(scenario, 60)
+    assert (cuda_state.removed_total_m3 > 0).all()
+
+
+@needs_cuda
+def test_cuda_graph_sees_damping_and_proxy_changes_made_after_capture(scenario) -> None:
+    """The CUDA step is a graph captured with the state: block damping set and a proxy placed
+    mid-run (both written into the state's arrays in place) reach the next steps as they
+    reach numpy's."""
+
+    def change(step: int, cuda_state, numpy_state, position: np.ndarray) -> None:
+        if step == 30:
+            damping = numpy_state.block_damping_N_s_per_m() * np.array([[1.5], [0.5]])
+            cuda_state.set_block_damping(damping)
+            numpy_state.set_block_damping(damping)
+        if step == 50:
+            lane = np.array([True, False])
+            cuda_state.place_proxy(position, lane)
+            numpy_state.place_proxy(position, lane)
+
+    cuda_state, numpy_state = _cut_on_cuda_and_numpy(scenario, 80, change)
+    np.testing.assert_allclose(cuda_state.block_damping_N_s_per_m(),
+                               numpy_state.block_damping_N_s_per_m())
