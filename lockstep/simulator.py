@@ -35,6 +35,7 @@ from haptic.common.config.scenario import Scenario
 from haptic.common.model.drift import DriftCoupling
 from haptic.common.model.lti import DiscreteLTI
 from haptic.common.model.passivity import PassivitySettings
+from haptic.common.model.synthesis import synthesize
 from haptic.common.model.teleop import TeleopModel
 from haptic.common.model.work_area import shared_work_area, slave_work_area_m
 from haptic.common.wire.injection import InjectionConfig
@@ -233,7 +234,9 @@ def stacked_compensators(model: TeleopModel, gains_k: np.ndarray
     masters, slaves = {}, {}
     for gain in distinct:
         gained = model.with_gain(float(gain))
-        masters[gain], slaves[gain] = master_compensator(gained), slave_compensators(gained)
+        synthesized = synthesize(gained)  # once for both sides
+        masters[gain] = master_compensator(gained, synthesized)
+        slaves[gain] = slave_compensators(gained, synthesized)
     if distinct.size == 1:
         return masters[distinct[0]], slaves[distinct[0]]
     return (StackedLTI.from_blocks([masters[g] for g in gains_k]),
@@ -279,9 +282,7 @@ class LockstepSimulator:
         base = "linear" if environment == "linear" else "clay"
         self.slave = SlaveNode(model, scenario, base, clay_impl, device, passivity, drift,
                                (self.work_area.tool_low_m, self.work_area.tool_high_m),
-                               self.passivity_standby)
-        # The node synthesizes its compensators for the model's k; lanes use their own k.
-        self.slave.compensators = slave_block
+                               self.passivity_standby, slave_block)  # each lane its own k
         if environment == "clay+linear":
             self.slave.environment = CombinedEnvironment(
                 make_environment("clay", model, scenario, clay_impl, device),

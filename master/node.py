@@ -38,6 +38,7 @@ activation) scales the compensator's inputs: the margin governor's k (master/mar
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,7 +47,7 @@ import numpy as np
 from haptic.common.model.block_layout import CompensatorLayout
 from haptic.common.model.lti import DiscreteLTI, Path, combine, discretize
 from haptic.common.model.passivity import PassivityPort, PassivitySettings
-from haptic.common.model.synthesis import synthesize
+from haptic.common.model.synthesis import AxisCompensators, synthesize
 from haptic.common.model.teleop import TeleopModel
 from haptic.common.runtime.replayed_launch import ReplayedLaunch
 from haptic.master import node_kernels as kernels
@@ -119,11 +120,14 @@ class MasterNodeState:
         return self.faulted.shape[0]
 
 
-def master_compensator(model: TeleopModel) -> DiscreteLTI:
-    """Ch1 and Ct1 of both axes, Tustin at Ts, as one block: vh = Ch1 fh - Ct1 ft."""
+def master_compensator(model: TeleopModel,
+                       synthesized: Sequence[AxisCompensators] | None = None) -> DiscreteLTI:
+    """Ch1 and Ct1 of both axes, Tustin at Ts, as one block: vh = Ch1 fh - Ct1 ft.
+    ``synthesized``: the model's compensators where they are already at hand (else they are
+    synthesised here)."""
     period_s = model.sample_period_s
     paths = []
-    for index, axis in enumerate(synthesize(model)):
+    for index, axis in enumerate(synthesize(model) if synthesized is None else synthesized):
         paths.append(Path(discretize(axis.ch1, period_s, "tustin"), source=index, target=index))
         paths.append(Path(discretize(axis.ct1, period_s, "tustin"), source=2 + index,
                           target=index, gain=-1.0))

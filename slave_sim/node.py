@@ -26,7 +26,7 @@ from haptic.common.model.block_layout import CompensatorLayout
 from haptic.common.model.drift import DriftCoupling
 from haptic.common.model.lti import DiscreteLTI, Path, combine, discretize
 from haptic.common.model.passivity import PassivityPort, PassivitySettings
-from haptic.common.model.synthesis import synthesize
+from haptic.common.model.synthesis import AxisCompensators, synthesize
 from haptic.common.model.teleop import TeleopModel, model_from_config
 from haptic.common.model.work_area import work_area_from_config
 from haptic.common.runtime.replayed_launch import ReplayedLaunch
@@ -49,12 +49,14 @@ def _warp() -> Any:
     return wp
 
 
-def slave_compensators(model: TeleopModel) -> DiscreteLTI:
+def slave_compensators(model: TeleopModel,
+                       synthesized: Sequence[AxisCompensators] | None = None) -> DiscreteLTI:
     """vt = -Ch2 fh + Ct2 ft for both axes as one MIMO block (Tustin): inputs
-    (fh_x, fh_y, ft_x, ft_y) N, outputs (vt_x, vt_y) N."""
+    (fh_x, fh_y, ft_x, ft_y) N, outputs (vt_x, vt_y) N. ``synthesized``: the model's
+    compensators where they are already at hand (else they are synthesised here)."""
     paths = []
     n_axes = len(model.axes)
-    for index, axis in enumerate(synthesize(model)):
+    for index, axis in enumerate(synthesize(model) if synthesized is None else synthesized):
         ts = model.sample_period_s
         ch2 = discretize(axis.ch2, ts, "tustin", f"fh_{axis.axis}", f"vt_{axis.axis}")
         ct2 = discretize(axis.ct2, ts, "tustin", f"ft_{axis.axis}", f"vt_{axis.axis}")
@@ -140,6 +142,8 @@ class SlaveNode:
 
     ``environment`` is the name of the tool's environment ("clay" or "linear"; ``None``: the
     scenario's), ``clay_impl`` "warp" or "numpy", ``device`` the Warp device ("auto").
+    ``compensators``: the Ch2/Ct2 block to run (one per lane, stacked, as the lockstep's
+    lanes have); ``None``: synthesised for the model's k.
     """
 
     def __init__(self, model: TeleopModel, scenario: Scenario, environment: str | None = None,
@@ -147,7 +151,7 @@ class SlaveNode:
                  passivity: PassivitySettings | None = None,
                  drift: DriftCoupling | None = None,
                  tool_bounds_m: tuple[Sequence[float], Sequence[float]] | None = None,
-                 passivity_standby: bool = False) -> None:
+                 passivity_standby: bool = False, compensators: Any = None) -> None:
         self.model = model
         #: The wall the tool stays inside: (low (x, y), high (x, y)), m, the work area both
         #: sides hold (common/model/work_area.py); None: no wall.
@@ -163,7 +167,8 @@ class SlaveNode:
         self.passivity_standby = bool(passivity_standby and passivity is not None)
         self.scenario = scenario
         self.sample_period_s = model.sample_period_s
-        self.compensators = slave_compensators(model)
+        self.compensators = slave_compensators(model) if compensators is None else (
+            compensators)
         self.plant = tool_plant(model)
         mass, damping, stiffness = tool_constants(model)
         self._inv_period_s = 1.0 / model.sample_period_s
@@ -173,8 +178,8 @@ class SlaveNode:
                                             device)
         self._kernel_matrices: tuple[Any, tuple, int, Any] | None = None
         self._constants = self._kernel_constants(mass, damping, stiffness)
-        # Load (or compile, a few s the first time) the kernels now, never inside a tick
-        # (a lockstep that replaces the compensators loads its layout's at initial_state).
+        # Load (or compile, a few s the first time) the kernels of the compensators' layout
+        # now, never inside a tick (compensators replaced later load theirs at initial_state).
         _warp().load_module(kernels.step_kernels(self._matrices()[3])[0].module, device=DEVICE)
 
     def _kernel_constants(self, mass: np.ndarray, damping: np.ndarray,
