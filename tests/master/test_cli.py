@@ -57,8 +57,9 @@ def _sim_config(tmp_path) -> str:
 def test_cli_runs_the_node_on_the_simulated_rig(tmp_path, capsys) -> None:
     status = main(["--config", _sim_config(tmp_path), "--rig", "sim", "--duration", "0.1",
                    "--no-pace", "--json", "--no-link"])
-    result = json.loads(capsys.readouterr().out)
-    assert status == 0
+    printed = capsys.readouterr()
+    assert status == 0, printed.err  # a hardware error prints one line there, no JSON
+    result = json.loads(printed.out)
     assert result["rig"] == "sim" and result["cycles"] == 185
     assert result["final_position_m"][0] > 0.0
     assert result["events"][0]["kind"] == "enable"
