@@ -50,6 +50,10 @@ def _sim_config(tmp_path) -> str:
         "pdo_timeout_s = 0.5\n"
         'operator = "constant:fx=1,fy=0,onset=0.02"\n'
         "force_noise_std_N = 0.0\nseed = 0\ninitial_position_m = [0.0, 0.0]\n"
+        # the master runs in the test process: a pause of it (a gen-2 collection of a long
+        # session's heap) beyond the shipped 0.3 s heartbeat consumer time faults the emulated
+        # drives with EMCY 0x8130 (test_rig_emulator.py's _config)
+        "[master.can]\nheartbeat_timeout_s = 5.0\n"
     )
     return str(path)
 

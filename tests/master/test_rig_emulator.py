@@ -46,6 +46,12 @@ WAIT_S = 40.0
 
 def _config(operator: str = "constant:fx=0,fy=0", **overrides: object) -> dict:
     config = override(load_config(), "master.sim.operator", operator)
+    # The heartbeats both ways are wall-clock supervision (test_can_commissioning.py and the
+    # emulator's own test below). Here the master's driver runs in the test process, and a
+    # pause of that process beyond the shipped 0.3 s consumer time (a gen-2 collection of a
+    # long test session's heap; a 0.3 s collection every 0.15 s faulted 6 of 8 such runs
+    # with EMCY 0x8130) latches the drives in Fault, as test_sim_rig.py explains.
+    config = override(config, "master.can.heartbeat_timeout_s", 5.0)
     for key, value in overrides.items():
         config = override(config, key.replace("__", "."), value)
     return config
