@@ -14,10 +14,10 @@ Modes:
 
 from __future__ import annotations
 
-import concurrent.futures
 import multiprocessing
 import threading
 import time
+import traceback
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -269,11 +269,6 @@ class _LaneJob:
     parts: tuple[tuple[int, int], ...]  # (first lane, end) of each part
 
 
-#: The job the forked workers run (set in the parent just before they fork, so nothing of it
-#: is pickled; read only in the workers).
-_FORKED_JOB: _LaneJob | None = None
-
-
 def _simulate_lanes(job: _LaneJob, first: int, end: int) -> LockstepResult:
     """Lanes ``first:end`` of ``job`` in one lockstep simulation."""
     settings = job.settings
@@ -298,12 +293,6 @@ def _simulate_lanes(job: _LaneJob, first: int, end: int) -> LockstepResult:
                          to_master=injection, seed=settings.seed, excitation_N=excitation,
                          window_s=settings.window_s,
                          schedules=tuple(s[:, first:end] for s in job.schedules))
-
-
-def _forked_part(index: int) -> LockstepResult:
-    """A worker's part of the forked job."""
-    assert _FORKED_JOB is not None, "a sweep worker must be forked with its job"
-    return _simulate_lanes(_FORKED_JOB, *_FORKED_JOB.parts[index])
 
 
 def lane_parts(lane_gains: np.ndarray, workers: int) -> tuple[tuple[int, int], ...]:
@@ -341,23 +330,75 @@ def available_workers() -> int:
 
 
 def _run_lanes(job: _LaneJob) -> LockstepResult:
-    """Every lane of ``job``: the first part in this process, each other one in a worker
+    """Every lane of ``job``: the first part in this process, each other one in a process
     forked for it meanwhile (the results joined in lane order: bit for bit the one-process
     run, the schedules having been drawn for every lane)."""
-    global _FORKED_JOB
     if len(job.parts) == 1:
         return _simulate_lanes(job, *job.parts[0])
-    _FORKED_JOB = job
+    context = multiprocessing.get_context("fork")
+    others: list[_ForkedPart] = []
     try:
-        context = multiprocessing.get_context("fork")
-        with concurrent.futures.ProcessPoolExecutor(len(job.parts) - 1,
-                                                    mp_context=context) as pool:
-            others = [pool.submit(_forked_part, index) for index in range(1, len(job.parts))]
-            parts = [_simulate_lanes(job, *job.parts[0])]
-            parts.extend(future.result() for future in others)
+        others.extend(_ForkedPart(context, job, index) for index in range(1, len(job.parts)))
+        parts = [_simulate_lanes(job, *job.parts[0])]
+        parts.extend(other.result() for other in others)
     finally:
-        _FORKED_JOB = None
+        for other in others:
+            other.close()
     return concatenate_results(parts)
+
+
+class _ForkedPart:
+    """Part ``index`` of ``job`` in a forked process of its own, which inherits the job (so
+    nothing of it is pickled) and sends back its result through a pipe.
+
+    A plain forked process, not a process pool: a pool hands the part over through its
+    manager and feeder threads, which wait for this process's GIL while it runs its own part
+    (the worker started 30-50 ms late in a 1 s sweep)."""
+
+    def __init__(self, context: Any, job: _LaneJob, index: int) -> None:
+        self._receiver, sender = context.Pipe(duplex=False)
+        self._process = context.Process(target=_part_worker, args=(job, index, sender),
+                                        name=f"sweep part {index}", daemon=True)
+        self._process.start()
+        sender.close()  # the worker holds its end: end of file here when it stops
+
+    def result(self) -> LockstepResult:
+        """The part's result; its error raised again here when the worker failed."""
+        try:
+            done, value, trace = self._receiver.recv()
+        except EOFError:
+            self._process.join()
+            raise RuntimeError(f"sweep worker {self._process.pid} stopped without a result "
+                               f"(exit status {self._process.exitcode})") from None
+        self._process.join()
+        if not done:
+            raise value from RuntimeError(f"in sweep worker {self._process.pid}:\n{trace}")
+        return value
+
+    def close(self) -> None:
+        """End the worker if it still runs (its own PID) and reap it."""
+        if self._process.is_alive():
+            self._process.kill()
+        self._process.join()
+        self._process.close()
+        self._receiver.close()
+
+
+def _part_worker(job: _LaneJob, index: int, sender: Any) -> None:
+    """A forked worker's body: part ``index`` of ``job``, sent as (True, result, ""), or the
+    error that stopped it as (False, error, traceback)."""
+    try:
+        message = (True, _simulate_lanes(job, *job.parts[index]), "")
+    except Exception as error:  # raised again in the parent, with the worker's traceback
+        message = (False, error, traceback.format_exc())
+    try:
+        sender.send(message)
+    except Exception as error:  # what does not pickle goes back as text
+        problem = error if message[0] else message[1]
+        sender.send((False, RuntimeError(f"{type(problem).__name__}: {problem}"),
+                     message[2] or traceback.format_exc()))
+    finally:
+        sender.close()
 
 
 def lane_device(settings: SweepSettings) -> str:

@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import json
+import multiprocessing
+import os
 import threading
 from dataclasses import replace
 
@@ -14,6 +16,7 @@ from haptic.common.config import load_config
 from haptic.common.config.scenario import load_scenario
 from haptic.common.model.teleop import model_from_config
 from haptic.common.wire.injection import InjectionConfig
+from haptic.lockstep import sweep
 from haptic.lockstep.cli import main
 from haptic.lockstep.simulator import LockstepSimulator, concatenate_results, line_schedules
 from haptic.lockstep.sweep import (
@@ -121,6 +124,40 @@ def test_a_sweep_split_between_processes_is_the_one_process_sweep(model, tmp_pat
     assert one.extra["per_cell"] == split.extra["per_cell"]
     assert np.array_equal(one.energy_ratio, split.energy_ratio, equal_nan=True)
     assert split.summary()["workers"] == 2
+
+
+def _fail_in_workers(monkeypatch, failure) -> None:
+    """Make every forked worker's part call ``failure()`` (this process's part runs)."""
+    parent, real = os.getpid(), sweep._simulate_lanes
+
+    def part(job, first, end):
+        if os.getpid() != parent:
+            failure()
+        return real(job, first, end)
+
+    monkeypatch.setattr(sweep, "_simulate_lanes", part)
+
+
+def test_a_worker_s_error_is_raised_here_with_its_traceback_and_the_worker_reaped(
+        model, monkeypatch) -> None:
+    def failure():
+        raise ValueError("lane trouble")
+
+    _fail_in_workers(monkeypatch, failure)
+    settings = SweepSettings((3.0, 13.0), (0.0, 0.006), "linear", 0.3)
+    with pytest.raises(ValueError, match="lane trouble") as raised:
+        run_sweep(model, settings, workers=2)
+    assert "in sweep worker" in str(raised.value.__cause__)
+    assert "failure" in str(raised.value.__cause__)  # the worker's own traceback
+    assert multiprocessing.active_children() == []
+
+
+def test_a_worker_that_dies_is_an_error_not_a_hang(model, monkeypatch) -> None:
+    _fail_in_workers(monkeypatch, lambda: os._exit(3))
+    settings = SweepSettings((3.0, 13.0), (0.0, 0.006), "linear", 0.3)
+    with pytest.raises(RuntimeError, match=r"stopped without a result \(exit status 3\)"):
+        run_sweep(model, settings, workers=2)
+    assert multiprocessing.active_children() == []
 
 
 def test_cli_sweep_workers(tmp_path, capsys) -> None:
