@@ -40,7 +40,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -62,10 +62,10 @@ _LIMITS = ("handle force", "tool force", "command velocity", "workspace")
 DEVICE = "cpu"
 
 
-@dataclass(frozen=True)
-class SafetyEvent:
+class SafetyEvent(NamedTuple):
     """One safety event: ``kind`` is ``trip``, ``saturate`` or ``enable``; ``axis`` is
-    "x", "y" or ``None`` when it concerns the lane as a whole."""
+    "x", "y" or ``None`` when it concerns the lane as a whole. Immutable, and a third of a
+    frozen dataclass's cost to make (a sweep's unstable lanes make thousands)."""
 
     step: int
     time_s: float
@@ -427,19 +427,27 @@ class MasterNode:
         flagged = np.flatnonzero(bits)
         if not flagged.size:
             return
-        # one pass over the flagged lanes (Python ints), each value's events looked up; a
-        # stable sort by the layer's order keeps the lanes, then the axes, ascending
+        # each flagged lane's value (a Python int) looked up in the plans; with several lanes,
+        # a stable sort by the layer's order keeps the lanes, then the axes, ascending
         plans = self._event_plans
-        found = []
-        for lane, value in zip(flagged.tolist(), bits[flagged].tolist(), strict=True):
-            plan = plans.get(value)
-            if plan is None:
-                plan = plans[value] = self._event_plan(value)
-            found.extend((rank, lane, kind, reason, axis) for rank, kind, reason, axis in plan)
-        if len(flagged) > 1:
-            found.sort(key=_rank)
-        events.extend(SafetyEvent(step, time_s, lane, kind, reason, axis)
-                      for _, lane, kind, reason, axis in found)
+        lanes, values = flagged.tolist(), bits[flagged].tolist()
+        if len(lanes) == 1:
+            lane, value = lanes[0], values[0]
+            plan = plans.get(value) or self._new_event_plan(value)
+            events.extend([SafetyEvent(step, time_s, lane, kind, reason, axis)
+                           for _, kind, reason, axis in plan])
+            return
+        found = [(rank, lane, kind, reason, axis)
+                 for lane, value in zip(lanes, values, strict=True)
+                 for rank, kind, reason, axis in plans.get(value) or self._new_event_plan(value)]
+        found.sort(key=_rank)
+        events.extend([SafetyEvent(step, time_s, lane, kind, reason, axis)
+                       for _, lane, kind, reason, axis in found])
+
+    def _new_event_plan(self, value: int) -> tuple[tuple[int, str, str, str | None], ...]:
+        """:meth:`_event_plan` of ``value``, kept for the next lane with that value."""
+        plan = self._event_plans[value] = self._event_plan(value)
+        return plan
 
     def _event_plan(self, value: int) -> tuple[tuple[int, str, str, str | None], ...]:
         """The events one lane's ``event_bits`` value stands for, as (rank in the safety
