@@ -55,6 +55,7 @@ KIND_HELLO = 3
 HELLO_PERIOD_S = 0.1
 HELLO_MAX_AGE_S = 5.0
 _SIDE_CODE = {"master": 1, "slave": 2}
+_SIDE_NAME = {code: side for side, code in _SIDE_CODE.items()}
 _SESSION_LABEL = b"haptic-teleop/2/session"
 
 
@@ -132,18 +133,22 @@ def decode_hello(payload: bytes, psk: bytes | None) -> Hello:
         body_length = unpacker.tell()
     except Exception:  # noqa: BLE001 - msgpack raises many types for corrupt input
         raise HelloError("not msgpack") from None
-    if not isinstance(fields, list) or len(fields) < 2 or fields[1] != KIND_HELLO:
+    # every field checked as exactly its type (``type(x) is int``: a bool or a float that
+    # equals an int is not one, and a list or map must not reach a dict lookup)
+    if (not isinstance(fields, list) or len(fields) < 2 or type(fields[1]) is not int
+            or fields[1] != KIND_HELLO):
         raise HelloError("not a hello")
     version = fields[0]
-    if version != SCHEMA_VERSION:
-        return Hello(version if isinstance(version, int) else -1, "", 0, b"", 0, False)
+    if version != SCHEMA_VERSION or type(version) is not int:
+        return Hello(version if type(version) is int else -1, "", 0, b"", 0, False)
     if len(fields) != 7:
         raise HelloError("wrong shape")
     _, _, side_code, epoch, nonce, time_ns, authenticated = fields
-    sides = {v: k for k, v in _SIDE_CODE.items()}
-    if (side_code not in sides or not isinstance(epoch, int) or not 0 <= epoch < 2**32
-            or not isinstance(nonce, bytes) or len(nonce) != NONCE_BYTES
-            or not isinstance(time_ns, int) or not isinstance(authenticated, bool)):
+    if (type(side_code) is not int or side_code not in _SIDE_NAME
+            or type(epoch) is not int or not 0 <= epoch < 2**32
+            or type(nonce) is not bytes or len(nonce) != NONCE_BYTES
+            or type(time_ns) is not int or not 0 <= time_ns < 2**63
+            or type(authenticated) is not bool):
         raise HelloError("bad field")
     tag = payload[body_length:]
     if authenticated and psk is not None:
@@ -153,7 +158,7 @@ def decode_hello(payload: bytes, psk: bytes | None) -> Hello:
         raise HelloError("trailing bytes")
     # without a psk an authenticated hello is returned unverified: the caller can only
     # report the mismatch, never pair on it
-    return Hello(version, sides[side_code], epoch, nonce, time_ns, authenticated)
+    return Hello(version, _SIDE_NAME[side_code], epoch, nonce, time_ns, authenticated)
 
 
 class SessionAuth:
@@ -191,12 +196,14 @@ class SessionAuth:
 
     def accept_hello(self, hello: Hello, now_ns: int) -> bool:
         """Take a verified hello (:func:`decode_hello` with the psk); True when it paired this
-        side with a new peer run (re-derived the session key)."""
+        side with a new peer run (re-derived the session key). Every hello refused is counted
+        in :attr:`rejected_hellos`: from the wrong side, unauthenticated, more than
+        :data:`HELLO_MAX_AGE_S` from ``now_ns`` either way (a replay, or clocks that differ
+        that much), or not newer than the last one taken (a replay)."""
         if (hello.side != self.peer_side or not hello.authenticated
                 or abs(now_ns - hello.time_ns) > HELLO_MAX_AGE_S * 1e9
                 or hello.time_ns <= self._peer_time_ns):
-            self.rejected_hellos += hello.side != self.peer_side or not hello.authenticated \
-                or hello.time_ns < self._peer_time_ns
+            self.rejected_hellos += 1
             return False
         self._peer_time_ns = hello.time_ns
         current = self.peer

@@ -148,6 +148,10 @@ class Link:
         self._hello_publisher: zenoh.Publisher | None = None
         self._hello_subscriber: zenoh.Subscriber | None = None
         self._next_hello_ns = 0
+        self.undecodable_hellos = 0
+        """Hellos on the peer's pairing key that did not decode (or whose tag did not verify),
+        with or without a session key; the summary's ``link_rejected_hellos`` adds the ones
+        the pairing refused."""
         self.peer_hello: Hello | None = None
         """The peer's latest valid hello (its run's epoch; None before the first)."""
         self.peer_mismatch: str | None = None
@@ -390,8 +394,7 @@ class Link:
             try:
                 hello = decode_hello(sample.payload.to_bytes(), self._psk)
             except HelloError:
-                if auth is not None:
-                    auth.rejected_hellos += 1
+                self.undecodable_hellos += 1
                 continue
             if hello.version != SCHEMA_VERSION:
                 self.peer_mismatch = (
@@ -526,8 +529,8 @@ class Link:
         result["link_capped_polls"] = self.capped_polls
         result["link_authenticated"] = self.auth is not None
         result["link_pairings"] = self.auth.pairings if self.auth is not None else None
-        result["link_rejected_hellos"] = (self.auth.rejected_hellos if self.auth is not None
-                                          else None)
+        result["link_rejected_hellos"] = self.undecodable_hellos + (
+            self.auth.rejected_hellos if self.auth is not None else 0)
         result["link_unpaired_sends"] = self.unpaired_sends
         result["link_peer_alive"] = self.peer_alive
         return result

@@ -215,3 +215,26 @@ def test_another_schema_version_is_refused_at_start() -> None:
                 publisher.put(hello)
                 master.wait_for_peer(0.05)
         token.undeclare()
+
+
+@pytest.mark.parametrize("key", [PSK, None], ids=["with a key", "without a key"])
+def test_malformed_hellos_are_counted_and_never_stop_the_poll(key) -> None:
+    """A hello whose side code is a list once made ``Link.poll()`` raise (a dict lookup of
+    an unhashable value): any process that could publish on the pairing key could stop the
+    loop. Now every undecodable hello is counted, with a key or without."""
+    master_config, _, endpoint = _configs(master_key=key)
+    junk = [msgpack.packb([SCHEMA_VERSION, KIND_HELLO, [1], 11, bytes(16), time.time_ns(),
+                           False]),
+            msgpack.packb([SCHEMA_VERSION, KIND_HELLO, {"x": 1}, 11, bytes(16), 1, False]),
+            msgpack.packb([SCHEMA_VERSION, KIND_HELLO, 2, True, bytes(16), True, False]),
+            b"\xc1not msgpack"]
+    with Link(master_config) as master, _raw_session(endpoint) as stranger:
+        publisher = stranger.declare_publisher(master_config.key("pair/slave"))
+        deadline = time.monotonic() + WAIT_S
+        while master.undecodable_hellos < 2 * len(junk) and time.monotonic() < deadline:
+            for payload in junk:
+                publisher.put(payload)
+            _drain(master, 0.05)  # poll() must not raise
+        assert master.undecodable_hellos >= 2 * len(junk)
+        assert master.summary()["link_rejected_hellos"] >= 2 * len(junk)
+        assert master.peer_hello is None

@@ -106,6 +106,13 @@ def test_a_hello_carries_its_fields_and_a_16_byte_tag() -> None:
 
 @pytest.mark.parametrize(("fields", "why"), [
     ([SCHEMA_VERSION, 3, 9, 7, bytes(16), NOW_NS, False], "bad field"),      # side code
+    ([SCHEMA_VERSION, 3, [1], 7, bytes(16), NOW_NS, False], "bad field"),    # a list there
+    ([SCHEMA_VERSION, 3, {"a": 1}, 7, bytes(16), NOW_NS, False], "bad field"),  # a map
+    ([SCHEMA_VERSION, 3, True, 7, bytes(16), NOW_NS, False], "bad field"),   # a bool side
+    ([SCHEMA_VERSION, 3, 1, True, bytes(16), NOW_NS, False], "bad field"),   # a bool epoch
+    ([SCHEMA_VERSION, 3, 1, 7, bytes(16), True, False], "bad field"),        # a bool time
+    ([SCHEMA_VERSION, 3, 1, 7, bytes(16), -1, False], "bad field"),          # time < 0
+    ([SCHEMA_VERSION, 3.0, 1, 7, bytes(16), NOW_NS, False], "not a hello"),  # a float kind
     ([SCHEMA_VERSION, 3, 1, -1, bytes(16), NOW_NS, False], "bad field"),     # epoch < 0
     ([SCHEMA_VERSION, 3, 1, 2**32, bytes(16), NOW_NS, False], "bad field"),  # epoch too big
     ([SCHEMA_VERSION, 3, 1, 1.0, bytes(16), NOW_NS, False], "bad field"),    # epoch not int
@@ -139,6 +146,8 @@ def test_edges_of_a_hello_decode() -> None:
     assert decode_hello(other, PSK) == Hello(SCHEMA_VERSION + 1, "", 0, b"", 0, False)
     assert decode_hello(msgpack.packb(["v", 3], use_bin_type=True), None) == Hello(
         -1, "", 0, b"", 0, False)
+    assert decode_hello(msgpack.packb([float(SCHEMA_VERSION), 3, 1], use_bin_type=True),
+                        None) == Hello(-1, "", 0, b"", 0, False)  # a float is not a version
     # 256 bytes is not too long (it fails on what follows the body instead)
     with pytest.raises(HelloError, match="trailing bytes"):
         decode_hello(ok + bytes(256 - len(ok)), None)
@@ -200,22 +209,22 @@ def test_hello_refusals_and_what_counts_as_rejected() -> None:
     assert not slave.accept_hello(decode_hello(encode_hello("master", 11, bytes(16), NOW_NS,
                                                             None), None), NOW_NS)
     assert slave.rejected_hellos == 2
-    # exactly the age limit is accepted; a nanosecond older is not (and is not counted)
+    # exactly the age limit is accepted; a nanosecond older or newer is not, and is counted
     limit_ns = int(HELLO_MAX_AGE_S * 1e9)
     stale = decode_hello(master.hello(NOW_NS - limit_ns - 1), PSK)
-    assert not slave.accept_hello(stale, NOW_NS) and slave.rejected_hellos == 2
+    assert not slave.accept_hello(stale, NOW_NS) and slave.rejected_hellos == 3
     future = decode_hello(master.hello(NOW_NS + limit_ns + 1), PSK)
-    assert not slave.accept_hello(future, NOW_NS) and slave.rejected_hellos == 2
+    assert not slave.accept_hello(future, NOW_NS) and slave.rejected_hellos == 4
     assert slave.accept_hello(decode_hello(master.hello(NOW_NS - limit_ns), PSK), NOW_NS)
     assert slave.peer_epoch == 11 and slave.pairings == 1
-    # the same time again: refused, not counted; an older one: refused and counted
+    # the same time again (a replay) and an older one: refused and counted
     again = decode_hello(master.hello(NOW_NS - limit_ns), PSK)
-    assert not slave.accept_hello(again, NOW_NS) and slave.rejected_hellos == 2
+    assert not slave.accept_hello(again, NOW_NS) and slave.rejected_hellos == 5
     older = decode_hello(master.hello(NOW_NS - limit_ns - 5), PSK)
-    assert not slave.accept_hello(older, NOW_NS - 10) and slave.rejected_hellos == 3
+    assert not slave.accept_hello(older, NOW_NS - 10) and slave.rejected_hellos == 6
     # a later hello of the same run: accepted in time, no new pairing
     assert not slave.accept_hello(decode_hello(master.hello(NOW_NS), PSK), NOW_NS)
-    assert slave.pairings == 1 and slave.rejected_hellos == 3
+    assert slave.pairings == 1 and slave.rejected_hellos == 6
     # the same epoch with a new nonce is a new run: re-paired
     rerun = SessionAuth(PSK, "master", 11)
     assert slave.accept_hello(decode_hello(rerun.hello(NOW_NS + 1), PSK), NOW_NS + 1)
