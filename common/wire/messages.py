@@ -125,6 +125,13 @@ class DropReason(enum.StrEnum):
     """Authenticated link: the tag does not verify under the session key (common/wire/auth.py)."""
     UNPAIRED = "unpaired"
     """Authenticated link: no pairing yet, or an epoch other than the paired peer's."""
+    IMPLAUSIBLE = "implausible"
+    """A send time or sequence number no real sender gives: sent more than ``stale_after_s``
+    ahead of this host's clock, or a sequence number beyond what the sender could have
+    sent since its newest message (common/wire/receive.py)."""
+    PEER_RESTART = "peer_restart"
+    """Accepted and waiting for its delivery time when the peer restarted (a new epoch):
+    discarded undelivered."""
 
 
 class DecodeError(ValueError):

@@ -9,13 +9,23 @@ Per received payload, in order:
 
 1. decode (:func:`haptic.common.wire.messages.decode`): ``malformed``, ``unknown_version``,
    ``wrong_kind``, ``non_finite`` drops;
-2. a new sender ``epoch`` with a newer send time means the peer restarted: ordering starts
-   again (``peer_restarts``); an old epoch's late message is ``out_of_order``;
-3. ``stale``: older at arrival than ``stale_after_s`` plus the largest injected delay;
-4. ``out_of_order``: a sequence number not above the highest already accepted (a duplicate or
-   a reordered message; also counted in ``reordered``);
-5. ``injected_loss``: the loss models drop it;
-6. it waits in a queue ordered by delivery time, ``max(arrival, send + delay + jitter)``.
+2. ``implausible``: sent more than ``stale_after_s`` ahead of this host's clock (no sender's
+   clock may be that far ahead: the staleness check already needs the hosts' clocks within
+   that much the other way), so a single message stamped in the far future cannot make every
+   later one look old;
+3. a new sender ``epoch`` with a newer send time means the peer restarted: ordering starts
+   again (``peer_restarts``; what was waiting for its delivery time is dropped
+   ``peer_restart``); an old epoch's late message is ``out_of_order``;
+4. ``implausible`` too: a sequence number further above the highest than the sender could
+   have sent since (:data:`MAX_SEND_RATE_HZ` over the send times' advance, plus
+   :data:`SEQUENCE_SLACK`), so one message cannot make every later one ``out_of_order``;
+5. ``stale``: older at arrival than ``stale_after_s`` plus the largest injected delay;
+6. ``out_of_order``: a sequence number not above the highest already accepted (a duplicate or
+   a reordered message; also counted in ``reordered``); one that fills a gap counted as lost
+   takes it back from ``network_lost``, once: the last :data:`SEQUENCE_WINDOW` sequence
+   numbers are remembered, so a duplicate or a replay never does;
+7. ``injected_loss``: the loss models drop it;
+8. it waits in a queue ordered by delivery time, ``max(arrival, send + delay + jitter)``.
 
 :meth:`ReceivePath.release` pops every message whose delivery time has come; one older than a
 message already delivered is dropped ``out_of_order`` (jitter without ``preserve_order`` can
@@ -38,6 +48,14 @@ from haptic.common.wire.injection import Impairment, InjectionConfig
 from haptic.common.wire.messages import DecodeError, DropReason, Message, decode
 
 _CLOCK_SKEW_TOLERANCE_NS = 1_000_000
+#: The most messages a second a sender may send (the programs send one a tick: 1852 Hz at the
+#: paper's Ts, 4 kHz at the fastest period tested), with room to spare.
+MAX_SEND_RATE_HZ = 20_000.0
+#: Sequence numbers a message may skip beyond what that rate allows (a burst, a clock step).
+SEQUENCE_SLACK = 64
+#: How many sequence numbers below the highest are remembered as received or not.
+SEQUENCE_WINDOW = 1024
+_WINDOW_MASK = (1 << SEQUENCE_WINDOW) - 1
 _MAX_PAYLOAD_BYTES = 1024
 _MALFORMED = DropReason.MALFORMED.value
 
@@ -100,6 +118,8 @@ class _Sequence:
     highest_seq: int
     highest_send_ns: int
     delivered_seq: int = -1
+    #: bit i set: sequence number ``highest_seq - i`` was received (i < SEQUENCE_WINDOW)
+    received_bits: int = 0
 
 
 @dataclass
@@ -134,6 +154,7 @@ class ReceivePath:
         self._impairment = Impairment(injection, rng)
         self._inject = injection.active
         self._stale_ns = int((stale_after_s + injection.max_extra_delay_s) * 1e9)
+        self._future_ns = int(stale_after_s * 1e9)
         self._pending: list[tuple[int, int, Message]] = []
         self._seq: _Sequence | None = None
         self._n = _Counters()
@@ -162,10 +183,16 @@ class ReceivePath:
         self._pinned_epoch = epoch
         seq_state = self._seq
         if seq_state is not None and seq_state.epoch != epoch:
-            self._n.peer_restarts += 1
-            self._n.expected_closed += seq_state.highest_seq - seq_state.first_seq + 1
-            self._pending.clear()
+            self._restart(seq_state)
             self._seq = None
+
+    def _restart(self, seq_state: _Sequence) -> None:
+        """The peer restarted: close the old epoch's counts and drop what waits undelivered."""
+        n = self._n
+        n.peer_restarts += 1
+        n.expected_closed += seq_state.highest_seq - seq_state.first_seq + 1
+        n.dropped[DropReason.PEER_RESTART.value] += len(self._pending)
+        self._pending.clear()
 
     def drop(self, reason: DropReason) -> None:
         """Count one received payload dropped before :meth:`accept` (its tag, its pairing)."""
@@ -202,6 +229,12 @@ class ReceivePath:
         if self._epochs_pinned and message.epoch != self._pinned_epoch:
             self._drop(DropReason.UNPAIRED)  # a new epoch only through an explicit pairing
             return
+        age_ns = arrival_ns - send_ns
+        if age_ns < -_CLOCK_SKEW_TOLERANCE_NS:
+            n.clock_skew += 1
+            if age_ns < -self._future_ns:
+                self._drop(DropReason.IMPLAUSIBLE)  # from the future: no order state taken
+                return
         seq_state = self._seq
         if seq_state is None or message.epoch != seq_state.epoch:
             if seq_state is not None and send_ns <= seq_state.highest_send_ns:
@@ -209,20 +242,21 @@ class ReceivePath:
                 self._drop(DropReason.OUT_OF_ORDER)  # a late message of an older epoch
                 return
             if seq_state is not None:
-                n.peer_restarts += 1
-                n.expected_closed += seq_state.highest_seq - seq_state.first_seq + 1
-                self._pending.clear()
+                self._restart(seq_state)
             seq_state = self._seq = _Sequence(message.epoch, message.seq, message.seq - 1, 0)
-        age_ns = arrival_ns - send_ns
-        if age_ns < -_CLOCK_SKEW_TOLERANCE_NS:
-            n.clock_skew += 1
+        elif message.seq - seq_state.highest_seq > SEQUENCE_SLACK + MAX_SEND_RATE_HZ * max(
+                send_ns - seq_state.highest_send_ns, 0) * 1e-9:
+            self._drop(DropReason.IMPLAUSIBLE)  # further ahead than the sender could send
+            return
         if age_ns > self._stale_ns:
             self._note_sequence(seq_state, message.seq, send_ns)
             self._drop(DropReason.STALE)
             return
         if message.seq <= seq_state.highest_seq:
-            if message.seq < seq_state.highest_seq and n.network_lost > 0:
-                n.network_lost -= 1  # it filled a gap counted as lost (duplicates are not told)
+            behind = seq_state.highest_seq - message.seq
+            if behind < SEQUENCE_WINDOW and not seq_state.received_bits >> behind & 1:
+                seq_state.received_bits |= 1 << behind  # it fills a gap counted as lost
+                n.network_lost -= 1
             n.reordered += 1
             self._drop(DropReason.OUT_OF_ORDER)
             return
@@ -238,9 +272,17 @@ class ReceivePath:
         heapq.heappush(self._pending, (delivery_ns, message.seq, message))
 
     def _note_sequence(self, seq_state: _Sequence, seq: int, send_ns: int) -> None:
+        """A message of sequence number ``seq`` was received (delivered or stale)."""
         if seq > seq_state.highest_seq:
-            self._n.network_lost += seq - seq_state.highest_seq - 1
+            skipped = seq - seq_state.highest_seq
+            self._n.network_lost += skipped - 1
             seq_state.highest_seq = seq
+            seq_state.received_bits = (seq_state.received_bits << skipped | 1) & _WINDOW_MASK \
+                if skipped < SEQUENCE_WINDOW else 1
+        else:
+            behind = seq_state.highest_seq - seq
+            if behind < SEQUENCE_WINDOW:
+                seq_state.received_bits |= 1 << behind
         if send_ns > seq_state.highest_send_ns:
             seq_state.highest_send_ns = send_ns
 

@@ -195,3 +195,75 @@ def test_the_median_is_the_50th_percentile() -> None:
     stats = p.stats()
     assert stats.one_way_delay_p50_s == pytest.approx(1e-3, rel=0.1)
     assert stats.age_at_use_p50_s == pytest.approx(1e-3, rel=0.1)
+
+
+# One message must not be able to spoil the order for the messages after it (found by fuzzing
+# the receive path): a send time far ahead of this host's clock made every later restart look
+# old, a sequence number near 2**63 made every later message out of order, and replays of old
+# sequence numbers took losses back.
+
+
+def test_a_message_from_beyond_stale_after_ahead_is_implausible_and_takes_no_order() -> None:
+    p = path()
+    p.accept(handle(0, T0), T0)
+    p.accept(handle(1, T0 + 50 * MS + MS), T0 + MS)  # exactly stale_after_s ahead: taken
+    p.accept(handle(2, T0 + 51 * MS + 2 * MS), T0 + 2 * MS)  # 1 ns more: dropped
+    p.accept(handle(3, 2**63 - 1), T0 + 3 * MS)  # the far future
+    stats = p.stats()
+    assert stats.dropped["implausible"] == 2 and stats.clock_skew == 3
+    assert p.release(T0 + 3 * MS).seq == 1
+    # the peer restarts: its new epoch is taken, as if the far-future message never came
+    p.accept(handle(0, T0 + 60 * MS, epoch=2), T0 + 60 * MS)
+    assert p.stats().peer_restarts == 1
+    assert p.release(T0 + 60 * MS).epoch == 2
+
+
+def test_a_sequence_number_beyond_the_sender_s_rate_is_implausible() -> None:
+    p = path()
+    for seq in range(3):
+        p.accept(handle(seq, T0 + seq * MS), T0 + seq * MS)
+    p.accept(handle(2**63 - 1, T0 + 3 * MS), T0 + 3 * MS)
+    p.accept(handle(10**6, T0 - 60 * MS), T0 + 3 * MS)  # stale too: still no order taken
+    # 1 ms after the newest, 20 kHz allows 20 more, plus the slack of 64
+    p.accept(handle(2 + 64 + 20 + 1, T0 + 3 * MS), T0 + 3 * MS)
+    stats = p.stats()
+    assert stats.dropped["implausible"] == 3 and stats.network_lost == 0
+    for seq in range(3, 10):
+        p.accept(handle(seq, T0 + seq * MS), T0 + seq * MS)
+    stats = p.stats()
+    assert stats.dropped["out_of_order"] == 0 and stats.network_lost == 0
+    assert p.release(T0 + 9 * MS).seq == 9
+    p.accept(handle(9 + 64 + 20, T0 + 10 * MS), T0 + 10 * MS)  # the most it allows: taken
+    assert p.stats().network_lost == 64 + 20 - 1
+
+
+def test_replays_never_take_a_loss_back_and_a_late_one_takes_it_back_once() -> None:
+    p = path()
+    p.accept(handle(0, T0), T0)
+    p.accept(handle(5, T0 + 5 * MS), T0 + 5 * MS)  # 1..4 lost
+    for _ in range(4):
+        p.accept(handle(0, T0), T0 + 5 * MS)  # replays of a message already received
+    assert p.stats().network_lost == 4
+    p.accept(handle(3, T0 + 3 * MS), T0 + 6 * MS)  # a late one: one loss less
+    p.accept(handle(3, T0 + 3 * MS), T0 + 6 * MS)  # and again: no change
+    stats = p.stats()
+    assert stats.network_lost == 3 and stats.reordered == 6
+    # beyond the remembered window nothing is taken back
+    p.accept(handle(5 + 2000, T0 + 200 * MS), T0 + 200 * MS)
+    lost = p.stats().network_lost
+    p.accept(handle(4, T0 + 4 * MS), T0 + 200 * MS)
+    assert p.stats().network_lost == lost
+
+
+def test_what_waits_when_the_peer_restarts_is_counted_as_dropped() -> None:
+    injection = InjectionConfig(delay_s=0.01)
+    p = ReceivePath(KIND_HANDLE, injection, np.random.default_rng(0), STALE_S)
+    for seq in range(3):
+        p.accept(handle(seq, T0 + seq * MS), T0 + seq * MS)
+    assert p.pending == 3
+    p.accept(handle(0, T0 + 3 * MS, epoch=2), T0 + 3 * MS)
+    stats = p.stats()
+    assert stats.peer_restarts == 1 and stats.dropped["peer_restart"] == 3
+    assert stats.received == 4 and p.pending == 1
+    p.pin_epoch(3)  # an authenticated re-pairing drops what waits, too
+    assert p.stats().dropped["peer_restart"] == 4 and p.pending == 0
