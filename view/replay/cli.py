@@ -13,6 +13,11 @@ mean force and speed) and writes PNGs into ``--out``:
 
 ``--view`` replays the recording into the live view (``haptic-view``) instead, at ``--speed``
 times real time.
+
+Exit status: 0 when every file was read (complete, or cut short by a killed writer); 1 when a
+file cannot be opened, is not MCAP, or holds no message of a master's or slave's recording;
+3 when a file is damaged inside (read up to the damage, the summary printed and the error
+named); 2 for bad arguments.
 """
 
 from __future__ import annotations
@@ -46,14 +51,15 @@ def summarize(recording: Recording) -> dict[str, Any]:
     times = [t for items in recording.messages.values() for t, _ in items]
     summary: dict[str, Any] = {
         "file": str(recording.path), "side": side, "complete": recording.complete,
-        "read_error": recording.error or None, "messages": counts,
+        "status": recording.status, "read_error": recording.error or None,
+        "skipped_messages": recording.skipped, "messages": counts,
         "span_s": (max(times) - min(times)) * 1e-9 if times else 0.0,
     }
     meta = recording.metadata.get("recorder")
     if meta:
-        summary["recorder_written"] = int(meta.get("written", 0))
-        summary["recorder_dropped"] = int(meta.get("dropped", 0))
-        summary["recorder_max_queue_depth"] = int(meta.get("max_queue_depth", 0))
+        summary["recorder_written"] = _count(meta.get("written"))
+        summary["recorder_dropped"] = _count(meta.get("dropped"))
+        summary["recorder_max_queue_depth"] = _count(meta.get("max_queue_depth"))
     events = [m for _, m in recording.messages.get(f"/{side}/events", [])]
     summary["events"] = events
     link = recording.last(f"/{side}/link")
@@ -62,6 +68,8 @@ def summarize(recording: Recording) -> dict[str, Any]:
             "link_one_way_delay_p50_s", "link_one_way_delay_p99_s", "loss_ratio", "link_received",
             "link_sent", "watchdog_state", "watchdog_trips") if k in link}
     state = recording.columns(f"/{side}/state")
+    if "time_s" not in state:  # a state channel without its clock: nothing to time
+        state = {}
     if state:
         summary["state_rate_hz"] = (
             (state["time_s"].size - 1) / (state["time_s"][-1] - state["time_s"][0])
@@ -71,13 +79,16 @@ def summarize(recording: Recording) -> dict[str, Any]:
                 values = state[name][np.isfinite(state[name])]
                 if values.size:
                     summary[f"max_abs_{name}"] = float(np.abs(values).max())
-    if side == "slave" and state:
+    if side == "slave" and state and not (missing := [
+            name for name in _CUT_COLUMNS if name not in state]):
         from haptic.common.records.cutting import cutting_figures, steady_cut_fields
 
         trace = dict(state)
         trace["forces_enabled"] = state["running"]
         summary.update(cutting_figures(trace))
         summary.update(steady_cut_fields(trace))
+    elif side == "slave" and state:
+        summary["cut_missing_columns"] = missing
     run_summary = recording.last(f"/{side}/summary")
     if run_summary:
         summary["run"] = {k: run_summary.get(k) for k in (
@@ -86,12 +97,39 @@ def summarize(recording: Recording) -> dict[str, Any]:
     return summary
 
 
+#: The slave state's columns the cut's figures need.
+_CUT_COLUMNS = ("time_s", "running", "cutting", "tool_force_x_N", "tool_force_y_N",
+                "tool_velocity_x_m_s", "tool_velocity_y_m_s", "tool_position_x_m",
+                "tool_position_y_m", "handle_force_x_N")
+_STATUS_TEXT = {"complete": "complete", "cut short": "cut short (no footer)",
+                "damaged": "damaged"}
+
+
+def _count(value: Any) -> int | None:
+    """A count from the recorder's metadata (text), None when it is not one."""
+    try:
+        return int(value)
+    except (TypeError, ValueError):
+        return None
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
 def format_text(summary: dict[str, Any]) -> str:
     """The summary as a few lines for the terminal."""
-    lines = [f"{summary['file']}: {summary['side']}, "
-             f"{'complete' if summary['complete'] else 'cut short (no footer)'}, "
+    lines = [f"{summary['file']}: {summary['side']}, {_STATUS_TEXT[summary['status']]}, "
              f"{summary['span_s']:.2f} s"]
+    if summary["read_error"]:
+        lines.append(f"  read error: {summary['read_error']}")
     lines.append("  messages: " + ", ".join(f"{t} {n}" for t, n in summary["messages"].items()))
+    if summary["skipped_messages"]:
+        lines.append(f"  skipped: {summary['skipped_messages']} messages that are not JSON "
+                     "objects")
+    if summary.get("cut_missing_columns"):
+        lines.append("  cut: no figures, the state lacks "
+                     + ", ".join(summary["cut_missing_columns"]))
     if "recorder_dropped" in summary:
         lines.append(f"  recorder: written {summary['recorder_written']}, dropped "
                      f"{summary['recorder_dropped']}, max queue depth "
@@ -100,7 +138,7 @@ def format_text(summary: dict[str, Any]) -> str:
         link = summary["link"]
         p50, p99 = link.get("link_one_way_delay_p50_s"), link.get("link_one_way_delay_p99_s")
         loss = link.get("loss_ratio")
-        if p50 is not None and p99 is not None and loss is not None:
+        if _is_number(p50) and _is_number(p99) and _is_number(loss):
             lines.append(f"  link: one-way delay p50 {p50 * 1e3:.3f} ms, p99 {p99 * 1e3:.3f} "
                          f"ms, loss {loss * 100:.2f} %, watchdog {link.get('watchdog_state')} "
                          f"(trips {link.get('watchdog_trips')})")
@@ -110,9 +148,15 @@ def format_text(summary: dict[str, Any]) -> str:
                      f"{summary['cut_mean_speed_m_s'] * 1e3:.1f} mm/s")
     for event in summary["events"]:
         time_s = event.get("time_s")
-        stamp = f"{time_s:8.3f} s" if isinstance(time_s, (int, float)) else "       ?"
+        stamp = f"{time_s:8.3f} s" if _is_number(time_s) else "       ?"
         lines.append(f"  event {stamp}  {event.get('kind')}: {event.get('reason', '')}")
     return "\n".join(lines)
+
+
+def haptic_topics(recording: Recording) -> list[str]:
+    """The recording's topics of a master's or a slave's run that hold messages."""
+    return [topic for topic, items in recording.messages.items()
+            if items and topic.startswith(("/master/", "/slave/"))]
 
 
 def write_plots(recordings: Sequence[Recording], out: Path) -> list[Path]:
@@ -127,8 +171,8 @@ def write_plots(recordings: Sequence[Recording], out: Path) -> list[Path]:
     by_side = {side_of(r): r for r in recordings}
     slave = by_side.get("slave")
     master = by_side.get("master")
-    s_state = slave.columns("/slave/state") if slave else {}
-    m_state = master.columns("/master/state") if master else {}
+    s_state = _with_columns(slave.columns("/slave/state") if slave else {}, _SLAVE_PLOTTED)
+    m_state = _with_columns(master.columns("/master/state") if master else {}, _MASTER_PLOTTED)
 
     if s_state or m_state:
         figure, axes = plt.subplots(figsize=(9, 4.5), dpi=110)
@@ -172,10 +216,9 @@ def write_plots(recordings: Sequence[Recording], out: Path) -> list[Path]:
 
     layout = slave.last("/slave/workpiece") if slave else None
     clay = slave.last("/slave/clay") if slave else None
-    if layout and clay:
-        heights = np.array(clay["heights_mm"], float)
-        x0, x1 = (1e3 * v for v in layout["x_range_m"])
-        y0, y1 = (1e3 * v for v in layout["y_range_m"])
+    plan = _clay_plan(layout, clay)
+    if plan is not None:
+        heights, (x0, x1, y0, y1) = plan
         aspect = (y1 - y0) / (x1 - x0)
         figure, axes = plt.subplots(figsize=(10, max(2.5, 10 * aspect + 1.0)), dpi=110)
         image = axes.imshow(heights, origin="lower", extent=[x0, x1, y0, y1], cmap="viridis",
@@ -204,6 +247,41 @@ def write_plots(recordings: Sequence[Recording], out: Path) -> list[Path]:
     return written
 
 
+#: The state columns the plots draw (a state without one of them is not plotted).
+_SLAVE_PLOTTED = ("time_s", "tool_force_x_N", "tool_force_y_N", "handle_force_x_N",
+                  "tool_position_x_m", "tool_position_y_m", "tool_velocity_x_m_s")
+_MASTER_PLOTTED = ("time_s", "handle_force_x_N", "felt_force_x_N")
+
+
+def _with_columns(state: dict[str, np.ndarray], names: Sequence[str]) -> dict[str, np.ndarray]:
+    """``state`` when it has every column of ``names``, else empty."""
+    return state if all(name in state for name in names) else {}
+
+
+def _clay_plan(layout: Any, clay: Any) -> tuple[np.ndarray, tuple[float, ...]] | None:
+    """The clay map (mm) and its extent (x0, x1, y0, y1 in mm) when the recorded layout and
+    map make a picture: a 2-D map of numbers, ranges of two increasing finite numbers, and
+    the layout's block ids, names and dampings of matching shapes; else None (no plot)."""
+    if not isinstance(layout, dict) or not isinstance(clay, dict):
+        return None
+    try:
+        heights = np.array(clay["heights_mm"], float)
+        (x0, x1), (y0, y1) = (np.array(layout[key], float) * 1e3
+                              for key in ("x_range_m", "y_range_m"))
+        ids = np.array(layout["block_id"])
+        names, dampings = layout["block_names"], layout["block_damping_N_s_per_m"]
+    except (KeyError, TypeError, ValueError):
+        return None
+    extent = (float(x0), float(x1), float(y0), float(y1))
+    if (heights.ndim != 2 or not heights.size or ids.ndim != 2 or not ids.size
+            or min(ids.shape) < 2 or ids.dtype.kind not in "iu" or not isinstance(names, list)
+            or not isinstance(dampings, list) or len(names) != len(dampings)
+            or not all(_is_number(value) for value in dampings)
+            or not all(np.isfinite(extent)) or not (x1 > x0 and y1 > y0)):
+        return None
+    return heights, extent
+
+
 def _save(figure: Any, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
@@ -230,7 +308,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point: 0; 1 when a file cannot be read at all; 2 for bad arguments."""
+    """Entry point; the exit status is the module docstring's."""
     args = build_parser().parse_args(argv)
     if not args.speed > 0.0:
         print("haptic-replay: --speed: must be > 0", file=sys.stderr)
@@ -238,14 +316,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     recordings = []
     for name in args.files:
         try:
-            recordings.append(read_recording(name))
+            recording = read_recording(name)
         except (OSError, ValueError) as error:
             print(f"haptic-replay: {name}: {error}", file=sys.stderr)
             return 1
+        if not haptic_topics(recording):
+            topics = ", ".join(recording.messages) or "none"
+            why = f"; {recording.error}" if recording.error else ""
+            print(f"haptic-replay: {name}: no message of a master's or slave's recording "
+                  f"({recording.status}, topics: {topics}{why})", file=sys.stderr)
+            return 1
+        recordings.append(recording)
+    damaged = [r for r in recordings if r.damaged]
+    for recording in damaged:
+        print(f"haptic-replay: {recording.path}: damaged, read up to {recording.error}",
+              file=sys.stderr)
     if args.view:
         from haptic.view.replay.playback import replay_into_view
 
-        return replay_into_view(recordings, port=args.port, speed=args.speed)
+        status = replay_into_view(recordings, port=args.port, speed=args.speed)
+        return status or (3 if damaged else 0)
     summaries = [summarize(r) for r in recordings]
     plots: list[Path] = [] if args.no_plots else write_plots(recordings, args.out)
     if args.json:
@@ -258,7 +348,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(format_text(summary))
         for path in plots:
             print(f"wrote {path}")
-    return 0
+    return 3 if damaged else 0
 
 
 if __name__ == "__main__":

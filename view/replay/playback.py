@@ -5,7 +5,10 @@ links' statistics and events as each side's status, the workpiece and the clay m
 merged in log-time order and fed to a :class:`~haptic.view.state.ViewState` at ``speed``
 times real time, at most ``rate_hz`` frames a second; the page is the live view's, served on
 ``http://127.0.0.1:PORT/``. The replay ends with the recording (the last frame stays up until
-SIGINT or SIGTERM).
+SIGINT or SIGTERM). A pause in the recording longer than :data:`MAX_PAUSE_S` of replay time
+is shortened to that (a log time far from the others, in a damaged or foreign file, must not
+hold the replay for days), every wait ends at once on SIGINT or SIGTERM, and a message the view
+cannot show (a field missing or of another type) is skipped.
 """
 
 from __future__ import annotations
@@ -56,6 +59,12 @@ def frame_parts(topic: str, message: dict[str, Any]) -> dict[str, Any]:
     return {}
 
 
+#: The longest wait between two frames, s of wall time (longer pauses are shortened).
+MAX_PAUSE_S = 1.0
+#: The longest single sleep, s: a stop request is seen within this.
+_SLEEP_SLICE_S = 0.05
+
+
 def merged(recordings: Sequence[Recording]) -> Iterator[tuple[int, str, dict[str, Any]]]:
     """Every message of the recordings as ``(log_time_ns, topic, message)`` in time order."""
     streams = [[(t, topic, m) for t, m in items]
@@ -87,12 +96,18 @@ def play(recordings: Sequence[Recording], state: ViewState, speed: float = 1.0,
             statuses[side] = {"side": side, "time_ns": log_time, "link": message,
                               "events": events.get(side, [])[-50:]}
         else:
-            pending.update(frame_parts(topic, message))
+            try:
+                pending.update(frame_parts(topic, message))
+            except (KeyError, TypeError, ValueError, IndexError):
+                pass  # a message the view cannot show: the frame goes on without it
         if log_time >= next_frame:
             due = start_wall + (log_time - start_log) / speed
             delay = (due - time.monotonic_ns()) * 1e-9
-            if delay > 0:
-                time.sleep(delay)
+            if delay > MAX_PAUSE_S:  # a long pause (or a wild log time): shortened
+                start_wall -= int((delay - MAX_PAUSE_S) * 1e9)
+                delay = MAX_PAUSE_S
+            if _wait(delay, stop):
+                break
             for status in statuses.values():
                 state.update(status=status)
             statuses.clear()
@@ -103,6 +118,16 @@ def play(recordings: Sequence[Recording], state: ViewState, speed: float = 1.0,
     if pending:
         state.update(**pending)
     return frames
+
+
+def _wait(seconds: float, stop: Any) -> bool:
+    """Sleep ``seconds`` (s) in short slices; True as soon as ``stop()`` asks to stop."""
+    end = time.monotonic() + seconds
+    while (left := end - time.monotonic()) > 0:
+        if stop is not None and stop():
+            return True
+        time.sleep(min(left, _SLEEP_SLICE_S))
+    return stop is not None and bool(stop())
 
 
 def replay_into_view(recordings: Sequence[Recording], port: int = 8765,
