@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from haptic.common.analysis.loop import handle_with_operator, tool_with_environment
 from haptic.common.model.lti import Path, combine, discretize
+from haptic.common.model.plants import handle_with_operator, tool_with_environment
 from haptic.common.model.synthesis import AxisCompensators
 from haptic.common.model.teleop import AxisModel
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
+from haptic.common.model.plants import handle_with_operator, tool_with_environment
 from haptic.common.model.synthesis import AxisCompensators, minimal_tf
 from haptic.common.model.teleop import AxisModel, evaluate_tf, tf, tf_coefficients
 
@@ -36,23 +37,6 @@ def feedthrough(system: control.TransferFunction) -> float:
     num, den = tf_coefficients(system)
     num, den = np.trim_zeros(num, "f"), np.trim_zeros(den, "f")
     return float(num[0] / den[0]) if len(num) == len(den) else 0.0
-
-
-def _polynomial_tf(coefficients: np.ndarray) -> control.TransferFunction:
-    return tf(coefficients, [1.0])
-
-
-def handle_with_operator(axis: AxisModel) -> control.TransferFunction:
-    """Ph = Th Gh / (1 + Th Sh): handle command (m) -> force the operator's arm takes (N)."""
-    th = _polynomial_tf(axis.operator_impedance_th_N_per_m)
-    return minimal_tf(th * axis.handle_actuator_gh / (1 + th * axis.handle_compliance_sh))
-
-
-def tool_with_environment(axis: AxisModel) -> control.TransferFunction:
-    """Pt = Tt Gt / (1 - Tt St): tool actuator force (N) -> force on the environment (N); Tt
-    may be rational (``environment_impedance_den``)."""
-    tt = tf(axis.environment_impedance_tt_N_per_m, axis.environment_impedance_den)
-    return minimal_tf(tt * axis.tool_actuator_gt / (1 - tt * axis.tool_compliance_st))
 
 
 @dataclass(frozen=True)
@@ -111,7 +95,7 @@ class AxisLoop:
             # The coupling's parts: Cp, the tool seen by its force Gt' = Gt/(1 - Tt St) and
             # the handle seen by its command Gh' = Gh/(1 + Th Sh) (docs/control.md).
             kp, wc = drift
-            th = _polynomial_tf(axis.operator_impedance_th_N_per_m)
+            th = tf(axis.operator_impedance_th_N_per_m, [1.0])
             tt = tf(axis.environment_impedance_tt_N_per_m, axis.environment_impedance_den)
             gt = axis.tool_actuator_gt / (1 - tt * axis.tool_compliance_st)
             gh = axis.handle_actuator_gh / (1 + th * axis.handle_compliance_sh)

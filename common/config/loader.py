@@ -27,6 +27,9 @@ from typing import Any
 from haptic.common.model.errors import ConfigError
 
 CONFIG_ERROR_EXIT_STATUS = 2
+#: The longest string value, characters (names, interfaces and paths: a path's own limits,
+#: 4096 bytes and 255 per component on Linux, are the operating system's to report).
+MAX_STRING_LENGTH = 1024
 
 
 @dataclass(frozen=True)
@@ -92,6 +95,11 @@ def _validate_field(key: str, field: Field, value: Any) -> Any:
     elif kind == "str":
         if not isinstance(value, str):
             raise ConfigError(key, f"must be a string (got {value!r})")
+        if len(value) > MAX_STRING_LENGTH:
+            raise ConfigError(key, f"must be at most {MAX_STRING_LENGTH} characters "
+                              f"(got {len(value)})")
+        if any(ord(c) < 0x20 or ord(c) == 0x7F for c in value):
+            raise ConfigError(key, f"must not hold control characters (got {value!r})")
         if field.choices is not None and value not in field.choices:
             raise ConfigError(key, f"must be one of {', '.join(field.choices)} (got {value!r})")
         result = value
@@ -186,13 +194,15 @@ def load_config(path: str | Path | None = None) -> dict[str, Any]:
 
     Raises :class:`ConfigError` for an unreadable file or an invalid key or value.
     """
-    from haptic.common.config.schema import SCHEMA
+    from haptic.common.config.schema import SCHEMA, check_across_keys
 
     defaults = validate_table(parse_toml(default_config_text(), "defaults"), SCHEMA, {})
     if path is None:
         return defaults
     text = read_config_text(path, "config file")
-    return validate_table(parse_toml(text, str(path)), SCHEMA, defaults)
+    config = validate_table(parse_toml(text, str(path)), SCHEMA, defaults)
+    check_across_keys(config)
+    return config
 
 
 def override(config: dict[str, Any], dotted_key: str, value: Any) -> dict[str, Any]:
@@ -213,6 +223,9 @@ def override(config: dict[str, Any], dotted_key: str, value: Any) -> dict[str, A
     for part in parts[:-1]:
         node = node[part]
     node[parts[-1]] = checked
+    from haptic.common.config.schema import check_across_keys
+
+    check_across_keys(result)
     return result
 
 

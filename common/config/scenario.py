@@ -51,6 +51,8 @@ def _pair(values: list[float]) -> str | None:
     return None if len(values) == 2 else "must be a list of two numbers [x, y]"
 
 
+#: The most height-field cells along one axis (16384 x 16384 float64 heights: 2 GiB).
+MAX_GRID_CELLS = 16384
 _POSITIVE = {"minimum": 0.0, "exclusive_minimum": True}
 
 SCENARIO_SCHEMA: Schema = {
@@ -66,8 +68,10 @@ SCENARIO_SCHEMA: Schema = {
         "x_range_m": Field("float_list", "Work area along x (cutting direction), m.",
                            check=_range),
         "y_range_m": Field("float_list", "Work area along y, m.", check=_range),
-        "cells_x": Field("int", "Height-field cells along x.", minimum=1),
-        "cells_y": Field("int", "Height-field cells along y.", minimum=1),
+        "cells_x": Field("int", "Height-field cells along x (at most 16384).", minimum=1,
+                         maximum=MAX_GRID_CELLS),
+        "cells_y": Field("int", "Height-field cells along y (at most 16384).", minimum=1,
+                         maximum=MAX_GRID_CELLS),
     },
     "tool": {
         "radius_m": Field("float", "Flat-end cylindrical tool radius, m.", **_POSITIVE),
@@ -336,10 +340,17 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
             f"scenarios/{name_or_path}.toml").read_text()
     else:
         path = Path(name_or_path)
-        if not path.suffix and not path.exists():
+        try:
+            unknown = not source or (not path.suffix and not path.exists())
+        except (OSError, ValueError):  # a name the file system cannot take
+            unknown = True
+        if unknown:
             raise ConfigError("slave.scenario", f"unknown scenario {source!r}; shipped ones: "
                               f"{', '.join(SCENARIO_NAMES)}, or give a .toml path")
-        text = read_config_text(path, "scenario file")
+        try:
+            text = read_config_text(path, "scenario file")
+        except ConfigError as error:
+            raise ConfigError("slave.scenario", str(error)) from None
     return scenario_from_table(parse_toml(text, source), source)
 
 

@@ -15,6 +15,7 @@ from haptic.common.config.lockstep_schema import LOCKSTEP_SCHEMA
 from haptic.common.config.master_schema import MASTER_SCHEMA
 from haptic.common.config.runner_schema import RUNNER_SCHEMA
 from haptic.common.config.slave_schema import SLAVE_SCHEMA
+from haptic.common.model.errors import ConfigError
 
 
 def _leading_nonzero(coefficients: list[float]) -> str | None:
@@ -89,7 +90,8 @@ AXIS_SCHEMA: Schema = {
 
 MODEL_SCHEMA: Schema = {
     "sample_period_s": Field(
-        "float", "Ts, the control period of both sides, s.", minimum=0.0, exclusive_minimum=True
+        "float", "Ts, the control period of both sides, s (10 us to 0.1 s).", minimum=1e-5,
+        maximum=0.1,
     ),
     "position_ratio_ah1": Field(
         "matrix2", "Ah1, diagonal position ratio, yt = Ah1 yh, dimensionless.",
@@ -111,10 +113,12 @@ MODEL_SCHEMA: Schema = {
 
 ANALYSIS_SCHEMA: Schema = {
     "round_trip_delay_s": Field(
-        "float", "Round-trip network delay tau analysed by default, s.", minimum=0.0
+        "float", "Round-trip network delay tau analysed by default, s (at most 10 s).",
+        minimum=0.0, maximum=10.0,
     ),
     "max_frequency_rad_s": Field(
-        "float", "Upper end of the frequency grid, rad/s.", minimum=0.0, exclusive_minimum=True
+        "float", "Upper end of the frequency grid, rad/s (1 to 1e7).", minimum=1.0,
+        maximum=1e7,
     ),
     "max_delay_s": Field(
         "float", "Largest round-trip delay searched for margins and maps, s.", minimum=0.0,
@@ -147,3 +151,15 @@ SCHEMA: Schema = {
     "governor": GOVERNOR_SCHEMA,
     "control": CONTROL_SCHEMA,
 }
+
+
+def check_across_keys(config: dict[str, Any]) -> None:
+    """The rules that tie keys of different places together, checked whenever a file or a flag
+    sets a key (raises :class:`ConfigError` naming one of them); rules that need a program's
+    own objects stay with them (``[slave.safety]``'s in ``InputGuardSettings.from_config``)."""
+    governor = config.get("governor", {})
+    if "urgent_factor" in governor and "safety_factor" in governor and not (
+            governor["urgent_factor"] >= governor["safety_factor"]):
+        raise ConfigError("governor.urgent_factor",
+                          f"must be >= governor.safety_factor ({governor['safety_factor']:g}; "
+                          f"got {governor['urgent_factor']:g})")

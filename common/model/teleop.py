@@ -154,6 +154,8 @@ def model_from_config(config: dict[str, Any]) -> TeleopModel:
     section = config["model"]
     ch1 = section["ch1"]
     _check_proper("model.ch1.num", ch1["num"], ch1["den"])
+    if not any(ch1["num"]):
+        raise ConfigError("model.ch1.num", "must not be zero (Ch1 = 0 never moves the handle)")
     axes = []
     for index, name in enumerate(AXES):
         raw = section[name]
@@ -187,10 +189,34 @@ def model_from_config(config: dict[str, Any]) -> TeleopModel:
                 force_ratio_ah2=section["force_ratio_ah2"][index][index],
             )
         )
-    return TeleopModel(
+    model = TeleopModel(
         sample_period_s=section["sample_period_s"],
         ch1_gain_k=ch1["gain_k"],
         ch1_num=np.asarray(ch1["num"], float),
         ch1_den=np.asarray(ch1["den"], float),
         axes=tuple(axes),
     )
+    _check_realisable(model)
+    return model
+
+
+def _check_realisable(model: TeleopModel) -> None:
+    """What every program's start computes from the model, checked here so that a model that
+    cannot run is a :class:`ConfigError` naming its axis table: each axis's compensators
+    synthesise (eqs 21-23) and its plants Ph and Pt are proper (a zero tool mass with an St
+    that does not roll off, extreme coefficients)."""
+    from haptic.common.model.plants import handle_with_operator, tool_with_environment
+    from haptic.common.model.synthesis import SynthesisError, synthesize_axis
+
+    for axis in model.axes:
+        try:
+            synthesize_axis(axis, model.ch1)
+            for name, system in (("Ph = Th Gh/(1 + Th Sh)", handle_with_operator(axis)),
+                                 ("Pt = Tt Gt/(1 - Tt St)", tool_with_environment(axis))):
+                num, den = tf_coefficients(system)
+                if not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))):
+                    raise SynthesisError(f"{name} has coefficients beyond the float range")
+                if len(np.trim_zeros(num, "f")) > len(np.trim_zeros(den, "f")):
+                    raise SynthesisError(f"{name} is improper; the loop is not causal")
+        except (SynthesisError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
+            raise ConfigError(f"model.{axis.name}", str(error)) from None

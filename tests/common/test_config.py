@@ -45,9 +45,18 @@ def test_a_sub_table_alone_keeps_the_parent_defaults(tmp_path: Path) -> None:
         ("[runner]\nspin_seconds = 0.0001\n", "runner.spin_seconds", "unknown key"),
         ("[nonsense]\n", "nonsense", "unknown key"),
         ("[model]\nsample_period_s = -0.001\nposition_ratio_ah1 = [[1,0],[0,1]]\n"
-         "force_ratio_ah2 = [[1,0],[0,1]]\n", "model.sample_period_s", "must be > 0"),
+         "force_ratio_ah2 = [[1,0],[0,1]]\n", "model.sample_period_s", "must be >= 1e-05"),
         ("[model]\nsample_period_s = 0.0\nposition_ratio_ah1 = [[1,0],[0,1]]\n"
-         "force_ratio_ah2 = [[1,0],[0,1]]\n", "model.sample_period_s", "must be > 0"),
+         "force_ratio_ah2 = [[1,0],[0,1]]\n", "model.sample_period_s", "must be >= 1e-05"),
+        ("[model]\nsample_period_s = 1e300\n", "model.sample_period_s", "must be <= 0.1"),
+        ("[slave]\nscenario = \"a\\u0000b.toml\"\n", "slave.scenario", "control characters"),
+        ("[slave]\nscenario = \"a\\nb.toml\"\n", "slave.scenario", "control characters"),
+        ("[analysis]\nround_trip_delay_s = 1e300\n", "analysis.round_trip_delay_s",
+         "must be <= 10"),
+        ("[analysis]\nmax_frequency_rad_s = 1e-300\n", "analysis.max_frequency_rad_s",
+         "must be >= 1"),
+        ("[governor]\nurgent_factor = 0.5\n", "governor.urgent_factor",
+         "must be >= governor.safety_factor"),
         ("[model]\nsample_period_s = 0.001\nposition_ratio_ah1 = [[1,0],[0,0]]\n"
          "force_ratio_ah2 = [[1,0],[0,1]]\n", "model.position_ratio_ah1", "singular"),
         ("[model]\nsample_period_s = 0.001\nposition_ratio_ah1 = [[1,0.5],[0,1]]\n"
@@ -132,3 +141,21 @@ def test_to_toml_gives_another_process_the_same_configuration(paper_config: dict
     for config in (paper_config, changed):
         assert load_config(write(tmp_path, to_toml(config))) == config
     assert load_config(write(tmp_path, to_toml(changed))) != paper_config
+
+
+@pytest.mark.parametrize(("text", "key", "message"), [
+    ("[model.ch1]\nnum = [0.0]\nden = [1.0, 10.0, 0.0]\n", "model.ch1.num", "must not be zero"),
+    ("[model.x]\nhandle_compliance_sh_num = [1.0]\nhandle_compliance_sh_den = [1.0]\n",
+     "model.x", "Ct1 is improper"),
+    ("[model.y]\ntool_mass_kg = 0.0\n", "model.y", "Pt = Tt Gt/(1 - Tt St) is improper"),
+    ("[model.x]\ntool_damping_N_s_per_m = 1e300\n", "model.x", "Pt = Tt Gt/(1 - Tt St)"),
+])
+def test_a_model_no_program_can_run_names_its_table(tmp_path: Path, text: str, key: str,
+                                                    message: str) -> None:
+    """A model that passes the keys' own checks but that no program can run (its
+    compensators do not synthesise, or a plant is improper) is a ConfigError naming the axis
+    table, as every program's start needs, not a traceback from the first synthesis."""
+    with pytest.raises(ConfigError) as caught:
+        model_from_config(load_config(write(tmp_path, text)))
+    assert caught.value.key == key
+    assert message in str(caught.value)
