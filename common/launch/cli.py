@@ -463,6 +463,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"config error: --duration: must be > 0 s (got {args.duration:g})",
               file=sys.stderr)
         return 2
+    if args.config:  # checked here once, before any program starts: one line, exit status 2
+        from haptic.common.config import ConfigError, load_config
+        from haptic.common.model.teleop import model_from_config
+
+        try:
+            model_from_config(load_config(args.config))
+        except ConfigError as error:
+            print(f"config error: {error}", file=sys.stderr)
+            return 2
     return run_session(args)
 
 

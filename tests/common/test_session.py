@@ -175,3 +175,19 @@ def test_the_master_reports_the_rig_emulator_cpu_over_its_loop() -> None:
     assert device_process_cpu(None, 2.5, 3.0) == {}  # no emulator (real drives, model rig)
     assert device_process_cpu(1.0, None, 3.0) == {}  # it was gone at the end
     assert device_process_cpu(1.0, 2.0, 0.0) == {}
+
+
+def test_a_bad_config_is_one_line_before_any_program_starts(tmp_path, capsys) -> None:
+    """haptic-session checks --config itself: one line and exit status 2, not the same error
+    from both programs followed by their exit statuses (and no output folder written)."""
+    from haptic.common.launch.cli import main
+
+    for text in ("model.sample_period_s = 1e300\n", "[model.x]\ntool_mass_kg = 0.0\n"):
+        config = tmp_path / "bad.toml"
+        config.write_text(text)
+        out = tmp_path / "session"
+        assert main(["--config", str(config), "--duration", "0.5", "--out", str(out)]) == 2
+        captured = capsys.readouterr()
+        assert captured.err.startswith("config error: model.")
+        assert len(captured.err.strip().splitlines()) == 1
+        assert not out.exists()
