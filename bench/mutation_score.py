@@ -170,9 +170,6 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
     ("master/node.py", "counts[0] = counts[1] = 0", "counts[ 1] = counts[1] = 0",
      "the events count never cleared: every later step is decoded, those without events "
      "to nothing (time, not behaviour)"),
-    ("master/node.py", "if len(flagged) > 1:", "if len(flagged) >= 1:",
-     "one flagged lane's events are in the layer's order already: the stable sort keeps it "
-     "(time, not behaviour)"),
     ("master/node_kernels.py", "wp.atomic_add(event_count, 0, 1)",
      "wp.atomic_add(event_count, 0, 2)",
      "the count is only tested for zero, and reset by the node after each decoding"),

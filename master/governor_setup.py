@@ -71,8 +71,16 @@ def start_governor(config: dict[str, Any], args: argparse.Namespace, model: Tele
 
 def governor_step(governor: MarginGovernor, link: Link, now_s: float) -> GovernorDecision:
     """One tick: the echo age of the newest tool message (the link's poll time minus the
-    echoed handle send time, both CLOCK_REALTIME on this host) into the governor."""
+    echoed handle send time, both CLOCK_REALTIME on this host) into the governor. An echo
+    of no handle message this master sent (before its first, after its newest: a faulty or
+    forged slave's) is no round trip: it is counted once per message and not used, so it can
+    neither hide the delay (a future echo read as zero round trip) nor invent one."""
     latest = link.latest
     echo_ns = getattr(latest, "echo_send_time_ns", 0) if latest is not None else 0
+    if echo_ns > 0 and not link.first_sent_ns <= echo_ns <= link.last_sent_ns:
+        if latest is not governor.last_invalid_echo:
+            governor.last_invalid_echo = latest
+            governor.invalid_echoes += 1
+        echo_ns = 0
     age_s = (link.last_poll_ns - echo_ns) * 1e-9 if echo_ns > 0 else None
     return governor.update(now_s, age_s)

@@ -127,6 +127,10 @@ class MarginGovernor:
         """The latest round-trip estimate, s (NaN before the first echo)."""
         self.peak_rtt_s = math.nan
         self.max_rtt_s = 0.0
+        self.invalid_echoes = 0
+        self.last_invalid_echo: Any = None  # the message last counted there
+        """Tool messages whose echoed send time is no handle message this master sent (before
+        its first or after its newest): not a round trip, never used."""
         self.min_gain_used_k = self.nominal_k
         self.tdpa_requested = False
         self.beyond_margin = False
@@ -290,6 +294,7 @@ class MarginGovernor:
             "governor_final_k": self.gain_k,
             "governor_min_k": self.min_gain_used_k,
             "governor_max_round_trip_s": self.max_rtt_s,
+            "governor_invalid_echoes": self.invalid_echoes,
             "governor_tdpa_requested": self.tdpa_requested,
             "governor_beyond_margin": self.beyond_margin,
             "governor_table": self.table.as_dict(),

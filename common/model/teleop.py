@@ -209,6 +209,7 @@ def _check_realisable(model: TeleopModel) -> None:
     from haptic.common.model.synthesis import SynthesisError, synthesize_axis
 
     for axis in model.axes:
+        key = f"model.{axis.name}"
         try:
             synthesize_axis(axis, model.ch1)
             for name, system in (("Ph = Th Gh/(1 + Th Sh)", handle_with_operator(axis)),
@@ -217,6 +218,8 @@ def _check_realisable(model: TeleopModel) -> None:
                 if not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))):
                     raise SynthesisError(f"{name} has coefficients beyond the float range")
                 if len(np.trim_zeros(num, "f")) > len(np.trim_zeros(den, "f")):
+                    if name.startswith("Pt") and axis.tool_mass_kg == 0.0:
+                        key += ".tool_mass_kg"  # a massless tool: Gt of first order
                     raise SynthesisError(f"{name} is improper; the loop is not causal")
         except (SynthesisError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
-            raise ConfigError(f"model.{axis.name}", str(error)) from None
+            raise ConfigError(key, str(error)) from None

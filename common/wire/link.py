@@ -139,6 +139,10 @@ class Link:
         """Time of the latest :meth:`poll` on the link's clock, ns."""
         self.sent = 0
         self.send_errors = 0
+        self.first_sent_ns = 0
+        self.last_sent_ns = 0
+        """Send times of the first and the newest message this link sent, ns (0: none yet):
+        what an echo of this side's send time can be (common/wire/messages.py ToolState)."""
         self.capped_polls = 0
         """Polls that took ``max_samples_per_poll`` samples and left the rest for the next."""
         # pairing (common/wire/auth.py): hellos on <prefix>/pair/<side>, tags with a session key
@@ -273,6 +277,9 @@ class Link:
             else:
                 publisher.put(payload)
             self.sent += 1
+            self.last_sent_ns = send_ns
+            if not self.first_sent_ns:
+                self.first_sent_ns = send_ns
         except Exception:  # noqa: BLE001 - a failed put is a lost message, never a crash
             self.send_errors += 1
         return send_ns

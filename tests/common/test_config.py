@@ -147,7 +147,8 @@ def test_to_toml_gives_another_process_the_same_configuration(paper_config: dict
     ("[model.ch1]\nnum = [0.0]\nden = [1.0, 10.0, 0.0]\n", "model.ch1.num", "must not be zero"),
     ("[model.x]\nhandle_compliance_sh_num = [1.0]\nhandle_compliance_sh_den = [1.0]\n",
      "model.x", "Ct1 is improper"),
-    ("[model.y]\ntool_mass_kg = 0.0\n", "model.y", "Pt = Tt Gt/(1 - Tt St) is improper"),
+    ("[model.y]\ntool_mass_kg = 0.0\n", "model.y.tool_mass_kg",
+     "Pt = Tt Gt/(1 - Tt St) is improper"),
     ("[model.x]\ntool_damping_N_s_per_m = 1e300\n", "model.x", "Pt = Tt Gt/(1 - Tt St)"),
 ])
 def test_a_model_no_program_can_run_names_its_table(tmp_path: Path, text: str, key: str,

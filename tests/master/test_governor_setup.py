@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import math
 
 import pytest
 
@@ -47,8 +48,36 @@ def test_the_analysis_of_a_governed_run_takes_the_profile_start(paper_config) ->
 
 
 def test_lower_k_needs_a_design_linear_in_k(paper_config) -> None:
+    # a compliance that rolls off as fast as Gh (relative degree 2), so the design synthesises
     config = override(paper_config, "model.x.handle_compliance_sh_num", [1e-4])
-    config = override(config, "model.x.handle_compliance_sh_den", [0.01, 1.0])
+    config = override(config, "model.x.handle_compliance_sh_den", [1e-4, 0.02, 1.0])
     with pytest.raises(ConfigError, match=r"governor\.action"):
         start_governor(config, _args(governor=True), model_from_config(config),
                        stream=io.StringIO())
+
+
+def test_an_echo_of_no_handle_message_sent_is_counted_and_never_a_round_trip() -> None:
+    """A tool message's echoed handle send time must lie between this master's first and
+    newest sent message: a future echo read as a round trip of 0 kept the nominal gain
+    whatever the delay, and an echo of 1 ns invented a huge one."""
+    from types import SimpleNamespace
+
+    from haptic.common.config import load_config
+    from haptic.master.governor_setup import governor_step
+    from haptic.master.margin_governor import governor_for
+
+    config = override(load_config(), "governor.enabled", True)
+    governor = governor_for(model_from_config(config), config)
+    t0 = 1_700_000_000_000_000_000
+    link = SimpleNamespace(first_sent_ns=t0, last_sent_ns=t0 + 10_000_000,
+                           last_poll_ns=t0 + 12_000_000, latest=None)
+    for echo_ns in (t0 + 10**12, 1, t0 - 1):
+        link.latest = SimpleNamespace(echo_send_time_ns=echo_ns)
+        for tick in range(3):  # the same message on every tick: counted once
+            governor_step(governor, link, tick * 1e-3)
+        assert math.isnan(governor.rtt_s) and governor.max_rtt_s == 0.0  # no round trip yet
+    assert governor.invalid_echoes == 3
+    link.latest = SimpleNamespace(echo_send_time_ns=t0 + 4_000_000)  # sent: 8 ms ago
+    governor_step(governor, link, 0.01)
+    assert governor.rtt_s == pytest.approx(0.008)
+    assert governor.invalid_echoes == 3 and governor.summary()["governor_invalid_echoes"] == 3
