@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from haptic.common.config.loader import Field, Schema
@@ -22,6 +23,26 @@ def _rig_name(name: Any) -> str | None:
             else f"must be one of {', '.join(RIG_BACKENDS)} (got {name!r})")
 
 
+def _existing_file(*suffixes: str) -> Any:
+    """A check for a file key: empty (the packaged file) or an existing file ending in one of
+    ``suffixes`` (what the reader behind it takes: cantools by .dbc, canopen by .eds/.dcf)."""
+
+    def check(value: str) -> str | None:
+        if not value:
+            return None
+        path = Path(value)
+        if path.suffix.lower() not in suffixes:
+            return f"must be a {' or '.join(suffixes)} file (got {value!r})"
+        try:
+            if path.is_file():
+                return None
+        except OSError as error:  # a name the file system cannot take
+            return f"cannot read {value!r}: {error.strerror}"
+        return f"no such file: {value!r}"
+
+    return check
+
+
 CAN_SCHEMA: Schema = {
     "interface": Field("str", "python-can interface of the real bus, e.g. socketcan, pcan."),
     "channel": Field("str", "python-can channel, e.g. can0."),
@@ -30,7 +51,8 @@ CAN_SCHEMA: Schema = {
                        maximum=127),
     "y_node_id": Field("int", "CANopen node id of the y-axis CiA 402 drive.", minimum=1,
                        maximum=127),
-    "dbc_file": Field("str", "Force sensor DBC file; empty for the packaged one."),
+    "dbc_file": Field("str", "Force sensor DBC file; empty for the packaged one.",
+                      check=_existing_file(".dbc")),
     "pdo_timeout_s": Field("float", "How long read() waits for the PDOs of a SYNC, s.",
                            minimum=0.0, exclusive_minimum=True),
     "sync_lead_s": Field("float", "The loop sends each cycle's SYNC this long before its "
@@ -50,8 +72,10 @@ CAN_SCHEMA: Schema = {
                                 check=_pair),
     "x_eds_file": Field("str", "EDS or DCF file of the x drive (configure() maps its PDOs "
                         "from it); empty for the packaged "
-                        "master/hardware/eds/haptic_cia402_drive.eds."),
-    "y_eds_file": Field("str", "EDS or DCF file of the y drive; empty for the packaged one."),
+                        "master/hardware/eds/haptic_cia402_drive.eds.",
+                        check=_existing_file(".eds", ".dcf")),
+    "y_eds_file": Field("str", "EDS or DCF file of the y drive; empty for the packaged one.",
+                        check=_existing_file(".eds", ".dcf")),
     "master_node_id": Field("int", "Node id of the master's heartbeat (the drives consume "
                             "it).", minimum=1, maximum=127),
     "heartbeat_period_s": Field("float", "Heartbeat producer period of the master and the "
@@ -82,7 +106,14 @@ def _emulator_interface(name: Any) -> str | None:
     if name == "virtual":
         return ("python-can's virtual bus does not cross processes; use unix_datagram or "
                 "udp_multicast (or the in-process rig, rig = \"sim-inproc\")")
-    return None if name else "must name a python-can interface, e.g. unix_datagram"
+    if not name:
+        return "must name a python-can interface, e.g. unix_datagram"
+    from can.interfaces import VALID_INTERFACES  # python-can's and the plug-ins' (ours too)
+
+    if name not in VALID_INTERFACES:
+        return (f"{name!r} is not a python-can interface here; one that crosses processes: "
+                "unix_datagram or udp_multicast")
+    return None
 
 
 EMULATOR_SCHEMA: Schema = {

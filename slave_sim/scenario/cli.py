@@ -10,12 +10,13 @@ tool path) under ``--out``.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from haptic.common.config import exit_on_config_error, load_config, override
+from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.config.scenario import load_scenario
 from haptic.slave_sim.node import SlaveNode
 
@@ -32,6 +33,8 @@ def main(argv: list[str] | None = None) -> int:
 
     warp.config.log_level = warp.LOG_WARNING  # no start-up banner in the summary
     with exit_on_config_error():
+        if not (math.isfinite(args.duration) and 0.0 < args.duration <= 3600.0):
+            raise ConfigError("--duration", f"must be in (0, 3600] s (got {args.duration:g})")
         config = load_config(args.config)
         if args.scenario:
             config = override(config, "slave.scenario", args.scenario)

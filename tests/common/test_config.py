@@ -57,6 +57,11 @@ def test_a_sub_table_alone_keeps_the_parent_defaults(tmp_path: Path) -> None:
          "must be >= 1"),
         ("[governor]\nurgent_factor = 0.5\n", "governor.urgent_factor",
          "must be >= governor.safety_factor"),
+        ("[master.sim.emulator]\ninterface = \"nosuch\"\n", "master.sim.emulator.interface",
+         "not a python-can interface"),
+        ("[master.can]\ndbc_file = \"nosuch.dbc\"\n", "master.can.dbc_file", "no such file"),
+        ("[master.can]\nx_eds_file = \"x\"\n", "master.can.x_eds_file", ".eds or .dcf file"),
+        ("[master.can]\ny_eds_file = \"nosuch.dcf\"\n", "master.can.y_eds_file", "no such file"),
         ("[model]\nsample_period_s = 0.001\nposition_ratio_ah1 = [[1,0],[0,0]]\n"
          "force_ratio_ah2 = [[1,0],[0,1]]\n", "model.position_ratio_ah1", "singular"),
         ("[model]\nsample_period_s = 0.001\nposition_ratio_ah1 = [[1,0.5],[0,1]]\n"

@@ -191,3 +191,16 @@ def test_a_bad_config_is_one_line_before_any_program_starts(tmp_path, capsys) ->
         assert captured.err.startswith("config error: model.")
         assert len(captured.err.strip().splitlines()) == 1
         assert not out.exists()
+
+
+def test_haptic_slave_sim_refuses_a_duration_that_is_no_time(capsys) -> None:
+    from haptic.slave_sim.scenario.cli import main
+
+    for duration in ("-1", "nan", "inf"):
+        try:
+            main(["--duration", duration])
+        except SystemExit as stop:
+            assert stop.code == 2
+        captured = capsys.readouterr()
+        assert captured.err.strip() == (f"config error: --duration: must be in (0, 3600] s "
+                                        f"(got {float(duration):g})")

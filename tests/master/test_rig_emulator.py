@@ -442,8 +442,10 @@ def test_a_start_timeout_is_a_hardware_error_and_the_child_is_reaped() -> None:
 
 
 def test_an_emulator_that_cannot_open_its_bus_fails_configure_with_its_message() -> None:
-    config = _config(master__sim__emulator__interface="no-such-interface",
-                     master__sim__emulator__channel="x")
+    # an interface python-can has, on a channel no host has (an unknown interface is a
+    # configuration error before any process starts: tests/common/test_config.py)
+    config = _config(master__sim__emulator__interface="socketcan",
+                     master__sim__emulator__channel="no-such-can9")
     hardware = create_hardware("sim", config)
     with pytest.raises(HardwareError, match="ended .exit status 1.*cannot open the CAN bus"):
         hardware.configure()
