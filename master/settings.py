@@ -164,9 +164,17 @@ def with_work_area(safety: SafetySettings, area: SharedWorkArea) -> SafetySettin
 
 def emulator_settings(table: dict[str, Any],
                       prefix: str = "master.sim.emulator") -> EmulatorSettings:
-    """:class:`EmulatorSettings` from a validated table; a udp_multicast channel must be a
-    multicast group (:class:`ConfigError` naming the key)."""
+    """:class:`EmulatorSettings` from a validated table: the interface must be one python-can
+    has here (its own and its plug-ins', this package's unix_datagram among them; checked here,
+    on the master's side, so reading a configuration needs no CAN stack), and a udp_multicast
+    channel a multicast group (:class:`ConfigError` naming the key)."""
     emulator = EmulatorSettings(**table)
+    from can.interfaces import VALID_INTERFACES
+
+    if emulator.interface not in VALID_INTERFACES:
+        raise ConfigError(f"{prefix}.interface", f"{emulator.interface!r} is not a python-can "
+                          "interface here; one that crosses processes: unix_datagram or "
+                          "udp_multicast")
     if emulator.interface == "udp_multicast":
         check_multicast_group(emulator.channel, f"{prefix}.channel")
     return emulator

@@ -57,8 +57,6 @@ def test_a_sub_table_alone_keeps_the_parent_defaults(tmp_path: Path) -> None:
          "must be >= 1"),
         ("[governor]\nurgent_factor = 0.5\n", "governor.urgent_factor",
          "must be >= governor.safety_factor"),
-        ("[master.sim.emulator]\ninterface = \"nosuch\"\n", "master.sim.emulator.interface",
-         "not a python-can interface"),
         ("[master.can]\ndbc_file = \"nosuch.dbc\"\n", "master.can.dbc_file", "no such file"),
         ("[master.can]\nx_eds_file = \"x\"\n", "master.can.x_eds_file", ".eds or .dcf file"),
         ("[master.can]\ny_eds_file = \"nosuch.dcf\"\n", "master.can.y_eds_file", "no such file"),
@@ -165,3 +163,15 @@ def test_a_model_no_program_can_run_names_its_table(tmp_path: Path, text: str, k
         model_from_config(load_config(write(tmp_path, text)))
     assert caught.value.key == key
     assert message in str(caught.value)
+
+
+def test_an_emulator_interface_python_can_does_not_have_names_its_key(tmp_path: Path) -> None:
+    """Checked with the master's settings (reading a configuration loads no CAN stack:
+    tests/common/test_layers.py), before any process starts."""
+    from haptic.master.settings import master_settings
+
+    config = load_config(write(tmp_path, "[master.sim.emulator]\ninterface = \"nosuch\"\n"))
+    with pytest.raises(ConfigError) as caught:
+        master_settings(config)
+    assert caught.value.key == "master.sim.emulator.interface"
+    assert "not a python-can interface" in str(caught.value)
