@@ -23,7 +23,9 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from haptic.common.model.plants import handle_with_operator, tool_with_environment
+from haptic.common.model.plants import (
+    causal_plants,
+)
 from haptic.common.model.synthesis import AxisCompensators, minimal_tf
 from haptic.common.model.teleop import AxisModel, evaluate_tf, tf, tf_coefficients
 
@@ -69,12 +71,7 @@ class AxisLoop:
         self.drift = drift
         self.compensators = compensators
         self.sample_period_s = sample_period_s
-        ph = handle_with_operator(axis)
-        pt = tool_with_environment(axis)
-        for name, system in (("Ph = Th Gh/(1 + Th Sh)", ph), ("Pt = Tt Gt/(1 - Tt St)", pt)):
-            num, den = tf_coefficients(system)
-            if len(np.trim_zeros(num, "f")) > len(np.trim_zeros(den, "f")):
-                raise ValueError(f"axis {axis.name}: {name} is improper; the loop is not causal")
+        ph, pt = causal_plants(axis)
         comps = compensators
         if sample_period_s is None:
             self._parts = {"ph": ph, "pt": pt, "ch1": comps.ch1, "ct1": comps.ct1,

@@ -205,21 +205,18 @@ def _check_realisable(model: TeleopModel) -> None:
     cannot run is a :class:`ConfigError` naming its axis table: each axis's compensators
     synthesise (eqs 21-23) and its plants Ph and Pt are proper (a zero tool mass with an St
     that does not roll off, extreme coefficients)."""
-    from haptic.common.model.plants import handle_with_operator, tool_with_environment
+    from haptic.common.model.plants import causal_plants
     from haptic.common.model.synthesis import SynthesisError, synthesize_axis
 
     for axis in model.axes:
         key = f"model.{axis.name}"
         try:
             synthesize_axis(axis, model.ch1)
-            for name, system in (("Ph = Th Gh/(1 + Th Sh)", handle_with_operator(axis)),
-                                 ("Pt = Tt Gt/(1 - Tt St)", tool_with_environment(axis))):
-                num, den = tf_coefficients(system)
-                if not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))):
-                    raise SynthesisError(f"{name} has coefficients beyond the float range")
-                if len(np.trim_zeros(num, "f")) > len(np.trim_zeros(den, "f")):
-                    if name.startswith("Pt") and axis.tool_mass_kg == 0.0:
-                        key += ".tool_mass_kg"  # a massless tool: Gt of first order
-                    raise SynthesisError(f"{name} is improper; the loop is not causal")
+            for name, system in zip(("Ph", "Pt"), causal_plants(axis), strict=True):
+                if not all(np.all(np.isfinite(c)) for c in tf_coefficients(system)):
+                    raise SynthesisError(f"axis {axis.name}: {name} has coefficients beyond "
+                                         "the float range")
         except (SynthesisError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
+            if "Pt" in str(error) and axis.tool_mass_kg == 0.0:
+                key += ".tool_mass_kg"  # a massless tool: Gt of first order
             raise ConfigError(key, str(error)) from None
