@@ -9,10 +9,12 @@ message cannot push the handle or fake a resync (``[master.tool_input]``):
    tool position outside ``position_min_m`` .. ``position_max_m``, or a position that moved
    farther than the tool can in the time between the two messages (``velocity_trip_m_per_s``
    times the send-time difference, at least one period, plus ``jump_margin_m``; same sender
-   epoch) is a **fault**: the message is not an input (the master keeps the previous one),
-   forces go off at once (:class:`haptic.master.supervisor.MasterSupervisor`), and the fault
-   clears after ``clear_after_messages`` plausible messages in a row; forces come back only
-   once the tool is again in sync with the handle (the resync check);
+   epoch; the difference as :class:`~haptic.common.wire.send_clock.SendClock` credits it,
+   never more than this host's own elapsed time plus ``jitter_allowance_s``) is a **fault**:
+   the message is not an input (the master keeps the previous one), forces go off at once
+   (:class:`haptic.master.supervisor.MasterSupervisor`), and the fault clears after
+   ``clear_after_messages`` plausible messages in a row; forces come back only once the tool
+   is again in sync with the handle (the resync check);
 2. otherwise the message is an input (the node saturates the force, master/node.py).
 
 Every fault and every cleared fault is an event (``tool_input_fault``,
@@ -28,11 +30,12 @@ from typing import Any
 
 from haptic.common.config import ConfigError
 from haptic.common.wire.messages import ToolState
+from haptic.common.wire.send_clock import SendClock, receive_time_ns
 
 
 @dataclass(frozen=True)
 class ToolGuardSettings:
-    """``[master.tool_input]``: forces in N, positions in m, speeds in m/s."""
+    """``[master.tool_input]``: forces in N, positions in m, speeds in m/s, times in s."""
 
     force_trip_N: float = 200.0
     position_min_m: tuple[float, float] = (-0.5, -0.5)
@@ -40,6 +43,12 @@ class ToolGuardSettings:
     velocity_trip_m_per_s: float = 2.0
     jump_margin_m: float = 0.002
     clear_after_messages: int = 20
+    jitter_allowance_s: float = 0.005
+
+    @property
+    def jitter_allowance_ns(self) -> int:
+        """:attr:`jitter_allowance_s` in whole ns."""
+        return round(self.jitter_allowance_s * 1e9)
 
     @classmethod
     def from_config(cls, config: dict[str, Any]) -> ToolGuardSettings:
@@ -79,9 +88,12 @@ class ToolInputGuard:
     faulted: bool = False
     position_m: tuple[float, float] | None = None
     """The tool position of the latest accepted message, m (None before the first)."""
-    _epoch: int | None = None
-    _send_ns: int = 0
+    clock: SendClock = field(init=False)
+    """The credited send times of the accepted messages."""
     _plausible_run: int = 0
+
+    def __post_init__(self) -> None:
+        self.clock = SendClock(self.settings.jitter_allowance_ns)
 
     def _fault(self, now_s: float, reason: str) -> None:
         self.counters.faults += 1
@@ -111,9 +123,10 @@ class ToolInputGuard:
                         "box")
             return False
         epoch, send_ns = message.epoch, message.send_time_ns
+        now_ns = receive_time_ns(now_s)
         previous = self.position_m
-        if previous is not None and self._epoch == epoch:
-            dt_s = max((send_ns - self._send_ns) * 1e-9, self.period_s)
+        dt_s = self.clock.span_s(epoch, send_ns, now_ns, self.period_s)
+        if previous is not None and dt_s is not None:
             allowed_m = s.velocity_trip_m_per_s * dt_s + s.jump_margin_m
             jump_m = max(abs(px - previous[0]), abs(py - previous[1]))
             if jump_m > allowed_m:
@@ -123,7 +136,7 @@ class ToolInputGuard:
                             f"{allowed_m * 1e3:.3g} mm)")
                 return False
         self.position_m = (px, py)
-        self._epoch, self._send_ns = epoch, send_ns
+        self.clock.accept(epoch, send_ns, now_ns)
         if self.faulted:
             self._plausible_run += 1
             if self._plausible_run >= s.clear_after_messages:

@@ -17,6 +17,11 @@ faulty or forged master message cannot push the tool harder or faster than the l
 3. the force's rate of change is limited to ``force_rate_limit_N_per_s`` per axis (over the
    time since the previous message, at least one tick).
 
+The time since the previous message is the send-time difference as
+:class:`~haptic.common.wire.send_clock.SendClock` credits it: never more than this host's own
+elapsed time allows (plus ``jitter_allowance_s``), so a sender that stamps its messages ahead
+gains no room for a jump.
+
 Every fault, every onset of a saturation or rate limit, and a cleared fault is an event
 (``input_fault``, ``input_saturated``, ``input_rate_limited``, ``input_fault_cleared``); the
 counters go into the summary (``input_guard``). Pure Python floats: a few us per message.
@@ -30,11 +35,13 @@ from typing import Any
 
 from haptic.common.config import ConfigError
 from haptic.common.wire.messages import HandleState
+from haptic.common.wire.send_clock import SendClock, receive_time_ns
 
 
 @dataclass(frozen=True)
 class InputGuardSettings:
-    """``[slave.safety]``: forces in N, rates in N/s, positions in m, speeds in m/s."""
+    """``[slave.safety]``: forces in N, rates in N/s, positions in m, speeds in m/s, times
+    in s."""
 
     force_limit_N: float = 20.0
     force_trip_N: float = 60.0
@@ -44,6 +51,12 @@ class InputGuardSettings:
     velocity_trip_m_per_s: float = 1.0
     jump_margin_m: float = 0.001
     clear_after_messages: int = 20
+    jitter_allowance_s: float = 0.005
+
+    @property
+    def jitter_allowance_ns(self) -> int:
+        """:attr:`jitter_allowance_s` in whole ns."""
+        return round(self.jitter_allowance_s * 1e9)
 
     @classmethod
     def from_config(cls, config: dict[str, Any]) -> InputGuardSettings:
@@ -87,11 +100,14 @@ class InputGuard:
     """The bounded force of the latest accepted message, N."""
     position_m: tuple[float, float] | None = None
     """The position of the latest accepted message, m (None before the first)."""
-    _epoch: int | None = None
-    _send_ns: int = 0
+    clock: SendClock = field(init=False)
+    """The credited send times of the accepted messages."""
     _plausible_run: int = 0
     _saturating: bool = False
     _rate_limiting: bool = False
+
+    def __post_init__(self) -> None:
+        self.clock = SendClock(self.settings.jitter_allowance_ns)
 
     def _fault(self, now_s: float, reason: str) -> None:
         self.counters.faults += 1
@@ -105,7 +121,6 @@ class InputGuard:
         a fault (they keep the previous ones, and :attr:`faulted` is set)."""
         s = self.settings
         self.counters.checked += 1
-        epoch, send_time_ns = message.epoch, message.send_time_ns
         fx, fy = message.handle_force_N
         px, py = message.handle_position_m
         if not (math.isfinite(fx) and math.isfinite(fy) and math.isfinite(px)
@@ -122,11 +137,11 @@ class InputGuard:
             self._fault(now_s, f"handle position ({px:.4g}, {py:.4g}) m outside the "
                         "plausible box")
             return False
-        same_epoch = self._epoch == epoch and self.position_m is not None
-        dt_s = max((send_time_ns - self._send_ns) * 1e-9, self.period_s) if same_epoch \
-            else self.period_s
-        if same_epoch:
-            assert self.position_m is not None
+        epoch, send_time_ns = message.epoch, message.send_time_ns
+        now_ns = receive_time_ns(now_s)
+        span_s = self.clock.span_s(epoch, send_time_ns, now_ns, self.period_s)
+        dt_s = self.period_s if span_s is None or self.position_m is None else span_s
+        if span_s is not None and self.position_m is not None:
             allowed_m = s.velocity_trip_m_per_s * dt_s + s.jump_margin_m
             jump_m = max(abs(px - self.position_m[0]), abs(py - self.position_m[1]))
             if jump_m > allowed_m:
@@ -156,7 +171,7 @@ class InputGuard:
         self._saturating, self._rate_limiting = saturated, rate_limited
         self.force_N = (rx, ry)
         self.position_m = (px, py)
-        self._epoch, self._send_ns = epoch, send_time_ns
+        self.clock.accept(epoch, send_time_ns, now_ns)
         if self.faulted:
             self._plausible_run += 1
             if self._plausible_run >= s.clear_after_messages:
@@ -167,26 +182,16 @@ class InputGuard:
         return True
 
     def take_plain(self, count: int, force_N: tuple[float, float],
-                   position_m: tuple[float, float], epoch: int, send_time_ns: int) -> None:
+                   position_m: tuple[float, float], clock: SendClock) -> None:
         """Record ``count`` messages that :meth:`admit` takes as they are (the lockstep's
         quiet lanes, slave_sim/quiet_kernel.py; the guard not faulted), the last of them with
-        these values (N, m, its sender's epoch and send time, ns): the state those
-        :meth:`admit` calls would have left."""
+        these values (N, m) and leaving ``clock`` (its epoch, credited send time, receive time
+        and lead): the state those :meth:`admit` calls would have left."""
         self.counters.checked += count
         self.force_N = force_N
         self.position_m = position_m
-        self._epoch, self._send_ns = epoch, send_time_ns
+        self.clock = clock
         self._saturating = self._rate_limiting = False
-
-    @property
-    def last_epoch(self) -> int | None:
-        """The sender epoch of the latest accepted message (None before the first)."""
-        return self._epoch
-
-    @property
-    def last_send_time_ns(self) -> int:
-        """The send time of the latest accepted message, ns (0 before the first)."""
-        return self._send_ns
 
     def summary(self) -> dict[str, Any]:
         """The summary's ``input_guard`` figures."""

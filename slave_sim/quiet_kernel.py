@@ -11,7 +11,9 @@ lane and comparison by comparison:
 - :meth:`InputGuard.admit` for a message it takes unchanged: the guard not faulted, every
   value finite, no force beyond ``force_trip_N``, the position inside its box, the same sender
   epoch as the last accepted message with no jump beyond ``velocity_trip_m_per_s dt +
-  jump_margin_m``, and neither saturation at ``force_limit_N`` nor the rate limit;
+  jump_margin_m``, and neither saturation at ``force_limit_N`` nor the rate limit, ``dt``
+  credited as :class:`~haptic.common.wire.send_clock.SendClock` credits it (and the clock
+  then moved on as :meth:`SendClock.accept` moves it);
 - :meth:`SlaveSupervisor.update` returning ``NONE``: :meth:`SlaveSupervisor.steady`, the
   watchdog not silent, the message (where one came) carrying FORCES_ENABLED, and the tool
   inside its work area.
@@ -31,6 +33,7 @@ import warp as wp
 
 from haptic.common.runtime.replayed_launch import InPlaceInputs, ReplayedLaunch, host_array
 from haptic.common.wire.messages import Flags
+from haptic.common.wire.send_clock import LEAD_RISE_DIVISOR
 from haptic.slave_sim.input_guard import InputGuardSettings
 
 # The programs print JSON on stdout: Warp must not announce itself there.
@@ -54,6 +57,8 @@ class GuardLimits:
     position_max_y_m: wp.float64
     velocity_trip_m_per_s: wp.float64
     jump_margin_m: wp.float64
+    jitter_allowance_ns: wp.int64
+    lead_rise_divisor: wp.int64  # send_clock.LEAD_RISE_DIVISOR
     forces_enabled_bit: wp.int64  # Flags.FORCES_ENABLED
 
 
@@ -92,11 +97,14 @@ def quiet_kernel(
     max_age_s: wp.array(dtype=wp.float64),
     tool: wp.array2d(dtype=wp.float64),
     work_area_m: wp.array2d(dtype=wp.float64),
+    now_ns: wp.array(dtype=wp.int64),
     limits: GuardLimits,
     handle_force: wp.array2d(dtype=wp.float64),
     handle_position: wp.array2d(dtype=wp.float64),
     guard_epoch: wp.array(dtype=wp.int64),
-    guard_send_ns: wp.array(dtype=wp.int64),
+    guard_credited_ns: wp.array(dtype=wp.int64),
+    guard_received_ns: wp.array(dtype=wp.int64),
+    guard_lead_ns: wp.array(dtype=wp.int64),
     echo_send_ns: wp.array(dtype=wp.int64),
     force_scale: wp.array(dtype=wp.float64),
     unseen: wp.array(dtype=wp.int64),
@@ -106,11 +114,16 @@ def quiet_kernel(
 ):
     lane = wp.tid()
     came = fresh[lane]
+    now = now_ns[0]
     # the guard takes the message as it is (InputGuard.admit, its plain path)
     plain = False
+    credited_ns = wp.int64(0)
     if came and (not guard_faulted[lane]) and guard_has_last[lane] and (
             epoch[lane] == guard_epoch[lane]):
-        dt_s = wp.max(wp.float64(send_ns[lane] - guard_send_ns[lane]) * limits.ns_to_s,
+        # SendClock.credit and span_s
+        credited_ns = wp.min(send_ns[lane], now + guard_lead_ns[lane]
+                             + limits.jitter_allowance_ns)
+        dt_s = wp.max(wp.float64(credited_ns - guard_credited_ns[lane]) * limits.ns_to_s,
                       limits.period_s)
         allowed_m = limits.velocity_trip_m_per_s * dt_s
         allowed_m = allowed_m + limits.jump_margin_m
@@ -139,7 +152,14 @@ def quiet_kernel(
         handle_position[lane, 0] = position[lane, 0]
         handle_position[lane, 1] = position[lane, 1]
         guard_epoch[lane] = epoch[lane]
-        guard_send_ns[lane] = send_ns[lane]
+        # SendClock.accept (the same epoch)
+        guard_credited_ns[lane] = credited_ns
+        lead_ns = send_ns[lane] - now
+        if lead_ns > guard_lead_ns[lane]:
+            elapsed_ns = wp.max(now - guard_received_ns[lane], wp.int64(0))
+            guard_lead_ns[lane] = wp.min(
+                lead_ns, guard_lead_ns[lane] + elapsed_ns / limits.lead_rise_divisor)
+        guard_received_ns[lane] = now
         echo_send_ns[lane] = send_ns[lane]
         force_scale[lane] = scale[lane]
         unseen[lane] = unseen[lane] + wp.int64(1)
@@ -159,6 +179,8 @@ def guard_limits(settings: InputGuardSettings, period_s: float) -> Any:
     limits.position_max_x_m, limits.position_max_y_m = map(float, settings.position_max_m)
     limits.velocity_trip_m_per_s = float(settings.velocity_trip_m_per_s)
     limits.jump_margin_m = float(settings.jump_margin_m)
+    limits.jitter_allowance_ns = settings.jitter_allowance_ns
+    limits.lead_rise_divisor = LEAD_RISE_DIVISOR
     limits.forces_enabled_bit = int(Flags.FORCES_ENABLED)
     return limits
 
@@ -181,6 +203,7 @@ class QuietLanes:
         self.send_time_ns = np.zeros(lanes, np.int64)
         self.force_scale = np.zeros(lanes)
         self.silence_s = np.zeros(lanes)
+        self.now_ns = np.zeros(1, np.int64)
         self.quiet = np.zeros(lanes, bool)
         self.loud_count = np.zeros(1, np.int32)
         messages = [
@@ -190,10 +213,11 @@ class QuietLanes:
         held = [
             (views["guard_faulted"], flag), (views["guard_has_last"], flag),
             (views["steady"], flag), (views["max_age_s"], f64), (views["tool"], f64),
-            (views["work_area_m"], f64)]
+            (views["work_area_m"], f64), (self.now_ns, i64)]
         outputs = [
             (views["handle_force_N"], f64), (views["handle_position_m"], f64),
-            (views["guard_epoch"], i64), (views["guard_send_ns"], i64),
+            (views["guard_epoch"], i64), (views["guard_credited_ns"], i64),
+            (views["guard_received_ns"], i64), (views["guard_lead_ns"], i64),
             (views["echo_send_time_ns"], i64), (views["force_scale"], f64),
             (views["unseen"], i64), (views["admitted"], flag), (self.quiet, flag),
             (self.loud_count, wp.int32)]
@@ -215,11 +239,13 @@ class QuietLanes:
             ("same_kind", "same_kind", "same_kind", "unsafe", "unsafe", "unsafe",
              "same_kind", "same_kind"), record)
 
-    def run(self, fresh: np.ndarray, force_N: np.ndarray, position_m: np.ndarray,
+    def run(self, now_ns: int, fresh: np.ndarray, force_N: np.ndarray, position_m: np.ndarray,
             flags: np.ndarray, epoch: np.ndarray, send_time_ns: np.ndarray,
             force_scale: np.ndarray, silence_s: np.ndarray) -> list[int]:
-        """One tick's messages (columns, see ``HandleColumns``) and silences (s): takes the
-        quiet lanes' messages into the bound arrays and returns the other lanes, in order."""
+        """One tick's loop time (ns, :func:`~haptic.common.wire.send_clock.receive_time_ns`),
+        messages (columns, see ``HandleColumns``) and silences (s): takes the quiet lanes'
+        messages into the bound arrays and returns the other lanes, in order."""
+        self.now_ns[0] = now_ns
         self.loud_count[0] = 0
         self.inputs.launch((fresh, force_N, position_m, flags, epoch, send_time_ns,
                             force_scale, silence_s))

@@ -35,6 +35,7 @@ import numpy as np
 from haptic.common.analysis.margin_table import follow_gain
 from haptic.common.wire.lane_flags import lane_flag_values
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, HandleState
+from haptic.common.wire.send_clock import SendClock, receive_time_ns
 from haptic.slave_sim.input_guard import InputGuard
 from haptic.slave_sim.node import SlaveNode, SlaveOutputs, SlaveState
 from haptic.slave_sim.pacing import Sample, Step
@@ -154,7 +155,9 @@ class SlaveTick:
         self._guard_faulted = np.zeros(lanes, bool)
         self._guard_has_last = np.zeros(lanes, bool)
         self._guard_epoch = np.zeros(lanes, np.int64)
-        self._guard_send_ns = np.zeros(lanes, np.int64)
+        self._guard_credited_ns = np.zeros(lanes, np.int64)  # the guards' SendClock
+        self._guard_received_ns = np.zeros(lanes, np.int64)
+        self._guard_lead_ns = np.zeros(lanes, np.int64)
         self._unseen = np.zeros(lanes, np.int64)
         #: the quiet lanes' kernel over these arrays (slave_sim/quiet_kernel.py), bound at
         #: the first supervise_columns
@@ -283,9 +286,9 @@ class SlaveTick:
             quiet_lanes = self._quiet_lanes = self._bind_quiet_lanes()
         fresh = messages.fresh
         # one kernel: the quiet lanes' messages taken, the others' lanes returned
-        fed = quiet_lanes.run(fresh, messages.force_N, messages.position_m, messages.flags,
-                              messages.epoch, messages.send_time_ns, messages.force_scale,
-                              silence_s)
+        fed = quiet_lanes.run(receive_time_ns(now_s), fresh, messages.force_N,
+                              messages.position_m, messages.flags, messages.epoch,
+                              messages.send_time_ns, messages.force_scale, silence_s)
         state = self.state
         admitted = self.fresh
         self.lane_ticks_fed += len(fed)
@@ -339,7 +342,9 @@ class SlaveTick:
             "steady": self._steady, "max_age_s": self._max_age_s, "tool": self.state.tool,
             "work_area_m": self._work_area_m, "handle_force_N": self.handle_force_N,
             "handle_position_m": self.handle_position_m, "guard_epoch": self._guard_epoch,
-            "guard_send_ns": self._guard_send_ns, "echo_send_time_ns": self.echo_send_time_ns,
+            "guard_credited_ns": self._guard_credited_ns,
+            "guard_received_ns": self._guard_received_ns, "guard_lead_ns": self._guard_lead_ns,
+            "echo_send_time_ns": self.echo_send_time_ns,
             "force_scale": self.force_scale, "unseen": self._unseen, "admitted": self.fresh})
 
     def _tell(self, lane: int) -> None:
@@ -350,10 +355,12 @@ class SlaveTick:
             return
         position = (float(self.handle_position_m[lane, 0]),
                     float(self.handle_position_m[lane, 1]))
-        self.guards[lane].take_plain(count, (float(self.handle_force_N[lane, 0]),
-                                             float(self.handle_force_N[lane, 1])),
-                                     position, int(self._guard_epoch[lane]),
-                                     int(self._guard_send_ns[lane]))
+        guard = self.guards[lane]
+        clock = SendClock(guard.settings.jitter_allowance_ns, int(self._guard_epoch[lane]),
+                          int(self._guard_credited_ns[lane]),
+                          int(self._guard_received_ns[lane]), int(self._guard_lead_ns[lane]))
+        guard.take_plain(count, (float(self.handle_force_N[lane, 0]),
+                                 float(self.handle_force_N[lane, 1])), position, clock)
         self.supervisors[lane].handle_position_m = position
         self._unseen[lane] = 0
 
@@ -366,10 +373,13 @@ class SlaveTick:
             self._outside[lane] = supervisor.outside
             self._steady[lane] = supervisor.steady()
             self._guard_faulted[lane] = guard.faulted
-            epoch = guard.last_epoch
+            clock = guard.clock
+            epoch = clock.epoch
             self._guard_has_last[lane] = epoch is not None and guard.position_m is not None
             self._guard_epoch[lane] = 0 if epoch is None else epoch
-            self._guard_send_ns[lane] = guard.last_send_time_ns
+            self._guard_credited_ns[lane] = clock.credited_ns
+            self._guard_received_ns[lane] = clock.received_ns
+            self._guard_lead_ns[lane] = clock.lead_ns
 
     def sync_supervisors(self) -> None:
         """Tell every guard and supervisor what its lane took as quiet in

@@ -178,6 +178,10 @@ TOOL_INPUT_SCHEMA: Schema = {
                            "jump, m.", minimum=0.0),
     "clear_after_messages": Field("int", "Plausible tool messages in a row that clear a "
                                   "fault.", minimum=1),
+    "jitter_allowance_s": Field(
+        "float", "How much earlier than usual (delay shorter than usual) a tool message may "
+        "arrive and its send-time difference still count in full in the jump bound, s.",
+        minimum=0.0, maximum=1.0),
 }
 
 MASTER_SCHEMA: Schema = {

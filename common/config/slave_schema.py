@@ -36,6 +36,10 @@ SAFETY_SCHEMA: Schema = {
         "float", "Allowance on top of the speed bound for a position jump, m.", minimum=0.0),
     "clear_after_messages": Field(
         "int", "Plausible messages in a row that clear an input fault.", minimum=1),
+    "jitter_allowance_s": Field(
+        "float", "How much earlier than usual (delay shorter than usual) a message may arrive "
+        "and its send-time difference still count in full in the jump and rate bounds, s.",
+        minimum=0.0, maximum=1.0),
 }
 
 

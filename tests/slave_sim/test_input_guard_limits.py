@@ -246,8 +246,9 @@ def test_the_shipped_defaults_are_the_configurations_and_frozen() -> None:
     assert shipped == InputGuardSettings.from_config(load_config())
     assert (shipped.force_limit_N, shipped.force_trip_N, shipped.force_rate_limit_N_per_s,
             shipped.position_min_m, shipped.position_max_m, shipped.velocity_trip_m_per_s,
-            shipped.jump_margin_m, shipped.clear_after_messages) == (
-        20.0, 60.0, 20000.0, (-0.16, -0.16), (0.16, 0.16), 1.0, 0.001, 20)
+            shipped.jump_margin_m, shipped.clear_after_messages,
+            shipped.jitter_allowance_s) == (
+        20.0, 60.0, 20000.0, (-0.16, -0.16), (0.16, 0.16), 1.0, 0.001, 20, 0.005)
     with pytest.raises(dataclasses.FrozenInstanceError):
         shipped.force_limit_N = 1e9  # type: ignore[misc]
 
