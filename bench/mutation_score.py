@@ -82,7 +82,13 @@ MODULES: dict[str, Target] = {
     "slave_sim/supervisor.py": Target(("tests/slave_sim/test_supervisor.py",
                                        "tests/wire/test_supervisor_policy.py")),
     "slave_sim/input_guard.py": Target(("tests/slave_sim/test_input_guard_limits.py",
-                                        "tests/wire/test_input_guard.py")),
+                                        "tests/wire/test_input_guard.py",
+                                        "tests/wire/test_send_clock.py")),
+    "master/tool_guard.py": Target(("tests/master/test_tool_guard_limits.py",
+                                    "tests/wire/test_send_clock.py",
+                                    "tests/wire/test_tool_guard.py")),
+    "common/wire/send_clock.py": Target(("tests/wire/test_send_clock.py",
+                                         "tests/slave_sim/test_quiet_kernel.py")),
     "common/wire/auth.py": Target(("tests/wire/test_auth_units.py", "tests/wire/test_auth.py")),
     "common/model/clay_contact.py": Target(("tests/slave_sim/test_clay.py",
                                       "tests/lockstep/test_clay_analysis.py")),
@@ -122,10 +128,12 @@ _CUDA = ("CUDA-only path (the pinned staging buffers and their copies): not run 
          "device, where the step uses zero-copy views; on a GPU machine "
          "test_clay_limits.py::test_cuda_device_matches_numpy runs it")
 EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
-    ("slave_sim/input_guard.py", "_plausible_run: int = 0", "_plausible_run: int = 1",
-     "read only after a fault, and every fault sets it to 0 first"),
-    ("slave_sim/input_guard.py", "_send_ns: int = 0", "_send_ns: int = 1",
-     "read only for a message of the same epoch as an admitted one, which set it"),
+    *((module, "_plausible_run: int = 0", "_plausible_run: int = 1",
+       "read only after a fault, and every fault sets it to 0 first")
+      for module in ("slave_sim/input_guard.py", "master/tool_guard.py")),
+    *(("common/wire/send_clock.py", f"{name}: int = 0", f"{name}: int = 1",
+       "read only for a message of the epoch an accepted message set, which set it too")
+      for name in ("credited_ns", "received_ns", "lead_ns")),
     ("common/wire/auth.py",
      "descriptor = os.open(file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)",
      "descriptor = os.open(file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 385)",

@@ -154,11 +154,11 @@ def quiet_kernel(
         guard_epoch[lane] = epoch[lane]
         # SendClock.accept (the same epoch)
         guard_credited_ns[lane] = credited_ns
-        lead_ns = send_ns[lane] - now
-        if lead_ns > guard_lead_ns[lane]:
-            elapsed_ns = wp.max(now - guard_received_ns[lane], wp.int64(0))
-            guard_lead_ns[lane] = wp.min(
-                lead_ns, guard_lead_ns[lane] + elapsed_ns / limits.lead_rise_divisor)
+        # (an integer division truncates here and floors in Python: they differ only for
+        # a time going back, where both keep the lead)
+        lead_ns = guard_lead_ns[lane]
+        risen_ns = lead_ns + (now - guard_received_ns[lane]) / limits.lead_rise_divisor
+        guard_lead_ns[lane] = wp.max(lead_ns, wp.min(send_ns[lane] - now, risen_ns))
         guard_received_ns[lane] = now
         echo_send_ns[lane] = send_ns[lane]
         force_scale[lane] = scale[lane]

@@ -79,9 +79,9 @@ class SendClock:
             self.lead_ns = lead_ns
             return
         self.credited_ns = self.credit(send_ns, now_ns)
-        if lead_ns > self.lead_ns:
-            elapsed_ns = max(now_ns - self.received_ns, 0)
-            self.lead_ns = min(lead_ns, self.lead_ns + elapsed_ns // LEAD_RISE_DIVISOR)
+        # never lower (a time going back rises by nothing)
+        risen_ns = self.lead_ns + (now_ns - self.received_ns) // LEAD_RISE_DIVISOR
+        self.lead_ns = max(self.lead_ns, min(lead_ns, risen_ns))
         self.received_ns = now_ns
 
 

@@ -132,8 +132,9 @@ def test_a_jump_up_to_speed_times_time_plus_margin_is_plausible(axis, sign, peri
 
 
 def test_the_elapsed_time_is_the_senders_and_at_least_one_period() -> None:
-    """Two messages sent at the same instant span one period (not zero); the loop's own
-    time (``now_s``) plays no part."""
+    """Two messages sent at the same instant span one period (not zero), however much loop
+    time (``now_s``) passed: the loop's own time only caps the span (common/wire/
+    send_clock.py), it never lengthens it."""
     g = primed()
     allowed_m = 1.0 * PERIOD_S + 0.001
     assert g.admit(msg(1, position=(allowed_m * 0.999, 0.0), send_ns=0), 99.0)
@@ -207,6 +208,25 @@ def test_each_onset_of_a_limit_is_one_event() -> None:
     kinds = [e["kind"] for e in g.events]
     assert kinds == ["input_rate_limited", "input_rate_limited"]
     assert g.events[0]["reason"] == "handle force changes faster than 8000 N/s"
+
+
+def test_messages_taken_plain_end_a_limit_so_the_next_onset_is_an_event() -> None:
+    """take_plain (the lockstep's quiet lanes: messages the guard takes unchanged, so neither
+    saturated nor rate limited) ends a saturation: the next saturating message is a new
+    onset, one event."""
+    g = guard(force_rate_limit_N_per_s=1e12)
+    assert g.admit(msg(0, (20.0, 0.0)), 0.0)
+    assert [e["kind"] for e in g.events] == ["input_saturated"]
+    g.take_plain(3, (1.0, 0.0), (0.0, 0.0), g.clock)
+    assert g.counters.checked == 4
+    assert g.admit(msg(4, (20.0, 0.0)), 4 * PERIOD_S)
+    assert [e["kind"] for e in g.events] == ["input_saturated", "input_saturated"]
+    g = guard()
+    assert g.admit(msg(0, (0.0, 0.0)), 0.0)
+    assert g.admit(msg(1, (15.0, 0.0)), PERIOD_S)  # rate limited
+    g.take_plain(1, (4.0, 0.0), (0.0, 0.0), g.clock)
+    assert g.admit(msg(2, (15.0, 0.0)), 2 * PERIOD_S)
+    assert [e["kind"] for e in g.events] == ["input_rate_limited", "input_rate_limited"]
 
 
 # --- the latch ----------------------------------------------------------------------------

@@ -90,6 +90,30 @@ def test_a_delay_that_falls_for_good_is_counted_in_full_again_later() -> None:
     assert 1.4 < seq * TS < 1.7
 
 
+def test_the_lead_rises_by_whole_ns_and_never_falls() -> None:
+    clock = SendClock(ALLOWANCE_NS)
+    clock.accept(7, 0, DELAY_NS)
+    assert clock.lead_ns == -DELAY_NS
+    clock.accept(7, 1_540_050, 540_050 + DELAY_NS)  # 1 ms faster, 540.05 us on: 5400 ns
+    assert clock.lead_ns == -DELAY_NS + 5_400 and type(clock.lead_ns) is int
+    clock.accept(7, 2_000_000, 3_000_000 + DELAY_NS)  # slower: kept
+    assert clock.lead_ns == -DELAY_NS + 5_400
+    clock.accept(7, 2_100_000, 1_000_000)  # a receive time going back: kept
+    assert clock.lead_ns == -DELAY_NS + 5_400 and clock.received_ns == 1_000_000
+
+
+def test_a_new_epoch_starts_its_lead_afresh() -> None:
+    """After the peer's restart (a new epoch, through the link's pairing), its lead is the
+    new epoch's first message's: a restarted peer whose clock now leads by 30 ms more is
+    counted in full from its second message on."""
+    clock = SendClock(ALLOWANCE_NS)
+    clock.accept(7, 0, DELAY_NS)
+    clock.accept(8, 40_000_000, 10_000_000)  # leads by 30 ms
+    assert (clock.epoch, clock.lead_ns, clock.credited_ns) == (8, 30_000_000, 40_000_000)
+    assert clock.span_s(8, 40_540_000, 10_540_000, TS) == pytest.approx(TS)
+    assert clock.credit(40_540_000, 10_540_000) == 40_540_000
+
+
 def test_receive_time_ns_truncates_as_the_kernel_does() -> None:
     assert receive_time_ns(1.5) == 1_500_000_000
     assert receive_time_ns(12.345678901) == int(12.345678901 * 1e9)
@@ -113,7 +137,10 @@ def test_a_message_stamped_ahead_earns_no_room_for_a_jump(side: str) -> None:
     assert guard.admit(build(0, start_ns), start_s)
     assert not guard.admit(build(1, start_ns + 50_000_000 + TS_NS, (0.03, 0.0)), start_s + TS)
     assert guard.faulted and guard.counters.faults == 1
-    assert "jumped" in guard.events[-1]["reason"]
+    # over 5.54 ms (0.54 ms of this host's time + the 5 ms allowance), not 50.54 ms
+    assert guard.events[-1]["reason"] == (
+        "handle position jumped 30 mm in 5.54 ms (at most 6.54 mm)" if side == "slave" else
+        "tool position jumped 30 mm in 5.54 ms (the tool moves at most 13.1 mm)")
     # honest: 50 ms later by both clocks
     other = InputGuard(InputGuardSettings.from_config(config), TS) if side == "slave" \
         else ToolInputGuard(ToolGuardSettings.from_config(config), TS)
@@ -145,3 +172,9 @@ def test_the_allowance_is_validated(key: str) -> None:
         with pytest.raises(ConfigError, match=key):
             override(config, key, bad)
     assert override(config, key, 0.0) is not None
+
+
+def test_the_allowance_in_whole_ns() -> None:
+    for settings in (InputGuardSettings, ToolGuardSettings):
+        assert settings(jitter_allowance_s=1.0).jitter_allowance_ns == 10**9
+        assert settings(jitter_allowance_s=0.0049999999).jitter_allowance_ns == 5_000_000
