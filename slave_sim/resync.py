@@ -75,19 +75,19 @@ class ToolResync:
         if not state.halted[moving].all():
             raise ValueError("ToolResync.step moves halted tools only (call safe_stop first)")
         node = self.node
-        lanes = state.lanes
+        count = state.lanes
         period = node.sample_period_s
         elapsed = period
         if now_s is not None:
             if self._last_s is not None:
                 elapsed = min(max(now_s - self._last_s, period), MAX_STEP_PERIODS * period)
             self._last_s = float(now_s)
-        if self._cut_last is None or self._cut_last.shape != (lanes,):
-            self._cut_last = np.ones(lanes, bool)  # unknown: assume clay
+        if self._cut_last is None or self._cut_last.shape != (count,):
+            self._cut_last = np.ones(count, bool)  # unknown: assume clay
         speed = np.where(self._cut_last, self.speed_m_s, self.free_speed_m_s)
         max_step = speed * elapsed
         previous = state.tool[:, POSITION_COLUMNS]
-        target = np.broadcast_to(self.target_m(handle_position_m), (lanes, 2))
+        target = np.broadcast_to(self.target_m(handle_position_m), (count, 2))
         if lanes is not None:
             target = np.where(moving[:, None], target, previous)
         offset = target - previous
@@ -98,7 +98,7 @@ class ToolResync:
         position = previous + move
         velocity = move / elapsed
         result = node.environment.step(state.environment, previous, position, velocity,
-                                       np.zeros((lanes, 2)))
+                                       np.zeros((count, 2)))
         moved = (move * move).sum(axis=1) > 0.0
         self._cut_last = np.where(moved, np.asarray(result.removed_volume_m3) > 0.0,
                                   self._cut_last)

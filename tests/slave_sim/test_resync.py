@@ -165,3 +165,116 @@ def test_resync_moves_halted_tools_only(paper_config) -> None:
         ToolResync(node, 0.0)
     with pytest.raises(ValueError, match="speed"):
         ToolResync(node, 0.05, 0.01)
+
+
+def test_the_resync_speeds_and_stall_cap_are_pinned() -> None:
+    """The values the module's docs and docs/clay.md state (m/s, periods)."""
+    assert (RESYNC_SPEED_M_S, RESYNC_FREE_SPEED_M_S, MAX_STEP_PERIODS) == (0.02, 0.25, 20)
+
+
+def _halted(paper_config, lanes: int):
+    """``lanes`` halted tools in free air with motion, compensator and forces left over."""
+    model = model_from_config(paper_config)
+    node = SlaveNode(model, load_scenario("constant-rate").with_grid(256, 64), device="cpu")
+    state = node.initial_state(lanes)  # at x = 0, in free air
+    node.safe_stop(state)
+    state.tool[:, 1::2] = 0.3  # m/s
+    state.compensator[...] = 1.5
+    state.actuator_force_N = np.full((lanes, 2), 2.0)
+    state.tool_force_N = np.full((lanes, 2), 3.0)
+    state.handle_position_m = np.full((lanes, 2), 0.07)
+    return node, state
+
+
+@pytest.mark.parametrize("mask", [None, [True, False, True]])
+def test_a_step_moves_the_chosen_tools_at_rest_and_leaves_the_others(paper_config,
+                                                                     mask) -> None:
+    """Each moving lane: the tool steps towards Ah1 yh, its velocity, compensator and forces
+    are zero, and it holds the handle's position; a lane outside the mask is left exactly as
+    it was. No array the state shared with another is written through."""
+    node, state = _halted(paper_config, 3)
+    shared = state.actuator_force_N
+    before = {name: np.array(getattr(state, name)) for name in (
+        "tool", "compensator", "actuator_force_N", "tool_force_N", "handle_position_m")}
+    handle = np.array([[0.01, 0.0], [0.02, 0.0], [0.0, -0.01]])
+    left = ToolResync(node).step(state, handle, lanes=None if mask is None else np.array(mask))
+    moving = np.ones(3, bool) if mask is None else np.array(mask)
+    step = RESYNC_SPEED_M_S * node.sample_period_s  # unknown ground: the cutting speed
+    target = node.position_ratio * handle
+    for lane in range(3):
+        if moving[lane]:
+            direction = target[lane] / np.linalg.norm(target[lane])
+            assert state.tool_position_m()[lane] == pytest.approx(direction * step, abs=1e-15)
+            assert left[lane] == pytest.approx(np.linalg.norm(target[lane]) - step)
+            assert (state.tool[lane, 1::2] == 0.0).all()
+            assert (state.compensator[lane] == 0.0).all()
+            assert (state.actuator_force_N[lane] == 0.0).all()
+            assert (state.tool_force_N[lane] == 0.0).all()
+            assert (state.handle_position_m[lane] == handle[lane]).all()
+        else:
+            for name, value in before.items():
+                np.testing.assert_array_equal(getattr(state, name)[lane], value[lane], name)
+            assert left[lane] == 0.0
+    assert (shared == 2.0).all()  # the old array, not written through
+
+
+def test_a_tool_that_did_not_move_keeps_what_it_knew_of_the_ground(paper_config) -> None:
+    """Unknown ground counts as clay (the cutting speed); a step that moves nothing (the
+    handle where the tool is) learns nothing, so the next move is still at the cutting
+    speed; one free move later, the free speed."""
+    node, state = _halted(paper_config, 1)
+    resync = ToolResync(node)
+    ts = node.sample_period_s
+    assert resync.step(state, np.zeros((1, 2)))[0] == 0.0  # at the handle: no move
+    handle = np.array([[0.01, 0.0]])
+    first = float(resync.step(state, handle)[0])
+    assert first == pytest.approx(0.01 * node.position_ratio[0] - RESYNC_SPEED_M_S * ts)
+    second = float(resync.step(state, handle)[0])
+    assert second == pytest.approx(first - RESYNC_FREE_SPEED_M_S * ts)
+
+
+def test_equal_cutting_and_free_speeds_are_allowed(paper_config) -> None:
+    model = model_from_config(paper_config)
+    node = SlaveNode(model, load_scenario("constant-rate").with_grid(256, 64), device="cpu")
+    resync = ToolResync(node, 0.05, 0.05)
+    assert resync.speed_m_s == resync.free_speed_m_s == 0.05
+
+
+def test_a_resync_in_the_linear_environment(paper_config) -> None:
+    """The sweep's lanes resync in the linear environment (ft = Tt yt): the tool reaches the
+    handle in free steps (it cuts nothing), nothing is removed."""
+    model = model_from_config(paper_config)
+    node = SlaveNode(model, load_scenario("constant-rate"), environment="linear")
+    state = node.initial_state(2)
+    node.safe_stop(state)
+    resync = ToolResync(node)
+    handle = np.array([[0.001, 0.0], [0.0, 0.0]])
+    left = [resync.step(state, handle) for _ in range(10)]
+    assert left[-1].tolist() == [0.0, 0.0]
+    assert state.tool_position_m()[0] == pytest.approx(node.position_ratio * handle[0])
+
+
+def test_the_clay_is_told_the_resyncs_speed(paper_config) -> None:
+    """A resync step through clay moves the proxy as a cut at the resync's speed does: the
+    coupling's damping sees the tool's velocity over the step (move / elapsed time), by the
+    proxy's law (slave_sim/clay/clay_numpy.py proxy_numpy)."""
+    model = model_from_config(paper_config)
+    node = SlaveNode(model, load_scenario("constant-rate").with_grid(512, 128), device="cpu")
+    state = node.initial_state(1, start_position_m=np.array([0.03, 0.0]))
+    node.safe_stop(state)
+    resync = ToolResync(node)
+    handle = np.array([[0.05, 0.0]]) / node.position_ratio
+    for _ in range(200):  # into the clay at 0.02 m/s
+        resync.step(state, handle)
+    clay = state.environment
+    contact = node.environment.clay.contact
+    proxy = clay.proxy_position_m()[0].copy()
+    resistance = float(clay.resistance_N_s_per_m()[0])
+    assert resistance > 0.0  # cutting
+    resync.step(state, handle)
+    tool = state.tool_position_m()[0]
+    velocity = RESYNC_SPEED_M_S * np.array([1.0, 0.0])  # m/s, along x
+    push = contact.stiffness * (tool - proxy) + contact.damping * velocity
+    expected = proxy + contact.period * push / (
+        resistance + contact.stiffness * contact.period + contact.damping)
+    assert clay.proxy_position_m()[0] == pytest.approx(expected, rel=0, abs=1e-12)
