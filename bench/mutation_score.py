@@ -90,6 +90,10 @@ MODULES: dict[str, Target] = {
     "common/wire/send_clock.py": Target(("tests/wire/test_send_clock.py",
                                          "tests/slave_sim/test_quiet_kernel.py")),
     "slave_sim/resync.py": Target(("tests/slave_sim/test_resync.py",)),
+    "common/wire/phase_lock.py": Target(("tests/common/test_phase_lock_limits.py",
+                                         "tests/common/test_phase_lock.py",
+                                         "tests/slave_sim/test_phase_lock_config.py")),
+    "common/wire/passivity_link.py": Target(("tests/common/test_passivity_link.py",)),
     "master/margin_governor.py": Target(("tests/master/test_margin_governor_limits.py",
                                          "tests/master/test_margin_governor.py")),
     "common/wire/auth.py": Target(("tests/wire/test_auth_units.py", "tests/wire/test_auth.py")),
@@ -154,6 +158,12 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
      "return time_s - self._above_since > self.settings.confirm_s - 1e-12",
      "the 1e-12 s slack already takes confirm_s itself; only a time 1e-12 s short of it "
      "differs"),
+    ("common/wire/phase_lock.py", "step = -1 if error > 0 else 1",
+     "step = -1 if error >= 0 else 1",
+     "an error of 0 is inside every deadband (-0 <= 0 <= 0) and never reaches this line"),
+    ("common/wire/passivity_link.py", "if value > port.peer_sent_J[0]:  # NaN compares False: "
+     "nothing noted", "if value >= port.peer_sent_J[0]:  # NaN compares False: nothing noted",
+     "an equal value assigns the same value"),
     ("master/margin_governor.py", "if rtt > self.max_rtt_s:", "if rtt >= self.max_rtt_s:",
      "an equal round trip assigns the same value"),
     ("master/margin_governor.py", "if k < self.min_gain_used_k:",

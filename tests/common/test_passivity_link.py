@@ -42,3 +42,19 @@ def test_a_peer_configured_in_the_other_mode_is_refused_a_switched_one_is_not() 
     with pytest.raises(LinkOpenError, match='mode = "tdpa"'):
         PassivityLink(False).check(_message(0.0))
     PassivityLink(False).check(_message(0.0, flags=Flags.TDPA_SWITCHED | Flags.FORCES_ENABLED))
+
+
+def test_each_mode_sets_its_flag_and_sends_its_ports_energy() -> None:
+    """A ``tdpa`` side flags every message TDPA and sends its port's cumulative handed-over
+    energy (J); a ``paper`` side flags nothing and sends 0 J, as does a side whose node has
+    no port yet."""
+    from types import SimpleNamespace
+
+    assert (PassivityLink(True).mode, PassivityLink(True).flags) == ("tdpa", Flags.TDPA)
+    assert (PassivityLink(False).mode, PassivityLink(False).flags) == ("paper", Flags(0))
+    assert int(PassivityLink(False).flags) == 0
+    port = PassivityPort.create(PassivitySettings(), 0.00054, 2)
+    port.sent_J[:] = (0.25, 0.75)
+    assert PassivityLink.sent_J(SimpleNamespace(passivity=port)) == 0.25  # lane 0: the program's
+    assert PassivityLink.sent_J(SimpleNamespace(passivity=None)) == 0.0
+    assert PassivityLink.sent_J(object()) == 0.0
