@@ -253,3 +253,20 @@ def test_two_port_passivity_in_a_delayed_lockstep_run() -> None:
             assert np.all(np.abs(result.final_position_gap_m) < 0.002)
     assert peaks["paper"] > 10.0
     assert peaks["tdpa"] <= 1.5
+
+
+def test_the_shipped_limits_are_the_configurations_and_frozen() -> None:
+    """The code's defaults and the shipped ``[control]`` limits are one set of values (a
+    changed default would otherwise pass every test that builds its own settings)."""
+    import dataclasses
+
+    from haptic.common.config import load_config
+    from haptic.common.config.control_schema import standby_passivity_settings
+
+    shipped = PassivitySettings()
+    assert standby_passivity_settings(load_config()) == shipped
+    assert dataclasses.astuple(shipped) == (
+        0.002, 0.05, 0.2, 200.0, 0.5, 0.002, 0.002, 1e-5, 2000.0, 40.0, 4000.0, 200.0, 2.0,
+        2.0, 0.01, 2.0, 0.01)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        shipped.credit_max_J = 1e9  # type: ignore[misc]
