@@ -204,11 +204,10 @@ class PassivityPort:
         self.tank_J -= give
         self._cap_credit()
 
-    def _correction(self, force_N: np.ndarray, work_out_J: np.ndarray,
-                    most_m: np.ndarray | None = None) -> np.ndarray:
+    def _correction(self, force_N: np.ndarray, work_out_J: np.ndarray) -> np.ndarray:
         """The conductance's correction (lanes, 2), m, along ``force_N``: ``f . d`` equals
         what this step's work out ``work_out_J`` lacks in the account, within the floor,
-        the caps and the rise limit; ``most_m`` (lanes,) caps ``|d|`` further."""
+        the caps and the rise limit."""
         s, ts = self.settings, self.period_s
         force2 = np.einsum("ij,ij->i", force_N, force_N)
         excess = np.maximum(work_out_J - self.reserve_J(), 0.0)
@@ -218,8 +217,6 @@ class PassivityPort:
         rise = s.correction_accel_max_m_per_s2 * ts * ts
         size = np.minimum(size, np.minimum(s.correction_speed_max_m_per_s * ts,
                                            self.correction_m + rise))
-        if most_m is not None:
-            size = np.minimum(size, np.maximum(most_m, 0.0))
         size = np.where(self.active, size, 0.0)  # a switched-off lane corrects nothing
         self.correction_m[...] = size
         self.active_steps += size > 0.0
@@ -275,14 +272,14 @@ class PassivityPort:
         step = np.where(known[:, None], np.nan_to_num(gap_m) * (rate_per_s * ts), 0.0)
         length = np.sqrt(np.einsum("ij,ij->i", step, step))
         most = speed_max_m_per_s * ts
-        step *= np.where(length > most, most / np.maximum(length, 1e-300), 1.0)[:, None]
+        step *= np.minimum(1.0, most / np.maximum(length, 1e-300))[:, None]
         return step
 
     def _paid(self, step: np.ndarray, work_J: np.ndarray, budget_J: np.ndarray) -> np.ndarray:
-        """``step`` (lanes, 2) as far as it is paid: whole where its work at the port
-        ``work_J`` is an input (>= 0) or within ``budget_J``, else scaled to the budget; none
-        on lanes switched off."""
-        paid = (work_J >= 0.0) | (-work_J <= budget_J)
+        """``step`` (lanes, 2) as far as it is paid: whole where the work it gives out at the
+        port, ``-work_J``, is within ``budget_J`` (>= 0, so an input, ``work_J`` >= 0, always
+        is), else scaled to the budget; none on lanes switched off."""
+        paid = -work_J <= budget_J
         step *= np.where(paid & self.active, 1.0,
                          np.where(self.active, budget_J / np.maximum(-work_J, 1e-300),
                                   0.0))[:, None]

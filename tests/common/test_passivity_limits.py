@@ -31,6 +31,16 @@ def test_a_new_port_is_empty_and_on_or_off_as_asked() -> None:
     assert (p.period_s, p.keep_J) == (TS, 0.0)
 
 
+def test_a_port_keeps_nothing_unless_asked_and_is_compared_by_identity() -> None:
+    """``keep_J`` defaults to 0 (Artigas' TDPN); ports hold arrays, so two ports with the
+    same values are two ports (no element-wise ``==``), and a port can key a dict."""
+    p = PassivityPort.create(PassivitySettings(), TS, 2)
+    assert p.keep_J == 0.0
+    twin = PassivityPort.create(PassivitySettings(), TS, 2)
+    assert p == p and p != twin
+    assert {p: 1, twin: 2}[twin] == 2
+
+
 def test_switching_on_starts_the_account_empty_and_only_where_it_changed() -> None:
     p = port(3, active=False)
     p.active[0] = True
