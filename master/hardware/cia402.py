@@ -98,8 +98,8 @@ def encode_pdo(mapping: tuple[od.ODVariable, ...], values: tuple[int, ...]) -> b
     """
     if len(values) != len(mapping):
         raise ValueError(f"{len(mapping)} values expected, got {len(values)}")
-    return b"".join(variable.encode_raw(int(value)) for variable, value in zip(mapping, values,
-                                                                               strict=True))
+    pairs = zip(mapping, values, strict=True)
+    return b"".join(variable.encode_raw(int(value)) for variable, value in pairs)
 
 
 def decode_pdo(mapping: tuple[od.ODVariable, ...], data: bytes) -> tuple[int, ...]:
@@ -252,7 +252,7 @@ def decode_sdo(payload: bytes) -> SdoFrame:
     if len(payload) != 8:
         raise ValueError(f"SDO payload of {len(payload)} bytes, expected 8")
     command, index, subindex = struct.unpack_from("<BHB", payload)
-    return SdoFrame(command, index, subindex, bytes(payload[4:8]))
+    return SdoFrame(command, index, subindex, bytes(payload[4:]))
 
 
 def sdo_download_request(variable: od.ODVariable, value: int) -> bytes:

@@ -162,8 +162,7 @@ class ForceSensorCodec:
 def _count(value: float) -> tuple[int, bool]:
     """``value`` rounded half to even and held to +-RAW_LIMIT, and whether it was held."""
     if math.isinf(value):
-        return (RAW_LIMIT if value > 0 else -RAW_LIMIT), True
+        return int(math.copysign(RAW_LIMIT, value)), True
     count = round(value)  # ValueError on NaN
-    if abs(count) > RAW_LIMIT:
-        return (RAW_LIMIT if count > 0 else -RAW_LIMIT), True
-    return count, False
+    held = min(max(count, -RAW_LIMIT), RAW_LIMIT)
+    return held, held != count
