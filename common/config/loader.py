@@ -240,9 +240,7 @@ def _toml_value(key: str, value: Any) -> str:
     if isinstance(value, int):
         return str(value)
     if isinstance(value, float):
-        if not math.isfinite(value):
-            return ("-inf" if value < 0 else "inf") if math.isinf(value) else "nan"
-        return repr(value)
+        return repr(value)  # Python's inf, -inf and nan are TOML's spellings too
     if isinstance(value, str):
         return json.dumps(value, ensure_ascii=False)  # a JSON string is a TOML basic string
     if isinstance(value, list):

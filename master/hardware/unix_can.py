@@ -31,7 +31,8 @@ reading costs a sender one wait, not one per frame.
 Wire format, one or more frames per datagram, each: arbitration id (u32 little-endian),
 flags (u8: 1 extended, 2 remote, 4 error, 8 FD, 16 bit-rate switch, 32 error state
 indicator), data length (u8), then the data bytes. The receive timestamp is the receiver's
-``time.time()``; a frame cut short at the end of a datagram is dropped (counted in
+``time.time()``; a frame cut short at the end of a datagram is dropped, and a datagram longer
+than the largest burst (16 frames of 64 bytes) is dropped whole (each counted in
 ``malformed_datagrams``).
 
 Bursts: :meth:`UnixDatagramBus.send_burst` sends frames that go out back to back (a drive's
@@ -91,6 +92,12 @@ def _parse(datagram: bytes) -> tuple[list[RawFrame], bool]:
         offset = start + length
         frames.append((frame_id, flags, datagram[start:offset]))
     return frames, offset == size and bool(frames)
+
+
+def send_timeout(seconds: float) -> bytes:
+    """``SO_SNDTIMEO``'s ``struct timeval`` for ``seconds`` (s), rounded to whole us."""
+    whole_us = int(round(seconds * 1e6))
+    return struct.pack("ll", whole_us // 1_000_000, whole_us % 1_000_000)
 
 
 def wire_flags(msg: can.Message) -> int:
@@ -170,10 +177,8 @@ class UnixDatagramBus(can.BusABC):
         self._socket.setblocking(False)
         # sends that wait for room in a full queue: blocking, bounded by SO_SNDTIMEO
         self._waiting_socket = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-        wait_us = int(round(float(full_queue_wait_s) * 1e6))
         self._waiting_socket.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO,
-                                        struct.pack("ll", wait_us // 1_000_000,
-                                                    wait_us % 1_000_000))
+                                        send_timeout(float(full_queue_wait_s)))
         self.full_queue_wait_s = float(full_queue_wait_s)
         #: Members whose queue stayed full for a whole wait: no waiting until they take one.
         self._congested: set[str] = set()
@@ -274,7 +279,7 @@ class UnixDatagramBus(can.BusABC):
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             try:
-                return self._socket.recv(_MAX_DATAGRAM)
+                return self._socket.recv(_MAX_DATAGRAM + 1)  # one more: a longer one shows
             except BlockingIOError:
                 now = time.monotonic()
                 if deadline is not None and now >= deadline:
@@ -293,7 +298,8 @@ class UnixDatagramBus(can.BusABC):
                 None if deadline is None else max(0.0, deadline - time.monotonic()))
             if datagram is None:
                 return []
-            frames, whole = _parse(datagram)
+            # longer than the largest burst: not a member's, dropped whole
+            frames, whole = _parse(datagram) if len(datagram) <= _MAX_DATAGRAM else ([], False)
             if not whole:
                 self.malformed_datagrams += 1
             if frames:
