@@ -342,7 +342,8 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         path = Path(name_or_path)
         try:
             unknown = not source or (not path.suffix and not path.exists())
-        except (OSError, ValueError):  # a name the file system cannot take
+        except OSError:  # a name the file system cannot take (too long; pathlib's exists()
+            # already answers False for one with a NUL)
             unknown = True
         if unknown:
             raise ConfigError("slave.scenario", f"unknown scenario {source!r}; shipped ones: "
