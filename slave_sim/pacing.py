@@ -123,17 +123,13 @@ class MasterSamplePacing:
             if not owed:
                 self.waited_ticks += 1
                 return []
-            return self._take(0)
-        new = 0
-        for sample in samples:
-            new += self._queue(sample)
-        if not new and not owed:
-            return []
-        return self._take(new)
+            return self._take(False)
+        new = any([self._queue(sample) for sample in samples])  # every one queued
+        return self._take(new)  # none new and none owed: no step
 
-    def _queue(self, sample: Sample) -> int:
+    def _queue(self, sample: Sample) -> bool:
         """Owe the steps up to ``sample``: one per sample since the last one queued, the lost
-        ones interpolated; returns how many were queued."""
+        ones interpolated; returns whether it queued any (not for an old sequence)."""
         last = self._last
         owed = self._owed
         epoch, seq, (fx, fy), (x, y), scale = sample
@@ -141,10 +137,10 @@ class MasterSamplePacing:
             owed.clear()  # the first sample, or a new epoch (the master restarted)
             owed.append((fx, fy, x, y, scale))
             self._last = sample
-            return 1
+            return True
         ahead = seq - last[1]
         if ahead <= 0:  # the receive filter drops these; never step backwards
-            return 0
+            return False
         self._last = sample
         _, _, (fx0, fy0), (x0, y0), scale0 = last
         keep = self.settings.max_steps_per_tick + self.settings.max_backlog_samples
@@ -156,22 +152,22 @@ class MasterSamplePacing:
                          x0 + weight * (x - x0), y0 + weight * (y - y0),
                          scale0 + weight * (scale - scale0)))
         self.interpolated_steps += ahead - first
-        return ahead - first + 1
+        return True
 
-    def _take(self, new_samples: int) -> list[Step]:
+    def _take(self, new_sample: bool) -> list[Step]:
         """This tick's steps, the oldest owed first: ``max_steps_per_tick``, and all that
-        would leave more than ``max_backlog_samples`` owed (counted as ``burst_steps``)."""
+        would leave more than ``max_backlog_samples`` owed (counted as ``burst_steps``);
+        ``new_sample``: the tick brought one (its step is the tick's own, not caught up)."""
         owed = self._owed
         settings = self.settings
         count = min(len(owed), settings.max_steps_per_tick)
-        burst = len(owed) - count - settings.max_backlog_samples
-        if burst > 0:
-            count += burst
-            self.burst_steps += burst
+        burst = max(len(owed) - count - settings.max_backlog_samples, 0)
+        count += burst
+        self.burst_steps += burst
         steps: list[Step] = [owed.popleft() for _ in range(count)]
         self.max_backlog = max(self.max_backlog, len(owed))
         self.max_tick_steps = max(self.max_tick_steps, count)
-        self.caught_up_steps += len(steps) - 1 if new_samples else len(steps)
+        self.caught_up_steps += len(steps) - 1 if new_sample else len(steps)
         return steps
 
     def summary(self) -> dict[str, Any]:
