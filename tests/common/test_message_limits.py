@@ -4,6 +4,7 @@ refuses the next one, the flags keep their wire values, floats travel as float64
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import msgpack
 import pytest
@@ -19,6 +20,7 @@ from haptic.common.wire.messages import (
     ToolState,
     decode,
     encode,
+    encode_tool_around_send_time,
 )
 
 MAX_U32 = 2**32 - 1
@@ -208,3 +210,32 @@ def test_echo_outside_u63_or_not_an_int_is_refused_on_decode(echo: object) -> No
 def test_echo_outside_u63_is_refused_on_encode(echo: int) -> None:
     with pytest.raises(ValueError, match=f"echo_send_time_ns {echo} out of range"):
         encode(_tool_state(echo=echo))
+
+
+@pytest.mark.parametrize("field", range(9))
+def test_any_one_non_finite_tool_value_is_refused_on_encode(field: int) -> None:
+    values = [1.0, 2.0, 0.1, 0.2, 0.0, 0.0, 0.5, 1e-9, 0.0]
+    values[field] = math.nan
+    fx, fy, px, py, vx, vy, engagement, volume, energy = values
+    with pytest.raises(ValueError, match="non-finite value in ToolState"):
+        encode_tool_around_send_time(1, 2, 2, (fx, fy), (px, py), (vx, vy), engagement,
+                                     volume, 0, energy)
+
+
+def test_the_largest_flags_byte_is_encoded() -> None:
+    before, after = encode_tool_around_send_time(1, 2, 0xFF, (1.0, 2.0), (0.1, 0.2),
+                                                 (0.0, 0.0), 0.5, 1e-9, 0, 0.0)
+    message = decode(before + msgpack.packb(3) + after, KIND_TOOL)
+    assert int(message.flags) == 0xFF
+    with pytest.raises((IndexError, ValueError)):  # beyond a byte: never encoded
+        encode_tool_around_send_time(1, 2, 0x100, (1.0, 2.0), (0.1, 0.2), (0.0, 0.0), 0.5,
+                                     1e-9, 0, 0.0)
+
+
+def test_a_force_scale_of_0_to_1_is_accepted() -> None:
+    for scale in (0.0, 1.0):
+        floats = (0.5, -0.5, 0.01, 0.02, 13.0, 0.0, scale)
+        assert decode(_handle(floats=floats), KIND_HANDLE).force_scale == scale
+    for scale in (-1e-9, 1.0 + 1e-9):
+        assert "force_scale" in str(_refused(_handle(floats=(0.5, -0.5, 0.01, 0.02, 13.0,
+                                                              0.0, scale))))

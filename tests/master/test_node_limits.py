@@ -16,6 +16,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from haptic.common.model.passivity import PassivitySettings
 from haptic.master.node import MasterNode, master_compensator
 from haptic.master.settings import SafetySettings
 
@@ -388,3 +389,15 @@ def test_the_kernel_steps_a_general_coupled_block(block) -> None:
         command = node.step(state, fh, np.zeros((1, 2)), ft)
         expected = coupled.step(reference, np.concatenate([fh, ft], axis=1))
         np.testing.assert_allclose(command, expected, rtol=1e-12, atol=1e-18)
+
+
+def test_the_passivity_layer_waits_switched_off_only_when_asked_and_built(block) -> None:
+    """``tdpa`` mode: the layer runs from the start; ``passivity_standby``: it is built
+    switched off for the governor; without the layer there is nothing to stand by."""
+    running = MasterNode(block, _safety(), PassivitySettings())
+    assert running.passivity_standby is False
+    assert running.activate(np.zeros((1, 2))).passivity.active.tolist() == [True]
+    standby = MasterNode(block, _safety(), PassivitySettings(), passivity_standby=True)
+    assert standby.passivity_standby is True
+    assert standby.activate(np.zeros((1, 2))).passivity.active.tolist() == [False]
+    assert MasterNode(block, _safety(), None, passivity_standby=True).passivity_standby is False

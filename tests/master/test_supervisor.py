@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from haptic.common.runtime.watchdog import WatchdogState
 from haptic.common.wire.messages import Flags, ToolState
 from haptic.master.supervisor import MasterSupervisor, Transition
 
@@ -330,3 +331,26 @@ def test_a_slave_not_ready_before_forces_came_on_holds_nothing_new() -> None:
     assert not [e for e in supervisor.events if e["kind"] == "handle_held"]
     transitions = run_in_sync(supervisor, RESYNC, start=20)
     assert transitions.count(Transition.ACTIVATE) == 1 and supervisor.enabled
+
+
+def test_steady_is_forces_on_with_nothing_latched_awaited_or_guarded() -> None:
+    """The lockstep's quiet lanes rely on it (master/quiet_kernel.py): each condition alone
+    makes a supervisor not steady."""
+    fresh = make()
+    assert (fresh.peer_stops, fresh.work_area_stops) == (0, 0) and not fresh.steady()
+
+    def steady_supervisor() -> MasterSupervisor:
+        supervisor = make()
+        assert run_in_sync(supervisor, RESYNC)[-1] is Transition.ACTIVATE
+        assert supervisor.steady()
+        return supervisor
+
+    for name, value in (("enabled", False), ("faulted", True), ("_await_sync", True),
+                        ("_await_peer", True), ("tool_guard", object())):
+        supervisor = steady_supervisor()
+        setattr(supervisor, name, value)
+        assert not supervisor.steady(), name
+    for state in WatchdogState:
+        supervisor = steady_supervisor()
+        supervisor.watchdog.state = state
+        assert supervisor.steady() is (state is WatchdogState.OK), state

@@ -3,6 +3,7 @@ only with the watchdog ok and the master's forces on, and the work-area guard st
 
 from __future__ import annotations
 
+from haptic.common.runtime.watchdog import WatchdogState
 from haptic.common.wire.messages import Flags, HandleState
 from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
 
@@ -196,3 +197,25 @@ def test_a_work_area_stop_lasts_while_the_master_holds_until_the_handle_is_back(
     supervisor.receive(handle(0.15, enabled=False, seq=40))  # the handle back over the grid
     supervisor.update(0.2, True, (0.2 + 1e-4, 0.0))
     assert not supervisor.outside and supervisor.ready
+
+
+def test_steady_is_running_with_nothing_stopped_rejoining_or_faulted() -> None:
+    """The lockstep's quiet lanes rely on it (slave_sim/quiet_kernel.py): each condition alone
+    makes a supervisor not steady."""
+    assert not make().steady()
+
+    def steady_supervisor() -> SlaveSupervisor:
+        supervisor = make()
+        assert start(supervisor)[-1] is Transition.RESUME
+        assert supervisor.steady()
+        return supervisor
+
+    for name, value in (("running", False), ("master_enabled", False), ("outside", True),
+                        ("rejoining", True), ("input_fault", True)):
+        supervisor = steady_supervisor()
+        setattr(supervisor, name, value)
+        assert not supervisor.steady(), name
+    for state in WatchdogState:
+        supervisor = steady_supervisor()
+        supervisor.watchdog.state = state
+        assert supervisor.steady() is (state is WatchdogState.OK), state
