@@ -19,11 +19,13 @@ Per received payload, in order:
 4. ``implausible`` too: a sequence number further above the highest than the sender could
    have sent since (:data:`MAX_SEND_RATE_HZ` over the send times' advance, plus
    :data:`SEQUENCE_SLACK`), so one message cannot make every later one ``out_of_order``;
-5. ``stale``: older at arrival than ``stale_after_s`` plus the largest injected delay;
+5. ``stale``: older at arrival than ``stale_after_s`` plus the largest injected delay (sent,
+   so not lost: one that fills a gap counted as lost takes it back, as in 6);
 6. ``out_of_order``: a sequence number not above the highest already accepted (a duplicate or
    a reordered message; also counted in ``reordered``); one that fills a gap counted as lost
    takes it back from ``network_lost``, once: the last :data:`SEQUENCE_WINDOW` sequence
-   numbers are remembered, so a duplicate or a replay never does;
+   numbers are remembered, so a duplicate or a replay never does (nor one below the epoch's
+   first sequence number, which no count included);
 7. ``injected_loss``: the loss models drop it;
 8. it waits in a queue ordered by delivery time, ``max(arrival, send + delay + jitter)``.
 
@@ -118,8 +120,9 @@ class _Sequence:
     highest_seq: int
     highest_send_ns: int
     delivered_seq: int = -1
-    #: bit i set: sequence number ``highest_seq - i`` was received (i < SEQUENCE_WINDOW)
-    received_bits: int = 0
+    #: bit i set: sequence number ``highest_seq - i`` was received, or lies below
+    #: ``first_seq`` (never counted lost, so never taken back) (i < SEQUENCE_WINDOW)
+    received_bits: int = _WINDOW_MASK
 
 
 @dataclass
@@ -253,10 +256,7 @@ class ReceivePath:
             self._drop(DropReason.STALE)
             return
         if message.seq <= seq_state.highest_seq:
-            behind = seq_state.highest_seq - message.seq
-            if behind < SEQUENCE_WINDOW and not seq_state.received_bits >> behind & 1:
-                seq_state.received_bits |= 1 << behind  # it fills a gap counted as lost
-                n.network_lost -= 1
+            self._arrived_late(seq_state, message.seq)
             n.reordered += 1
             self._drop(DropReason.OUT_OF_ORDER)
             return
@@ -280,11 +280,17 @@ class ReceivePath:
             seq_state.received_bits = (seq_state.received_bits << skipped | 1) & _WINDOW_MASK \
                 if skipped < SEQUENCE_WINDOW else 1
         else:
-            behind = seq_state.highest_seq - seq
-            if behind < SEQUENCE_WINDOW:
-                seq_state.received_bits |= 1 << behind
+            self._arrived_late(seq_state, seq)
         if send_ns > seq_state.highest_send_ns:
             seq_state.highest_send_ns = send_ns
+
+    def _arrived_late(self, seq_state: _Sequence, seq: int) -> None:
+        """A message of sequence number ``seq``, not above the highest, was received (in time
+        or stale): one that fills a gap counted as lost takes it back, once."""
+        behind = seq_state.highest_seq - seq
+        if behind < SEQUENCE_WINDOW and not seq_state.received_bits >> behind & 1:
+            seq_state.received_bits |= 1 << behind
+            self._n.network_lost -= 1
 
     def release(self, now_ns: int) -> Message | None:
         """The newest message whose delivery time is at or before ``now_ns``, or ``None``."""

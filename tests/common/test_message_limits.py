@@ -10,6 +10,7 @@ import msgpack
 import pytest
 
 from haptic.common.wire.messages import (
+    FLAGS_BY_VALUE,
     KIND_HANDLE,
     KIND_TOOL,
     SCHEMA_VERSION,
@@ -239,3 +240,12 @@ def test_a_force_scale_of_0_to_1_is_accepted() -> None:
     for scale in (-1e-9, 1.0 + 1e-9):
         assert "force_scale" in str(_refused(_handle(floats=(0.5, -0.5, 0.01, 0.02, 13.0,
                                                               0.0, scale))))
+
+
+def test_the_flags_table_holds_exactly_every_combination_of_the_defined_flags() -> None:
+    """FLAGS_BY_VALUE has the keys 0..63 (the six flags' combinations), each its own Flags."""
+    assert list(FLAGS_BY_VALUE) == list(range(64))
+    assert all(type(flags) is Flags and int(flags) == value
+               for value, flags in FLAGS_BY_VALUE.items())
+    assert 64 not in FLAGS_BY_VALUE  # a bit no flag defines: the callers' lookup refuses it
+    assert int(decode(_handle(flags=64 | 2), KIND_HANDLE).flags) == 66  # decode still reads it
