@@ -346,6 +346,11 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
      "when they are equal both branches give the same time"),
     ("common/wire/receive.py", "if send_ns > seq_state.highest_send_ns:",
      "if send_ns >= seq_state.highest_send_ns:", "when equal the assignment changes nothing"),
+    ("common/wire/injection.py", "self._uniforms = np.empty(0)\nself._next = 0", "self._next = 1",
+     "the buffer starts empty, so the first draw refills it and sets _next to 0 before _next "
+     "is used as an index; nothing else reads _next"),
+    ("common/wire/injection.py", "if target < self._last_target_ns:",
+     "if target <= self._last_target_ns:", "when equal the assignment changes nothing"),
     ("common/wire/receive.py", "if not pending or pending[0][0] > now_ns:",
      "if not pending or pending[0][ 1] > now_ns:",
      "an early exit only: the loop below checks the delivery time itself and returns None "

@@ -41,11 +41,16 @@ def downsample_heights(heights_m: np.ndarray, factors: tuple[int, int]) -> np.nd
 
 
 def heights_to_bytes(heights_m: np.ndarray) -> bytes:
-    """A reduced map as little-endian uint16 micrometres, row-major (y rows of x cells)."""
-    quantised = np.clip(np.rint(np.asarray(heights_m) / HEIGHT_QUANTUM_M), 0, 65535)
+    """A reduced map as little-endian uint16 micrometres, row-major (y rows of x cells); a
+    height below 0 or NaN is 0, one above 65.535 mm is 65535."""
+    quantised = np.clip(np.nan_to_num(np.rint(np.asarray(heights_m) / HEIGHT_QUANTUM_M),
+                                      nan=0.0), 0, 65535)
     return quantised.astype("<u2").tobytes()
 
 
 def heights_from_bytes(data: bytes, cells_x: int, cells_y: int) -> np.ndarray:
-    """Inverse of :func:`heights_to_bytes`, m."""
+    """Inverse of :func:`heights_to_bytes`, m; :class:`ValueError` unless ``data`` holds
+    exactly ``cells_x`` x ``cells_y`` words."""
+    if cells_x < 0 or cells_y < 0 or len(data) != 2 * cells_x * cells_y:
+        raise ValueError(f"{len(data)} bytes are not {cells_x} x {cells_y} uint16 heights")
     return np.frombuffer(data, "<u2").reshape(cells_y, cells_x) * HEIGHT_QUANTUM_M

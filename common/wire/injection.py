@@ -34,6 +34,7 @@ Every random draw comes from the seeded :class:`numpy.random.Generator` given to
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,10 +61,10 @@ class InjectionConfig:
     """A delay over time added to ``delay_s`` (None: constant)."""
 
     def __post_init__(self) -> None:
-        if not self.delay_s >= 0.0:
-            raise ValueError(f"delay_s must be >= 0 (got {self.delay_s})")
-        if not self.jitter_s >= 0.0:
-            raise ValueError(f"jitter_s must be >= 0 (got {self.jitter_s})")
+        for name in ("delay_s", "jitter_s"):  # an infinite one overflows the ns arithmetic
+            value = getattr(self, name)
+            if not 0.0 <= value < math.inf:
+                raise ValueError(f"{name} must be finite and >= 0 (got {value})")
         if self.jitter_distribution not in JITTER_DISTRIBUTIONS:
             raise ValueError(
                 f"jitter_distribution must be one of {', '.join(JITTER_DISTRIBUTIONS)} "
