@@ -135,6 +135,9 @@ MODULES: dict[str, Target] = {
                                              "tests/master/test_can_commissioning.py",
                                              "tests/master/test_sync_lead.py",
                                              "tests/master/test_sim_rig.py")),
+    "master/hardware/drive_device.py": Target(("tests/master/test_drive_device_limits.py",
+                                               "tests/master/test_can_commissioning.py",
+                                               "tests/master/test_sim_rig.py")),
 }
 
 _BINARY = (("Add", "Sub"), ("Sub", "Add"), ("Mul", "Div"), ("Div", "Mul"), ("FloorDiv", "Div"),
@@ -351,6 +354,31 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
      "is used as an index; nothing else reads _next"),
     ("common/wire/injection.py", "if target < self._last_target_ns:",
      "if target <= self._last_target_ns:", "when equal the assignment changes nothing"),
+    ("master/hardware/drive_device.py",
+     "self.node.sdo.on_request(cia402.SDO_RX_BASE + self.node_id, bytearray(data), 0.0)",
+     "self.node.sdo.on_request(cia402.SDO_RX_BASE - self.node_id, bytearray(data), 0.0)",
+     "canopen's SdoServer.on_request never reads its can_id: it decodes the request alone"),
+    ("master/hardware/drive_device.py",
+     "self.node.sdo.on_request(cia402.SDO_RX_BASE + self.node_id, bytearray(data), 0.0)",
+     "self.node.sdo.on_request(cia402.SDO_RX_BASE + self.node_id, bytearray(data), 1.0)",
+     "canopen's SdoServer.on_request never reads its timestamp"),
+    ("master/hardware/drive_device.py", "if indices == (0x6041, 0x6064):  # the loop's mapping",
+     "if indices == ( 24642, 0x6064):  # the loop's mapping",
+     "a shortcut for the loop's mapping: the general path packs the same statusword and "
+     "position into the same bytes"),
+    ("master/hardware/drive_device.py", "if indices == (0x6041, 0x6064):  # the loop's mapping",
+     "if indices == (0x6041, 24677):  # the loop's mapping",
+     "a shortcut for the loop's mapping: the general path packs the same statusword and "
+     "position into the same bytes"),
+    ("master/hardware/drive_device.py",
+     "return dict(zip(self._rpdo_indices, codec.unpack(data), strict=True))",
+     "return dict(zip(self._rpdo_indices, codec.unpack(data), strict=False))",
+     "the struct has one field per mapped object, so the lengths always match"),
+    ("master/hardware/drive_device.py",
+     "def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:",
+     "def send_message(self, can_id: int, data: bytes, remote: bool = True) -> None:",
+     "remote is deleted unread (SDO replies are data frames) and canopen's server never "
+     "passes it"),
     ("common/wire/receive.py", "if not pending or pending[0][0] > now_ns:",
      "if not pending or pending[0][ 1] > now_ns:",
      "an early exit only: the loop below checks the delivery time itself and returns None "

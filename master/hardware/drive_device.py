@@ -35,6 +35,7 @@ from haptic.master.hardware.cia402 import DriveState
 
 #: Abort codes (CiA 301) the PDO rules use.
 ABORT_UNSUPPORTED_ACCESS = 0x06010000
+ABORT_NO_SUBINDEX = 0x06090011
 ABORT_NOT_MAPPABLE = 0x06040041
 ABORT_PDO_LENGTH = 0x06040042
 ABORT_VALUE_RANGE = 0x06090030
@@ -155,12 +156,14 @@ class DriveObjects:
     ``send(frame_id, data)`` sends a classical frame on the rig's bus (SDO replies).
     ``runtime`` is the committed :class:`DriveRuntime` (the rig updates it in place).
     ``position_counts()`` gives the position actual value now, counts (SDO reads).
+    ``fd``: the drive is on CAN FD (PDOs of up to 64 bytes), else on classical CAN (8).
     """
 
     def __init__(self, node_id: int, eds_file: str | Path | None,
                  send: Callable[[int, bytes], None], runtime: DriveRuntime,
-                 position_counts: Callable[[], int]) -> None:
+                 position_counts: Callable[[], int], fd: bool = True) -> None:
         self.node_id = node_id
+        self.fd = fd
         self.dictionary = load_drive_dictionary(eds_file, node_id)
         self.node = canopen.LocalNode(node_id, self.dictionary)
         # The heartbeat is produced by the rig's loop (deterministically), not by canopen's
@@ -189,7 +192,8 @@ class DriveObjects:
         return entry if isinstance(entry, od.ODVariable) else entry[subindex]
 
     def _on_read(self, index: int, subindex: int, od: od.ODVariable) -> int | None:
-        del od
+        if subindex != od.subindex:  # canopen serves a variable at any sub-index
+            raise SdoAbortedError(ABORT_NO_SUBINDEX)
         runtime = self.runtime
         if index == 0x6041:
             return self.statusword(runtime)
@@ -215,6 +219,8 @@ class DriveObjects:
     def _on_write(self, index: int, subindex: int, od: od.ODVariable, data: bytes) -> None:
         """The CiA 301/402 rules of a write (raising :class:`SdoAbortedError` refuses it);
         the accepted value is stored by canopen after this returns."""
+        if subindex != od.subindex:  # canopen serves a variable at any sub-index
+            raise SdoAbortedError(ABORT_NO_SUBINDEX)
         value = int(od.decode_raw(bytes(data)))
         runtime = self.runtime
         if index in (RPDO1_COMM, TPDO1_COMM) and subindex == 1:
@@ -262,11 +268,12 @@ class DriveObjects:
                 variable = self._variable(target_index, target_sub)
             except KeyError:
                 raise SdoAbortedError(ABORT_NOT_MAPPABLE) from None
-            if not variable.pdo_mappable or len(variable) != length or (
+            if variable.subindex != target_sub or not variable.pdo_mappable or (
+                    len(variable) != length) or (
                     rpdo and not variable.writable) or (not rpdo and not variable.readable):
                 raise SdoAbortedError(ABORT_NOT_MAPPABLE)
             bits += length
-        if bits > 8 * FD_PDO_BYTES:
+        if bits > 8 * (FD_PDO_BYTES if self.fd else CLASSIC_PDO_BYTES):
             raise SdoAbortedError(ABORT_PDO_LENGTH)
 
     # --- configuration, cached -----------------------------------------------------
@@ -324,10 +331,12 @@ class DriveObjects:
         if indices == (0x6041, 0x6064):  # the loop's mapping
             return self._tpdo_codec.pack(self.statusword(runtime), position_counts)
         values = {0x6041: self.statusword(runtime), 0x6064: position_counts,
-                  0x6061: runtime.mode, 0x603F: runtime.error_code,
+                  0x6060: runtime.mode, 0x6061: runtime.mode, 0x603F: runtime.error_code,
                   0x607A: runtime.target_counts,
                   0x60F4: runtime.target_counts - position_counts, 0x6040: runtime.controlword}
-        return self._tpdo_codec.pack(*(values.get(index, 0) for index in indices))
+        return self._tpdo_codec.pack(*(  # any other object: its value in the dictionary
+            values[variable.index] if variable.index in values
+            else self.raw(variable.index, variable.subindex) for variable in self.tpdo.mapping))
 
     def decode_rpdo(self, data: bytes) -> dict[int, int] | int:
         """The mapped objects' values (index -> value) of an RPDO1 payload, or the EMCY code

@@ -187,7 +187,7 @@ class SimulatedCanRig:
         #: Each drive's object dictionary (its EDS) and communication objects.
         self.devices = [
             DriveObjects(node, eds, self._send, drive,
-                         lambda axis=axis: self._position_counts(axis))
+                         lambda axis=axis: self._position_counts(axis), fd=settings.fd)
             for axis, (node, eds, drive) in enumerate(zip(settings.node_ids, settings.eds_files,
                                                           self.drives, strict=True))]
         for axis, drive in enumerate(self.drives):
