@@ -60,11 +60,15 @@ def interpolation_period(sample_period_s: float) -> tuple[int, int]:
 
 def variable(dictionary: od.ObjectDictionary, index: int, subindex: int,
              what: str) -> od.ODVariable:
-    """The EDS's variable at ``index:subindex``; :class:`PlanError` naming ``what`` (the
-    drive and its EDS) when it is missing."""
+    """The EDS's variable at ``index:subindex`` (a plain variable is at sub-index 0 only);
+    :class:`PlanError` naming ``what`` (the drive and its EDS) when it is missing."""
     try:
         entry = dictionary[index]
-        return entry if isinstance(entry, od.ODVariable) else entry[subindex]
+        if isinstance(entry, od.ODVariable):
+            if subindex != 0:
+                raise KeyError(subindex)
+            return entry
+        return entry[subindex]
     except KeyError:
         raise PlanError(f"{what} has no object 0x{index:04X}:{subindex:02X}") from None
 
