@@ -32,7 +32,7 @@ from haptic.master.hardware.bus_load import BusLoad, bus_load, cycle_frames
 from haptic.master.hardware.canopen_setup import SdoStep, configuration_steps, variable
 from haptic.master.hardware.cia402 import DriveState
 from haptic.master.hardware.drive_device import load_drive_dictionary
-from haptic.master.hardware.force_sensor import ForceSensorCodec, load_database
+from haptic.master.hardware.force_sensor import STATUS_OK, ForceSensorCodec, load_database
 from haptic.master.hardware.interface import (
     HandleHardware,
     HandleReading,
@@ -81,10 +81,10 @@ class CanHandleDriver(HandleHardware):
         self._holding_for_sync = False
         self._state = LifecycleState.UNCONFIGURED
         self._cycle = 0
-        self._drive_states = [DriveState.NOT_READY_TO_SWITCH_ON] * 2
-        self._last_controlword = [cia402.CW_DISABLE_VOLTAGE] * 2
-        self._target_counts = np.zeros(2, np.int64)
-        self._position_counts = np.zeros(2, np.int64)
+        self._drive_states = [DriveState.NOT_READY_TO_SWITCH_ON] * len(AXES)
+        self._last_controlword = [cia402.CW_DISABLE_VOLTAGE] * len(AXES)
+        self._target_counts = np.zeros(len(AXES), np.int64)
+        self._position_counts = np.zeros(len(AXES), np.int64)
         self._sensor_counter: int | None = None
         self._pending_faults: list[str] = []
         self._pending_events: list[str] = []
@@ -107,18 +107,24 @@ class CanHandleDriver(HandleHardware):
         self._fd = bool(settings.fd)
         #: Print the bus-load budget (one line, stderr) at configure: the real bus's backend.
         self.announce_bus_load = False
-        self._warnings = [0, 0]
-        self._tripped = False
+        #: per axis, the statusword warning bits not in their healthy state (events on change)
+        self._warnings: list[int]
+        self._tripped: bool
         #: Why the master stopped the drives (stop_motion), None when it did not.
-        self._master_stop: str | None = None
-        self._stop_cycles = 0
-        self._stop_taken = [False, False]
-        self._stop_reported = [False, False]
+        self._master_stop: str | None
+        self._clear_trip()
+        #: since the master's stop: SYNCs, and per axis, taken by the drive, reported late
+        self._stop_cycles: int
+        self._stop_taken: list[bool]
+        self._stop_reported: list[bool]
+        self._watch_stop()
         self._heartbeat_period_s = settings.heartbeat_period_s
         self._heartbeat_timeout_s = settings.heartbeat_timeout_s
-        self._heartbeat_due_s = 0.0
-        self._heartbeat_seen_s = [0.0, 0.0]
-        self._heartbeat_lost = [False, False]
+        #: the master's next heartbeat, the drives' last ones and their losses reported
+        self._heartbeat_due_s: float
+        self._heartbeat_seen_s: list[float]
+        self._heartbeat_lost: list[bool]
+        self._expect_heartbeats(0.0)
         self._master_heartbeat = bytes([0x05])  # operational
         #: the master's heartbeat while inactive (a python-can periodic task): configured and
         #: waiting (e.g. for the slave), the loop does not run, but the node is alive and the
@@ -207,10 +213,7 @@ class CanHandleDriver(HandleHardware):
             self.identities = []
             for axis, node in enumerate(self.settings.node_ids):
                 self._configure_drive(axis, node, *plans[axis])
-            now = time.monotonic()
-            self._heartbeat_seen_s = [now, now]
-            self._heartbeat_lost = [False, False]
-            self._heartbeat_due_s = now
+            self._expect_heartbeats(time.monotonic())
             for node in self.settings.node_ids:
                 self._nmt(cia402.NMT_START, node)
             self._state = LifecycleState.INACTIVE
@@ -249,7 +252,7 @@ class CanHandleDriver(HandleHardware):
         lacking = [what for dictionary, what in dictionaries if 0x1019 not in dictionary]
         if overflow and lacking:
             self.sync_counter_note = (f"SYNC counter off: the {' and the '.join(lacking)} "
-                                      "has no 0x1019")
+                                      f"{'have' if len(lacking) > 1 else 'has'} no 0x1019")
             overflow = 0
         else:
             self.sync_counter_note = (f"SYNC counter 1..{overflow}" if overflow
@@ -271,6 +274,25 @@ class CanHandleDriver(HandleHardware):
             return self._sync
         self._sync_counter = self._sync_counter % overflow + 1
         return self._counted_syncs[self._sync_counter - 1]
+
+    def _expect_heartbeats(self, now: float) -> None:
+        """Supervise the heartbeats from ``now`` (time.monotonic(), s): each drive's counts as
+        heard then, none lost, and the master's own is due."""
+        self._heartbeat_seen_s = [now, now]
+        self._heartbeat_lost = [False, False]
+        self._heartbeat_due_s = now
+
+    def _clear_trip(self) -> None:
+        """No stop in force and no warning bit seen: where an activation starts."""
+        self._tripped = False
+        self._master_stop = None
+        self._warnings = [0, 0]
+
+    def _watch_stop(self) -> None:
+        """Watch each drive take the master's stop afresh (:meth:`_check_quick_stop`)."""
+        self._stop_cycles = 0
+        self._stop_taken = [False, False]
+        self._stop_reported = [False, False]
 
     def _configure_drive(self, axis: int, node: int, dictionary: Any,
                          steps: list[SdoStep]) -> None:
@@ -322,9 +344,7 @@ class CanHandleDriver(HandleHardware):
         reading = self.read()
         if not np.all(np.isfinite(reading.position_m)):
             raise HardwareError("cannot activate without positions: " + "; ".join(reading.faults))
-        self._tripped = False
-        self._master_stop = None
-        self._warnings = [0, 0]
+        self._clear_trip()
         for axis, node in enumerate(self.settings.node_ids):
             name = f"{AXES[axis]} drive (node {node})"
             counts = int(self._position_counts[axis])
@@ -415,9 +435,7 @@ class CanHandleDriver(HandleHardware):
             return
         self._tripped = True
         self._master_stop = reason
-        self._stop_cycles = 0
-        self._stop_taken = [False, False]
-        self._stop_reported = [False, False]
+        self._watch_stop()
         self._target_counts = self._position_counts.copy()
         self._send_both(cia402.CW_QUICK_STOP)
         self._pending_events.append(f"quick stop on both drives: {reason}")
@@ -696,8 +714,8 @@ class CanHandleDriver(HandleHardware):
             self.late_frames += 1
 
     def _sensor_force(self, data: bytes, faults: list[str]) -> tuple[float, float]:
-        """The sensor frame's force (N, x and y; NaN where it is not a valid sample, with the
-        fault)."""
+        """The sensor frame's force (N, x and y; both NaN where it is not a valid sample, with
+        the fault: a status other than ok, or counts that scale beyond a float)."""
         try:
             sample = self.codec.decode(data)
         except Exception as error:  # cantools raises several types for a bad frame
@@ -708,9 +726,13 @@ class CanHandleDriver(HandleHardware):
                           f"{sample.counter} (a stale or lost sample)")
         self._sensor_counter = sample.counter
         force = self.codec.newtons(sample)
-        if not (math.isfinite(force[0]) and math.isfinite(force[1])):
-            faults.append(f"force sensor status {sample.status} (not ok)")
-        return force
+        if math.isfinite(force[0]) and math.isfinite(force[1]):
+            return force
+        faults.append(f"force sensor status {sample.status} (not ok)" if sample.status
+                      != STATUS_OK else f"force sensor counts ({sample.raw_x_count}, "
+                      f"{sample.raw_y_count}) are not finite in N: see [master.can] "
+                      "force_scale_N_per_count and force_offset_count")
+        return math.nan, math.nan
 
     def write(self, position_command_m: np.ndarray) -> None:
         """Send the targets (m) to both drives; a non-finite command is never sent (the
