@@ -438,6 +438,76 @@ EQUIVALENT: tuple[tuple[str, str, str, str], ...] = (
      "CUDA-only, and the same graph either way: True only loads every Warp module on the "
      "device before the capture (the step's kernels are loaded when their launches are "
      "recorded)"),
+    ("master/hardware/can_driver.py", "self._sync_sent_s = 0.0", "self._sync_sent_s = 1.0",
+     "read only by read() after sync() has set it"),
+    *(("master/hardware/can_driver.py",
+       "self._sync_sent_s = 0.0\nself._sync_drive_fault = [False, False]", after,
+       "the first read() is configure's, inactive, where a drive fault commands nothing; it "
+       "clears the flags for the next cycle") for after in (
+        "self._sync_drive_fault = [True, False]", "self._sync_drive_fault = [False, True]")),
+    *(("master/hardware/can_driver.py", "self._warnings = [0, 0]", after,
+       "bit 0 is no watched warning bit: the first statusword differs from it, and its events "
+       "are those of the watched bits that are on, as from 0")
+      for after in ("self._warnings = [ 1, 0]", "self._warnings = [0, 1]")),
+    ("master/hardware/can_driver.py", "self._expect_heartbeats(0.0)",
+     "self._expect_heartbeats( 1.0)",
+     "configure calls it again, with the time, before anything reads the heartbeat times"),
+    ("master/hardware/can_driver.py", "self._dispatch[self.codec.frame_id] = (_SENSOR, 0)",
+     "self._dispatch[self.codec.frame_id] = (_SENSOR, 1)",
+     "the sensor frame's axis is never read: one frame carries both axes"),
+    ("master/hardware/can_driver.py", "self.sync_counter_overflow = 0",
+     "self.sync_counter_overflow = 1",
+     "_plans() sets it at configure, before the first SYNC"),
+    ("master/hardware/can_driver.py", "for count in range(1, 241)]",
+     "for count in range(1, 242)]",
+     "the overflow is at most 240 (0x1019's range, and the configuration's limit): the 241st "
+     "counted SYNC is never sent"),
+    ("master/hardware/can_driver.py", "file=sys.stderr, flush=True)",
+     "file=sys.stderr, flush=False)",
+     "stderr is line-buffered (Python 3.9 and later) and the line ends with a newline"),
+    ("master/hardware/can_driver.py", "strict=True)):", "strict=False)):",
+     "node_ids and eds_files are both pairs (CanSettings)"),
+    ("master/hardware/can_driver.py",
+     "for node, (dictionary, what) in zip(settings.node_ids, dictionaries, strict=True):",
+     "for node, (dictionary, what) in zip(settings.node_ids, dictionaries, strict=False):",
+     "dictionaries has one entry per node id (built from the same pairs just above)"),
+    ("master/hardware/can_driver.py", "strict=True))", "strict=False))",
+     "AXES and the drive states are both pairs"),
+    ("master/hardware/can_driver.py",
+     "self._stop_reported[axis] = True\ndrive_fault[axis] = True", "drive_fault[axis] = False",
+     "only after the master's own stop, which tripped the driver: quick_stop() for a drive "
+     "fault does nothing then"),
+    ("master/hardware/can_driver.py",
+     "if thread is not None and thread is not threading.current_thread():",
+     "if thread is not None or thread is not threading.current_thread():",
+     "python-can's ThreadBasedCyclicSendTask starts itself at construction: its thread is "
+     "never None here"),
+    ("master/hardware/can_driver.py", "thread.join(timeout=self._heartbeat_period_s + 0.5)",
+     "thread.join(timeout=self._heartbeat_period_s + 1.5)",
+     "a bound on the wait only: the stopped task's thread ends within one period"),
+    *(("master/hardware/can_driver.py", before, after,
+       "the two times are equal only when both are the same float reading of the monotonic "
+       "clock (ns): the next reading decides the same way")
+      for before, after in (
+          ("if now >= self._heartbeat_due_s:", "if now > self._heartbeat_due_s:"),
+          ("if clock >= deadline:", "if clock > deadline:"),
+          ("if now - self._heartbeat_seen_s[axis] > self._heartbeat_timeout_s and (",
+           "if now - self._heartbeat_seen_s[axis] >= self._heartbeat_timeout_s and ("),
+          ("while (remaining := deadline - time.monotonic()) > 0.0:",
+           "while (remaining := deadline - time.monotonic()) >= 0.0:"),
+          ("if now >= deadline:", "if now > deadline:"),
+          ("if now >= resend_at:", "if now > resend_at:"))),
+    *(("master/hardware/can_driver.py", "self._pending_faults, [False, False])", after,
+       "a list nothing reads after the call: during an SDO exchange an EMCY is logged and kept "
+       "for the next reading, where the faults it gives act") for after in (
+        "self._pending_faults, [True, False])", "self._pending_faults, [False, True])")),
+    ("master/hardware/can_driver.py", "_OTHER = (0, 0)", "_OTHER = (0, 1)",
+     "the axis of a frame of kind 0 (an id the driver does not know) is never read"),
+    ("master/hardware/can_driver.py", "self._outer = False", "self._outer = True",
+     "a burst's __enter__ sets it before its __exit__ reads it"),
+    ("master/hardware/can_driver.py", "if now >= deadline:\nbreak", "continue",
+     "past the deadline the loop's own condition is false too: continue leaves it as break "
+     "does, to the same error"),
     ("slave_sim/clay/clay_kernels.py", "u = wp.clamp(t, wp.float64(0.0), wp.float64(1.0))",
      "u = wp.clamp(t, wp.float64(0.0), wp.float64( 2.0))",
      "the cut only reaches cells with distance < outer_radius = inner_radius + edge_width, "

@@ -629,7 +629,7 @@ class CanHandleDriver(HandleHardware):
             elif kind == _SENSOR:
                 have_sensor = True
                 force_N = self._sensor_force(bytes(message.data), faults)
-            elif kind != _OTHER:
+            elif kind in (_EMCY, _HEARTBEAT):
                 self._supervision_frame(kind, axis, bytes(message.data), faults, drive_fault)
         for axis, node in enumerate(self.settings.node_ids):
             if not have_drive[axis]:
@@ -908,25 +908,26 @@ class CanHandleDriver(HandleHardware):
         return int(variable.decode_raw(reply.data[:size]))
 
 
+#: What read() does with a frame, by id: kinds 1-4 (0 for any other frame) and the axis.
+_TPDO, _SENSOR, _EMCY, _HEARTBEAT = range(1, 5)
 _OTHER = (0, 0)
-_TPDO, _SENSOR, _EMCY, _HEARTBEAT = 1, 2, 3, 4
 HEARTBEAT_BASE = 0x700
 _TPDO1 = struct.Struct("<Hi")  # statusword, position actual value (counts)
 _RPDO1 = struct.Struct("<Hi")  # controlword, target position (counts)
-#: Statusword bits watched as events and their healthy values (9 remote and 12 "follows the
-#: target" are set when healthy, so they are flipped before comparing).
 #: An SDO request without a reply is sent again after this long, s (until the deadline).
 SDO_RESEND_S = 0.25
 
-_WARNING_BITS = 0x0080 | 0x0200 | 0x0800 | 0x1000 | 0x2000
-_WARNING_IDLE = 0x0200 | 0x1000
-_FOLLOWS_TARGET = 0x1000
-_WARNING_TEXT = {0x0080: "warning (bit 7)", 0x0200: "not remote (bit 9 clear)",
+_FOLLOWS_TARGET = cia402.STATUS_FOLLOWING_TARGET
+#: Statusword bits watched as events, with their texts, and those of them that are set when
+#: healthy (9 remote and 12 "follows the target": flipped before comparing).
+_WARNING_TEXT = {0x0080: "warning (bit 7)", cia402.STATUS_REMOTE: "not remote (bit 9 clear)",
                  0x0800: "internal limit active (bit 11)",
-                 0x1000: "target ignored (bit 12 clear)",
+                 _FOLLOWS_TARGET: "target ignored (bit 12 clear)",
                  0x2000: "following error (bit 13)"}
-_NMT_STATE_NAMES = {0x00: "boot-up", 0x04: "stopped", 0x05: "operational",
-                    0x7F: "pre-operational"}
+_WARNING_BITS = sum(_WARNING_TEXT)  # one bit each
+_WARNING_IDLE = cia402.STATUS_REMOTE | _FOLLOWS_TARGET
+#: The NMT states a drive's heartbeat may report other than operational (0x05).
+_NMT_STATE_NAMES = {0x00: "boot-up", 0x04: "stopped", 0x7F: "pre-operational"}
 #: The state each enable-sequence controlword leads to from each state.
 _EXPECTED_AFTER = {
     (DriveState.SWITCH_ON_DISABLED, cia402.CW_SHUTDOWN): DriveState.READY_TO_SWITCH_ON,

@@ -21,18 +21,15 @@ import pytest
 from haptic.common.config import load_config, override
 from haptic.master.hardware import can_driver, cia402
 from haptic.master.hardware.bus_load import bus_load, cycle_frames
-from haptic.master.hardware.can_driver import (
-    HEARTBEAT_BASE,
-    INT32_MAX,
-    CanHandleDriver,
-    _abort_text,
-)
+from haptic.master.hardware.can_driver import CanHandleDriver, _abort_text
 from haptic.master.hardware.cia402 import DriveState
 from haptic.master.hardware.drive_device import packaged_eds_path
 from haptic.master.hardware.force_sensor import ForceSensorCodec, load_database
 from haptic.master.hardware.interface import HardwareError, LifecycleState, create_hardware
 from haptic.master.settings import master_settings
 from haptic.master.sim.sim_rig import NMT_PRE_OPERATIONAL_STATE, SimulatedRigHardware
+
+HEARTBEAT_BASE = 0x700  # CiA 301's NMT error control COB-ID base, not the driver's constant
 
 
 def _active(**overrides) -> SimulatedRigHardware:
@@ -119,11 +116,38 @@ def test_a_lost_sensor_frame_then_its_counter_jump_are_reported() -> None:
         assert len(numbers) == 1 and (numbers[0][0] + 2) % 256 == numbers[0][1], jumped.faults
 
 
-def test_the_sdo_abort_texts() -> None:
+#: CiA 301's SDO abort codes the driver names, with their meanings (CiA 301, table 22).
+ABORT_MEANINGS = {
+    0x05040001: "command specifier not valid", 0x06010000: "unsupported access",
+    0x06010001: "write-only object", 0x06010002: "read-only object",
+    0x06020000: "object does not exist", 0x06040041: "object cannot be mapped to the PDO",
+    0x06040042: "mapping exceeds the PDO length", 0x06040043: "parameter incompatibility",
+    0x06070010: "data type length mismatch", 0x06090011: "sub-index does not exist",
+    0x06090030: "value out of range", 0x08000000: "general error",
+    0x08000020: "cannot be stored or used now", 0x08000022: "not in the present device state",
+}
+
+
+@pytest.mark.parametrize(("code", "meaning"), [*ABORT_MEANINGS.items(),
+                                               (0x12345678, "see CiA 301"),
+                                               (0x06090031, "see CiA 301")])
+def test_the_sdo_abort_texts(code: int, meaning: str) -> None:
     """Known CiA 301 abort codes get their meaning, any other the pointer to the standard."""
-    assert _abort_text(0x06090030) == "value out of range"
-    assert _abort_text(0x06040041) == "object cannot be mapped to the PDO"
-    assert _abort_text(0x12345678) == "see CiA 301"
+    assert _abort_text(code) == meaning
+
+
+@pytest.mark.parametrize(("code", "meaning"), [
+    (0x8130, "heartbeat or life guard lost"), (0x8210, "PDO shorter than mapped"),
+    (0x8220, "PDO longer than mapped"),
+    (0x8240, "unexpected SYNC data length: the drive's 0x1019 does not match the SYNC counter"),
+    (0x8250, "RPDO deadline missed"), (0x8611, "following error")])
+def test_each_known_emcy_code_is_named_with_its_meaning(code: int, meaning: str) -> None:
+    """The CiA 301/402 EMCY codes the loop meets (CiA 301 table 21, CiA 402) are named."""
+    with _inactive() as hardware:
+        hardware.configure()
+        hardware.read()
+        faults = _faults_after(hardware, [(cia402.EMCY_BASE + 1, cia402.emcy_frame(code))])
+        assert faults == (f"x drive EMCY error code 0x{code:04X} (register 0x01; {meaning})",)
 
 
 def test_the_sync_counter_runs_1_to_overflow_and_wraps() -> None:
@@ -300,6 +324,9 @@ def test_a_bus_that_cannot_be_opened_is_one_hardware_error(monkeypatch, error) -
 
 
 # --- the command's range -----------------------------------------------------------------
+
+
+INT32_MAX = 2**31 - 1  # the drives' 0x607A range, independent of the driver's constant
 
 
 @pytest.mark.parametrize("axis", [0, 1])
@@ -1002,8 +1029,9 @@ def test_the_masters_stop_is_an_event_once_and_holds_the_drives_at_their_positio
         assert faults == []
         assert events.count("quick stop on both drives: watchdog tripped") == 1
         assert not any("again" in e for e in events)
-        assert events.count("x drive took the quick stop (quick stop active)") == 1
-        assert events.count("y drive took the quick stop (quick stop active)") == 1
+        for name in ("x", "y"):  # once, though the drive goes on to switch on disabled
+            took = [e for e in events if e.startswith(f"{name} drive took the quick stop")]
+            assert took == [f"{name} drive took the quick stop (quick stop active)"], events
         for axis, node in enumerate((1, 2)):
             frames = [m for m in heard if m.arbitration_id == cia402.RPDO1_BASE + node]
             assert frames and all(
@@ -1108,12 +1136,18 @@ def test_a_drive_fault_while_active_quick_stops_both_once() -> None:
 def _read_with_tpdo(hardware: SimulatedRigHardware, axis: int, payload: bytes):
     """A reading whose ``axis`` TPDO1 is ``payload`` from another bus member (the drive's
     own dropped for that SYNC)."""
+    return _read_with_tpdo_id(hardware, axis, cia402.TPDO1_BASE + axis + 1, payload)
+
+
+def _read_with_tpdo_id(hardware: SimulatedRigHardware, axis: int, frame_id: int,
+                       payload: bytes):
+    """A reading for which the ``axis`` drive's TPDO1 is dropped and another bus member sends
+    ``payload`` on ``frame_id`` after the SYNC."""
     hardware.rig.drop_tpdo(axis, 1)
     hardware.driver.sync()
     channel = hardware.driver.bus_options["channel"]
     with can.Bus(interface="virtual", channel=channel) as other:
-        other.send(can.Message(arbitration_id=cia402.TPDO1_BASE + axis + 1, data=payload,
-                               is_extended_id=False))
+        other.send(can.Message(arbitration_id=frame_id, data=payload, is_extended_id=False))
     return hardware.read()
 
 
@@ -1462,9 +1496,10 @@ def test_frames_left_from_an_earlier_cycle_are_counted_and_supervision_is_kept()
         hardware.read()
         channel = hardware.driver.bus_options["channel"]
         with can.Bus(interface="virtual", channel=channel) as other:
-            for frame_id, data in ((cia402.TPDO1_BASE + 1, bytes(6)),
-                                   (hardware.driver.codec.frame_id, bytes(8)),
-                                   (cia402.EMCY_BASE + 2, cia402.emcy_frame(0x5530))):
+            for frame_id, data in ((cia402.EMCY_BASE + 2, cia402.emcy_frame(0x5530)),
+                                   (cia402.TPDO1_BASE + 1, bytes(6)),
+                                   (HEARTBEAT_BASE + 1, b"\x05"),
+                                   (hardware.driver.codec.frame_id, bytes(8))):
                 other.send(can.Message(arbitration_id=frame_id, data=data,
                                        is_extended_id=False))
         reading = hardware.read()
@@ -1522,3 +1557,167 @@ def test_sensor_counts_that_scale_beyond_a_float_are_a_fault_and_nan(axis: int) 
             r"force sensor counts \(-?\d+, -?\d+\) are not finite in N: see \[master.can\] "
             r"force_scale_N_per_count and force_offset_count", reading.faults[0]), reading.faults
         assert np.isnan(reading.force_N).all()
+
+
+def test_a_following_error_window_beyond_32_bits_is_written_as_the_largest() -> None:
+    """0x6065 is UNSIGNED32: a window (m) beyond it in counts is written as 0xFFFFFFFF (off,
+    for CiA 402 drives), not refused by the EDS's encoding."""
+    for window_m, expected in ((1e4, 0xFFFFFFFF), (0.01, None)):
+        driver = _plans_of(**{"master.can.following_error_window_m": window_m})
+        steps = {(step.variable.index, step.variable.subindex): step.value
+                 for step in driver._plans()[0][1]}
+        settings = driver.settings
+        assert steps[(0x6065, 0)] == (expected if expected is not None else round(
+            window_m / settings.metres_per_count))
+
+
+def _transition_then(state_after_reset, late: bool):
+    """cia402.next_drive_state for a drive whose fault reset leads to ``state_after_reset``,
+    at once or (``late``) one SYNC later, whatever that SYNC's controlword."""
+    transition = cia402.next_drive_state
+    pending = [False]
+
+    def patched(state, controlword, previous):
+        if state is DriveState.FAULT and pending[0]:
+            pending[0] = False
+            return state_after_reset
+        if state is DriveState.FAULT and controlword & 0x80 and not previous & 0x80:
+            if late:
+                pending[0] = True
+                return DriveState.FAULT
+            return state_after_reset
+        return transition(state, controlword, previous)
+
+    return patched
+
+
+def test_a_fault_reset_that_completes_one_sync_late_is_no_unexpected_transition(
+        monkeypatch) -> None:
+    """A drive that leaves Fault only at the SYNC after its reset, while the driver already
+    sends disable voltage (to take bit 7 low for a second reset): that step into switch on
+    disabled is expected, and the drive is enabled after one reset."""
+    monkeypatch.setattr(cia402, "next_drive_state",
+                        _transition_then(DriveState.SWITCH_ON_DISABLED, late=True))
+    with _inactive() as hardware:
+        hardware.configure()
+        hardware.rig.inject_drive_fault(0, 0x2310)
+        hardware.read()
+        channel = hardware.driver.bus_options["channel"]
+        with can.Bus(interface="virtual", channel=channel) as listener:
+            hardware.activate()
+            words = _rpdo_controlwords(_frames(listener), 1)
+        assert hardware.driver.drive_states == (DriveState.OPERATION_ENABLED,) * 2
+        assert words[:3] == [cia402.CW_FAULT_RESET, cia402.CW_DISABLE_VOLTAGE,
+                             cia402.CW_SHUTDOWN]
+
+
+def test_a_fault_reset_into_another_state_than_switch_on_disabled_stops_activation(
+        monkeypatch) -> None:
+    """A fault reset that lands anywhere but switch on disabled is an unexpected transition
+    (the exception for a late reset is for disable voltage only)."""
+    monkeypatch.setattr(cia402, "next_drive_state",
+                        _transition_then(DriveState.READY_TO_SWITCH_ON, late=False))
+    with _inactive() as hardware:
+        hardware.configure()
+        hardware.rig.inject_drive_fault(1, 0x2310)
+        hardware.read()
+        with pytest.raises(HardwareError, match=r"^activation stopped: y drive went from fault "
+                           r"to ready to switch on on controlword 0x0080 \("):
+            hardware.activate()
+
+
+def test_the_targets_follow_the_actual_positions_until_both_drives_are_enabled(
+        monkeypatch) -> None:
+    """A handle that moves while the drives are being enabled (pushed on a backdrivable
+    screw): each step's RPDO carries the position last read, so no drive is enabled with a
+    stale target."""
+    with _inactive() as hardware:
+        hardware.configure()
+        rig = hardware.rig
+        counts = rig._position_counts
+        calls = [0]
+
+        def drifting(axis: int, sample=None) -> int:
+            calls[0] += axis == 0
+            return counts(axis, sample) + (100 * calls[0] if axis == 0 else 0)
+
+        monkeypatch.setattr(rig, "_position_counts", drifting)
+        channel = hardware.driver.bus_options["channel"]
+        with can.Bus(interface="virtual", channel=channel) as listener:
+            hardware.activate()
+            targets = [struct.unpack("<Hi", bytes(m.data))[1] for m in _frames(listener)
+                       if m.arbitration_id == cia402.RPDO1_BASE + 1]
+        assert len(targets) >= 3 and len(set(targets)) == len(targets), targets
+
+
+class _SilentBus:
+    """A bus on which nothing answers, with its own clock: each receive waits exactly its
+    timeout (s) of that clock."""
+
+    def __init__(self) -> None:
+        self.now_s = 100.0
+        self.sent: list[bytes] = []
+        self.waits_s: list[float] = []
+
+    def monotonic(self) -> float:
+        return self.now_s
+
+    def recv(self, timeout: float) -> None:
+        self.waits_s.append(timeout)
+        self.now_s += timeout
+
+    def send(self, message: can.Message) -> None:
+        self.sent.append(bytes(message.data))
+
+
+@pytest.mark.parametrize(("deadline_s", "requests"), [(0.2, 1), (0.6, 3), (0.5, 2)])
+def test_an_sdo_exchange_waits_no_longer_than_its_deadline(monkeypatch, deadline_s: float,
+                                                           requests: int) -> None:
+    """With nothing answering, the exchange waits until its deadline exactly, never beyond
+    it (not until a resend due later), sending the request again every SDO_RESEND_S (0.25 s)
+    before it."""
+    bus = _SilentBus()
+    monkeypatch.setattr(can_driver, "time", bus)  # the driver's clock is the bus's
+    driver = CanHandleDriver(master_settings(load_config()).can,
+                             {"interface": "virtual", "channel": "unused"},
+                             deadline_s / 200, 0.00054)  # enable_timeout_cycles = 200
+    driver._bus = bus
+    dictionary = can_driver.load_drive_dictionary("", 1)
+    start = bus.now_s
+    with pytest.raises(HardwareError, match=r"^x: no SDO reply from node 1 for 0x1017:00"):
+        driver._sdo_exchange(1, cia402.sdo_upload_request(dictionary[0x1017]),
+                             dictionary[0x1017], "x")
+    assert bus.now_s - start == pytest.approx(deadline_s, abs=1e-9)
+    assert len(bus.sent) == requests and driver.sdo_resends == requests - 1
+
+
+def test_a_frame_of_an_unknown_id_in_the_cycle_is_ignored() -> None:
+    """A stranger's frame (any id the driver does not know, TPDO-sized) while the driver
+    collects its cycle is neither a sample nor a fault: the drive whose TPDO is missing
+    stays missing."""
+    with _inactive() as hardware:
+        hardware.configure()
+        hardware.read()
+        for frame_id in (0x123, 0x183, cia402.TPDO1_BASE + 5):
+            reading = _read_with_tpdo_id(hardware, 0, frame_id, struct.pack("<Hi", 0x0237, 77))
+            assert reading.faults == ("missing TPDO1 from the x drive (node 1)",)
+            assert np.isnan(reading.position_m[0]) and np.isfinite(reading.position_m[1])
+
+
+@pytest.mark.parametrize("fd", [False, True])
+def test_the_can_backend_opens_the_configured_bus(fd: bool) -> None:
+    """``haptic-master --rig can``: the bus named by ``[master.can]`` (interface, channel,
+    bit rate; on CAN FD also ``fd`` and the data bit rate), the configured PDO timeout and Ts,
+    and the bus-load line announced."""
+    config = override(load_config(), "master.can.interface", "virtual")
+    config = override(config, "master.can.channel", "rig0")
+    config = override(config, "master.can.fd", fd)
+    driver = create_hardware("can", config)
+    settings = master_settings(config).can
+    expected = {"interface": "virtual", "channel": "rig0", "bitrate": settings.bitrate}
+    if fd:
+        expected.update(fd=True, data_bitrate=settings.data_bitrate)
+    assert driver.bus_options == expected
+    assert driver.pdo_timeout_s == settings.pdo_timeout_s
+    assert driver.sample_period_s == config["model"]["sample_period_s"]
+    assert driver.announce_bus_load is True
