@@ -33,14 +33,8 @@ HEARTBEAT_BASE = 0x700  # CiA 301's NMT error control COB-ID base, not the drive
 
 
 def _active(**overrides) -> SimulatedRigHardware:
-    config = load_config()
-    config = override(config, "master.sim.operator", "constant:fx=0,fy=0")
-    config = override(config, "master.sim.channel", f"test-{uuid.uuid4().hex}")
-    config = override(config, "master.can.heartbeat_timeout_s", 5.0)  # unpaced steps
-    for key, value in overrides.items():
-        config = override(config, key, value)
-    hardware = create_hardware("sim-inproc", config)
-    assert isinstance(hardware, SimulatedRigHardware)
+    """:func:`_inactive`'s rig, its operator's hand still, configured and active."""
+    hardware = _inactive(**{"master.sim.operator": "constant:fx=0,fy=0", **overrides})
     hardware.configure()
     hardware.activate()
     return hardware
@@ -164,6 +158,8 @@ def test_the_sync_counter_runs_1_to_overflow_and_wraps() -> None:
 
 
 def _inactive(**overrides) -> SimulatedRigHardware:
+    """The in-process emulated rig on a channel of its own, ``overrides`` (dotted key ->
+    value) applied, not configured yet."""
     config = override(load_config(), "master.sim.channel", f"test-{uuid.uuid4().hex}")
     config = override(config, "master.can.heartbeat_timeout_s", 5.0)  # unpaced steps
     for key, value in overrides.items():
