@@ -351,14 +351,16 @@ def _run_linked_master(
 
                 def stop_safely() -> None:
                     # Safe state: hold where the handle is, no reflected force, then tell the
-                    # slave (one message with SAFE_STATE) before the link closes.
+                    # slave (one message with SAFE_STATE | STOPPING: it stops its tool at once
+                    # and counts no trip) before the link closes.
                     try:
                         final = hardware.read()
                         hold = np.nan_to_num(final.position_m)
                         hardware.present_tool_force(np.zeros(2))
                         hardware.write(hold)
                         link.send_handle((0.0, 0.0), (float(hold[0]), float(hold[1])),
-                                         Flags.SAFE_STATE | tick_stages.switched_flags()[0],
+                                         Flags.SAFE_STATE | Flags.STOPPING
+                                         | tick_stages.switched_flags()[0],
                                          gain_k_now(), force_scale=0.0)
                     except Exception as error:  # noqa: BLE001 - shutting down regardless
                         print(f"haptic-master: while stopping: {error}", file=sys.stderr)

@@ -27,8 +27,9 @@ from haptic.common.wire.messages import Flags
 wp.config.log_level = wp.LOG_WARNING
 
 DEVICE = "cpu"
-#: The flag bits that decide a quiet lane, and the value they must have.
-QUIET_MASK = int(Flags.FORCES_ENABLED) | int(Flags.WORK_AREA_STOP)
+#: The flag bits that decide a quiet lane, and the value they must have (a slave's last
+#: message, ``STOPPING``, goes through the supervisor).
+QUIET_MASK = int(Flags.FORCES_ENABLED) | int(Flags.WORK_AREA_STOP) | int(Flags.STOPPING)
 QUIET_VALUE = int(Flags.FORCES_ENABLED)
 
 

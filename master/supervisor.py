@@ -130,7 +130,9 @@ class MasterSupervisor:
             self.tool = message
         handle_x_m, handle_y_m = (float(v) for v in handle_position_m)
         synced = self.in_sync(handle_x_m, handle_y_m)
-        state = self.watchdog.update(now_s, message is not None, silence_s, synced, peer_alive)
+        stopping = message is not None and bool(int(message.flags) & _STOPPING)
+        state = self.watchdog.update(now_s, message is not None and not stopping, silence_s,
+                                     synced, peer_alive, stopping)
         input_fault = guard is not None and guard.faulted
         if self._await_sync and not input_fault and synced:
             self._await_sync = False
@@ -139,7 +141,9 @@ class MasterSupervisor:
         work_area_stop = bool(flags & _WORK_AREA_STOP)
         # the slave stopped its tool while this side applies forces (its watchdog, an input
         # fault): FORCES_ENABLED gone from its messages
-        slave_stopped = tool is not None and self.enabled and not flags & _FORCES_ENABLED
+        # (its last message is the watchdog's: an orderly end, not a stop to wait out)
+        slave_stopped = (tool is not None and self.enabled and not flags & _FORCES_ENABLED
+                         and not stopping)
         peer_stop = work_area_stop or slave_stopped
         if peer_stop and not self._await_peer:
             self._await_peer = True
@@ -199,7 +203,7 @@ class MasterSupervisor:
             return "tool input fault: waiting for the tool at the handle"
         if self._await_peer:
             return f"{self._peer_reason}: waiting for it at the handle"
-        return f"watchdog {self.watchdog.state.value}"
+        return self.watchdog.state_text()
 
     @property
     def trips(self) -> int:
@@ -213,6 +217,7 @@ class MasterSupervisor:
 
 _WORK_AREA_STOP = int(Flags.WORK_AREA_STOP)
 _FORCES_ENABLED = int(Flags.FORCES_ENABLED)
+_STOPPING = int(Flags.STOPPING)
 _WORK_AREA_REASON = "the slave's work-area guard stopped the tool"
 _SLAVE_STOPPED_REASON = ("the slave stopped its tool (its forces are off: its watchdog or an "
                          "input fault)")

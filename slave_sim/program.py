@@ -318,11 +318,12 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             stages.record(now_ns, (poll_ns, supervise_ns, node_ns, send_ns, clock()))
 
         def stop_safely() -> None:
-            # Safe state: the tool stops; one message with SAFE_STATE before the link closes.
+            # Safe state: the tool stops; one message with SAFE_STATE | STOPPING before the
+            # link closes (the master holds its handle at once and counts no trip)
             node.safe_stop(state)
             position = state.tool_position_m()[0]
             link.send_tool((0.0, 0.0), (float(position[0]), float(position[1])), (0.0, 0.0),
-                           0.0, flags_box["removed"], Flags.SAFE_STATE)
+                           0.0, flags_box["removed"], Flags.SAFE_STATE | Flags.STOPPING)
 
         run = harness.run(step, lambda: harness.status_line(
             watchdog, f"ft {flags_box['ft'][0]:+.2f} N  engagement "

@@ -60,6 +60,7 @@ class GuardLimits:
     jitter_allowance_ns: wp.int64
     lead_rise_divisor: wp.int64  # send_clock.LEAD_RISE_DIVISOR
     forces_enabled_bit: wp.int64  # Flags.FORCES_ENABLED
+    stopping_bit: wp.int64  # Flags.STOPPING: the master's last message is never quiet
 
 
 @wp.func
@@ -135,7 +136,8 @@ def quiet_kernel(
                  and plain_axis(force[lane, 1], position[lane, 1], handle_force[lane, 1], step,
                                 limits.position_min_y_m, limits.position_max_y_m, limits)
                  and not (wp.max(jump_x, jump_y) > allowed_m))
-    enabled = (flags[lane] & limits.forces_enabled_bit) != wp.int64(0)
+    enabled = ((flags[lane] & limits.forces_enabled_bit) != wp.int64(0)
+               and (flags[lane] & limits.stopping_bit) == wp.int64(0))
     # the supervisor changes nothing (SlaveSupervisor.update returns NONE)
     x = tool[lane, 0]
     y = tool[lane, 2]
@@ -182,6 +184,7 @@ def guard_limits(settings: InputGuardSettings, period_s: float) -> Any:
     limits.jitter_allowance_ns = settings.jitter_allowance_ns
     limits.lead_rise_divisor = LEAD_RISE_DIVISOR
     limits.forces_enabled_bit = int(Flags.FORCES_ENABLED)
+    limits.stopping_bit = int(Flags.STOPPING)
     return limits
 
 

@@ -28,6 +28,7 @@ from haptic.common.runtime.watchdog import PeerWatchdog, WatchdogState
 from haptic.common.wire.messages import Flags, HandleState
 
 _FORCES_ENABLED = int(Flags.FORCES_ENABLED)  # int arithmetic: IntFlag's costs about 1 us
+_STOPPING = int(Flags.STOPPING)
 
 
 class Transition(enum.Enum):
@@ -68,6 +69,8 @@ class SlaveSupervisor:
         #: only once in sync (it moves through the clay at a bounded speed)
         self.rejoining = False
         self.input_fault = False
+        #: the message :meth:`receive` took is the master's last (``Flags.STOPPING``)
+        self.peer_stopping = False
         self.grid_m = None if grid_m is None else tuple(float(v) for v in grid_m)
         self.events: list[dict[str, Any]] = []
 
@@ -82,9 +85,12 @@ class SlaveSupervisor:
     def receive(self, message: HandleState | None) -> bool:
         """Take the tick's fresh message (or ``None``); returns whether the tool should be
         re-placed at the handle now (it is not running and not stopped by the guard)."""
+        self.peer_stopping = False
         if message is not None:
+            flags = int(message.flags)
             self.handle_position_m = tuple(message.handle_position_m)  # type: ignore[assignment]
-            self.master_enabled = bool(int(message.flags) & _FORCES_ENABLED)
+            self.master_enabled = bool(flags & _FORCES_ENABLED)
+            self.peer_stopping = bool(flags & _STOPPING)
         return message is not None and not self.running and not self.outside
 
     def steady(self) -> bool:
@@ -112,7 +118,10 @@ class SlaveSupervisor:
         self.input_fault = input_fault
         tool_x_m, tool_y_m = tool_position_m
         synced = self.in_sync(tool_x_m, tool_y_m)
-        state = self.watchdog.update(now_s, fresh, silence_s, synced, peer_alive)
+        stopping = self.peer_stopping
+        self.peer_stopping = False
+        state = self.watchdog.update(now_s, fresh and not stopping, silence_s, synced,
+                                     peer_alive, stopping)
         watchdog_ok = state is WatchdogState.OK
         # the master holds its handle while the tool is stopped (Flags.WORK_AREA_STOP): with
         # a grid the stop lasts until the handle is back over it, not merely while the master
@@ -153,7 +162,7 @@ class SlaveSupervisor:
         elif self.running and not running:
             transition = Transition.STOP
             if not (self.outside or self.rejoining):
-                reason = (f"watchdog {state.value}" if not watchdog_ok
+                reason = (self.watchdog.state_text() if not watchdog_ok
                           else "input fault" if input_fault
                           else "the master is in its safe state")
                 self.events.append({"time_s": now_s, "kind": "tool_stopped",
@@ -171,7 +180,7 @@ class SlaveSupervisor:
             return "input fault"
         state = self.watchdog.state
         if state is not WatchdogState.OK:
-            return f"watchdog {state.value}"
+            return self.watchdog.state_text()
         return "the master's forces are off"
 
     @property

@@ -10,7 +10,9 @@ lease; :class:`PeerWatchdog` also watches the stream itself. States:
 ``tripped``
     no fresh message for longer than ``max_age_s`` (or the peer's liveliness token went away):
     the node goes to its safe state (master: hold the handle, no reflected force; slave: stop
-    the tool). One ``trip`` event, ``trips`` += 1.
+    the tool). One ``trip`` event, ``trips`` += 1. The same safe state, with a
+    ``peer_ended`` event and ``peer_ends`` += 1 instead, when the peer's last message says
+    it ends its run (``Flags.STOPPING``): an orderly end is not a fault.
 ``resyncing``
     the peer is back: fresh messages are counted, ``resync_messages`` of them in a row (none
     further apart than ``max_age_s``) are needed, and then the node must report its positions
@@ -62,6 +64,10 @@ class PeerWatchdog:
         self.resync_messages = resync_messages
         self.state = WatchdogState.WAITING
         self.trips = 0
+        #: orderly ends of the peer's run (its last message had ``Flags.STOPPING``)
+        self.peer_ends = 0
+        #: in ``tripped`` because the peer ended its run (until it returns)
+        self.peer_ended = False
         self.fresh_in_row = 0
         self.events: list[WatchdogEvent] = []
 
@@ -74,6 +80,13 @@ class PeerWatchdog:
     def safe_state(self) -> bool:
         return self.state is not WatchdogState.OK
 
+    def state_text(self) -> str:
+        """Why forces are off or on, for stop reasons: ``watchdog <state>``, or that the
+        peer ended its run."""
+        if self.peer_ended:
+            return "the peer ended its run"
+        return f"watchdog {self.state.value}"
+
     def _event(self, now_s: float, kind: str, reason: str) -> None:
         self.events.append(WatchdogEvent(now_s, kind, reason))
 
@@ -84,11 +97,23 @@ class PeerWatchdog:
         silence_s: float,
         in_sync: bool = True,
         peer_alive: bool = True,
+        peer_stopping: bool = False,
     ) -> WatchdogState:
         """One tick: ``fresh`` says a new peer message was delivered this tick, ``silence_s``
-        is the time since the last one (s), ``in_sync`` the node's position check, and
-        ``peer_alive`` the peer's liveliness. Returns the new state."""
+        is the time since the last one (s), ``in_sync`` the node's position check,
+        ``peer_alive`` the peer's liveliness and ``peer_stopping`` that the delivered message
+        is the peer's last (``Flags.STOPPING``: it is not counted as fresh). Returns the new
+        state."""
         state = self.state
+        if peer_stopping:
+            if state is not WatchdogState.TRIPPED:  # the safe state, until the peer returns
+                self.state = WatchdogState.TRIPPED
+                self.peer_ends += 1
+                self.peer_ended = True
+                self.fresh_in_row = 0
+                self._event(now_s, "peer_ended", "the peer ended its run (its last message "
+                            "said so): safe state until it returns")
+            return self.state
         silent = silence_s > self.max_age_s
         if state is WatchdogState.OK:
             if silent or not peer_alive:
@@ -105,6 +130,7 @@ class PeerWatchdog:
         if state is WatchdogState.TRIPPED:
             if fresh and peer_alive:
                 self.state = WatchdogState.RESYNCING
+                self.peer_ended = False
                 self.fresh_in_row = 1
                 self._event(now_s, "peer_returned", "fresh message after a trip; resyncing")
             return self.state

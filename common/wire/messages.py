@@ -98,6 +98,12 @@ class Flags(enum.IntFlag):
     (master/margin_governor.py), the slave while it follows the master's flag. Unlike
     :attr:`TDPA` it is not a start-up mismatch: a ``paper`` slave switches its layer on and
     off with the master's flag (slave_sim/tick.py)."""
+    STOPPING = 64
+    """The sender ends its run: this is its last message, sent from its safe state before its
+    link closes. The receiver's watchdog goes to its safe state at once and records a
+    ``peer_ended`` event instead of a trip (common/runtime/watchdog.py), so an orderly end is
+    not counted as a fault. A receiver that does not know the bit ignores it (the peer's
+    liveliness token then trips its watchdog as before); the schema version is unchanged."""
 
 
 #: Every combination of the flags by its int value (building an IntFlag from an int costs

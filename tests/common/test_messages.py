@@ -225,7 +225,7 @@ def test_the_flag_bits_are_the_wire_format() -> None:
     another build reads WORK_AREA_STOP without also reading SAFE_STATE, and the other way."""
     assert {flag.name: flag.value for flag in Flags} == {
         "SAFE_STATE": 1, "FORCES_ENABLED": 2, "IN_CONTACT": 4, "TDPA": 8,
-        "WORK_AREA_STOP": 16, "TDPA_SWITCHED": 32}
+        "WORK_AREA_STOP": 16, "TDPA_SWITCHED": 32, "STOPPING": 64}
     switched = decode(encode(HandleState(1, 1, 1, Flags.TDPA_SWITCHED, (0.0, 0.0), (0.0, 0.0))),
                       KIND_HANDLE)
     assert Flags.TDPA_SWITCHED in switched.flags and Flags.TDPA not in switched.flags
@@ -233,3 +233,13 @@ def test_the_flag_bits_are_the_wire_format() -> None:
     stopped = decode(encode(ToolState(1, 1, 1, Flags.WORK_AREA_STOP, (0.0, 0.0), (0.0, 0.0),
                                       (0.0, 0.0), 0.0, 0.0)), KIND_TOOL)
     assert not stopped.safe_state and Flags.WORK_AREA_STOP in stopped.flags
+
+
+def test_a_last_message_says_the_sender_stops() -> None:
+    """STOPPING travels in both message kinds next to SAFE_STATE and reads back alone."""
+    goodbye = Flags.SAFE_STATE | Flags.STOPPING
+    handle = decode(encode(HandleState(1, 1, 1, goodbye, (0.0, 0.0), (0.0, 0.0))), KIND_HANDLE)
+    tool = decode(encode(ToolState(1, 1, 1, goodbye, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0,
+                                   0.0)), KIND_TOOL)
+    assert handle.flags == tool.flags == goodbye
+    assert handle.safe_state and not handle.forces_enabled

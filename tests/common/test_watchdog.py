@@ -209,3 +209,46 @@ def test_events_are_immutable_records():
     wd.update(0.0, True, 0.0)
     with pytest.raises(dataclasses.FrozenInstanceError):
         wd.events[0].kind = "trip"
+
+
+def test_the_peers_last_message_is_a_safe_state_but_not_a_trip():
+    """An orderly end (the peer's message with Flags.STOPPING): safe state at once, one
+    ``peer_ended`` event, no trip; its liveliness then going away adds nothing, and a new
+    run of the peer resyncs as after a trip."""
+    wd = PeerWatchdog(AGE, resync_messages=3)
+    t = feed(wd, 3, 0.0)
+    assert wd.forces_enabled
+    assert wd.update(t, True, 0.0, peer_stopping=True) is WatchdogState.TRIPPED
+    assert wd.safe_state and wd.trips == 0 and wd.peer_ends == 1
+    assert wd.events[-1].kind == "peer_ended" and "ended its run" in wd.events[-1].reason
+    wd.update(t + 0.001, False, 0.001, peer_alive=False)
+    wd.update(t + 0.1, False, 0.1, peer_alive=False)
+    assert wd.trips == 0 and wd.peer_ends == 1 and len(wd.events) == 2
+    assert wd.peer_ended and wd.state_text() == "the peer ended its run"
+    wd.update(t + 0.2, True, 0.0, peer_stopping=True)  # a second goodbye changes nothing
+    assert wd.peer_ends == 1 and len(wd.events) == 2
+    wd.update(t + 0.3, True, 0.0)
+    assert wd.state is WatchdogState.RESYNCING and wd.events[-1].kind == "peer_returned"
+    assert not wd.peer_ended and wd.state_text() == "watchdog resyncing"
+    feed(wd, 2, t + 0.301)
+    assert wd.forces_enabled and wd.trips == 0
+
+
+@pytest.mark.parametrize("fed", [0, 1])
+def test_a_peer_stopping_before_the_forces_came_on_restarts_the_count(fed):
+    """Waiting or resyncing: the goodbye is no fresh message, the count starts again and the
+    return is counted from its first message."""
+    wd = PeerWatchdog(AGE, resync_messages=3)
+    t = feed(wd, fed, 0.0)
+    wd.update(t, True, 0.0, peer_stopping=True)
+    assert wd.state is WatchdogState.TRIPPED and wd.fresh_in_row == 0
+    assert wd.trips == 0 and wd.peer_ends == 1
+    t = feed(wd, 3, t + 0.001)
+    assert wd.forces_enabled
+
+
+def test_a_trip_is_told_as_the_watchdogs_state():
+    wd = PeerWatchdog(AGE, resync_messages=1)
+    feed(wd, 1, 0.0)
+    wd.update(0.1, False, 0.1)
+    assert not wd.peer_ended and wd.state_text() == "watchdog tripped"

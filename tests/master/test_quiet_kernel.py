@@ -14,7 +14,8 @@ LANES = 40
 MAX_AGE_S = 0.02
 FLAG_CHOICES = np.array([int(Flags.FORCES_ENABLED), int(Flags.SAFE_STATE),
                          int(Flags.FORCES_ENABLED | Flags.WORK_AREA_STOP),
-                         int(Flags.FORCES_ENABLED | Flags.IN_CONTACT)])
+                         int(Flags.FORCES_ENABLED | Flags.IN_CONTACT),
+                         int(Flags.FORCES_ENABLED | Flags.STOPPING)])
 
 
 def _views(rng: np.random.Generator) -> dict[str, np.ndarray]:
@@ -52,7 +53,7 @@ def test_the_kernel_stores_fresh_messages_and_finds_the_loud_lanes() -> None:
         # the definition, in numpy
         newest_flags = np.where(fresh, flags, expected["newest_flags"])
         expected["newest_flags"] = newest_flags
-        mask = int(Flags.FORCES_ENABLED | Flags.WORK_AREA_STOP)
+        mask = int(Flags.FORCES_ENABLED | Flags.WORK_AREA_STOP | Flags.STOPPING)
         is_quiet = (expected["steady"] & ~(silence > MAX_AGE_S)
                     & ((newest_flags & mask) == int(Flags.FORCES_ENABLED)))
         expected["newest_rows"][fresh] = rows[fresh]

@@ -354,3 +354,25 @@ def test_steady_is_forces_on_with_nothing_latched_awaited_or_guarded() -> None:
         supervisor = steady_supervisor()
         supervisor.watchdog.state = state
         assert supervisor.steady() is (state is WatchdogState.OK), state
+
+
+def test_the_slaves_last_message_holds_the_handle_without_a_trip() -> None:
+    """An orderly end of the slave's run (SAFE_STATE | STOPPING): the handle is held at once
+    and no trip is counted, not even when its liveliness token goes next; a new run of the
+    slave resyncs as after a trip."""
+    supervisor = make()
+    run_in_sync(supervisor, RESYNC)
+    handle = (0.01, 0.02)
+    goodbye = ToolState(1, RESYNC, 0, Flags.SAFE_STATE | Flags.STOPPING, (0.0, 0.0),
+                        (RATIO[0] * handle[0], RATIO[1] * handle[1]), (0.0, 0.0), 0.0, 0.0)
+    assert supervisor.update(RESYNC * PERIOD_S, goodbye, handle) is Transition.HOLD
+    assert supervisor.update((RESYNC + 1) * PERIOD_S, None, handle, peer_alive=False) \
+        is Transition.NONE
+    assert supervisor.trips == 0 and supervisor.watchdog.peer_ends == 1
+    assert supervisor.watchdog.state is WatchdogState.TRIPPED
+    assert supervisor.watchdog.events[-1].kind == "peer_ended"
+    assert supervisor.peer_stops == 0 and not supervisor.peer_held  # no stop to wait out
+    assert supervisor.stop_reason() == "the peer ended its run"
+    assert not supervisor.steady()
+    transitions = run_in_sync(supervisor, RESYNC, start=RESYNC + 2)
+    assert transitions[-1] is Transition.RESUME and supervisor.trips == 0

@@ -152,10 +152,10 @@ def test_a_message_is_taken_exactly_when_the_guard_takes_it_unchanged() -> None:
 
 
 def test_the_supervisor_conditions_make_a_lane_loud() -> None:
-    """Not steady, silent, without FORCES_ENABLED, the tool outside its work area: each
-    sends the lane to its supervisor; a lane with no message and nothing to change stays
-    quiet and takes nothing."""
-    lanes = 9
+    """Not steady, silent, without FORCES_ENABLED or with STOPPING (the master's last
+    message), the tool outside its work area: each sends the lane to its supervisor; a lane
+    with no message and nothing to change stays quiet and takes nothing."""
+    lanes = 10
     case = _cases(np.random.default_rng(1), lanes)
     case["force"][:] = case["last_force"]
     case["position"][:] = case["last_position"]
@@ -169,6 +169,7 @@ def test_the_supervisor_conditions_make_a_lane_loud() -> None:
     silence[2] = 0.06
     flags = np.full(lanes, ENABLED, np.int64)
     flags[4] = int(Flags.SAFE_STATE)
+    flags[9] = ENABLED | int(Flags.STOPPING)
     fresh = np.ones(lanes, bool)
     fresh[5] = False
     views["tool"][6, 0] = 0.11  # x beyond the work area, then below it
@@ -177,6 +178,6 @@ def test_the_supervisor_conditions_make_a_lane_loud() -> None:
     fed = quiet.run(NOW_NS, fresh, case["force"], case["position"], flags,
                     case["epoch"].astype(np.int64), case["send"].astype(np.int64),
                     np.ones(lanes), silence)
-    assert fed == [1, 2, 3, 4, 6, 7, 8]
-    assert views["admitted"].tolist() == [True] + [False] * 8
-    assert views["unseen"].tolist() == [1] + [0] * 8
+    assert fed == [1, 2, 3, 4, 6, 7, 8, 9]
+    assert views["admitted"].tolist() == [True] + [False] * 9
+    assert views["unseen"].tolist() == [1] + [0] * 9

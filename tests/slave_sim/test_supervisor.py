@@ -219,3 +219,28 @@ def test_steady_is_running_with_nothing_stopped_rejoining_or_faulted() -> None:
         supervisor = steady_supervisor()
         supervisor.watchdog.state = state
         assert supervisor.steady() is (state is WatchdogState.OK), state
+
+
+def test_the_masters_last_message_stops_the_tool_without_a_trip() -> None:
+    """An orderly end of the master's run (SAFE_STATE | STOPPING): the tool stops at once
+    with the watchdog's safe state, no trip is counted when the master's liveliness token
+    goes next, and a new run of the master resyncs as after a trip."""
+    supervisor = make()
+    start(supervisor)
+    goodbye = HandleState(1, 10, 0, Flags.SAFE_STATE | Flags.STOPPING, (0.0, 0.0), (0.05, 0.0))
+    supervisor.receive(goodbye)
+    assert supervisor.peer_stopping
+    assert supervisor.update(0.1, True, (0.05, 0.0)) is Transition.STOP
+    assert not supervisor.peer_stopping  # taken once
+    assert not supervisor.running and not supervisor.ready
+    assert supervisor.watchdog.state is WatchdogState.TRIPPED
+    assert supervisor.events[-1]["reason"] == "the peer ended its run: the tool stops"
+    assert supervisor.stop_reason() == "the peer ended its run"
+    supervisor.receive(None)
+    supervisor.update(0.101, False, (0.05, 0.0), silence_s=0.001, peer_alive=False)
+    assert supervisor.trips == 0 and supervisor.watchdog.peer_ends == 1
+    assert [e.kind for e in supervisor.watchdog.events][-1] == "peer_ended"
+    for i in range(RESYNC):
+        supervisor.receive(handle(0.05, seq=i))
+        transition = supervisor.update(0.2 + i * PERIOD_S, True, (0.05, 0.0))
+    assert transition is Transition.RESUME and supervisor.trips == 0
