@@ -131,8 +131,8 @@ class MasterSupervisor:
         handle_x_m, handle_y_m = (float(v) for v in handle_position_m)
         synced = self.in_sync(handle_x_m, handle_y_m)
         stopping = message is not None and bool(int(message.flags) & _STOPPING)
-        state = self.watchdog.update(now_s, message is not None and not stopping, silence_s,
-                                     synced, peer_alive, stopping)
+        state = self.watchdog.update(now_s, message is not None, silence_s, synced, peer_alive,
+                                     stopping)
         input_fault = guard is not None and guard.faulted
         if self._await_sync and not input_fault and synced:
             self._await_sync = False

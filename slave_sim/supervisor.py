@@ -120,8 +120,7 @@ class SlaveSupervisor:
         synced = self.in_sync(tool_x_m, tool_y_m)
         stopping = self.peer_stopping
         self.peer_stopping = False
-        state = self.watchdog.update(now_s, fresh and not stopping, silence_s, synced,
-                                     peer_alive, stopping)
+        state = self.watchdog.update(now_s, fresh, silence_s, synced, peer_alive, stopping)
         watchdog_ok = state is WatchdogState.OK
         # the master holds its handle while the tool is stopped (Flags.WORK_AREA_STOP): with
         # a grid the stop lasts until the handle is back over it, not merely while the master

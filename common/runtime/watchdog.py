@@ -102,8 +102,8 @@ class PeerWatchdog:
         """One tick: ``fresh`` says a new peer message was delivered this tick, ``silence_s``
         is the time since the last one (s), ``in_sync`` the node's position check,
         ``peer_alive`` the peer's liveliness and ``peer_stopping`` that the delivered message
-        is the peer's last (``Flags.STOPPING``: it is not counted as fresh). Returns the new
-        state."""
+        is the peer's last (``Flags.STOPPING``: it is not counted as fresh, whatever ``fresh``
+        says). Returns the new state."""
         state = self.state
         if peer_stopping:
             if state is not WatchdogState.TRIPPED:  # the safe state, until the peer returns

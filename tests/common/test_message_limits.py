@@ -243,9 +243,10 @@ def test_a_force_scale_of_0_to_1_is_accepted() -> None:
 
 
 def test_the_flags_table_holds_exactly_every_combination_of_the_defined_flags() -> None:
-    """FLAGS_BY_VALUE has the keys 0..63 (the six flags' combinations), each its own Flags."""
-    assert list(FLAGS_BY_VALUE) == list(range(64))
+    """FLAGS_BY_VALUE has the keys 0..127 (the seven flags' combinations), each its own
+    Flags."""
+    assert list(FLAGS_BY_VALUE) == list(range(128))
     assert all(type(flags) is Flags and int(flags) == value
                for value, flags in FLAGS_BY_VALUE.items())
-    assert 64 not in FLAGS_BY_VALUE  # a bit no flag defines: the callers' lookup refuses it
-    assert int(decode(_handle(flags=64 | 2), KIND_HANDLE).flags) == 66  # decode still reads it
+    assert 128 not in FLAGS_BY_VALUE  # a bit no flag defines: the callers' lookup refuses it
+    assert int(decode(_handle(flags=128 | 2), KIND_HANDLE).flags) == 130  # decode reads it

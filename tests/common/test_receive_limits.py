@@ -267,3 +267,17 @@ def test_what_waits_when_the_peer_restarts_is_counted_as_dropped() -> None:
     assert stats.received == 4 and p.pending == 1
     p.pin_epoch(3)  # an authenticated re-pairing drops what waits, too
     assert p.stats().dropped["peer_restart"] == 4 and p.pending == 0
+
+
+@pytest.mark.parametrize("stale_ns", [130_000, 2_070_000])
+def test_stale_after_is_the_nearest_ns_not_one_short(stale_ns) -> None:
+    """Limits whose seconds are no exact binary fraction (0.00013 s * 1e9 is 129999.99...):
+    a message exactly ``stale_after_s`` old, or sent exactly that far ahead, is taken."""
+    p = path(stale_ns / 1e9)
+    p.accept(handle(0, T0), T0 + stale_ns)
+    assert p.release(T0 + stale_ns) is not None
+    p.accept(handle(1, T0 + MS + stale_ns), T0 + MS)
+    p.accept(handle(2, T0 + 2 * MS), T0 + 2 * MS + stale_ns + 1)
+    stats = p.stats()
+    assert stats.dropped["implausible"] == 0 and stats.dropped["stale"] == 1
+    assert p.release(T0 + 2 * MS).seq == 1

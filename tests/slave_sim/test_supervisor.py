@@ -244,3 +244,13 @@ def test_the_masters_last_message_stops_the_tool_without_a_trip() -> None:
         supervisor.receive(handle(0.05, seq=i))
         transition = supervisor.update(0.2 + i * PERIOD_S, True, (0.05, 0.0))
     assert transition is Transition.RESUME and supervisor.trips == 0
+
+
+def test_a_tick_without_a_message_is_no_goodbye() -> None:
+    """receive(None) clears what the last message said: the tool runs on and nothing ends."""
+    supervisor = make()
+    start(supervisor)
+    supervisor.receive(None)
+    assert not supervisor.peer_stopping
+    assert supervisor.update(0.01, False, (0.05, 0.0), silence_s=0.001) is Transition.NONE
+    assert supervisor.running and supervisor.watchdog.peer_ends == 0
