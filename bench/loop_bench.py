@@ -285,8 +285,8 @@ def cpu_layout_args(layout: str, cpus: list[int] | None = None) -> list[str]:
     use (``cpus``; default: its affinity).
 
     ``partitioned`` (the default for the programs with 2 CPUs or more, as on a rig PC): both
-    loops on the last CPU in SCHED_FIFO, kept apart in time by the slave's phase lock, with a
-    20 us spin; every other thread (Zenoh's, the display's) on the other CPUs. ``free``: the
+    loops on the last CPU in SCHED_FIFO, kept apart in time by the slave's phase lock (its
+    margin: :func:`slave_layout_args`), with a 20 us spin; every other thread (Zenoh's, the display's) on the other CPUs. ``free``: the
     loops in SCHED_FIFO on any CPU with the default spin, everything else where the kernel
     puts it.
     """
@@ -300,6 +300,23 @@ def cpu_layout_args(layout: str, cpus: list[int] | None = None) -> list[str]:
         return common
     others = ",".join(str(cpu) for cpu in cpus[:-1])
     return [*common, "--loop-cpus", str(cpus[-1]), "--other-cpus", others, "--spin-s", "0.00002"]
+
+
+#: The slave program's phase margin in the partitioned layout, s: its spin starts this long
+#: after the master's message arrives (the lag is the 20 us spin plus this). Both loops share
+#: one CPU there, so the slave's tick must come after the master's work behind its send (its
+#: telemetry, p99 about 30 us): with the shipped 30 us, a master still running at the slave's
+#: deadline made the slave's period error p99 57-81 us; with 60 us, 34-48 us (2026-12-05,
+#: 2-core Intel Xeon VM, interleaved runs). It costs the slave's age at use 30 us.
+PARTITIONED_SLAVE_MARGIN_S = 0.00006
+
+
+def slave_layout_args(layout: str, cpus: list[int] | None = None) -> list[str]:
+    """The slave program's own options of a CPU layout (its phase lock's margin where both
+    loops share a CPU); nothing for the free layout or a single CPU."""
+    if "--loop-cpus" not in cpu_layout_args(layout, cpus):
+        return []
+    return ["--phase-margin", repr(PARTITIONED_SLAVE_MARGIN_S)]
 
 
 def run_pair(
@@ -417,10 +434,12 @@ def benchmark(
     with cpu_latency_request(cpu_latency_limit_us) as (held_us, latency_warning):
         before = raw_ping_pong()
         paced_before = raw_ping_pong(PACED_ROUND_TRIPS, 50, period_s=ts_s)
+        # the phase margin is the slave program's own option (not the echo node's)
+        slave_args = [] if slave_cmd or echo else slave_layout_args(cpu_layout)
         master, slave = run_pair(
             master_cmd or default_command("master", echo, rig),
-            slave_cmd or default_command("slave", echo), duration_s, extra_args,
-            cpu_layout=cpu_layout,
+            [*(slave_cmd or default_command("slave", echo)), *slave_args], duration_s,
+            extra_args, cpu_layout=cpu_layout,
         )
         raw = summarise_one_way(np.concatenate([before, raw_ping_pong()]))
         paced = summarise_one_way(np.concatenate(
@@ -443,6 +462,7 @@ def benchmark(
         "duration_s": duration_s,
         "cpu_layout": cpu_layout,
         "run_options": cpu_layout_args(cpu_layout) + list(extra_args or []),
+        "slave_run_options": slave_args,
         "nodes": "echo" if echo and not (master_cmd or slave_cmd) else (
             "custom" if master_cmd or slave_cmd else f"programs, rig {rig}"),
         "period_s": ts_s,
@@ -470,7 +490,9 @@ def _us(value: float | None) -> str:
 def print_table(result: dict[str, Any]) -> None:
     print(f"loop benchmark, {result['duration_s']:g} s on loopback, nodes: "
           f"{result.get('nodes', '?')}, CPU layout {result.get('cpu_layout', '?')} "
-          f"({' '.join(result.get('run_options', []))})")
+          f"({' '.join(result.get('run_options', []))}"
+          + (f"; slave {' '.join(result['slave_run_options'])}"
+             if result.get("slave_run_options") else "") + ")")
     held = result.get("cpu_latency_limit_us")
     print(f"  CPU latency request: {'none' if held is None else f'{held} us'}"
           + (f" ({result['cpu_latency_warning']})" if result.get("cpu_latency_warning") else ""))

@@ -25,6 +25,11 @@ def test_json_shape(load_bench, capsys, monkeypatch):
     assert result["raw_zenoh_paced"]["period_s"] == 0.00054
     assert result["link_to_raw_p50_ratio"] > 0
     assert result["cpu_layout"] == "partitioned"
+    # the slave program got the layout's phase margin (its summary says the lag it ran)
+    assert result["slave_run_options"] == bench.slave_layout_args("partitioned")
+    if result["slave_run_options"]:  # two CPUs or more: the 20 us spin plus the margin
+        assert result["phase_lock"]["lag_s"] == pytest.approx(
+            2e-5 + bench.PARTITIONED_SLAVE_MARGIN_S)
     # the programs' default request, held by the bench too (or refused, and said why)
     assert (result["cpu_latency_limit_us"] == 0) != bool(result["cpu_latency_warning"])
     assert result["slave"]["step_p50_s"] > 0
@@ -42,3 +47,7 @@ def test_cpu_layouts(load_bench):
     assert bench.cpu_layout_args("free", list(range(8))) == ["--rt-priority", "40"]
     with pytest.raises(ValueError, match="cpu layout"):
         bench.cpu_layout_args("isolated", [0, 1])
+    # the slave's phase margin where both loops share a CPU, and nowhere else
+    assert bench.slave_layout_args("partitioned", [0, 1]) == ["--phase-margin", "6e-05"]
+    assert bench.slave_layout_args("partitioned", [0]) == []
+    assert bench.slave_layout_args("free", [0, 1]) == []
