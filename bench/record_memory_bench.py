@@ -38,6 +38,13 @@ adopted, pymalloc is faster per object. 5-minute runs with ``MALLOC_MMAP_THRESHO
 ``MALLOC_TRIM_THRESHOLD_`` fixed at 128 kB grew the slave 4 kB/s (worse) and the master as
 without.
 
+A 30-minute recorded run (``--duration 1800``, 2026-12-05, a 2-core Intel Xeon KVM guest,
+nothing else running; 160 MB of MCAP from the master, 174 MB from the slave): the master's
+RSS 334.5 -> 335.6 MB over the fit (0.07 kB/s; 0.20 kB/s in the first half, 0.02 in the
+second, +0 kB over the last 5 minutes), the slave's 343.5 -> 344.7 MB (0.07 kB/s; 0.22, then
+0.0; +0 kB); from 2 minutes on the master grew 88 kB and the slave 152 kB, the slave none
+after 10 minutes. The allocators' retention levels off: memory is flat.
+
 ``--no-record`` runs the same without recording (the reference: what the recording adds).
 
 Usage: ``python bench/record_memory_bench.py [--duration S] [--settle S] [--linear]
