@@ -286,9 +286,9 @@ def cpu_layout_args(layout: str, cpus: list[int] | None = None) -> list[str]:
 
     ``partitioned`` (the default for the programs with 2 CPUs or more, as on a rig PC): both
     loops on the last CPU in SCHED_FIFO, kept apart in time by the slave's phase lock (its
-    margin: :func:`slave_layout_args`), with a 20 us spin; every other thread (Zenoh's, the display's) on the other CPUs. ``free``: the
-    loops in SCHED_FIFO on any CPU with the default spin, everything else where the kernel
-    puts it.
+    margin: :func:`slave_layout_args`), with a 20 us spin; every other thread (Zenoh's, the
+    display's) on the other CPUs. ``free``: the loops in SCHED_FIFO on any CPU with the
+    default spin, everything else where the kernel puts it.
     """
     if layout not in CPU_LAYOUTS:
         raise ValueError(f"cpu layout must be one of {', '.join(CPU_LAYOUTS)} (got {layout!r})")
