@@ -133,6 +133,8 @@ class Link:
         self._subscriber: zenoh.Subscriber | None = None
         self._token: zenoh.LivelinessToken | None = None
         self._presence: zenoh.Subscriber | None = None
+        #: the peer's token going away, held while a capped poll left samples in the ring
+        self._presence_held: zenoh.Sample | None = None
         self.peer_alive = False
         self.presence_events: list[PresenceEvent] = []
         self.last_poll_ns = 0
@@ -345,8 +347,10 @@ class Link:
         """Drain what was received since the last poll (at most ``max_samples_per_poll``
         samples: the rest wait for the next poll; ``capped_polls`` counts polls that reached
         the bound) into the receive path and return the newest message whose delivery time has
-        come (``None`` if none). Also updates ``peer_alive`` from the liveliness subscriber.
-        Never blocks."""
+        come (``None`` if none). Also updates ``peer_alive`` from the liveliness subscriber:
+        its going away waits while received samples are left in the ring (a capped poll), so
+        what the peer sent before it left, its last message included, is taken first (a
+        killed peer's silence trips the watchdog meanwhile). Never blocks."""
         subscriber = self._subscriber
         if subscriber is None:
             raise RuntimeError("link is not open")
@@ -357,6 +361,7 @@ class Link:
         budget = self.config.max_samples_per_poll  # flood bound: the rest wait in the ring
         sample = subscriber.try_recv()
         auth = self.auth
+        capped = False
         while sample is not None:
             payload = sample.payload.to_bytes()
             if receive.rejects_at_once(payload):  # junk costs no stamp, no decode
@@ -371,14 +376,21 @@ class Link:
             budget -= 1
             if budget == 0:
                 self.capped_polls += 1
+                capped = True
                 break
             sample = subscriber.try_recv()
         self._pair(now_ns)
         presence = self._presence
         if presence is not None:
-            change = presence.try_recv()
+            change = self._presence_held
+            self._presence_held = None
+            if change is None:
+                change = presence.try_recv()
             while change is not None:
                 alive = change.kind == zenoh.SampleKind.PUT
+                if not alive and capped and self.peer_alive:
+                    self._presence_held = change  # the samples before it first
+                    break
                 if alive != self.peer_alive:
                     self.peer_alive = alive
                     self.presence_events.append(PresenceEvent(now_ns, alive))

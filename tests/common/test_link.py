@@ -254,3 +254,29 @@ def test_slave_started_before_master_finds_it():
             wait_for_peers(master, slave)  # zenoh retries the slave's connect endpoint
             sent = master.send_handle((0.5, 0.5), (0.0, 0.0))
             assert [m for m, _ in drain(slave, 0.2)] == [sent]
+
+
+def test_the_peers_last_messages_come_before_its_leaving():
+    """A backlog in the ring (polls capped at 8 samples) when the peer leaves: its token's
+    going waits until what it sent before is taken, so its last message (an orderly end's
+    STOPPING) is delivered at the latest with the poll that reports the leaving."""
+    master_cfg, slave_cfg = configs(max_samples_per_poll=8)
+    with Link(master_cfg) as master:
+        with Link(slave_cfg) as slave:
+            wait_for_peers(master, slave)
+            for _ in range(60):
+                slave.send_tool((0.5, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)
+            slave.send_tool((0.0, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0,
+                            Flags.SAFE_STATE | Flags.STOPPING)
+            time.sleep(0.2)  # everything is in the master's ring before the slave leaves
+        time.sleep(0.5)  # and its token's going is too
+        seen = []
+        deadline = time.monotonic() + WAIT_S
+        while master.peer_alive:
+            message = master.poll()
+            if message is not None:
+                seen.append(message.flags)
+            assert time.monotonic() < deadline, "the slave's departure was not seen"
+        assert master.capped_polls >= 7  # 61 samples, 8 a poll
+        assert seen and seen[-1] == Flags.SAFE_STATE | Flags.STOPPING
+        assert [e.alive for e in master.presence_events] == [True, False]

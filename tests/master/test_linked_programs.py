@@ -172,10 +172,13 @@ def test_two_processes_exchange_forces_and_positions(pair, tmp_path) -> None:
         assert summary["zenoh_thread_warnings"] == []
     assert master_summary["side"] == "master" and slave_summary["side"] == "slave"
     # the master's orderly end: its last message said so (Flags.STOPPING), so the slave,
-    # which runs on, stopped its tool at once and counted no trip when the master went
+    # which runs on, stopped its tool at once and counted no trip when the master went (the
+    # token's going waits for a backlog: docs/link.md section 7); only a slave already
+    # tripped by a stall right at the end has no goodbye to see
+    trips = _events(slave_summary, "trip")
+    assert not [e for e in trips if e["reason"] == "peer liveliness token gone"]
     ended = _events(slave_summary, "peer_ended")
-    assert len(ended) == 1
-    assert not [e for e in _events(slave_summary, "trip") if e["time_s"] >= ended[0]["time_s"]]
+    assert len(ended) == 1 or (not ended and trips)
     # each side received most of what the other sent (no loss injected; the slave runs 0.5 s
     # past the master's 3 s, and what either sent before the other listened is lost)
     assert master_summary["link_delivered"] > 0.5 * slave_summary["steps"]
