@@ -384,6 +384,10 @@ def _side_figures(summary: dict[str, Any], ts_s: float) -> dict[str, Any]:
         "scheduling": summary.get("scheduling"),
         "process_cpu_cores": summary.get("process_cpu_cores"),
         "loop_thread_cpu_per_step_s": summary.get("loop_thread_cpu_per_step_s"),
+        # the slave's node steps per tick (slave_sim/pacing.py): caught-up steps make a
+        # tick's node stage two or more steps long
+        "pacing": {key.removeprefix("pacing_"): value for key, value in summary.items()
+                   if key.startswith("pacing_")} or None,
     }
 
 
@@ -512,6 +516,12 @@ def print_table(result: dict[str, Any]) -> None:
             print("         stages p50/p99: " + "  ".join(
                 f"{name} {g['p50_s'] * 1e6:.1f}/{g['p99_s'] * 1e6:.1f}"
                 for name, g in f["stages"].items()) + " us")
+        pacing = f.get("pacing")
+        if pacing and pacing.get("follow_master_samples"):
+            print(f"         node steps: {pacing['waited_ticks']} ticks waited, "
+                  f"{pacing['caught_up_steps']} caught up, most in one tick "
+                  f"{pacing['max_tick_steps']}, largest backlog "
+                  f"{pacing['max_backlog_samples']}")
     lock = result.get("phase_lock")
     if lock and lock.get("used_after_arrival_p50_s") is not None:
         print(f"  slave phase lock: the master's messages used "

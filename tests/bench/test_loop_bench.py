@@ -33,6 +33,18 @@ def test_json_shape(load_bench, capsys, monkeypatch):
     # the programs' default request, held by the bench too (or refused, and said why)
     assert (result["cpu_latency_limit_us"] == 0) != bool(result["cpu_latency_warning"])
     assert result["slave"]["step_p50_s"] > 0
+    # the slave's node steps per tick (slave_sim/pacing.py); the master has no pacing
+    pacing = result["slave"]["pacing"]
+    assert pacing["follow_master_samples"] is True
+    assert {"waited_ticks", "caught_up_steps", "max_tick_steps", "max_backlog_samples"} <= set(
+        pacing)
+    assert pacing["max_tick_steps"] >= 1
+    assert result["master"]["pacing"] is None
+    bench.print_table(result)
+    table = capsys.readouterr().out
+    assert f"node steps: {pacing['waited_ticks']} ticks waited, {pacing['caught_up_steps']} " \
+        "caught up" in table
+    assert table.count("node steps:") == 1
 
 
 def test_cpu_layouts(load_bench):
