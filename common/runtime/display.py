@@ -21,7 +21,17 @@ display rates:
 Nothing is encoded or sent for a key no subscriber matches (each key has a declared Zenoh
 publisher whose matching status costs about 1 us to read): with no viewer the thread only
 reads the loop's counts and, on a recording slave, reduces the clay for the recording; a
-viewer that appears gets the workpiece layout at once.
+viewer that appears gets the workpiece layout at its next wake-up.
+
+The thread wakes only when a publication is due, and an unwatched key is looked at again
+after :data:`UNWATCHED_CHECK_S` instead of at its rate: every wake-up takes the process's GIL
+at a time the loop does not choose, and where the loop hands it over (each Warp launch, a
+ctypes call) the thread keeps it for as long as it runs. On 2 CPUs with both loops under
+SCHED_FIFO a display thread woken in the middle of the slave's tick was preempted by the
+master's loop while it held the slave's GIL: at 4 kHz (Ts = 0.25 ms) the thread's old
+200 wake-ups a second put the slave's node stage at p99 226-233 us and its overruns at
+2.0-2.9 %; waking every 0.1 s they were 87 us and 0.23 % (2026-12-05, a 2-core Intel Xeon
+guest, docs/programs.md).
 
 The thread measures its own cost (:attr:`figures`): publications made and the mean and
 largest time one took, s, and the publications skipped because nobody watched.
@@ -51,6 +61,9 @@ from haptic.common.runtime.summary import json_safe
 DEFAULT_STATE_RATE_HZ = 60.0
 DEFAULT_STATUS_RATE_HZ = 5.0
 DEFAULT_CLAY_RATE_HZ = 10.0
+#: How often a publication nobody watches looks again for a viewer, s (a viewer that
+#: subscribes gets its first frame within this).
+UNWATCHED_CHECK_S = 0.25
 
 
 class _Publication:
@@ -250,9 +263,10 @@ class DisplayPublisher:
         while not self._stop.is_set():
             now = time.monotonic()
             if now >= next_state:
-                next_state = now + self._state_period_s / self.scale
                 state = self._state
                 self.state_watched = state_pub.matching()
+                next_state = now + (self._state_period_s / self.scale if self.state_watched
+                                    else max(self._state_period_s, UNWATCHED_CHECK_S))
                 if state is not None and state is not sent_state:
                     sent_state = state
                     if self._counted(self.state_watched):
@@ -271,6 +285,7 @@ class DisplayPublisher:
                                "link": status, "events": self._events, **loop}
                     status_pub.put(json.dumps(json_safe(payload)).encode())
                     self._account(time.perf_counter() - started)
+            next_wake = min(next_state, next_status)
             if has_clay:
                 watched = publishers["layout"].matching()
                 if watched and (now >= next_layout or not layout_watched):
@@ -280,9 +295,15 @@ class DisplayPublisher:
                     publishers["layout"].put(self._layout_bytes)
                 layout_watched = watched
                 if now >= next_clay:
-                    next_clay = now + self._clay_period_s / self.scale
-                    sequence = self._clay(publishers["clay"], sequence)
-            self._stop.wait(min(0.005, self._state_period_s))
+                    sequence, clay_watched = self._clay(publishers["clay"], sequence)
+                    next_clay = now + (self._clay_period_s / self.scale
+                                       if clay_watched or self._on_clay is not None
+                                       else max(self._clay_period_s, UNWATCHED_CHECK_S))
+                next_wake = min(next_wake, next_clay)
+                if watched:
+                    next_wake = min(next_wake, next_layout)
+            # asleep until the next publication is due (stop() wakes it at once)
+            self._stop.wait(max(next_wake - time.monotonic(), 0.0))
 
     def _counted(self, watched: bool) -> bool:
         """``watched`` (a subscriber matches the key); a skipped publication is counted."""
@@ -290,19 +311,19 @@ class DisplayPublisher:
             self.unwatched_skips += 1
         return watched
 
-    def _clay(self, publication: _Publication, sequence: int) -> int:
+    def _clay(self, publication: _Publication, sequence: int) -> tuple[int, bool]:
         """Reduce the clay map; publish it where watched and hand it to ``on_clay``.
-        Returns the publication's sequence number."""
+        Returns the publication's sequence number and whether a viewer watched."""
         watched = self._counted(publication.matching())
         if not watched and self._on_clay is None:
-            return sequence
+            return sequence, watched
         started = time.perf_counter()
         from haptic.common.records.heightmap_codec import downsample_heights, heights_to_bytes
 
         assert self._clay_source is not None  # has_clay
         heights = self._clay_source()
         if heights is None:
-            return sequence
+            return sequence, watched
         reduced = downsample_heights(heights, self._factors)
         if watched:
             sequence += 1
@@ -311,7 +332,7 @@ class DisplayPublisher:
             self._account(time.perf_counter() - started)
         if self._on_clay is not None:
             self._on_clay(time.time_ns(), reduced)
-        return sequence
+        return sequence, watched
 
     def _loop_scale(self, now_s: float) -> dict[str, Any]:
         """Read the loop's counts and update the back-off's scale; the status's loop keys."""

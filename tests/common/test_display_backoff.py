@@ -245,3 +245,57 @@ def test_nothing_is_encoded_for_keys_nobody_watches_and_a_new_viewer_gets_the_la
     assert keys.count("t/workpiece") >= 1 and session.undeclared == 4
     assert publisher.figures["display_unwatched_skips"] >= 6
 
+
+
+class _CountingSession(_WatchedSession):
+    """A :class:`_WatchedSession` that counts how often its publishers' matching status is
+    read (once per key per wake-up of the display thread that looks at it)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.matching_reads = 0
+
+    def declare_publisher(self, key: str) -> _Publisher:
+        session = self
+
+        class Counting(_Publisher):
+            @property
+            def matching_status(self) -> Any:
+                with session.lock:
+                    session.matching_reads += 1
+                return super().matching_status
+
+        return Counting(self, key)
+
+
+def test_the_display_thread_wakes_only_when_something_is_due() -> None:
+    """Every wake-up of the display thread takes the program's GIL at a time the loop does
+    not choose (module docstring of common/runtime/display.py): with nobody watching it looks
+    at each key every UNWATCHED_CHECK_S or at the status rate, not every 5 ms; watched, at
+    the publications' own rates. Counts over wall time only bound the wake-ups from above,
+    which a slow machine can only lower."""
+    session = _CountingSession()
+    heights = np.zeros((8, 16))
+    publisher = DisplayPublisher(
+        session, "t", "slave", clay_source=lambda: heights,
+        layout={"cells_x": 16, "cells_y": 8}, factors=(1, 1))
+    publisher.follow_loop(lambda: (100, 0), DisplayBackoff())
+    publisher.offer_status({}, [])
+    publisher.offer_state({"tool_force_N": [1.0, 0.0]})
+    with publisher:
+        time.sleep(1.0)
+        unwatched_reads = session.matching_reads
+        # 5 status looks a second (the back-off reads the loop's counts), each looking at
+        # the layout too, and 4 a second at the state and the clay: about 18 in 1 s
+        # (the old 5 ms wait: about 800)
+        assert 4 <= unwatched_reads <= 40
+        assert session.keys() == []
+        session.watched = True
+        _wait_for(lambda: {"t/workpiece", "t/status/slave", "t/clay"} <= set(session.keys()))
+        before = session.matching_reads
+        time.sleep(1.0)
+        watched_reads = session.matching_reads - before
+    # watched: the state at 60 Hz, the clay at 10 Hz, the status at 5 Hz, and the layout
+    # looked at on each of those wake-ups: at most about 150 reads in 1 s
+    assert watched_reads <= 200
+    assert publisher.publications > 0
