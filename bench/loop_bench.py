@@ -288,7 +288,8 @@ def cpu_layout_args(layout: str, cpus: list[int] | None = None) -> list[str]:
     loops on the last CPU in SCHED_FIFO, kept apart in time by the slave's phase lock (its
     margin: :func:`slave_layout_args`), with a 20 us spin; every other thread (Zenoh's, the
     display's) on the other CPUs. ``free``: the loops in SCHED_FIFO on any CPU with the
-    default spin, everything else where the kernel puts it.
+    default spin, Zenoh's threads in SCHED_FIFO below them (:data:`FREE_ZENOH_PRIORITY`),
+    everything else where the kernel puts it.
     """
     if layout not in CPU_LAYOUTS:
         raise ValueError(f"cpu layout must be one of {', '.join(CPU_LAYOUTS)} (got {layout!r})")
@@ -296,11 +297,20 @@ def cpu_layout_args(layout: str, cpus: list[int] | None = None) -> list[str]:
     if cpus is None:
         cpus = (sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
                 else list(range(os.cpu_count() or 1)))
-    if layout == "free" or len(cpus) < 2:
+    if layout == "free":
+        return [*common, "--zenoh-priority", str(FREE_ZENOH_PRIORITY)]
+    if len(cpus) < 2:
         return common
     others = ",".join(str(cpu) for cpu in cpus[:-1])
     return [*common, "--loop-cpus", str(cpus[-1]), "--other-cpus", others, "--spin-s", "0.00002"]
 
+
+#: The free layout's SCHED_FIFO priority of Zenoh's threads, below the loops' 40. Two FIFO loops
+#: that may run on any CPU leave Zenoh's normal threads only their gaps: on 2 CPUs the master's
+#: samples then reached the slave in bunches (at 1852 Hz 519-675 of 14,800 slave ticks waited
+#: for a sample that came late; at 4 kHz half of them), with these 11-36 (2026-12-05, 2-core
+#: Intel Xeon guest; runner.zenoh_thread_priority, docs/link.md section 9).
+FREE_ZENOH_PRIORITY = 30
 
 #: The slave program's phase margin in the partitioned layout, s: its spin starts this long
 #: after the master's message arrives (the lag is the 20 us spin plus this). Both loops share
@@ -577,9 +587,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--echo", action="store_true",
                         help="run the echo nodes (link and runner only) instead of the programs")
     parser.add_argument("--cpu-layout", choices=CPU_LAYOUTS,
-                        help="partitioned (default for the programs): both loops on the last "
-                        "CPU, the other threads on the rest; free (default for --echo and "
-                        "custom commands, which have no phase lock): anywhere")
+                        help="partitioned (default for the programs at the configured period): "
+                        "both loops on the last CPU, the other threads on the rest; free "
+                        "(default for --echo, custom commands, which have no phase lock, and "
+                        "a --period under the configured one, where both ticks do not fit "
+                        "one CPU): anywhere")
     parser.add_argument(
         "--extra", default="", help="extra arguments for both commands (one shell string)"
     )
@@ -615,12 +627,40 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+#: The spin before each tick as a share of the period, where ``--period`` asks for a period
+#: shorter than the configured one: the shipped 0.1 ms (a sleep on these VMs wakes 16-36 us
+#: late, p50) is 40 % of a 0.25 ms period, and two loops spinning that long leave Zenoh's
+#: threads too little of 2 CPUs.
+SHORT_PERIOD_SPIN_SHARE = 0.1
+
+
 def period_config(folder: Path, period_s: float) -> Path:
-    """A configuration file that sets only the sample period, s (every other key keeps its
-    default: a file is merged over the defaults key by key)."""
+    """A configuration file that sets the sample period, s, and for a period under the
+    configured one a spin of :data:`SHORT_PERIOD_SPIN_SHARE` of it (``runner.spin_s``, where
+    that is shorter; a ``--spin-s`` of the layout still wins). Every other key keeps its
+    default: a file is merged over the defaults key by key."""
+    from haptic.common.config import load_config
+
+    defaults = load_config()
+    text = f"[model]\nsample_period_s = {period_s!r}\n"
+    if period_s < defaults["model"]["sample_period_s"]:
+        spin_s = min(defaults["runner"]["spin_s"], SHORT_PERIOD_SPIN_SHARE * period_s)
+        text += f"[runner]\nspin_s = {spin_s!r}\n"
     path = folder / "period.toml"
-    path.write_text(f"[model]\nsample_period_s = {period_s!r}\n")
+    path.write_text(text)
     return path
+
+
+def default_cpu_layout(args: argparse.Namespace, ts_s: float) -> str:
+    """The layout when ``--cpu-layout`` is not given: ``free`` for the echo nodes and custom
+    commands (no phase lock) and for a period under the configured one (at 0.25 ms the two
+    programs' steps, p50 101 and 147 us, do not fit one CPU's period: 16 and 23 % overruns
+    partitioned, 2026-12-05, 2-core Intel Xeon guest); else ``partitioned``."""
+    if args.echo or args.master_cmd or args.slave_cmd:
+        return "free"
+    from haptic.common.config import load_config
+
+    return ("free" if ts_s < load_config()["model"]["sample_period_s"] else "partitioned")
 
 
 def _run(args: argparse.Namespace, extra: list[str], ts_s: float) -> dict[str, Any]:
@@ -632,8 +672,7 @@ def _run(args: argparse.Namespace, extra: list[str], ts_s: float) -> dict[str, A
         ts_s=ts_s,
         echo=args.echo,
         rig=args.rig,
-        cpu_layout=args.cpu_layout or (
-            "free" if args.echo or args.master_cmd or args.slave_cmd else "partitioned"),
+        cpu_layout=args.cpu_layout or default_cpu_layout(args, ts_s),
         cpu_latency_limit_us=args.cpu_latency_us,
     )
 

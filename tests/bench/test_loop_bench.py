@@ -56,10 +56,45 @@ def test_cpu_layouts(load_bench):
     assert allowed[allowed.index("--loop-cpus") + 1] == "5"
     assert allowed[allowed.index("--other-cpus") + 1] == "2,3"
     assert bench.cpu_layout_args("partitioned", [0]) == ["--rt-priority", "40"]
-    assert bench.cpu_layout_args("free", list(range(8))) == ["--rt-priority", "40"]
+    assert bench.cpu_layout_args("free", list(range(8))) == [
+        "--rt-priority", "40", "--zenoh-priority", "30"]  # Zenoh's threads under the loops
+    assert bench.cpu_layout_args("free", [0, 1]) == bench.cpu_layout_args("free", [0])
     with pytest.raises(ValueError, match="cpu layout"):
         bench.cpu_layout_args("isolated", [0, 1])
     # the slave's phase margin where both loops share a CPU, and nowhere else
     assert bench.slave_layout_args("partitioned", [0, 1]) == ["--phase-margin", "6e-05"]
     assert bench.slave_layout_args("partitioned", [0]) == []
     assert bench.slave_layout_args("free", [0, 1]) == []
+
+
+def test_a_shorter_period_gets_a_spin_in_proportion(load_bench, tmp_path):
+    """--period writes the period, and for a period under the configured 0.54 ms a spin of
+    a tenth of it; the file passes the programs' own validation."""
+    from haptic.common.config import load_config
+
+    bench = load_bench("loop_bench")
+    fast = load_config(bench.period_config(tmp_path, 0.00025))
+    assert fast["model"]["sample_period_s"] == 0.00025
+    assert fast["runner"]["spin_s"] == pytest.approx(2.5e-5)
+    slow = load_config(bench.period_config(tmp_path, 0.001))
+    assert slow["model"]["sample_period_s"] == 0.001
+    assert slow["runner"]["spin_s"] == load_config()["runner"]["spin_s"]  # as shipped
+    configured = load_config(bench.period_config(tmp_path, 0.00054))
+    assert configured["runner"]["spin_s"] == load_config()["runner"]["spin_s"]
+
+
+def test_the_default_layout_follows_the_nodes_and_the_period(load_bench):
+    import argparse
+
+    bench = load_bench("loop_bench")
+
+    def layout(ts_s: float, **flags: object) -> str:
+        args = argparse.Namespace(echo=False, master_cmd=None, slave_cmd=None)
+        vars(args).update(flags)
+        return bench.default_cpu_layout(args, ts_s)
+
+    assert layout(0.00054) == "partitioned"
+    assert layout(0.001) == "partitioned"
+    assert layout(0.00025) == "free"  # both ticks do not fit one CPU's period
+    assert layout(0.00054, echo=True) == "free"
+    assert layout(0.00054, master_cmd="my-master") == "free"
