@@ -134,6 +134,20 @@ def device_process_cpu(start_s: float | None, end_s: float | None,
     return {"rig_emulator_cpu_s": used_s, "rig_emulator_cpu_cores": used_s / elapsed_s}
 
 
+def emulator_placement(hardware: Any) -> dict[str, Any]:
+    """The summary's ``rig_emulator_cpus`` (the CPUs the emulated drives' process was put on:
+    the loop's, master/sim/rig_emulator.py; None: anywhere) and its warning where the placement
+    was refused (also printed); nothing for hardware without an emulator process."""
+    if not hasattr(hardware, "emulator_cpus"):
+        return {}
+    warning = getattr(hardware, "emulator_cpu_warning", None)
+    if warning:
+        print(f"haptic-master: {warning}", file=sys.stderr)
+    cpus = hardware.emulator_cpus
+    return {"rig_emulator_cpus": list(cpus) if cpus is not None else None,
+            "rig_emulator_cpu_warning": warning}
+
+
 def _flush_node_events(loop: _Loop, tick: MasterTick) -> None:
     """The node's safety events so far into the run's events."""
     for time_s, event in tick.take_node_events():
@@ -192,6 +206,7 @@ def _run_linked_master(
         except HardwareError as error:
             print(f"haptic-master: hardware error: {error}", file=sys.stderr)
             return 1
+        extra_summary.update(emulator_placement(hardware))
         try:
             with Link(link_config) as link:
                 harness = ProgramHarness("haptic-master", "slave", options, link, period_s,

@@ -13,6 +13,12 @@ watchdog) and writes a report directory (``--out``, default ``out/session``):
 - ``master_trace.npz``, ``slave_trace.npz``: every 10th tick of each side;
 - ``session.png``: handle and tool force against time, tool velocity against position.
 
+On a machine with two CPUs or more the session splits them (``--cpu-layout split``, the
+default; :func:`session_cpu_args`): the master's loop and its emulated drives on the last CPU,
+the slave's loop under SCHED_FIFO on the first, every other thread (Zenoh's, the displays')
+off the master's CPU. ``--cpu-layout free`` leaves every thread where the kernel puts it and
+the ``[runner]`` table of ``--config`` as it is.
+
 Children are ended by their own PID (SIGTERM, then SIGKILL after a grace period) on timeout
 or Ctrl-C, and always reaped. Exit status 0 when both programs exited 0 and wrote their
 summaries; otherwise 1 (or the first non-zero child status, e.g. 3 for the analysis refusal).
@@ -24,6 +30,7 @@ import argparse
 import atexit
 import json
 import math
+import os
 import shlex
 import shutil
 import signal
@@ -55,6 +62,11 @@ SLOWDOWN_ALLOWANCE = 8.0
 
 #: The largest position gap |yt - Ah1 yh| at the end of a session (issue 16), m.
 GAP_TARGET_M = 0.001
+#: The session's CPU layouts (:func:`session_cpu_args`).
+CPU_LAYOUTS = ("split", "free")
+#: The slave loop's SCHED_FIFO priority in the split layout (refused without CAP_SYS_NICE:
+#: then normal scheduling and a warning).
+SPLIT_SLAVE_PRIORITY = 40
 
 
 def free_port() -> int:
@@ -62,6 +74,32 @@ def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def session_cpu_args(layout: str, cpus: Sequence[int]) -> tuple[list[str], list[str]]:
+    """The master's and the slave's run options of a CPU layout on ``cpus`` (the CPUs this
+    process may use). ``split`` on two CPUs or more: the master's loop on the last CPU, where
+    its emulated drives follow it (master/sim/rig_emulator.py: they answer the SYNC while its
+    loop sleeps); the slave's loop under SCHED_FIFO on the first; every other thread of both
+    programs on the CPUs but the master's (the first alone on two). On a 2-core Intel Xeon
+    guest the README session met its loop targets in 2 of 3 runs so, against none of 8 with
+    every thread anywhere (2026-12-05, docs/programs.md). ``free``, or one CPU: nothing."""
+    if layout not in CPU_LAYOUTS:
+        raise ValueError(f"cpu layout must be one of {', '.join(CPU_LAYOUTS)} (got {layout!r})")
+    cpus = sorted(set(cpus))
+    if layout == "free" or len(cpus) < 2:
+        return [], []
+    master_cpu, slave_cpu = cpus[-1], cpus[0]
+    others = ",".join(str(cpu) for cpu in (cpus[1:-1] if len(cpus) > 2 else cpus[:1]))
+    return (["--loop-cpus", str(master_cpu), "--other-cpus", others],
+            ["--loop-cpus", str(slave_cpu), "--other-cpus", others,
+             "--rt-priority", str(SPLIT_SLAVE_PRIORITY)])
+
+
+def _usable_cpus() -> list[int]:
+    if hasattr(os, "sched_getaffinity"):
+        return sorted(os.sched_getaffinity(0))
+    return list(range(os.cpu_count() or 1))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -86,6 +124,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--governor", action="store_true",
                         help="the master's margin governor (docs/governor.md); delay profiles "
                         "come from --config ([link.<side>.injection] delay_profile)")
+    parser.add_argument("--cpu-layout", choices=CPU_LAYOUTS, default="split",
+                        help="split (default): the master's loop and its emulated drives on "
+                        "the last CPU, the slave's loop (SCHED_FIFO) on the first, the other "
+                        "threads off the master's CPU; free: every thread anywhere, --config's "
+                        "[runner] as it is")
     parser.add_argument("--master-args", default="", help="extra master arguments (one string)")
     parser.add_argument("--slave-args", default="", help="extra slave arguments (one string)")
     return parser
@@ -134,19 +177,24 @@ def run_session(args: argparse.Namespace) -> int:
     # The master steps the duration in rig time; the slave's wall-time bound allows a slow
     # master, and the session stops the slave as soon as the master is done.
     wall_bound_s = SLOWDOWN_ALLOWANCE * args.duration
+    master_layout, slave_layout = session_cpu_args(args.cpu_layout, _usable_cpus())
     commands = {
         "slave": [sys.executable, "-m", "haptic.slave_sim.cli", *common,
                   "--duration", repr(wall_bound_s + 5.0), "--connect", endpoint,
                   "--scenario", args.scenario, "--out", str(out),
-                  "--json-summary", str(files["slave"]), *shlex.split(args.slave_args)],
+                  "--json-summary", str(files["slave"]), *slave_layout,
+                  *shlex.split(args.slave_args)],
         "master": [sys.executable, "-m", "haptic.master.cli", *common,
                    "--rig-time", repr(args.duration), "--listen", endpoint, "--rig", args.rig,
                    "--operator", args.operator, "--out", str(out),
-                   "--json-summary", str(files["master"]), *shlex.split(args.master_args)],
+                   "--json-summary", str(files["master"]), *master_layout,
+                   *shlex.split(args.master_args)],
     }
     print(f"haptic-session: {args.scenario}, rig {args.rig}, operator {args.operator}, "
           f"{args.duration:g} s, "
-          f"Zenoh on {endpoint}, key prefix {prefix}", flush=True)
+          f"Zenoh on {endpoint}, key prefix {prefix}, CPU layout {args.cpu_layout}"
+          + (f" (master {' '.join(master_layout)}; slave {' '.join(slave_layout)})"
+             if master_layout else ""), flush=True)
     processes: dict[str, subprocess.Popen] = {}
     statuses: dict[str, int | None] = {}
     try:

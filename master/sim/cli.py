@@ -11,8 +11,10 @@ port 43113)::
     haptic-master --rig can --can-interface unix_datagram --can-channel /tmp/haptic-rig-sim \
         --no-link --duration 2
 
-It runs under SCHED_BATCH (its wake-ups never preempt the loops it shares the machine with),
-prints one line starting ``haptic-rig-sim: ready`` when it answers frames, serves until
+It runs under SCHED_BATCH (its wake-ups never preempt the loops it shares the machine with;
+``--scheduling normal``: normal scheduling, as the ``sim`` backend starts it on the master's own
+loop CPUs, where batching only delays its answer), prints one line starting
+``haptic-rig-sim: ready`` when it answers frames, serves until
 ``--duration`` or SIGINT/SIGTERM (exit status 0), and prints one line when it stops. Exit
 status 1 when the bus cannot open, 2 for an invalid option or configuration (one line naming
 it).
@@ -67,6 +69,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "frame (the sim backend passes it) instead of the first SYNC")
     parser.add_argument("--duration", metavar="S", type=float,
                         help="serve for S seconds (default: until SIGINT or SIGTERM)")
+    parser.add_argument("--scheduling", choices=("batch", "normal"), default="batch",
+                        help="batch (default): SCHED_BATCH, its wake-ups never preempt the "
+                        "loops on its CPUs; normal: normal scheduling (on CPUs of its own, or "
+                        "the master's loop CPUs, where it answers while the loop sleeps)")
     parser.add_argument("--parent-pid", metavar="PID", type=int,
                         help="also stop when process PID is no longer this one's parent "
                         "(the sim backend passes its own)")
@@ -120,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
         rig, bus_options = _configure(args)
     stop = StopRequest(args.duration, args.parent_pid)
     stop.install()
-    warning = use_batch_scheduling()
+    warning = use_batch_scheduling() if args.scheduling == "batch" else None
     if warning is not None:
         print(f"haptic-rig-sim: {warning}", file=sys.stderr)
     return run_emulator(rig, bus_options, stop)

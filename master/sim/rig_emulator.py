@@ -21,6 +21,15 @@ it to the emulator as the operator display frame
 all of them in the next SYNC's datagram (one wake-up of the emulator a cycle); where the display
 frame comes before its SYNC, the emulator prepares its answer while it waits
 (``SimulatedCanRig.prepare_ahead``).
+
+Where the master's loop has CPUs of its own (``[runner] loop_cpus``), the emulator runs on
+them too (:attr:`EmulatedRigHardware.emulator_cpus`), under normal scheduling: it answers the
+SYNC the master sends before its tick while the master's loop sleeps, on the same CPU, as a
+rig's drives answer while the master waits. Left to run anywhere on 2 CPUs it waited behind
+the slave's loop, and the master's read stage reached p99 160-290 us in ``haptic-session``;
+on the loop's CPU under SCHED_BATCH (which has no wake-up preemption) it still did in 1 run
+of 5, and under normal scheduling in none (docs/programs.md). Elsewhere it runs under
+SCHED_BATCH, so its wake-ups never cut into a loop's tick.
 """
 
 from __future__ import annotations
@@ -42,6 +51,7 @@ import can
 import numpy as np
 
 from haptic.common.config import to_toml
+from haptic.common.config.runner_schema import parse_cpus
 from haptic.common.runtime.machine import process_cpu_s
 from haptic.master.hardware.can_driver import CanHandleDriver
 from haptic.master.hardware.interface import (
@@ -246,6 +256,10 @@ class EmulatedRigHardware(HandleHardware):
         self._private_directory: str | None = None
         self._output: _ChildOutput | None = None  # kept after the stop, for its last lines
         self._display: bytes | None = None
+        #: the CPUs the emulator was placed on (the master's loop CPUs; None: anywhere) and
+        #: why it could not be, if it could not
+        self.emulator_cpus: tuple[int, ...] | None = None
+        self.emulator_cpu_warning: str | None = None
 
     @property
     def lifecycle_state(self) -> LifecycleState:
@@ -293,10 +307,12 @@ class EmulatedRigHardware(HandleHardware):
             file.write(to_toml(self.config))
             config_path = file.name
         try:
+            loop_cpus = parse_cpus(str(self.config["runner"]["loop_cpus"]))
             command = [sys.executable, "-m", "haptic.master.sim.cli", "--config",
                        config_path, "--can-interface", bus_options["interface"],
                        "--can-channel", bus_options["channel"], "--parent-pid", str(os.getpid()),
-                       "--operator-waits-for-lamp"]
+                       "--operator-waits-for-lamp",
+                       "--scheduling", "normal" if loop_cpus else "batch"]
             if "port" in bus_options:
                 command += ["--can-port", str(bus_options["port"])]
             try:
@@ -311,6 +327,7 @@ class EmulatedRigHardware(HandleHardware):
                     process_group=0)
             except OSError as error:
                 raise HardwareError(f"cannot start haptic-rig-sim: {error}") from None
+            self._place_emulator(self.process.pid, loop_cpus)
             assert self.process.stdout is not None
             self._output = _ChildOutput(self.process.stdout)
             timeout_s = self.emulator.start_timeout_s
@@ -325,6 +342,27 @@ class EmulatedRigHardware(HandleHardware):
                                     f"{self._output.tail()}")
         finally:
             os.unlink(config_path)  # read before the ready line, or no longer needed
+
+    def _place_emulator(self, pid: int, cpus: tuple[int, ...]) -> None:
+        """Put the emulator on the master's loop CPUs (``cpus``, ``[runner] loop_cpus``),
+        before it starts its threads (they inherit it); nothing where those are not set. A
+        refusal is kept in :attr:`emulator_cpu_warning`, never an error: the emulator then
+        runs anywhere."""
+        self.emulator_cpus = None
+        self.emulator_cpu_warning = None
+        if not cpus:
+            return
+        if not hasattr(os, "sched_setaffinity"):
+            self.emulator_cpu_warning = ("CPU affinity is a Linux setting: the emulator runs "
+                                         "anywhere")
+            return
+        try:
+            os.sched_setaffinity(pid, cpus)
+        except OSError as error:
+            self.emulator_cpu_warning = (f"the emulator's CPUs {','.join(map(str, cpus))} were "
+                                         f"refused ({error}): it runs anywhere")
+            return
+        self.emulator_cpus = tuple(sorted(cpus))
 
     def _stop_emulator(self) -> None:
         process = self.process

@@ -54,6 +54,37 @@ def test_session_runs_both_programs_and_writes_the_report(tmp_path) -> None:
     assert max(abs(g) for g in slave["final_position_gap_m"]) <= 0.001, slave
     report = (out / "report.md").read_text()
     assert "## master summary" in report and "## slave summary" in report
+    # the split CPU layout (on 2 CPUs or more): the master's loop and its emulated drives on
+    # the last CPU, the slave's loop on the first (SCHED_FIFO where this host allows it)
+    import os
+
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) >= 2:
+        assert "CPU layout split (master --loop-cpus" in log
+        assert master["scheduling"].split(", CPUs ")[1].startswith(str(cpus[-1]))
+        assert master["rig_emulator_cpus"] == [cpus[-1]] or master["rig_emulator_cpu_warning"]
+        assert slave["scheduling"].split(", CPUs ")[1].startswith(str(cpus[0]))
+        assert cpus[-1] not in master["other_threads_cpus"] + slave["other_threads_cpus"]
+        assert (slave["scheduling_policy"] == "SCHED_FIFO") != bool(
+            slave["scheduling_warnings"])  # FIFO, or refused and said why
+
+
+def test_the_session_cpu_layouts() -> None:
+    from haptic.common.launch.cli import session_cpu_args
+
+    master, slave = session_cpu_args("split", [0, 1])
+    assert master == ["--loop-cpus", "1", "--other-cpus", "0"]
+    assert slave == ["--loop-cpus", "0", "--other-cpus", "0", "--rt-priority", "40"]
+    # more CPUs: the other threads on those neither loop has
+    master, slave = session_cpu_args("split", [7, 2, 3, 5])
+    assert master == ["--loop-cpus", "7", "--other-cpus", "3,5"]
+    assert slave[:4] == ["--loop-cpus", "2", "--other-cpus", "3,5"]
+    assert session_cpu_args("split", [3]) == ([], [])  # one CPU: nothing to split
+    assert session_cpu_args("free", [0, 1]) == ([], [])
+    import pytest
+
+    with pytest.raises(ValueError, match="cpu layout"):
+        session_cpu_args("pinned", [0, 1])
 
 
 def _loop_summary(**changes) -> dict:

@@ -282,8 +282,9 @@ def test_the_sim_backend_configures_enables_and_follows_commands() -> None:
         assert hardware.lifecycle_state is LifecycleState.INACTIVE
         process = hardware.process
         assert process is not None and process.poll() is None
-        # its wake-ups never preempt the loops: SCHED_BATCH
+        # its wake-ups never preempt the loops: SCHED_BATCH (no loop CPUs configured)
         assert os.sched_getscheduler(process.pid) == os.SCHED_BATCH
+        assert hardware.emulator_cpus is None and hardware.emulator_cpu_warning is None
         # a process group of its own (a terminal's Ctrl-C reaches only the master), in the
         # master's session: with autogroup, a session of its own was starved on a busy machine
         assert os.getpgid(process.pid) == process.pid != os.getpgid(0)
@@ -312,6 +313,50 @@ def test_the_sim_backend_configures_enables_and_follows_commands() -> None:
     assert not directory.exists()
     assert "answered as prepared" in hardware.emulator_output
     hardware.cleanup()  # a second cleanup is harmless
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="CPU affinity is Linux's")
+def test_the_emulator_runs_on_the_masters_loop_cpus_under_normal_scheduling() -> None:
+    """With [runner] loop_cpus the emulated drives share the master's loop CPU (they answer
+    the SYNC while the loop sleeps) under normal scheduling; the summary says where."""
+    from haptic.master.program import emulator_placement
+
+    cpu = max(os.sched_getaffinity(0))
+    hardware = create_hardware("sim", _config(runner__loop_cpus=str(cpu)))
+    try:
+        hardware.configure()
+        process = hardware.process
+        assert process is not None and process.poll() is None
+        assert os.sched_getaffinity(process.pid) == {cpu}
+        assert os.sched_getscheduler(process.pid) == os.SCHED_OTHER
+        assert hardware.emulator_cpus == (cpu,) and hardware.emulator_cpu_warning is None
+        assert hardware.read().ok
+        assert emulator_placement(hardware) == {"rig_emulator_cpus": [cpu],
+                                                "rig_emulator_cpu_warning": None}
+    finally:
+        hardware.cleanup()
+    assert _reaped(process)
+
+
+def test_a_refused_placement_is_a_warning_and_the_emulator_runs_anywhere(
+        monkeypatch, capsys) -> None:
+    from haptic.master.program import emulator_placement
+
+    def refuse(_pid: int, _cpus: object) -> None:
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "sched_setaffinity", refuse)
+    hardware = create_hardware("sim", _config(runner__loop_cpus="0"))
+    try:
+        hardware.configure()
+        assert hardware.emulator_cpus is None
+        assert "were refused" in hardware.emulator_cpu_warning
+        assert hardware.read().ok  # it serves all the same
+        assert emulator_placement(hardware)["rig_emulator_cpus"] is None
+        assert "haptic-master: the emulator's CPUs 0 were refused" in capsys.readouterr().err
+    finally:
+        hardware.cleanup()
+    assert emulator_placement(object()) == {}  # no emulator process: nothing to say
 
 
 def test_the_sim_backend_sends_its_targets_in_the_next_syncs_datagram() -> None:
