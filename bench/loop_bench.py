@@ -235,7 +235,7 @@ def echo_node(side: str, argv: list[str]) -> int:
         runner = RealTimeRunner(
             period_s, step, duration_s=options.duration_s, status=status,
             spin_s=options.runner.spin_s, realtime=options.runner.realtime,
-            stop_signals=signals,
+            stop_signals=signals, freeze_heap=True,
             show_status=options.show_status,
         )
         run = runner.run()

@@ -172,7 +172,7 @@ class ProgramHarness:
         options = self.options
         self.runner = RealTimeRunner(
             self.period_s, step, duration_s=options.duration_s, max_steps=options.max_steps,
-            spin_s=options.runner.spin_s,
+            spin_s=options.runner.spin_s, freeze_heap=True, prepare=self.link.discard_received,
             realtime=options.runner.realtime, status=status_text,
             show_status=options.show_status, stop_signals=signals, lead=lead, lead_s=lead_s)
         try:

@@ -30,6 +30,7 @@ whole life and hands it to the runner.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import signal
 import sys
@@ -40,6 +41,7 @@ from dataclasses import dataclass
 from typing import TextIO
 
 from haptic.common.records.histogram import LogHistogram
+from haptic.common.runtime.gc_pauses import GcPauses, frozen_heap
 from haptic.common.runtime.realtime import AppliedScheduling, LoopThreadScheduling, RealtimeSettings
 
 
@@ -100,6 +102,8 @@ class RunStats:
     step_max_s: float = math.nan
     loop_thread_cpu_s: float = math.nan
     process_cpu_s: float = math.nan
+    #: the garbage collector's pauses while the loop ran (common/runtime/gc_pauses.py)
+    gc_pauses: dict[str, object] | None = None
 
     @property
     def overrun_ratio(self) -> float:
@@ -139,6 +143,7 @@ class RunStats:
             "loop_thread_cpu_per_step_s": self.loop_thread_cpu_per_step_s,
             "process_cpu_s": self.process_cpu_s,
             "process_cpu_cores": self.process_cpu_cores,
+            **(self.gc_pauses or {}),
             **(self.scheduling.as_summary() if self.scheduling is not None else {}),
         }
 
@@ -157,6 +162,11 @@ class RealTimeRunner:
     ``lead``: called ``lead_s`` (s, at most one period) before each tick's deadline, in the
     wait before it (with the sleep's precision; right away when the previous step ended later
     than that, and never after the deadline: a late tick calls it just before its step).
+    ``freeze_heap``: collect and freeze the heap before the loop (common/runtime/gc_pauses.py;
+    the programs do, tests and simulations need not). Every run times the garbage
+    collector's pauses (:attr:`gc_pauses`, the summary's ``gc_*`` keys). ``prepare``: called
+    once just before the first tick, after the heap and the scheduling are set (the programs
+    drop the peer's messages from before their start, ``Link.discard_received``).
     """
 
     def __init__(
@@ -178,6 +188,8 @@ class RealTimeRunner:
         realtime: RealtimeSettings | None = None,
         lead: LeadFunction | None = None,
         lead_s: float = 0.0,
+        freeze_heap: bool = False,
+        prepare: Callable[[], None] | None = None,
     ) -> None:
         if not period_s > 0.0:
             raise ValueError(f"period_s must be > 0 (got {period_s})")
@@ -188,6 +200,8 @@ class RealTimeRunner:
         if not lead_s >= 0.0:
             raise ValueError(f"lead_s must be >= 0 (got {lead_s})")
         self._lead = lead
+        self._freeze_heap = freeze_heap
+        self._prepare = prepare
         self._lead_ns = min(round(lead_s * 1e9), round(period_s * 1e9))
         self._max_steps = max_steps
         self.period_s = period_s
@@ -219,6 +233,8 @@ class RealTimeRunner:
         self._loop_thread_cpu_s = math.nan
         self._process_cpu_s = math.nan
         self._shift_ns = 0
+        #: the garbage collector's pauses while :meth:`run` runs
+        self.gc_pauses = GcPauses()
 
     def shift_schedule(self, delta_ns: int) -> None:
         """Move the next tick's deadline by ``delta_ns`` (ns; negative: earlier), from a step
@@ -243,12 +259,14 @@ class RealTimeRunner:
         try:
             if own:
                 signals.__enter__()
-            if self._realtime is None:
-                self._loop(signals)
-            else:
-                with LoopThreadScheduling(self._realtime) as applied:
-                    self.scheduling = applied
+            with frozen_heap() if self._freeze_heap else contextlib.nullcontext(), \
+                    self.gc_pauses:
+                if self._realtime is None:
                     self._loop(signals)
+                else:
+                    with LoopThreadScheduling(self._realtime) as applied:
+                        self.scheduling = applied
+                        self._loop(signals)
         finally:
             if own:
                 signals.__exit__(None, None, None)
@@ -266,6 +284,8 @@ class RealTimeRunner:
         step_times = self._step_times
         step = self._step
         self._shift_ns = 0  # a shift asked for outside a run does not carry into this one
+        if self._prepare is not None:
+            self._prepare()
         thread_cpu_s, process_cpu_s = time.thread_time(), time.process_time()
         start = clock()
         end = None if self._duration_ns is None else start + self._duration_ns
@@ -361,6 +381,7 @@ class RealTimeRunner:
             step_max_s=self._step_times.max_s if self._step_times.count else math.nan,
             loop_thread_cpu_s=self._loop_thread_cpu_s,
             process_cpu_s=self._process_cpu_s,
+            gc_pauses=self.gc_pauses.summary(),
         )
 
 

@@ -280,3 +280,28 @@ def test_the_peers_last_messages_come_before_its_leaving():
         assert master.capped_polls >= 7  # 61 samples, 8 a poll
         assert seen and seen[-1] == Flags.SAFE_STATE | Flags.STOPPING
         assert [e.alive for e in master.presence_events] == [True, False]
+
+
+def test_what_came_before_the_first_tick_is_discarded_undecoded():
+    """The peer's messages from before this side's loop (its start-up backlog) are dropped
+    without decoding; the next message is delivered as usual and the peer stays present."""
+    master_cfg, slave_cfg = configs()
+    with Link(master_cfg) as master, Link(slave_cfg) as slave:
+        wait_for_peers(master, slave)
+        for index in range(40):
+            slave.send_tool((float(index), 0.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)
+        deadline = time.monotonic() + WAIT_S
+        discarded = 0
+        while discarded < 40:  # the samples arrive in the ring over a few ms
+            discarded += master.discard_received()
+            assert time.monotonic() < deadline, f"only {discarded} of 40 arrived"
+            time.sleep(0.001)
+        assert discarded == 40 and master.discarded_before_start == 40
+        assert master.receive.stats().delivered == 0  # none was decoded or counted
+        assert master.discard_received() == 0
+        sent = slave.send_tool((99.0, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0)
+        assert first_message(master) == sent
+        assert master.peer_alive
+        assert master.summary()["link_discarded_before_start"] == 40
+    with pytest.raises(RuntimeError, match="not open"):
+        master.discard_received()

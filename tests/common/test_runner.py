@@ -355,3 +355,53 @@ def test_a_free_running_clock_runs_the_ticks_back_to_back_on_schedule() -> None:
     gaps = [later - earlier for earlier, later in zip(starts[:-1], starts[1:], strict=True)]
     assert all(abs(gap - 1_000_000_000) < 1_000_000 for gap in gaps), gaps
     assert stats.overruns == 0 and stats.stalls == 0
+
+
+# --- before the first tick: the prepare hook and the garbage collector ------------------------
+
+
+def test_prepare_runs_once_before_the_first_tick_and_the_schedule_starts_after_it():
+    clock = FakeClock()
+    calls: list[tuple[str, int]] = []
+
+    def prepare() -> None:
+        calls.append(("prepare", clock.now))
+        clock.now += 5_000_000  # a slow preparation (5 ms) is not a late first tick
+
+    runner = make(clock, lambda tick, now: calls.append(("step", now)), duration_s=0.01,
+                  prepare=prepare)
+    stats = runner.run()
+    assert calls[0][0] == "prepare" and [kind for kind, _ in calls].count("prepare") == 1
+    assert all(kind == "step" for kind, _ in calls[1:]) and len(calls) > 2
+    assert stats.stalls == 0 and stats.overruns == 0
+
+
+def test_the_run_times_the_collectors_pauses():
+    import gc
+
+    def make_cycles(tick: int, now: int) -> None:
+        for _ in range(300):  # cyclic garbage: collections of the youngest generation
+            node: list = []
+            node.append(node)
+
+    stats = make(FakeClock(), make_cycles, duration_s=0.05).run()
+    summary = stats.as_summary()
+    assert summary["gc_collections"] > 0
+    assert summary["gc_collections"] == sum(summary["gc_collections_by_generation"])
+    assert 0.0 < summary["gc_pause_max_s"] <= summary["gc_pause_total_s"]
+    quiet = make(FakeClock(), lambda tick, now: None, duration_s=0.01).run()
+    assert quiet.as_summary()["gc_pause_max_s"] <= summary["gc_pause_total_s"]
+    assert not [c for c in gc.callbacks if getattr(c, "__self__", None) is not None
+                and type(c.__self__).__name__ == "GcPauses"]  # removed after the run
+
+
+def test_a_frozen_heap_is_scanned_no_more_during_the_run_and_thawed_after():
+    import gc
+
+    frozen_during: list[int] = []
+    keep = [[] for _ in range(1000)]  # tracked objects from before the run
+    runner = make(FakeClock(), lambda tick, now: frozen_during.append(gc.get_freeze_count()),
+                  duration_s=0.002, freeze_heap=True)
+    runner.run()
+    assert min(frozen_during) >= len(keep)  # everything alive before the loop was frozen
+    assert gc.get_freeze_count() == 0  # and thawed after it
