@@ -82,8 +82,9 @@ def session_cpu_args(layout: str, cpus: Sequence[int]) -> tuple[list[str], list[
     its emulated drives follow it (master/sim/rig_emulator.py: they answer the SYNC while its
     loop sleeps); the slave's loop under SCHED_FIFO on the first; every other thread of both
     programs on the CPUs but the master's (the first alone on two). On a 2-core Intel Xeon
-    guest the README session met its loop targets in 2 of 3 runs so, against none of 8 with
-    every thread anywhere (2026-12-05, docs/programs.md). ``free``, or one CPU: nothing."""
+    guest the README session then met its loop targets in 3 of 6 runs, the slave in all 6,
+    against none with every thread anywhere (2026-12-05, docs/programs.md). ``free``, or one
+    CPU: nothing."""
     if layout not in CPU_LAYOUTS:
         raise ValueError(f"cpu layout must be one of {', '.join(CPU_LAYOUTS)} (got {layout!r})")
     cpus = sorted(set(cpus))
