@@ -30,8 +30,8 @@ ctypes call) the thread keeps it for as long as it runs. On 2 CPUs with both loo
 SCHED_FIFO a display thread woken in the middle of the slave's tick was preempted by the
 master's loop while it held the slave's GIL: at 4 kHz (Ts = 0.25 ms) the thread's old
 200 wake-ups a second put the slave's node stage at p99 226-233 us and its overruns at
-2.0-2.9 %; waking every 0.1 s they were 87 us and 0.23 % (2026-12-05, a 2-core Intel Xeon
-guest, docs/programs.md).
+2.0-2.9 %; with these (about 9 a second with no viewer) 88-92 us and 0.22-0.24 % (2026-12-05,
+a 2-core Intel Xeon guest, docs/programs.md).
 
 The thread measures its own cost (:attr:`figures`): publications made and the mean and
 largest time one took, s, and the publications skipped because nobody watched.
