@@ -30,7 +30,6 @@ import argparse
 import atexit
 import json
 import math
-import os
 import shlex
 import shutil
 import signal
@@ -45,7 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from haptic.common.runtime.cli_options import add_retired_delay_option
-from haptic.common.runtime.machine import usable_cpu_count
+from haptic.common.runtime.machine import usable_cpu_count, usable_cpus
 from haptic.common.runtime.summary import finite_figure, loop_cpu_text
 from haptic.common.wire.auth import write_key_file
 
@@ -95,12 +94,6 @@ def session_cpu_args(layout: str, cpus: Sequence[int]) -> tuple[list[str], list[
     return (["--loop-cpus", str(master_cpu), "--other-cpus", others],
             ["--loop-cpus", str(slave_cpu), "--other-cpus", others,
              "--rt-priority", str(SPLIT_SLAVE_PRIORITY)])
-
-
-def _usable_cpus() -> list[int]:
-    if hasattr(os, "sched_getaffinity"):
-        return sorted(os.sched_getaffinity(0))
-    return list(range(os.cpu_count() or 1))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -178,7 +171,7 @@ def run_session(args: argparse.Namespace) -> int:
     # The master steps the duration in rig time; the slave's wall-time bound allows a slow
     # master, and the session stops the slave as soon as the master is done.
     wall_bound_s = SLOWDOWN_ALLOWANCE * args.duration
-    master_layout, slave_layout = session_cpu_args(args.cpu_layout, _usable_cpus())
+    master_layout, slave_layout = session_cpu_args(args.cpu_layout, usable_cpus())
     commands = {
         "slave": [sys.executable, "-m", "haptic.slave_sim.cli", *common,
                   "--duration", repr(wall_bound_s + 5.0), "--connect", endpoint,

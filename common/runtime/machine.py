@@ -20,12 +20,18 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
-def usable_cpu_count() -> int:
-    """CPUs this process may run on (its affinity where the OS tells, else all of them)."""
+def usable_cpus() -> list[int]:
+    """The CPUs this process may run on, in order (its affinity where the OS tells, else all
+    of them)."""
     try:
-        return len(os.sched_getaffinity(0))
+        return sorted(os.sched_getaffinity(0))
     except (AttributeError, OSError):
-        return os.cpu_count() or 1
+        return list(range(os.cpu_count() or 1))
+
+
+def usable_cpu_count() -> int:
+    """How many CPUs this process may run on (:func:`usable_cpus`)."""
+    return len(usable_cpus())
 
 
 def process_cpu_s(pid: int) -> float | None:
