@@ -39,7 +39,7 @@ activation) scales the compensator's inputs: the margin governor's k (master/mar
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -227,9 +227,15 @@ class MasterNode:
             self._limits = limits
         return self._matrices, self._limits
 
-    def activate(self, position_m: np.ndarray) -> MasterNodeState:
+    def activate(self, position_m: np.ndarray,
+                 reuse: MasterNodeState | None = None) -> MasterNodeState:
         """A fresh state for lanes starting at ``position_m`` (lanes, 2): the command holds
-        that position, forces are not yet enabled."""
+        that position, forces are not yet enabled.
+
+        ``reuse``: a state of this node for as many lanes that nobody uses any more; its
+        buffers and recorded launches are set to the fresh values in place and it is returned
+        (the same values as a new state, without the 0.25-0.7 ms of allocating about twenty
+        Warp arrays and recording the launches: a tick can afford it)."""
         wp = _warp()
         position = np.array(np.atleast_2d(position_m), float)
         lanes = position.shape[0]
@@ -239,6 +245,13 @@ class MasterNode:
                              f"activated with {lanes}")
         faulted_at_start = ~np.all(np.isfinite(position), axis=1)
         safe = np.nan_to_num(position)
+        if reuse is not None:
+            if reuse.lanes != lanes:
+                raise ValueError(f"cannot reuse a state of {reuse.lanes} lanes for {lanes}")
+            state = self._reinitialise(reuse, safe)
+            for lane in np.flatnonzero(faulted_at_start):
+                self._trip(state, lane, "non-finite handle position at activation", None)
+            return state
         n = self._layout.blocks * self._layout.block_states  # the packed layout's states
 
         def buffer(shape: tuple, dtype: Any, value: np.ndarray | None = None) -> Any:
@@ -295,14 +308,14 @@ class MasterNode:
             self._trip(state, lane, "non-finite handle position at activation", None)
         return state
 
-    def resume(self, position_m: np.ndarray, reason: str = "link resynchronised") -> (
-            MasterNodeState):
+    def resume(self, position_m: np.ndarray, reason: str = "link resynchronised",
+               reuse: MasterNodeState | None = None) -> MasterNodeState:
         """A fresh state after a link outage, at ``position_m`` (lanes, 2), m: like
         :meth:`activate` (command holds the position, compensator zero), but the forces ramp
         in over ``ramp_time_s`` at once instead of waiting for small-force samples: the
         operator may be pushing through the outage, and the ramp alone keeps the force from
-        jumping. One ``enable`` event per healthy lane."""
-        state = self.activate(position_m)
+        jumping. One ``enable`` event per healthy lane. ``reuse``: as for :meth:`activate`."""
+        state = self.activate(position_m, reuse)
         healthy = ~state.faulted
         state.forces_enabled[healthy] = True
         state.small_force_count[healthy] = self.safety.ramp_small_samples
@@ -310,6 +323,33 @@ class MasterNode:
             state.events.append(SafetyEvent(0, 0.0, int(lane), "enable",
                                             f"forces ramp in over {self.safety.ramp_time_s:g} s "
                                             f"({reason})"))
+        return state
+
+    def _reinitialise(self, state: MasterNodeState, safe_m: np.ndarray) -> MasterNodeState:
+        """``state``'s buffers set to what :meth:`activate` gives a new state at ``safe_m``
+        (lanes, 2), m (finite); the compensator's matrices and the recorded launches are
+        kept (they are this node's)."""
+        for held in (state.origin_m, state.last_command_m, state.last_position_m,
+                     state.hold_m, state.command_m):
+            held[...] = safe_m
+        for cleared in (state.compensator, state.small_force_count, state.forces_enabled,
+                        state.ramp_elapsed_s, state.force_scale, state.faulted, state.limiting,
+                        state.handle_force_used_N, state.tool_force_used_N, state.inputs,
+                        state._trip_code, state._event_bits, state._event_count):
+            cleared[...] = 0
+        state.gain_ratio[...] = 1.0
+        state.step = 0
+        state.events = []
+        port = state.passivity
+        if port is not None:
+            for item in fields(port):
+                value = getattr(port, item.name)
+                if isinstance(value, np.ndarray):
+                    value[...] = 0
+            port.active[...] = not self.passivity_standby
+            port.previous_position_m[...] = safe_m
+            state.peer_energy_J[...] = np.nan
+            state.peer_target_m[...] = np.nan
         return state
 
     def trip(self, state: MasterNodeState, lanes: np.ndarray, reason: str) -> None:

@@ -217,11 +217,10 @@ def _run_linked_master(
                 hardware.activate()
                 reading = hardware.read()
                 tick_stages.start(reading.position_m)
-                # one activation made and dropped before the loop: the node's first costs
-                # 1.1 ms (its kernels' first launches), the next 0.4 ms, so the loop's
-                # ACTIVATE tick runs warm (its supervise stage 0.8 ms in haptic-session, 1.4-1.5
-                # ms cold)
-                node.activate(np.nan_to_num(reading.position_m)[None, :])
+                # the node state the loop's ACTIVATE fills in place, made and first launched
+                # here: made in the tick, its supervise stage took 0.7-0.8 ms in haptic-session
+                # (1.4-1.5 ms with the kernels' first launches), more than the period
+                tick_stages.prepare(reading.position_m)
                 loop.last_yh = position_for_the_wire(
                     tuple(reading.position_m.tolist()), tuple(
                         np.nan_to_num(reading.position_m).tolist()))
