@@ -162,17 +162,27 @@ class ProgramHarness:
 
     def run(self, step: StepFunction, status_text: Callable[[], str], signals: StopSignals,
             on_stop: Callable[[], None], lead: LeadFunction | None = None,
-            lead_s: float = 0.0) -> RunStats:
+            lead_s: float = 0.0, before_loop: Callable[[], None] | None = None) -> RunStats:
         """The real-time runner over ``step`` for the run's duration (or until stopped);
         :attr:`runner` is the runner while it runs (a step may shift its schedule). On every
         way out ``on_stop()`` puts the side in its safe state and tells the peer, then the
         link's figures are kept (:meth:`collect_link`). ``status_text()``: this side's part
         of the live status line; ``lead``/``lead_s``: the runner's call ``lead_s`` (s) before
-        each tick (the master's early SYNC)."""
+        each tick (the master's early SYNC). ``before_loop()``: the program's last work before
+        the first tick, on the loop's CPU under its scheduling once the heap is frozen (the
+        first ticks then find what it touched in that CPU's caches); then the peer's backlog
+        is dropped (``Link.discard_received``)."""
         options = self.options
+        link = self.link
+
+        def prepare() -> None:
+            if before_loop is not None:
+                before_loop()
+            link.discard_received()
+
         self.runner = RealTimeRunner(
             self.period_s, step, duration_s=options.duration_s, max_steps=options.max_steps,
-            spin_s=options.runner.spin_s, freeze_heap=True, prepare=self.link.discard_received,
+            spin_s=options.runner.spin_s, freeze_heap=True, prepare=prepare,
             realtime=options.runner.realtime, status=status_text,
             show_status=options.show_status, stop_signals=signals, lead=lead, lead_s=lead_s)
         try:
