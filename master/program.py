@@ -52,7 +52,7 @@ from haptic.common.wire.link import Link
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags
 from haptic.common.wire.passivity_link import PassivityLink
 from haptic.master.governor_setup import governor_step
-from haptic.master.hardware.interface import HandleHardware, HardwareError
+from haptic.master.hardware.interface import HandleHardware, HandleReading, HardwareError
 from haptic.master.margin_governor import MarginGovernor
 from haptic.master.node import MasterNode
 from haptic.master.runner import early_sync
@@ -60,20 +60,26 @@ from haptic.master.supervisor import MasterSupervisor, Transition
 from haptic.master.tick import MasterTick
 from haptic.master.tool_guard import ToolGuardSettings, ToolInputGuard
 
-#: CAN cycles the master runs on its loop's CPU right before the first tick (the drives
-#: enabled, the command held: what the first ticks do). Without them the loop's second tick
-#: waited 0.37-0.53 ms for the drives' answer (the emulated drives, on that CPU, ran cold
-#: after the tick before it) and the first ticks overran in every haptic-session run on a
-#: 2-core Intel Xeon guest; with one cycle as well; with three, its read 0.24-0.29 ms and
-#: no overrun at the start in 5 runs (2026-12-05).
+#: CAN cycles the master runs on its loop's CPU right before the first tick, once the
+#: drives are enabled (the command held: what the first ticks do). Without them the loop's
+#: second tick waited 0.37-0.53 ms for the drives' answer (the emulated drives, on that CPU,
+#: ran cold after the tick before it) and the first ticks overran in every haptic-session
+#: run on a 2-core Intel Xeon guest; with one cycle as well; with three, its read 0.24-0.29
+#: ms and no overrun at the start in 5 runs (2026-12-05).
 WARM_CAN_CYCLES = 3
 
 
-def _warm_cycles(hardware: HandleHardware) -> None:
-    """:data:`WARM_CAN_CYCLES` read cycles, their readings dropped (the loop's first tick
-    reads its own)."""
-    for _ in range(WARM_CAN_CYCLES):
-        hardware.read()
+def _enable_drives(hardware: HandleHardware) -> HandleReading:
+    """Enable the drives (``activate``) and run :data:`WARM_CAN_CYCLES` cycles; returns the
+    last reading. For the runner's last moment before the first tick: from enable on only
+    the loop's reads send the master's heartbeat, and the work before the loop (the heap's
+    collection and freeze among it) took 150-215 ms in haptic-session on the 2-core guest,
+    against the drives' 0.3 s heartbeat consumer time."""
+    hardware.activate()
+    reading = hardware.read()
+    for _ in range(WARM_CAN_CYCLES - 1):
+        reading = hardware.read()
+    return reading
 
 
 #: The stages of one tick, in order (the summary's ``stages``).
@@ -230,16 +236,12 @@ def _run_linked_master(
                 came = harness.wait_for_peer(loop_options.peer_wait_s, signals)
                 if came is not None:
                     return came
-                hardware.activate()
-                reading = hardware.read()
-                tick_stages.start(reading.position_m)
                 # the node state the loop's ACTIVATE fills in place, made and first launched
-                # here: made in the tick, its supervise stage took 0.7-0.8 ms in haptic-session
-                # (1.4-1.5 ms with the kernels' first launches), more than the period
+                # here (at the handle's position, the drives still disabled): made in the
+                # tick, its supervise stage took 0.7-0.8 ms in haptic-session (1.4-1.5 ms with
+                # the kernels' first launches), more than the period
+                reading = hardware.read()
                 tick_stages.prepare(reading.position_m)
-                loop.last_yh = position_for_the_wire(
-                    tuple(reading.position_m.tolist()), tuple(
-                        np.nan_to_num(reading.position_m).tolist()))
                 harness.start()
                 if loop_options.display and link.session is not None:
                     harness.attach_display(DisplayPublisher(
@@ -384,6 +386,17 @@ def _run_linked_master(
                 def gain_k_now() -> float:
                     return governor.gain_k if governor is not None else nominal_k
 
+                def start_drives() -> None:
+                    # the drives enabled right before the first tick (_enable_drives), the
+                    # loop's hold at where they hold the handle; the first tick takes this
+                    # reading
+                    nonlocal reading
+                    reading = _enable_drives(hardware)
+                    tick_stages.start(reading.position_m)
+                    loop.last_yh = position_for_the_wire(
+                        tuple(reading.position_m.tolist()), tuple(
+                            np.nan_to_num(reading.position_m).tolist()))
+
                 def stop_safely() -> None:
                     # Safe state: hold where the handle is, no reflected force, then tell the
                     # slave (one message with SAFE_STATE | STOPPING: it stops its tool at once
@@ -408,7 +421,7 @@ def _run_linked_master(
                     f"{governor.status() if governor is not None else ''}"), signals,
                     stop_safely, lead=early_sync(hardware),
                     lead_s=options.config["master"]["can"]["sync_lead_s"],
-                    before_loop=lambda: _warm_cycles(hardware))
+                    before_loop=start_drives)
                 inert_summary = inert.summary(run.elapsed_s)
                 extra_summary.update(device_process_cpu(
                     device_cpu_start_s, hardware.device_process_cpu_s(), run.elapsed_s))

@@ -367,6 +367,62 @@ def test_a_drive_fault_latches_the_linked_master_in_its_safe_state(pair, tmp_pat
     assert trips and "hardware" in trips[0]["reason"]
 
 
+def test_the_drives_are_enabled_last_right_before_the_first_tick(pair, tmp_path) -> None:
+    """From enable on only the loop's reads send the master's heartbeat to the drives, and
+    the work before the loop (the heap's collection among it) took 150-215 ms in
+    haptic-session, against their 0.3 s consumer time: the master enables them in the
+    runner's last moment, with the heap already frozen, and the first tick comes right
+    after the warm cycles."""
+    import gc
+
+    from haptic.common.config import load_config, override
+    from haptic.common.model.teleop import model_from_config
+    from haptic.common.runtime.cli_options import run_options_from_args
+    from haptic.master.cli import build_parser
+    from haptic.master.hardware.interface import create_hardware
+    from haptic.master.node import MasterNode
+    from haptic.master.program import WARM_CAN_CYCLES, MasterLoopOptions, run_linked_master
+    from haptic.master.settings import master_settings
+
+    summary_path = tmp_path / "master.json"
+    args = build_parser().parse_args([
+        "--listen", pair.endpoint, "--key-prefix", pair.prefix, "--duration", "0.5",
+        "--no-status", "--json-summary", str(summary_path)])
+    config = override(load_config(), "master.sim.channel", f"enable-{uuid.uuid4().hex}")
+    options = run_options_from_args(args, "master", config=config)
+    model = model_from_config(options.config)
+    node = MasterNode.from_model(model, master_settings(options.config).safety)
+    hardware = create_hardware("sim-inproc", options.config)
+    calls: list[tuple[str, int]] = []
+    original_activate, original_read = hardware.activate, hardware.read
+
+    def activate() -> None:
+        calls.append(("activate", gc.get_freeze_count()))
+        original_activate()
+
+    def read():
+        calls.append(("read", gc.get_freeze_count()))
+        return original_read()
+
+    hardware.activate, hardware.read = activate, read
+    slave = pair.slave(None, tmp_path / "slave.json")
+    try:
+        status = run_linked_master(options, model, node, hardware,
+                                   MasterLoopOptions(peer_wait_s=30.0))
+    finally:
+        slave.send_signal(signal.SIGTERM)
+        slave.wait(timeout=10.0)
+    assert status == 0
+    names = [name for name, _ in calls]
+    enabled = names.index("activate")
+    assert names.count("activate") == 1
+    assert calls[enabled][1] > 0  # the heap was already frozen: the runner's last moment
+    # the warm cycles, then the loop's reads (its first tick takes the last warm reading)
+    assert names[enabled + 1:enabled + 1 + WARM_CAN_CYCLES] == ["read"] * WARM_CAN_CYCLES
+    summary = json.loads(summary_path.read_text())
+    assert not summary["node_faulted"] and not summary["hardware_faults"]
+
+
 def test_a_master_side_outage_resyncs_both_sides(pair, tmp_path) -> None:
     """Bursts of loss on the slave-to-master direction only (mean 100 messages, 54 ms) trip
     the master's watchdog while the slave's stays ok: the slave stops its tool while the
