@@ -13,7 +13,9 @@ port 43113)::
 
 It runs under SCHED_BATCH (its wake-ups never preempt the loops it shares the machine with;
 ``--scheduling normal``: normal scheduling, as the ``sim`` backend starts it on the master's own
-loop CPUs, where batching only delays its answer), prints one line starting
+loop CPUs, where batching only delays its answer; ``--scheduling fifo --rt-priority N``:
+SCHED_FIFO, as the backend starts it one above a master loop in SCHED_FIFO on those CPUs),
+prints one line starting
 ``haptic-rig-sim: ready`` when it answers frames, serves until
 ``--duration`` or SIGINT/SIGTERM (exit status 0), and prints one line when it stops. Exit
 status 1 when the bus cannot open, 2 for an invalid option or configuration (one line naming
@@ -28,6 +30,7 @@ import sys
 from typing import Any
 
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
+from haptic.common.config.runner_schema import MAX_FIFO_PRIORITY
 from haptic.master.settings import emulator_settings
 from haptic.master.sim.rig_emulator import (
     DEFAULT_CHANNELS,
@@ -35,6 +38,7 @@ from haptic.master.sim.rig_emulator import (
     StopRequest,
     run_emulator,
     use_batch_scheduling,
+    use_fifo_scheduling,
 )
 from haptic.master.sim.sim_rig import SimulatedCanRig
 
@@ -69,10 +73,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "frame (the sim backend passes it) instead of the first SYNC")
     parser.add_argument("--duration", metavar="S", type=float,
                         help="serve for S seconds (default: until SIGINT or SIGTERM)")
-    parser.add_argument("--scheduling", choices=("batch", "normal"), default="batch",
+    parser.add_argument("--scheduling", choices=("batch", "normal", "fifo"), default="batch",
                         help="batch (default): SCHED_BATCH, its wake-ups never preempt the "
                         "loops on its CPUs; normal: normal scheduling (on CPUs of its own, or "
-                        "the master's loop CPUs, where it answers while the loop sleeps)")
+                        "the master's loop CPUs, where it answers while the loop sleeps); "
+                        "fifo: SCHED_FIFO at --rt-priority (on the CPU of a master loop in "
+                        "SCHED_FIFO, one above it)")
+    parser.add_argument("--rt-priority", metavar="N", type=int,
+                        help="SCHED_FIFO priority 1-99 of --scheduling fifo (required there)")
     parser.add_argument("--parent-pid", metavar="PID", type=int,
                         help="also stop when process PID is no longer this one's parent "
                         "(the sim backend passes its own)")
@@ -106,6 +114,12 @@ def _configure(args: argparse.Namespace) -> tuple[SimulatedCanRig, dict[str, Any
         raise ConfigError(f"--can-channel ({error.key})", message) from None
     if args.duration is not None and not (args.duration > 0.0 and math.isfinite(args.duration)):
         raise ConfigError("--duration", f"must be a finite number > 0 s (got {args.duration})")
+    if args.scheduling == "fifo" and not (
+            args.rt_priority is not None and 1 <= args.rt_priority <= MAX_FIFO_PRIORITY):
+        raise ConfigError("--rt-priority", f"--scheduling fifo needs a priority 1-"
+                          f"{MAX_FIFO_PRIORITY} (got {args.rt_priority})")
+    if args.rt_priority is not None and args.scheduling != "fifo":
+        raise ConfigError("--rt-priority", "applies to --scheduling fifo only")
     if args.parent_pid is not None and args.parent_pid < 1:
         raise ConfigError("--parent-pid", f"must be a process id >= 1 (got {args.parent_pid})")
     try:
@@ -126,7 +140,9 @@ def main(argv: list[str] | None = None) -> int:
         rig, bus_options = _configure(args)
     stop = StopRequest(args.duration, args.parent_pid)
     stop.install()
-    warning = use_batch_scheduling() if args.scheduling == "batch" else None
+    warning = (use_batch_scheduling() if args.scheduling == "batch"
+               else use_fifo_scheduling(args.rt_priority) if args.scheduling == "fifo"
+               else None)
     if warning is not None:
         print(f"haptic-rig-sim: {warning}", file=sys.stderr)
     return run_emulator(rig, bus_options, stop)

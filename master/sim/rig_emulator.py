@@ -51,7 +51,7 @@ import can
 import numpy as np
 
 from haptic.common.config import to_toml
-from haptic.common.config.runner_schema import parse_cpus
+from haptic.common.config.runner_schema import MAX_FIFO_PRIORITY, parse_cpus
 from haptic.common.runtime.machine import process_cpu_s
 from haptic.master.hardware.can_driver import CanHandleDriver
 from haptic.master.hardware.interface import (
@@ -159,6 +159,23 @@ def use_batch_scheduling() -> str | None:
         os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
     except OSError as error:
         return f"SCHED_BATCH refused ({error}): normal scheduling"
+    return None
+
+
+def use_fifo_scheduling(priority: int) -> str | None:
+    """Put this thread (the emulator's serving loop; threads it starts later inherit it)
+    under SCHED_FIFO at ``priority`` (1-99; needs the privilege to). Where the master's loop
+    runs in SCHED_FIFO on the same CPU, the drives are above it: they answer as soon as the
+    SYNC comes, and a kernel thread of normal scheduling that holds the CPU (DAMON's
+    ``kdamond`` on a VM: 0.8-1.6 ms every 0.5 s) gives it up at its next preemption point
+    instead of at its end. Returns a warning when refused, else ``None`` (the emulator then
+    runs under normal scheduling)."""
+    if not hasattr(os, "SCHED_FIFO"):
+        return "SCHED_FIFO is not available here: normal scheduling"
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as error:
+        return f"SCHED_FIFO {priority} refused ({error}): normal scheduling"
     return None
 
 
@@ -311,8 +328,7 @@ class EmulatedRigHardware(HandleHardware):
             command = [sys.executable, "-m", "haptic.master.sim.cli", "--config",
                        config_path, "--can-interface", bus_options["interface"],
                        "--can-channel", bus_options["channel"], "--parent-pid", str(os.getpid()),
-                       "--operator-waits-for-lamp",
-                       "--scheduling", "normal" if loop_cpus else "batch"]
+                       "--operator-waits-for-lamp", *emulator_scheduling(self.config["runner"])]
             if "port" in bus_options:
                 command += ["--can-port", str(bus_options["port"])]
             try:
@@ -451,6 +467,19 @@ class EmulatedRigHardware(HandleHardware):
             return
         payload, self._display = self._display, None
         self.driver.send_frame(OPERATOR_DISPLAY_ID, payload, extended=True)
+
+
+def emulator_scheduling(runner: dict[str, Any]) -> list[str]:
+    """``haptic-rig-sim``'s scheduling options for the master's ``[runner]`` table: on the
+    loop's CPUs (``loop_cpus``) SCHED_FIFO one above a SCHED_FIFO loop
+    (``realtime_priority``), normal scheduling beside a loop of normal scheduling; elsewhere
+    SCHED_BATCH."""
+    if not parse_cpus(str(runner["loop_cpus"])):
+        return ["--scheduling", "batch"]
+    priority = int(runner["realtime_priority"])
+    if 0 < priority < MAX_FIFO_PRIORITY:
+        return ["--scheduling", "fifo", "--rt-priority", str(priority + 1)]
+    return ["--scheduling", "normal"]
 
 
 @register_hardware("sim")

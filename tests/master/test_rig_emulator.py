@@ -338,6 +338,38 @@ def test_the_emulator_runs_on_the_masters_loop_cpus_under_normal_scheduling() ->
     assert _reaped(process)
 
 
+def test_beside_a_fifo_loop_the_emulator_runs_one_priority_above_it() -> None:
+    """A master loop in SCHED_FIFO on its CPUs would starve emulated drives of normal
+    scheduling there (they answer while it waits, and it spins before each tick): they run in
+    SCHED_FIFO one above it. Elsewhere: normal beside a normal loop, batch off its CPUs."""
+    from haptic.master.sim.rig_emulator import emulator_scheduling
+
+    assert emulator_scheduling({"loop_cpus": "1", "realtime_priority": 40}) == [
+        "--scheduling", "fifo", "--rt-priority", "41"]
+    assert emulator_scheduling({"loop_cpus": "1", "realtime_priority": 0}) == [
+        "--scheduling", "normal"]
+    assert emulator_scheduling({"loop_cpus": "1", "realtime_priority": 99}) == [
+        "--scheduling", "normal"]  # nothing above 99
+    assert emulator_scheduling({"loop_cpus": "", "realtime_priority": 40}) == [
+        "--scheduling", "batch"]
+    cpu = max(os.sched_getaffinity(0))
+    hardware = create_hardware("sim", _config(runner__loop_cpus=str(cpu),
+                                              runner__realtime_priority=40))
+    try:
+        hardware.configure()
+        process = hardware.process
+        assert process is not None
+        assert hardware.read().ok
+        policy = os.sched_getscheduler(process.pid)
+        if policy == os.SCHED_FIFO:
+            assert os.sched_getparam(process.pid).sched_priority == 41
+        else:  # a host that refuses SCHED_FIFO (it warns): normal scheduling, serving anyway
+            assert policy == os.SCHED_OTHER
+    finally:
+        hardware.cleanup()
+    assert _reaped(process)
+
+
 def test_a_refused_placement_is_a_warning_and_the_emulator_runs_anywhere(
         monkeypatch, capsys) -> None:
     from haptic.master.program import emulator_placement
@@ -538,6 +570,9 @@ def test_the_can_backend_sends_no_operator_display_frame(tmp_path) -> None:
      "--can-channel (master.sim.emulator.channel)"),
     (["--can-interface", "virtual"], "--can-interface (master.sim.emulator.interface)"),
     (["--parent-pid", "0"], "--parent-pid"),
+    (["--scheduling", "fifo"], "--rt-priority"),
+    (["--scheduling", "fifo", "--rt-priority", "100"], "--rt-priority"),
+    (["--rt-priority", "41"], "--rt-priority"),
     (["--config", "/no/such/file.toml"], "cannot read config file"),
 ])
 def test_bad_options_exit_2_with_one_line_naming_them(argv, named, capsys) -> None:
