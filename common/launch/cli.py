@@ -82,8 +82,8 @@ def session_cpu_args(layout: str, cpus: Sequence[int]) -> tuple[list[str], list[
     loop sleeps); the slave's loop under SCHED_FIFO on the first; every other thread of both
     programs on the CPUs but the master's (the first alone on two). On a 2-core Intel Xeon
     guest the README session then met its loop targets in 3 of 6 runs, the slave in all 6,
-    against none with every thread anywhere (2026-12-05, docs/programs.md). ``free``, or one
-    CPU: nothing."""
+    against none with every thread anywhere, and in 6 of 6 once the loops started warm
+    (2026-12-05, docs/programs.md). ``free``, or one CPU: nothing."""
     if layout not in CPU_LAYOUTS:
         raise ValueError(f"cpu layout must be one of {', '.join(CPU_LAYOUTS)} (got {layout!r})")
     cpus = sorted(set(cpus))
