@@ -236,7 +236,6 @@ class MasterNode:
         buffers and recorded launches are set to the fresh values in place and it is returned
         (the same values as a new state, without the 0.25-0.7 ms of allocating about twenty
         Warp arrays and recording the launches: a tick can afford it)."""
-        wp = _warp()
         position = np.array(np.atleast_2d(position_m), float)
         lanes = position.shape[0]
         (matrices, per_lane), limits = self._kernel_constants()
@@ -245,13 +244,23 @@ class MasterNode:
                              f"activated with {lanes}")
         faulted_at_start = ~np.all(np.isfinite(position), axis=1)
         safe = np.nan_to_num(position)
-        if reuse is not None:
-            if reuse.lanes != lanes:
-                raise ValueError(f"cannot reuse a state of {reuse.lanes} lanes for {lanes}")
+        if reuse is None:
+            state = self._new_state(safe, matrices, per_lane, limits)
+        elif reuse.lanes != lanes:
+            raise ValueError(f"cannot reuse a state of {reuse.lanes} lanes for {lanes}")
+        else:
             state = self._reinitialise(reuse, safe)
-            for lane in np.flatnonzero(faulted_at_start):
-                self._trip(state, lane, "non-finite handle position at activation", None)
-            return state
+        for lane in np.flatnonzero(faulted_at_start):
+            self._trip(state, lane, "non-finite handle position at activation", None)
+        return state
+
+    def _new_state(self, safe: np.ndarray, matrices: tuple, per_lane: int,
+                   limits: Any) -> MasterNodeState:
+        """A state at ``safe`` (lanes, 2), m (finite): its Warp buffers, the recorded launch
+        over them and this node's constants (``matrices``, ``per_lane``, ``limits``), and the
+        passivity port where configured."""
+        wp = _warp()
+        lanes = safe.shape[0]
         n = self._layout.blocks * self._layout.block_states  # the packed layout's states
 
         def buffer(shape: tuple, dtype: Any, value: np.ndarray | None = None) -> Any:
@@ -304,8 +313,6 @@ class MasterNode:
         if self.passivity is not None:
             self._attach_passivity(state, safe, (inputs, enabled, faulted, command, last_command,
                                                  origin))
-        for lane in np.flatnonzero(faulted_at_start):
-            self._trip(state, lane, "non-finite handle position at activation", None)
         return state
 
     def resume(self, position_m: np.ndarray, reason: str = "link resynchronised",

@@ -153,13 +153,7 @@ def use_batch_scheduling() -> str | None:
     preempt a running task, so a frame that wakes the emulator while the master's loop runs
     (the operator display frame, whose answer it then prepares) waits for that CPU to be free
     instead of cutting into the loop's tick. Returns a warning when refused, else ``None``."""
-    if not hasattr(os, "SCHED_BATCH"):
-        return "SCHED_BATCH is not available here: normal scheduling"
-    try:
-        os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
-    except OSError as error:
-        return f"SCHED_BATCH refused ({error}): normal scheduling"
-    return None
+    return _use_policy("SCHED_BATCH", 0)
 
 
 def use_fifo_scheduling(priority: int) -> str | None:
@@ -170,12 +164,20 @@ def use_fifo_scheduling(priority: int) -> str | None:
     ``kdamond`` on a VM: 0.8-1.6 ms every 0.5 s) gives it up at its next preemption point
     instead of at its end. Returns a warning when refused, else ``None`` (the emulator then
     runs under normal scheduling)."""
-    if not hasattr(os, "SCHED_FIFO"):
-        return "SCHED_FIFO is not available here: normal scheduling"
+    return _use_policy("SCHED_FIFO", priority)
+
+
+def _use_policy(name: str, priority: int) -> str | None:
+    """The calling thread under the policy ``os.<name>`` at ``priority``; the warning of a
+    refusal (or of a platform without it), else ``None``."""
+    policy = getattr(os, name, None)
+    if policy is None:
+        return f"{name} is not available here: normal scheduling"
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        os.sched_setscheduler(0, policy, os.sched_param(priority))
     except OSError as error:
-        return f"SCHED_FIFO {priority} refused ({error}): normal scheduling"
+        label = f"{name} {priority}" if priority else name
+        return f"{label} refused ({error}): normal scheduling"
     return None
 
 
