@@ -43,6 +43,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from haptic.common.launch.guidance import (
+    expected_duration_line,
+    kernels_cached,
+    missed_guidance_lines,
+    warp_kernel_cache_dir,
+)
 from haptic.common.runtime.cli_options import add_retired_delay_option
 from haptic.common.runtime.machine import usable_cpu_count, usable_cpus
 from haptic.common.runtime.summary import finite_figure, loop_cpu_text
@@ -189,6 +195,8 @@ def run_session(args: argparse.Namespace) -> int:
           f"Zenoh on {endpoint}, key prefix {prefix}, CPU layout {args.cpu_layout}"
           + (f" (master {' '.join(master_layout)}; slave {' '.join(slave_layout)})"
              if master_layout else ""), flush=True)
+    print(expected_duration_line(args.duration, kernels_cached(warp_kernel_cache_dir())),
+          flush=True)
     processes: dict[str, subprocess.Popen] = {}
     statuses: dict[str, int | None] = {}
     try:
@@ -386,6 +394,9 @@ def combined_summary(master: dict[str, Any], slave: dict[str, Any],
     slowest = slowest_stage_line(master, slave, misses)
     if slowest is not None:
         lines.append(slowest)
+    if misses:
+        trips = watchdog_trips_split(master, slave)[0] + watchdog_trips_split(slave, master)[0]
+        lines.extend(missed_guidance_lines(slave, GAP_TARGET_M, trips))
     for name, s in (("master -> slave", slave), ("slave -> master", master)):
         loss = s.get("loss_ratio")
         loss_text = "n/a" if loss is None else f"{loss * 100:.3f} %"
