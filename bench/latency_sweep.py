@@ -42,14 +42,13 @@ from haptic.common.model.teleop import model_from_config
 from haptic.lockstep.sweep import (
     SweepSettings,
     auto_workers,
+    default_settings,
     device_problem,
     plot_heatmap,
     run_sweep,
     write_csv,
 )
 
-FULL_GAINS = (1.0, 3.0, 5.0, 8.0, 10.0, 13.0, 16.0, 19.0, 25.0, 30.0)
-QUICK_GAINS = (1.0, 3.0, 8.0, 13.0, 19.0, 30.0)
 SPEED_TARGET = 200.0
 #: The gains run over the real link, and the injected round trips as multiples of each one's
 #: sampled delay margin tau*: both sides of it, outside the 10 % band (quick: the CI set).
@@ -65,14 +64,8 @@ def real_link_cells(quick: bool) -> list[tuple[float, float]]:
 
 
 def settings_for(quick: bool, mode: str) -> SweepSettings:
-    """The grid of the full or the quick sweep."""
-    if mode == "clay":
-        gains = (0.5, 0.75, 1.0, 1.25, 1.5)
-        delays = tuple(np.arange(0.0, 0.0201, 0.002 if quick else 0.001))
-        return SweepSettings(gains, delays, "clay", 3.0, reference_start_s=1.0)
-    if quick:
-        return SweepSettings(QUICK_GAINS, tuple(np.arange(0.0, 0.0201, 0.002)), "linear", 2.5)
-    return SweepSettings(FULL_GAINS, tuple(np.arange(0.0, 0.0201, 0.001)), "linear", 3.0)
+    """The grid of the full or the quick sweep: the one ``haptic-sim sweep`` runs."""
+    return default_settings(mode, quick)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -43,8 +43,6 @@ from haptic.master.margin_governor import governor_for
 from haptic.master.settings import master_settings
 from haptic.master.sim.operator import parse_operator_spec
 
-DEFAULT_GAINS = (1.0, 3.0, 5.0, 8.0, 10.0, 13.0, 16.0, 19.0, 25.0, 30.0)
-
 
 def _floats(text: str) -> tuple[float, ...]:
     """``"1,3,5"`` or ``"start:stop:step"`` (stop included) -> floats."""
@@ -97,12 +95,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     sweep = sub.add_parser("sweep", help="latency sweep against the analysis")
     sweep.add_argument("--mode", choices=("linear", "clay"), default="linear")
-    sweep.add_argument("--gains", type=_floats, default=DEFAULT_GAINS,
-                       help="k values: a,b,c or start:stop:step")
+    sweep.add_argument("--quick", action="store_true",
+                       help="the mode's quick grid (delays in 2 ms steps; linear: six gains, "
+                       "2.5 s runs)")
+    sweep.add_argument("--gains", type=_floats, default=None,
+                       help="k values: a,b,c or start:stop:step (default: the mode's grid, "
+                       "linear 1 to 30, clay 0.5 to 1.5)")
     sweep.add_argument("--delays", type=_floats, default=None,
-                       help="round-trip delays, s: a,b,c or start:stop:step (default 0:0.02:0.001)")
+                       help="round-trip delays, s: a,b,c or start:stop:step (default "
+                       "0:0.02:0.001, --quick 0:0.02:0.002)")
     sweep.add_argument("--duration", type=float, default=None, metavar="SECONDS",
-                       help="run length, s (default 3; clay: 2.25, the tool still in the block)")
+                       help="run length, s (default 3, --quick 2.5; clay: 2.25, the tool still "
+                       "in the block)")
     sweep.add_argument("--jitter", type=_floats, default=(0.0,), metavar="SECONDS",
                        help="jitter bound on each line, s: one value or a list (a grid)")
     sweep.add_argument("--loss", type=_floats, default=(0.0,),
@@ -283,29 +287,27 @@ def main(argv: list[str] | None = None) -> int:
         return command_sweep(args, config)
 
 
-#: The clay sweep's run length, s: the last window must still cut the constant-rate block
-#: (a fast, oscillating k = 3 lane leaves it at about 2.4 s).
-CLAY_SWEEP_DURATION_S = 2.25
-
-
 def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
     """Run the sweep, write its files, print its figures; 1 when --check fails."""
     from haptic.lockstep.sweep import (
         SweepSettings,
         auto_workers,
+        default_settings,
         device_problem,
         plot_heatmap,
         run_sweep_grid,
         write_csv,
     )
 
-    delays = args.delays or _floats("0:0.02:0.001")
+    grid = default_settings(args.mode, args.quick)  # the grid shared with the benchmark
+    gains = args.gains or grid.gains_k
+    delays = args.delays or grid.delays_s
     for value in delays:
         _check_seconds("--delays", value)
-    if any(not (math.isfinite(g) and g > 0.0) for g in args.gains):
+    if any(not (math.isfinite(g) and g > 0.0) for g in gains):
         raise ConfigError("--gains", "every k must be a finite number > 0")
     if args.duration is None:
-        args.duration = CLAY_SWEEP_DURATION_S if args.mode == "clay" else 3.0
+        args.duration = grid.duration_s
     if not args.duration >= 1.0:
         raise ConfigError("--duration", "must be >= 1 s (the verdict compares windows)")
     for value in args.jitter:
@@ -318,12 +320,11 @@ def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
     if problem is not None:
         raise ConfigError("--device", problem)
     model = model_from_config(config)
-    reference = 1.0 if args.mode == "clay" else 0.25
-    settings = SweepSettings(gains_k=tuple(args.gains), delays_s=tuple(delays), mode=args.mode,
-                             duration_s=args.duration, reference_start_s=reference,
+    settings = SweepSettings(gains_k=tuple(gains), delays_s=tuple(delays), mode=args.mode,
+                             duration_s=args.duration, reference_start_s=grid.reference_start_s,
                              seed=args.seed, control=args.control, bursty=args.bursty,
                              device=args.device)
-    workers = args.workers or auto_workers(len(args.gains) * len(delays))
+    workers = args.workers or auto_workers(len(gains) * len(delays))
     summary, results = run_sweep_grid(model, settings, tuple(args.jitter), tuple(args.loss),
                                       workers)
     result = results[0]

@@ -14,6 +14,7 @@ Modes:
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import threading
 import time
@@ -92,6 +93,44 @@ class SweepSettings:
     #: mode. Workers are forked only for clay on the CPU: a forked child cannot use its
     #: parent's CUDA context, so a sweep whose clay is on CUDA runs its lanes in one process.
     device: str = "cpu"
+
+
+#: The default grids, shared by ``haptic-sim sweep`` and bench/latency_sweep.py. The linear
+#: loop's gains reach past k = 19's margin; the clay loop's margins are far shorter (k = 1.5:
+#: about 22 ms, k = 2: 9 ms, k = 3: under 1 ms), so its grid stops at k = 1.5, where the
+#: boundary still crosses the delays and no cell falls in the bistable region below k = 2's
+#: margin (docs/lockstep.md, "The clay mode").
+LINEAR_GAINS = (1.0, 3.0, 5.0, 8.0, 10.0, 13.0, 16.0, 19.0, 25.0, 30.0)
+LINEAR_QUICK_GAINS = (1.0, 3.0, 8.0, 13.0, 19.0, 30.0)
+CLAY_GAINS = (0.5, 0.75, 1.0, 1.25, 1.5)
+#: Round-trip delays of the grids, s: 0 to 20 ms in 1 ms steps (quick: 2 ms).
+DELAY_STEP_S = 0.001
+QUICK_DELAY_STEP_S = 0.002
+MAX_DELAY_S = 0.020
+#: The clay sweep's run length, s: the last window must still cut the constant-rate block
+#: (a fast, oscillating k = 3 lane leaves it at about 2.4 s).
+CLAY_DURATION_S = 2.25
+
+
+def delay_grid(step_s: float, max_s: float = MAX_DELAY_S) -> tuple[float, ...]:
+    """Round-trip delays 0, step_s, ... up to ``max_s`` included, s."""
+    count = int(math.floor(max_s / step_s + 1e-9)) + 1
+    return tuple(step_s * i for i in range(count))
+
+
+def default_settings(mode: str, quick: bool = False) -> SweepSettings:
+    """The default grid of ``mode`` ("linear" or "clay"): gains, delays, run length and the
+    reference window's start; ``quick`` is the CI-sized grid (fewer gains for the linear
+    loop, 2 ms delay steps, linear runs of 2.5 s)."""
+    delays = delay_grid(QUICK_DELAY_STEP_S if quick else DELAY_STEP_S)
+    if mode == "clay":
+        return SweepSettings(CLAY_GAINS, delays, "clay", CLAY_DURATION_S,
+                             reference_start_s=1.0)
+    if mode != "linear":
+        raise ValueError(f"unknown sweep mode {mode!r}")
+    if quick:
+        return SweepSettings(LINEAR_QUICK_GAINS, delays, "linear", 2.5)
+    return SweepSettings(LINEAR_GAINS, delays, "linear", 3.0)
 
 
 @dataclass
