@@ -390,10 +390,3 @@ def _removed_total_m3(state: Any) -> float:
     """Clay removed since the start, m^3 (0 for the linear environment)."""
     total = getattr(state.environment, "removed_total_m3", None)
     return 0.0 if total is None else float(total[0])
-
-
-
-if __name__ == "__main__":  # the entry point moved to slave_sim/cli.py; old launchers still work
-    from haptic.slave_sim.cli import main
-
-    raise SystemExit(main())

@@ -6,8 +6,9 @@ from __future__ import annotations
 import control
 import numpy as np
 
+from haptic.common.model.axes import AxisModel
 from haptic.common.model.synthesis import minimal_tf
-from haptic.common.model.teleop import AxisModel, tf, tf_coefficients
+from haptic.common.model.transfer import tf, tf_coefficients
 
 
 def _polynomial_tf(coefficients: np.ndarray) -> control.TransferFunction:

@@ -22,13 +22,8 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from haptic.common.model.teleop import (
-    AxisModel,
-    TeleopModel,
-    polynomial_degree,
-    tf,
-    tf_coefficients,
-)
+from haptic.common.model.axes import AxisModel, TeleopModel
+from haptic.common.model.transfer import polynomial_degree, tf, tf_coefficients
 
 #: Real part (1/s) above which a pole counts as in the open right half-plane.
 RHP_TOLERANCE = 1e-9

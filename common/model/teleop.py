@@ -14,124 +14,30 @@ Th and Tt are impedance polynomials in N/m.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
 from typing import Any
 
-import control
 import numpy as np
 
+# The model's types and transfer-function helpers live in axes.py and transfer.py, which the
+# synthesis and the plants import without this module; they are re-exported here, where
+# the programs have always taken them from.
+from haptic.common.model.axes import AXES, AxisModel, TeleopModel
 from haptic.common.model.errors import ConfigError
+from haptic.common.model.plants import causal_plants
+from haptic.common.model.synthesis import SynthesisError, synthesize_axis
+from haptic.common.model.transfer import (
+    NEGLIGIBLE_COEFFICIENT,
+    clean_polynomial,
+    evaluate_tf,
+    polynomial_degree,
+    relative_degree,
+    tf,
+    tf_coefficients,
+)
 
-AXES = ("x", "y")
-
-
-#: Coefficients smaller than this fraction of a polynomial's largest are rounding noise.
-NEGLIGIBLE_COEFFICIENT = 1e-14
-
-
-def clean_polynomial(coefficients: list[float] | np.ndarray) -> np.ndarray:
-    """Coefficients (highest power first) with negligible ones set to zero and leading
-    zeros dropped; the zero polynomial is [0.0]."""
-    values = np.atleast_1d(np.asarray(coefficients, float)).copy()
-    scale = float(np.max(np.abs(values))) if values.size else 0.0
-    values[np.abs(values) < NEGLIGIBLE_COEFFICIENT * scale] = 0.0
-    nonzero = np.flatnonzero(values)
-    return np.array([0.0]) if nonzero.size == 0 else values[nonzero[0]:]
-
-
-def tf(num: list[float] | np.ndarray, den: list[float] | np.ndarray) -> control.TransferFunction:
-    """A SISO continuous-time transfer function from coefficient lists (highest power first)."""
-    return control.tf(clean_polynomial(num), clean_polynomial(den))
-
-
-def polynomial_degree(coefficients: np.ndarray) -> int:
-    """Degree of a polynomial given highest power first; -1 for the zero polynomial."""
-    nonzero = np.flatnonzero(np.asarray(coefficients) != 0.0)
-    return -1 if nonzero.size == 0 else len(coefficients) - 1 - int(nonzero[0])
-
-
-def tf_coefficients(system: control.TransferFunction) -> tuple[np.ndarray, np.ndarray]:
-    """Numerator and denominator of a SISO transfer function, highest power first."""
-    return (
-        np.atleast_1d(np.asarray(system.num[0][0], float)),
-        np.atleast_1d(np.asarray(system.den[0][0], float)),
-    )
-
-
-def relative_degree(system: control.TransferFunction) -> int | None:
-    """deg(den) - deg(num); ``None`` for the zero transfer function."""
-    num, den = tf_coefficients(system)
-    num_degree = polynomial_degree(num)
-    return None if num_degree < 0 else polynomial_degree(den) - num_degree
-
-
-def evaluate_tf(system: control.TransferFunction, points: np.ndarray) -> np.ndarray:
-    """Evaluate a SISO transfer function at complex points (s or z)."""
-    num, den = tf_coefficients(system)
-    return np.polyval(num, points) / np.polyval(den, points)
-
-
-@dataclass(frozen=True)
-class AxisModel:
-    """One axis of the handle-operator-tool-environment model (units in the field names)."""
-
-    name: str
-    handle_actuator_gh: control.TransferFunction  # position command (m) -> position (m)
-    handle_compliance_sh: control.TransferFunction  # m/N
-    tool_compliance_st: control.TransferFunction  # m/N
-    operator_impedance_th_N_per_m: np.ndarray  # polynomial in s
-    environment_impedance_tt_N_per_m: np.ndarray  # polynomial in s
-    tool_mass_kg: float
-    tool_damping_N_s_per_m: float
-    tool_stiffness_N_per_m: float
-    position_ratio_ah1: float  # yt = Ah1 yh, dimensionless
-    force_ratio_ah2: float  # ft = Ah2 fh^e, dimensionless
-    #: Denominator of a rational Tt (polynomial in s; [1]: Tt is the polynomial above), e.g.
-    #: the clay's contact linearised about steady cutting (common/model/clay_contact.py).
-    environment_impedance_den: np.ndarray = field(default_factory=lambda: np.ones(1))
-
-    @property
-    def tool_actuator_gt(self) -> control.TransferFunction:
-        """Gt = 1/(Mt s^2 + Bt s + Kt), actuator force (N) -> tool position (m) (eq 5)."""
-        return tf([1.0], [self.tool_mass_kg, self.tool_damping_N_s_per_m,
-                          self.tool_stiffness_N_per_m])
-
-    def with_environment(self, impedance_N_per_m: np.ndarray,
-                         denominator: np.ndarray | None = None) -> AxisModel:
-        """A copy with another environment impedance Tt (e.g. the clay as B s): the
-        polynomial ``impedance_N_per_m`` over ``denominator`` (default 1)."""
-        return replace(self, environment_impedance_tt_N_per_m=np.asarray(impedance_N_per_m, float),
-                       environment_impedance_den=np.ones(1) if denominator is None
-                       else np.asarray(denominator, float))
-
-
-@dataclass(frozen=True)
-class TeleopModel:
-    """The whole model: the sampling period, the master compensator Ch1 and both axes."""
-
-    sample_period_s: float
-    ch1_gain_k: float
-    ch1_num: np.ndarray
-    ch1_den: np.ndarray
-    axes: tuple[AxisModel, ...]
-
-    @property
-    def ch1(self) -> control.TransferFunction:
-        """Ch1 = k num/den: handle force (N) -> handle position command (m), m/N."""
-        return tf(self.ch1_gain_k * self.ch1_num, self.ch1_den)
-
-    def with_gain(self, gain_k: float) -> TeleopModel:
-        """A copy with another Ch1 gain k."""
-        if not gain_k > 0.0 or not np.isfinite(gain_k):
-            raise ConfigError("model.ch1.gain_k", f"must be a finite number > 0 (got {gain_k})")
-        return replace(self, ch1_gain_k=float(gain_k))
-
-    def axis(self, name: str) -> AxisModel:
-        """The axis called ``name`` ("x" or "y")."""
-        for axis in self.axes:
-            if axis.name == name:
-                return axis
-        raise KeyError(name)
+__all__ = ["AXES", "NEGLIGIBLE_COEFFICIENT", "AxisModel", "TeleopModel", "clean_polynomial",
+           "evaluate_tf", "model_from_config", "polynomial_degree", "relative_degree", "tf",
+           "tf_coefficients"]
 
 
 def _check_proper(key: str, num: list[float], den: list[float]) -> None:
@@ -205,9 +111,6 @@ def _check_realisable(model: TeleopModel) -> None:
     cannot run is a :class:`ConfigError` naming its axis table: each axis's compensators
     synthesise (eqs 21-23) and its plants Ph and Pt are proper (a zero tool mass with an St
     that does not roll off, extreme coefficients)."""
-    from haptic.common.model.plants import causal_plants
-    from haptic.common.model.synthesis import SynthesisError, synthesize_axis
-
     for axis in model.axes:
         key = f"model.{axis.name}"
         try:
