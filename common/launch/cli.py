@@ -21,7 +21,8 @@ the ``[runner]`` table of ``--config`` as it is.
 
 Children are ended by their own PID (SIGTERM, then SIGKILL after a grace period) on timeout
 or Ctrl-C, and always reaped. Exit status 0 when both programs exited 0 and wrote their
-summaries; otherwise 1 (or the first non-zero child status, e.g. 3 for the analysis refusal).
+summaries; otherwise the status of the first program to end on its own with a non-zero status
+(e.g. 3 for the analysis refusal; 1 for a signal), or 1.
 """
 
 from __future__ import annotations
@@ -145,6 +146,37 @@ def _end(process: subprocess.Popen) -> None:
     process.wait()
 
 
+def _note_ended(processes: dict[str, subprocess.Popen], ended: list[str]) -> bool:
+    """Append to ``ended`` each side whose program has exited and is not there yet (the
+    master first when both are seen at once); True when any side has ended."""
+    for side in ("master", "slave"):
+        if side in processes and side not in ended and processes[side].poll() is not None:
+            ended.append(side)
+    return bool(ended)
+
+
+def session_failure(statuses: dict[str, int | None], ended: Sequence[str]
+                    ) -> tuple[int, list[str]]:
+    """The session's exit status from its programs' (``statuses``: side -> exit status, a
+    negative one a signal) and the lines saying why; (0, []) when both exited 0.
+    ``ended``: the sides that exited on their own, in the order they did. The first of them
+    to fail decides: its own status (3 for the analysis refusal), not the SIGTERM the session
+    sent the other side afterwards. A side the session had to stop that then failed gives 1."""
+    own = [side for side in ended if statuses.get(side) != 0]
+    if own:
+        code = statuses[own[0]]
+        lines = [f"haptic-session: {side} exited with status {statuses[side]}" for side in own]
+        lines += [f"haptic-session: {side} stopped by the session after the {own[0]} ended "
+                  f"(status {code_})" for side, code_ in statuses.items()
+                  if side not in ended and code_ != 0]
+        return (code if code is not None and code > 0 else 1), lines
+    stopped = {side: code for side, code in statuses.items() if code != 0}
+    if not stopped:
+        return 0, []
+    return 1, [f"haptic-session: {side} exited with status {code} when the session stopped it"
+               for side, code in stopped.items()]
+
+
 def _session_key() -> Path:
     """A fresh pre-shared key for this session's two programs (common/wire/auth.py), in a private
     directory removed when the session ends: no other process can join the pair."""
@@ -199,19 +231,18 @@ def run_session(args: argparse.Namespace) -> int:
           flush=True)
     processes: dict[str, subprocess.Popen] = {}
     statuses: dict[str, int | None] = {}
+    ended: list[str] = []  # the sides that ended on their own, first first
     try:
         for side in ("slave", "master"):
             processes[side] = subprocess.Popen(commands[side])
         deadline = time.monotonic() + wall_bound_s + START_ALLOWANCE_S
-        master = processes["master"]
-        while master.poll() is None and time.monotonic() < deadline:
-            if processes["slave"].poll() is not None:
-                break
+        while not _note_ended(processes, ended) and time.monotonic() < deadline:
             time.sleep(0.05)
-        if master.poll() is None and processes["slave"].poll() is not None:
+        if ended == ["slave"]:
             # the slave died: give the master a moment, then stop it
             time.sleep(0.5)
-        _end(master)
+            _note_ended(processes, ended)
+        _end(processes["master"])
         _end(processes["slave"])
     except KeyboardInterrupt:
         print("haptic-session: interrupted; stopping the programs", file=sys.stderr)
@@ -220,12 +251,10 @@ def run_session(args: argparse.Namespace) -> int:
         for process in processes.values():
             _end(process)
         statuses = {side: p.returncode for side, p in processes.items()}
-    failed = {side: code for side, code in statuses.items() if code != 0}
-    if failed:
-        for side, code in failed.items():
-            print(f"haptic-session: {side} exited with status {code}", file=sys.stderr)
-        first = next(iter(failed.values()))
-        return first if first and first > 0 else 1
+    status, lines = session_failure(statuses, ended)
+    if status:
+        print("\n".join(lines), file=sys.stderr)
+        return status
     summaries = {}
     for side, path in files.items():
         if not path.is_file():
