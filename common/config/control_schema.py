@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from haptic.common.config.loader import Field, Schema
+from haptic.common.config.fields import Field, Schema
 from haptic.common.model.drift import DriftCoupling
 from haptic.common.model.passivity import MODES, PassivitySettings
 

@@ -3,7 +3,7 @@ docs/governor.md)."""
 
 from __future__ import annotations
 
-from haptic.common.config.loader import Field, Schema
+from haptic.common.config.fields import Field, Schema
 
 GOVERNOR_ACTIONS = ("lower_k", "tdpa")
 

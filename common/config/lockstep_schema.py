@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from haptic.common.config.loader import Field, Schema
+from haptic.common.config.fields import Field, Schema
 from haptic.common.config.operator_spec import check_operator_spec
 
 LOCKSTEP_SCHEMA: Schema = {

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from haptic.common.config.loader import Field, Schema
+from haptic.common.config.fields import Field, Schema
 from haptic.common.config.operator_spec import check_operator_spec
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from haptic.common.config.loader import ConfigError
+from haptic.common.model.errors import ConfigError
 
 #: The operator kinds (haptic.master.sim.operator documents each).
 OPERATOR_KINDS = ("constant", "regulate", "track")

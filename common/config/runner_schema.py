@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 
-from haptic.common.config.loader import Field, Schema
+from haptic.common.config.fields import Field, Schema
 
 #: Highest SCHED_FIFO priority Linux allows.
 MAX_FIFO_PRIORITY = 99

@@ -8,9 +8,9 @@ from __future__ import annotations
 from typing import Any
 
 from haptic.common.config.control_schema import CONTROL_SCHEMA
+from haptic.common.config.fields import Field, Schema
 from haptic.common.config.governor_schema import GOVERNOR_SCHEMA
 from haptic.common.config.link_schema import LINK_SCHEMA
-from haptic.common.config.loader import Field, Schema
 from haptic.common.config.lockstep_schema import LOCKSTEP_SCHEMA
 from haptic.common.config.master_schema import MASTER_SCHEMA
 from haptic.common.config.runner_schema import RUNNER_SCHEMA

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 
-from haptic.common.config.loader import Field, Schema
+from haptic.common.config.fields import Field, Schema
 
 
 def device_form_problem(value: str) -> str | None:
