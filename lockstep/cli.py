@@ -219,6 +219,31 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
     }
 
 
+def run_text(summary: dict[str, Any]) -> str:
+    """``haptic-sim run``'s summary as ``name: value`` lines for the terminal: the analysis
+    as the programs' stability line, a table as ``key value`` pairs, a pair of axes as
+    ``x, y``, a list of events one a line."""
+    from haptic.common.analysis.preflight import PreflightResult
+
+    lines = []
+    for key, value in summary.items():
+        if key == "analysis":
+            value = PreflightResult(
+                k=value["k"], round_trip_delay_s=value["round_trip_delay_s"],
+                sampled=value["sampled"], stable=value["stable"],
+                delay_margin_s=value["delay_margin_s"], axes=()).describe()
+        elif isinstance(value, dict):
+            value = ", ".join(f"{name} {item}" for name, item in value.items()) or "none"
+        elif isinstance(value, list) and all(isinstance(item, float) for item in value):
+            value = ", ".join(f"{item:.6g}" for item in value)
+        elif isinstance(value, list) and all(isinstance(item, dict) for item in value):
+            value = "".join("\n  " + ", ".join(f"{name} {item}" for name, item in entry.items())
+                            for entry in value) or "none"
+        text = str(value)
+        lines.append(f"{key}:{text}" if text.startswith("\n") else f"{key}: {text}")
+    return "\n".join(lines)
+
+
 def _analysis(config: dict[str, Any], gain: float, scenario: Any, environment: str,
               round_trip_s: float) -> PreflightResult:
     """The sampled analysis' verdict for the run: gain ``gain``, the constant round trip (s),
@@ -265,8 +290,7 @@ def main(argv: list[str] | None = None) -> int:
         config = load_config(args.config)
         if args.command == "run":
             summary = command_run(args, config)
-            print(json.dumps(summary) if args.json else
-                  "\n".join(f"{key}: {value}" for key, value in summary.items()))
+            print(json.dumps(summary) if args.json else run_text(summary))
             return 0
         if args.command == "repro":
             from haptic.lockstep.repro import reproduce, write_report

@@ -80,3 +80,14 @@ def test_run_reports_the_analysis_and_warns_when_it_calls_the_loop_unstable(tmp_
     captured = capsys.readouterr()
     assert json.loads(captured.out)["analysis"]["stable"] is True
     assert "UNSTABLE" not in captured.err
+
+
+def test_run_prints_the_analysis_as_the_programs_stability_line(tmp_path, capsys) -> None:
+    """Not a Python dict: the verdict as haptic-master and haptic-slave print it."""
+    assert main(["run", "--environment", "linear", "--k", "13", "--duration", "0.1",
+                 "--round-trip-delay", "0.005", "--out", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    analysis = [line for line in lines if line.startswith("analysis: ")]
+    assert analysis == ["analysis: stability (sampled-data loop at Ts): k = 13, round-trip "
+                        "delay 4.86 ms: stable; delay margin 14.31 ms (+9.45 ms left)"]
+    assert not any("{" in line for line in lines)
