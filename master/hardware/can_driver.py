@@ -38,7 +38,6 @@ from haptic.master.hardware.interface import (
     HandleReading,
     HardwareError,
     LifecycleState,
-    register_hardware,
 )
 from haptic.master.hardware.unix_can import send_burst
 from haptic.master.settings import CanSettings, master_settings
@@ -960,8 +959,9 @@ def _abort_text(code: int) -> str:
     return _ABORT_TEXT.get(code, "see CiA 301")
 
 
-@register_hardware("can")
-def _can_hardware(config: dict[str, Any]) -> HandleHardware:
+def can_hardware(config: dict[str, Any]) -> HandleHardware:
+    """Backend ``can`` for a validated configuration: the handle's drives and force sensor
+    on the configured CAN bus."""
     settings = master_settings(config)
     can_settings = settings.can
     options: dict[str, Any] = {"interface": can_settings.interface,

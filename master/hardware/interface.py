@@ -17,6 +17,7 @@ commands. A backend is chosen by name (``[master] rig``, ``haptic-master --rig``
 
 from __future__ import annotations
 
+import importlib
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -150,39 +151,35 @@ def starts_cycles_early(hardware: HandleHardware) -> bool:
 
 
 HardwareFactory = Callable[[dict[str, Any]], HandleHardware]
-_REGISTRY: dict[str, HardwareFactory] = {}
 
-
-def register_hardware(name: str) -> Callable[[HardwareFactory], HardwareFactory]:
-    """Decorator: register a factory ``factory(config) -> HandleHardware`` under ``name``."""
-
-    def decorate(factory: HardwareFactory) -> HardwareFactory:
-        _REGISTRY[name] = factory
-        return factory
-
-    return decorate
-
-
-def _load_builtin_backends() -> None:
-    # The built-in backends register themselves on import.
-    import haptic.master.hardware.can_driver  # noqa: F401
-    import haptic.master.sim.model_rig  # noqa: F401
-    import haptic.master.sim.rig_emulator  # noqa: F401
-    import haptic.master.sim.sim_rig  # noqa: F401
+#: The built-in backends as data, name -> ``"module:factory"`` (``factory(config) ->
+#: HandleHardware``), the way python-can names its interfaces: this module imports no
+#: backend, so the backends may import it without a cycle, and a backend's heavy imports
+#: (the CAN stack) load only when that backend is chosen.
+BACKENDS: dict[str, str] = {
+    "can": "haptic.master.hardware.can_driver:can_hardware",
+    "model": "haptic.master.sim.model_rig:model_rig_hardware",
+    "sim": "haptic.master.sim.rig_emulator:emulated_rig_hardware",
+    "sim-inproc": "haptic.master.sim.sim_rig:simulated_rig_hardware",
+}
 
 
 def hardware_names() -> tuple[str, ...]:
-    """Names of the registered backends."""
-    _load_builtin_backends()
-    return tuple(sorted(_REGISTRY))
+    """Names of the built-in backends."""
+    return tuple(sorted(BACKENDS))
+
+
+def hardware_factory(name: str) -> HardwareFactory:
+    """The factory of the backend called ``name``, imported on first use."""
+    try:
+        target = BACKENDS[name]
+    except KeyError:
+        raise KeyError(f"no handle hardware named {name!r}; known: "
+                       f"{', '.join(hardware_names())}") from None
+    module_name, _, attribute = target.partition(":")
+    return getattr(importlib.import_module(module_name), attribute)
 
 
 def create_hardware(name: str, config: dict[str, Any]) -> HandleHardware:
-    """The backend registered as ``name``, built from a validated configuration."""
-    _load_builtin_backends()
-    try:
-        factory = _REGISTRY[name]
-    except KeyError:
-        raise KeyError(f"no handle hardware named {name!r}; known: "
-                       f"{', '.join(sorted(_REGISTRY))}") from None
-    return factory(config)
+    """The backend called ``name``, built from a validated configuration."""
+    return hardware_factory(name)(config)

@@ -24,7 +24,6 @@ from haptic.master.hardware.interface import (
     HandleReading,
     HardwareError,
     LifecycleState,
-    register_hardware,
 )
 from haptic.master.settings import CanSettings, master_settings
 from haptic.master.sim.rig_model import RigModel
@@ -123,7 +122,6 @@ def _quantise(value: float, step: float, offset_counts: float) -> float:
     return (round(value / step + offset_counts) - offset_counts) * step
 
 
-@register_hardware("model")
 def model_rig_hardware(config: dict[str, Any]) -> ModelRigHardware:
     """The ``model`` backend of a validated configuration (``[model]``, ``[master.can]`` for
     the quantisation, ``[master.sim]`` for the operator, noise, seed and start)."""

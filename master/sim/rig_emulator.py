@@ -59,7 +59,6 @@ from haptic.master.hardware.interface import (
     HandleReading,
     HardwareError,
     LifecycleState,
-    register_hardware,
 )
 from haptic.master.hardware.unix_can import INTERFACE as UNIX_INTERFACE
 from haptic.master.settings import master_settings
@@ -484,7 +483,6 @@ def emulator_scheduling(runner: dict[str, Any]) -> list[str]:
     return ["--scheduling", "normal"]
 
 
-@register_hardware("sim")
 def emulated_rig_hardware(config: dict[str, Any]) -> EmulatedRigHardware:
     """Backend ``sim`` for a validated configuration: ``[model]``, ``[master.can]`` (node ids,
     conversions, DBC), ``[master.sim]`` (operator, noise, seed, start, ``pdo_timeout_s``) and

@@ -68,7 +68,6 @@ from haptic.master.hardware.interface import (
     HandleHardware,
     HandleReading,
     LifecycleState,
-    register_hardware,
 )
 from haptic.master.hardware.unix_can import (
     BRS_FLAG,
@@ -791,7 +790,6 @@ class SimulatedRigHardware(HandleHardware):
         self.rig.set_operator_ready(enabled)
 
 
-@register_hardware("sim-inproc")
 def simulated_rig_hardware(config: dict[str, Any]) -> SimulatedRigHardware:
     """The in-process simulated rig for a validated configuration (``[model]``,
     ``[master.can]`` for node ids and conversions, ``[master.sim]``; the virtual bus
