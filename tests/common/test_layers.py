@@ -89,6 +89,101 @@ def test_the_subpackage_checker_sees_a_forbidden_import(tmp_path: Path) -> None:
     assert ("wire", 1) in _common_imports(module)
 
 
+#: source folder -> the package it is installed as (pyproject.toml's package-dir)
+PACKAGE_DIRS = {"common": "haptic.common", "master": "haptic.master",
+                "slave_sim": "haptic.slave_sim", "lockstep": "haptic.lockstep",
+                "view": "haptic.view"}
+
+
+def _module_files(root: Path = ROOT) -> dict[str, Path]:
+    """Every source module, by its dotted ``haptic.*`` name (a package by its ``__init__``)."""
+    modules = {}
+    for folder, package in PACKAGE_DIRS.items():
+        for path in (root / folder).rglob("*.py"):
+            parts = list(path.relative_to(root / folder).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            modules[".".join([package, *parts])] = path
+    return modules
+
+
+def _module_imports(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+    """The source modules ``name`` imports (lazy imports included; ``from pkg import mod``
+    counts as importing ``mod``), resolved to the longest module name that exists."""
+
+    def resolve(dotted: str) -> str | None:
+        parts = dotted.split(".")
+        for end in range(len(parts), 0, -1):
+            if ".".join(parts[:end]) in modules:
+                return ".".join(parts[:end])
+        return None
+
+    package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        targets = []
+        if isinstance(node, ast.Import):
+            targets = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(package[:len(package) - node.level + 1] + ([base] if base else []))
+            targets = [base] + [f"{base}.{alias.name}" for alias in node.names]
+        found |= {resolve(t) for t in targets if t.startswith("haptic.")}
+    return found - {None, name}
+
+
+def import_cycles(modules: dict[str, Path]) -> list[list[str]]:
+    """The groups of modules that import each other, directly or around a loop (strongly
+    connected components of more than one module, Tarjan's algorithm)."""
+    edges = {name: _module_imports(name, path, modules) for name, path in modules.items()}
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    cycles: list[list[str]] = []
+
+    def visit(node: str) -> None:
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        for target in edges[node]:
+            if target not in index:
+                visit(target)
+                low[node] = min(low[node], low[target])
+            elif target in stack:
+                low[node] = min(low[node], index[target])
+        if low[node] == index[node]:
+            group = []
+            while True:
+                member = stack.pop()
+                group.append(member)
+                if member == node:
+                    break
+            if len(group) > 1:
+                cycles.append(sorted(group))
+
+    for name in sorted(modules):
+        if name not in index:
+            visit(name)
+    return cycles
+
+
+def test_no_two_modules_import_each_other() -> None:
+    cycles = import_cycles(_module_files())
+    assert not cycles, "modules in an import cycle:\n" + "\n".join(map(str, cycles))
+
+
+def test_the_cycle_checker_sees_a_loop_of_three_and_a_relative_import(tmp_path: Path) -> None:
+    (tmp_path / "common").mkdir()
+    for folder in PACKAGE_DIRS:
+        (tmp_path / folder).mkdir(exist_ok=True)
+    (tmp_path / "common" / "a.py").write_text("from haptic.common.b import x\n")
+    (tmp_path / "common" / "b.py").write_text("def f():\n    import haptic.common.c\n")
+    (tmp_path / "common" / "c.py").write_text("from . import a\n")
+    (tmp_path / "common" / "d.py").write_text("from haptic.common import a\n")
+    cycles = import_cycles(_module_files(tmp_path))
+    assert cycles == [["haptic.common.a", "haptic.common.b", "haptic.common.c"]]
+
+
 def test_the_checker_sees_a_forbidden_import(tmp_path: Path) -> None:
     module = tmp_path / "m.py"
     module.write_text("def f():\n    from haptic.master.node import MasterNode\n")
