@@ -69,7 +69,11 @@ SLAVE_RECORD_COLUMNS = (
     "handle_position_y_m", "tool_position_x_m", "tool_position_y_m", "tool_velocity_x_m_s",
     "tool_velocity_y_m_s", "tool_force_x_N", "tool_force_y_N", "actuator_force_x_N",
     "actuator_force_y_N", "engagement", "cutting", "removed_volume_m3", "running",
+    "sample_time_s",
 )
+#: ``/slave/state``'s ``time_s`` is the wall time since the loop's start, ``sample_time_s``
+#: the virtual world's (node steps x Ts, as in SLAVE_TRACE_COLUMNS): haptic-replay times the
+#: cut on it, as the slave's summary does.
 
 SLAVE_TRACE_COLUMNS = (
     "time_s", "handle_force_x_N", "handle_force_y_N", "handle_position_x_m",
@@ -305,7 +309,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                     now_s, float(fh[0, 0]), float(fh[0, 1]), float(yh[0, 0]), float(yh[0, 1]),
                     float(position[0]), float(position[1]), float(velocity[0]),
                     float(velocity[1]), float(ft[0]), float(ft[1]), float(vt[0]), float(vt[1]),
-                    engagement, float(out.cutting[0]), removed, float(running)))
+                    engagement, float(out.cutting[0]), removed, float(running),
+                    last_tick["sample_time_s"]))
             harness.offer_state(tick, lambda: {
                 "tool_force_N": [float(ft[0]), float(ft[1])],
                 "tool_position_m": [float(position[0]), float(position[1])],

@@ -3,7 +3,8 @@
 For each MCAP file written with ``--record`` (the master's, the slave's, or both) it prints
 what the file holds (side, complete or cut short, span, messages per channel, the recorder's
 drops, the safety events, the link's last statistics and, from the slave's state, the cut's
-mean force and speed) and writes PNGs into ``--out``:
+duration, mean force and speed, on the samples' clock as the slave reports them) and writes
+PNGs into ``--out``:
 
 - ``force_time.png``: forces against time (tool force ft and received handle force fh at the
   slave; handle force and felt force at the master);
@@ -81,12 +82,7 @@ def summarize(recording: Recording) -> dict[str, Any]:
                     summary[f"max_abs_{name}"] = float(np.abs(values).max())
     if side == "slave" and state and not (missing := [
             name for name in _CUT_COLUMNS if name not in state]):
-        from haptic.common.records.cutting import cutting_figures, steady_cut_fields
-
-        trace = dict(state)
-        trace["forces_enabled"] = state["running"]
-        summary.update(cutting_figures(trace))
-        summary.update(steady_cut_fields(trace))
+        summary.update(cut_figures(state))
     elif side == "slave" and state:
         summary["cut_missing_columns"] = missing
     run_summary = recording.last(f"/{side}/summary")
@@ -95,6 +91,23 @@ def summarize(recording: Recording) -> dict[str, Any]:
             "rate_hz", "overruns", "period_p99_error_s", "stop_reason", "watchdog_trips",
             "removed_volume_m3") if k in run_summary}
     return summary
+
+
+def cut_figures(state: dict[str, np.ndarray]) -> dict[str, Any]:
+    """The cut's figures of a slave's recorded state, timed on the samples' own clock
+    (``sample_time_s``: node steps x Ts) as the slave's summary times them: a master that
+    falls behind real time slows the cut on the wall clock, not on the samples'. A recording
+    without that column (written before it was recorded) is timed on the wall clock
+    (``time_s``); ``cut_clock`` says which ("sample" or "wall")."""
+    from haptic.common.records.cutting import cutting_figures, steady_cut_fields
+
+    trace = dict(state)
+    trace["forces_enabled"] = state["running"]
+    sampled = "sample_time_s" in state and state["sample_time_s"].size == state["time_s"].size
+    if sampled:
+        trace["time_s"] = state["sample_time_s"]
+    return {**cutting_figures(trace), **steady_cut_fields(trace),
+            "cut_clock": "sample" if sampled else "wall"}
 
 
 #: The slave state's columns the cut's figures need.
@@ -143,9 +156,11 @@ def format_text(summary: dict[str, Any]) -> str:
                          f"ms, loss {loss * 100:.2f} %, watchdog {link.get('watchdog_state')} "
                          f"(trips {link.get('watchdog_trips')})")
     if summary.get("cut_mean_force_N") is not None:
+        clock = ("" if summary.get("cut_clock") == "sample" else
+                 " (on the wall clock: the recording holds no sample clock)")
         lines.append(f"  cut: {summary['cutting_time_s']:.2f} s in the clay, mean |ft| "
                      f"{summary['cut_mean_force_N']:.3f} N, mean speed "
-                     f"{summary['cut_mean_speed_m_s'] * 1e3:.1f} mm/s")
+                     f"{summary['cut_mean_speed_m_s'] * 1e3:.1f} mm/s{clock}")
     for event in summary["events"]:
         time_s = event.get("time_s")
         stamp = f"{time_s:8.3f} s" if _is_number(time_s) else "       ?"
