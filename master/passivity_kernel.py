@@ -1,12 +1,12 @@
-"""NVIDIA Warp kernel of the master's passivity layer (issue 16): the TDPA observer and the
+"""NVIDIA Warp kernel of the master's passivity layer: the TDPA observer and the
 adaptive conductance at the handle's port for every lane in one launch, after the node's own
 kernel (:mod:`haptic.master.node_kernels`) wrote the command.
 
 It computes exactly what :class:`haptic.common.model.passivity.PassivityPort` does on the master
 (``receive``, ``yield_command``, ``observe``), which stays the numpy reference:
-tests/master/test_passivity_kernel.py runs both on the same inputs. One lane of numpy calls
-cost 133 us a tick on the 2-core development VM (the node step with this kernel: 27 us, without
-the layer: 14 us). The port's arrays are numpy views of this kernel's buffers.
+tests/master/test_passivity_kernel.py runs both on the same inputs. The kernel exists because
+the port's numpy calls cost several times the node's own step (bench/loop_bench.py measures
+the node stage). The port's arrays are numpy views of this kernel's buffers.
 """
 
 from __future__ import annotations

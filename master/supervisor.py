@@ -16,7 +16,7 @@ the hardware's faults, the link's silence (s) and the slave's liveliness. Decisi
   in sync with the handle again;
 - the slave's work-area guard (``Flags.WORK_AREA_STOP``) holds the handle too (an event
   ``handle_held`` and :attr:`peer_stops`), so the handle does not run on while the tool
-  stands; forces come back once the flag clears and the tool is in sync again (issue 16);
+  stands; forces come back once the flag clears and the tool is in sync again;
   so does any other stop of the slave's tool while forces are on here (``FORCES_ENABLED``
   gone from its messages: its watchdog tripped, an input fault), until it reports its forces
   enabled and its tool in sync again;

@@ -3,10 +3,9 @@
 The paper's scheme has no position feedback: the tool follows the handle because both sides
 integrate the same force samples (Ch1 and Ch2 the handle force, Ct1 and Ct2 the tool force),
 once each (docs/model.md section 6). On one clock the two loops step together and each
-master sample is used once. When the master falls behind real time (a busy or slow rig PC:
-966 Hz measured against 1852 Hz on a 2-core VM with the emulated CAN rig), a slave stepping
-once per tick of its own uses every handle force about twice, and the tool runs ahead of the
-handle (38 mm after a 51 mm move in 3 s).
+master sample is used once. When the master falls behind real time (a busy or slow rig PC
+at half its rate), a slave stepping once per tick of its own uses every handle force about
+twice, and the tool runs ahead of the handle (by centimetres within seconds).
 
 :class:`MasterSamplePacing` counts the master's samples by their sequence numbers instead:
 while the tool runs, a tick with no new master sample takes no node step (the virtual tool
@@ -21,12 +20,10 @@ delay), so it is bounded: a tick that would leave more than ``max_backlog_sample
 the excess at once (a longer tick; ``burst_steps`` counts those steps, ``max_tick_steps`` the
 most one tick took) instead of giving samples up. A sample given up is a force Ch1 integrated
 and Ch2 never will: it leaves the tool behind the handle for good in the paper's scheme, which
-has no position feedback. Measured on a loaded 2-core VM with 5 % loss and 2 ms jitter, giving
-up at once what one tick could not take left the tool 1.6 mm behind a 2 cm sine after 6 s
-(710 samples given up of 11 000); with two CPU hogs on the two cores (the governed test of
-tests/master/test_governed_programs.py, slave at 660-840 Hz) the bounded backlog still gave
-up 29-306 samples a run, each leaving the tool a sample's motion behind (43 um at the run's
-80 mm/s). The burst is bounded in practice by the watchdog (``[link.watchdog]
+has no position feedback: on a loaded host with loss and jitter, giving up at once what one
+tick could not take left the tool millimetres behind a 2 cm sine within seconds, each sample
+given up a sample's motion (tests/master/test_governed_programs.py runs the slave beside
+CPU hogs). The burst is bounded in practice by the watchdog (``[link.watchdog]
 max_message_age_s``, 30 ms: a longer stall halts the tool and clears the backlog), and what
 one message can make owed is bounded below. Samples are given up (``dropped_samples``) only
 where a jump in the sequence (messages lost on the way) owes more than ``max_steps_per_tick +

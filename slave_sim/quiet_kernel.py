@@ -19,8 +19,8 @@ lane and comparison by comparison:
   inside its work area.
 
 tests/lockstep/test_quiet_lanes.py runs every lane through both, bit for bit. One launch
-replaces about 40 numpy calls on (lanes, 2) arrays (60-90 us a tick at any lane count on a
-2-core AMD EPYC VM). float64 throughout; every constant comes in :class:`GuardLimits`, so no
+replaces about 40 numpy calls on (lanes, 2) arrays, whose cost does not grow with the lane
+count (bench/latency_sweep.py measures the sweep's speed). float64 throughout; every constant comes in :class:`GuardLimits`, so no
 literal is rounded to float32.
 """
 

@@ -3,7 +3,7 @@
 After a watchdog trip (or at start-up) the slave waits, halted, until the tool is back at
 ``Ah1 yh`` (the position ratio of the paper's design, eq 12). Placing the tool there at once
 carries it through whatever clay lies between where it stopped and the handle: a loaded run
-left a 2 cm uncut bridge in the middle of its groove that way (issue 15).
+left a 2 cm uncut bridge in the middle of its groove that way.
 
 The policy here: **the tool goes to the handle through the clay at a bounded speed, cutting
 as it goes.** Each fresh message of the safe state :meth:`ToolResync.step` moves the halted

@@ -1,8 +1,8 @@
 """The tool's path for the end-of-run picture, in bounded memory.
 
 The slave keeps every ``path_every``-th tool position for ``clay.png``. A Python list of tuples
-grew about 20 kB/s (185 points/s at 112 bytes each: most of the slave's 25 kB/s RSS growth
-in issue 17). :class:`ToolPath` keeps the points in a preallocated array of ``capacity`` rows;
+grows without bound over a long run (about 112 bytes a point, most of what a running slave's
+memory grew by: bench/record_memory_bench.py). :class:`ToolPath` keeps the points in a preallocated array of ``capacity`` rows;
 when it is full it keeps every other point and from then on takes every other offered point,
 so a run of any length keeps its whole path at a coarser spacing in fixed memory.
 """

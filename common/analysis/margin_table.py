@@ -4,7 +4,7 @@ The margin governor (master/margin_governor.py) compares the measured round trip
 table. Entries run from the configured k downwards by a constant ratio; the table stops at
 the first k whose loop is stable for every delay the analysis searches (tau* = ``None``): a
 lower k is not needed, that one is usable at any delay. Each entry costs one delay-margin
-search per axis (0.2 to 1 s on the 2-core VM), so a table is a few entries.
+search per axis (up to a second or so), so a table is a few entries.
 
 Changing k at run time: with Sh = St = 0 (the paper's handle and tool) every compensator is
 linear in k (Ch1 = k N/D, Ct1 = Ch1/Ah2, Ch2 = -Ah1 Gh Ch1/Gt, Ct2 = -Ah1 Ah2^-1 Gh Ch1/Gt),

@@ -1,5 +1,5 @@
 """The ``[control]`` table: which control scheme runs (the paper's, or with the passivity
-layer of issue 16), the passivity layer's limits and the paper mode's drift coupling."""
+layer, TDPA), the passivity layer's limits and the paper mode's drift coupling."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Position-drift coupling for the paper's scheme (issue 16, ``[control] mode = "paper"``).
+"""Position-drift coupling for the paper's scheme (``[control] mode = "paper"``).
 
 The paper's scheme has no position feedback between the sides (docs/model.md section 6):
 every difference between what the two sides integrate stays as an offset. This coupling adds,

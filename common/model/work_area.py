@@ -1,4 +1,4 @@
-"""One work area for both sides (issue 16): the handle's workspace and the tool's work area
+"""One work area for both sides: the handle's workspace and the tool's work area
 agree, the tighter bound of each applied to both, so neither side runs on alone.
 
 The master clamps its handle command to its workspace box (``[master.safety]

@@ -3,7 +3,7 @@ speed there (:func:`cutting_figures`), and how steady the cut was (:func:`cuttin
 :func:`steady_cut_fields`). Pure numpy on the trace's named columns, so the slave, the
 session, the replay and the lockstep reproduction share them.
 
-How steady a cut is (the figures of issue 15 for a constant-rate cut):
+How steady a cut is (the figures of a constant-rate cut):
 
 Over the steady part of a cut, from ``settle_s`` (0.3 s) after first contact to ``settle_s``
 before the contact ends (the tool leaving the block, or the end of the record while still

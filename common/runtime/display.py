@@ -28,10 +28,10 @@ after :data:`UNWATCHED_CHECK_S` instead of at its rate: every wake-up takes the 
 at a time the loop does not choose, and where the loop hands it over (each Warp launch, a
 ctypes call) the thread keeps it for as long as it runs. On 2 CPUs with both loops under
 SCHED_FIFO a display thread woken in the middle of the slave's tick was preempted by the
-master's loop while it held the slave's GIL: at 4 kHz (Ts = 0.25 ms) the thread's old
-200 wake-ups a second put the slave's node stage at p99 226-233 us and its overruns at
-2.0-2.9 %; with these (about 9 a second with no viewer) 88-92 us and 0.22-0.24 % (2026-12-05,
-a 2-core Intel Xeon guest, docs/programs.md).
+master's loop while it held the slave's GIL: at 4 kHz (Ts = 0.25 ms) a thread waking 200
+times a second more than doubled the slave's node stage p99 and multiplied its overruns
+tenfold against one waking about 9 times a second with no viewer (docs/programs.md has the
+figures).
 
 The thread measures its own cost (:attr:`figures`): publications made and the mean and
 largest time one took, s, and the publications skipped because nobody watched.

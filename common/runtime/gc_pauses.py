@@ -3,8 +3,8 @@
 Python's collector stops every thread of the process while it runs (it holds the GIL), so a
 collection that starts in any thread during a tick makes that tick as much longer. On the
 programs' heaps (about 220,000 tracked objects after Warp, Zenoh and the synthesis have
-loaded) a collection of the youngest generation took 45-66 us and one of the middle
-generation 0.5-1.7 ms on a 2-core Intel Xeon guest (2026-12-05). :class:`GcPauses` times each
+loaded) a collection of the youngest generation takes tens of microseconds and one of the
+middle generation up to milliseconds, longer than a tick. :class:`GcPauses` times each
 collection between ``__enter__`` and ``__exit__`` (``gc.callbacks``), so a run's summary says
 how many there were and the longest.
 

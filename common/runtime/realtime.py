@@ -6,9 +6,9 @@ long it must spin is set by how late a sleep wakes up, and that is set by the OS
 
 - Linux delays a normal thread's timer by its *timer slack* (50 us by default) so that it can
   batch wake-ups. :attr:`RealtimeSettings.tight_timers` sets the loop thread's slack to 1 ns
-  (``PR_SET_TIMERSLACK``): on the project's 2-core VMs a 0.3 ms sleep then wakes 3 us late
-  (p50) instead of 53 us, and the spin can shrink from 0.3 ms to 0.1 ms of the 0.54 ms
-  period. The loop's busy-waiting is what starves Zenoh's receive threads on a small
+  (``PR_SET_TIMERSLACK``): a sleep then wakes microseconds late instead of the slack's tens,
+  and the spin can shrink from 0.3 ms to 0.1 ms of the 0.54 ms period (bench/wakeup_bench.py
+  measures the wake-ups). The loop's busy-waiting is what starves Zenoh's receive threads on a small
   machine, so this is also what keeps the link's delay near Zenoh's own.
 - :attr:`RealtimeSettings.priority` > 0 puts the loop thread in ``SCHED_FIFO`` at that
   priority: it preempts every normal thread when its sleep ends (the ros2_control default is
@@ -20,10 +20,9 @@ long it must spin is set by how late a sleep wakes up, and that is set by the OS
 - :attr:`RealtimeSettings.cpus` pins the loop thread to those CPUs (empty: any). With
   :func:`place_process_threads` a program first puts its other threads (Zenoh's, the
   display's: they inherit the main thread's CPUs when they start) on other CPUs, so that
-  neither waits for the other: on the 2-core VM, both programs' loops on CPU 1 (kept apart in
-  time by the slave's phase lock, common/wire/phase_lock.py) and everything else on CPU 0 brought
-  the link's one-way p50 from 23-30 to 15-19 us and its p99 from 120-550 to 26-95 us
-  (docs/link.md section 9).
+  neither waits for the other: on 2 CPUs, both programs' loops on one (kept apart in time by
+  the slave's phase lock, common/wire/phase_lock.py) and everything else on the other cut the
+  link's one-way delay, its p99 most (bench/loop_bench.py; docs/link.md section 9).
 - :attr:`RealtimeSettings.gil_switch_interval_s` shortens Python's GIL switch interval
   (5 ms by default) while the loop runs: a loop that wants the GIL back from another thread
   of the process (the display's JSON encoding) then waits at most about this long. 0 leaves
@@ -33,10 +32,9 @@ long it must spin is set by how late a sleep wakes up, and that is set by the OS
   idle states that it leaves within that many us, so with 0 it polls instead of halting. Each
   hop of the tick (the master's SYNC to the drives and their answer, every Zenoh message)
   wakes a process on another CPU, and waking a halted CPU is what costs most on a virtual
-  machine: on the project's 2-core VM (haltpoll idle with ``guest_halt_poll_ns=0``) a
-  cross-CPU pipe round trip took 60-109 us (p50) and 27-86 us of CPU per wake-up, 6.5-7.4 us
-  and 5-6 us with the request (``bench/wakeup_bench.py``), and ``bench/loop_bench.py``'s
-  overruns fell from 8-10 % to 1.4-8 % (docs/link.md 6.2). The request is system-wide and
+  machine (haltpoll idle with ``guest_halt_poll_ns=0``): there the request cuts a cross-CPU
+  wake-up roughly tenfold (``bench/wakeup_bench.py``) and the loops' overruns with it
+  (``bench/loop_bench.py``; docs/link.md 6.2). The request is system-wide and
   ends when the file is closed (on exit, also a crash). It needs write access to the device
   (root, or a udev rule as in deploy/README.md); refused, the run goes on with the idle
   states as they are and the refusal is reported. -1 makes no request.
@@ -392,12 +390,12 @@ def raise_threads(
     SCHED_FIFO at ``priority`` (1..99). Returns ``(threads changed, warnings)``; a refusal is
     a warning, never an exception (Linux only: elsewhere nothing changes).
 
-    Why (measured with ``perf sched`` on a 2-core VM): a normal Zenoh thread woken on the
+    Why (seen with ``perf sched``): a normal Zenoh thread woken on the
     CPU where a SCHED_FIFO loop thread is about to run waits in that CPU's queue for the
     whole of the loop's tick (up to 0.25 ms) even while the other CPU is idle; the normal
     scheduler moves it only at its next balancing tick. At a FIFO priority *below* the
     loop's, it still never preempts the loop, but the real-time scheduler pushes it to the
-    free CPU at once: the link's one-way p99 fell from 250-520 us to 60-70 us."""
+    free CPU at once, which cuts the link's one-way p99 several times (bench/loop_bench.py)."""
     calls = os_calls if os_calls is not None else OsScheduling()
     if not 1 <= priority <= MAX_FIFO_PRIORITY:
         raise ValueError(f"priority must be 1..{MAX_FIFO_PRIORITY} (got {priority})")
@@ -416,12 +414,11 @@ def batch_threads(
     Why: a SCHED_BATCH thread keeps its fair share of the CPU but its wake-ups never preempt
     the thread running on the CPU it wakes on; it runs there when that thread sleeps, or at
     once on an idle CPU. Each Zenoh message wakes a sending and a receiving thread; on a
-    2-core VM where both CPUs are busy most of the time, those wake-ups preempted the loops
+    small machine where both CPUs are busy most of the time, those wake-ups preempt the loops
     and the emulated drives mid-tick, and every preemption of another CPU is an
-    inter-processor interrupt, which a virtual CPU pays as an exit to the hypervisor. Batch
-    Zenoh threads in ``haptic-session`` (15 interleaved pairs): master overruns median 20.6 %
-    against 33.0 %, slave 0.69 % against 1.67 %; the link's one-way p50 about 50 us longer,
-    its p99 about the same (docs/link.md 6.3)."""
+    inter-processor interrupt, which a virtual CPU pays as an exit to the hypervisor. With
+    batch Zenoh threads ``haptic-session``'s loops overrun less at the cost of a slightly
+    longer median link delay (docs/link.md 6.3 has the interleaved runs)."""
     calls = os_calls if os_calls is not None else OsScheduling()
     if not hasattr(os, "SCHED_BATCH"):
         return 0, ["SCHED_BATCH is not available on this platform"]

@@ -6,11 +6,11 @@ Every message is a msgpack array (compact: no field names on the wire)::
 
 ``version``
     :data:`SCHEMA_VERSION`; a receiver drops any other value (``unknown_version``), and a
-    peer of another version is refused at start (common/wire/link.py). Version 2 (issue 17) adds
+    peer of another version is refused at start (common/wire/link.py). Version 2 adds
     the pairing hello (common/wire/auth.py) and, on an authenticated link, a 16-byte tag after
-    the msgpack body; version 3 (issue 16) the handle's ``gain_k`` and the tool's
-    ``echo_send_time_ns``; version 4 (issue 16) ``energy_J`` in both payloads and the
-    :attr:`Flags.TDPA` bit; version 5 (issue 16) the :attr:`Flags.TDPA_SWITCHED` bit (the
+    the msgpack body; version 3 the handle's ``gain_k`` and the tool's
+    ``echo_send_time_ns``; version 4 ``energy_J`` in both payloads and the
+    :attr:`Flags.TDPA` bit; version 5 the :attr:`Flags.TDPA_SWITCHED` bit (the
     margin governor's run-time switch to the passivity layer, which a version-4 slave would
     not follow) and the handle's ``force_scale``.
 ``kind``
@@ -91,7 +91,7 @@ class Flags(enum.IntFlag):
     WORK_AREA_STOP = 16
     """Slave only: the work-area guard stopped the tool (it left the scenario's grid by more
     than the margin); the master holds its handle while this is set, so the handle does not
-    run on alone (issue 16)."""
+    run on alone."""
     TDPA_SWITCHED = 32
     """The sender runs the passivity layer switched on at run time (its configured mode is
     ``paper``): the master while its margin governor holds the switch on

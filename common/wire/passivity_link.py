@@ -1,4 +1,4 @@
-"""The passivity layer on the wire (issue 16): what a program does with ``energy_J`` and the
+"""The passivity layer on the wire: what a program does with ``energy_J`` and the
 TDPA flag of the messages, in a few calls from its tick (master/program.py,
 slave_sim/program.py).
 

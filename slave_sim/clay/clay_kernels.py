@@ -67,7 +67,7 @@ def cut_kernel(
     gives, so the cut is the one computed from the distance everywhere (numpy's, to rounding:
     tests/slave_sim/test_clay.py). A row visits only its chord of the outer circle, widened
     by two cells each side (a tool off the grid, whose window is clamped away from it, costs
-    almost nothing: 1.5 us a step instead of 13 for one lane on a 2-core AMD EPYC VM)."""
+    almost nothing: bench/clay_bench.py measures the step)."""
     lane, j = wp.tid()
     px = tool_xy[lane, 0]
     py = tool_xy[lane, 1]
