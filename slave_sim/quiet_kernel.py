@@ -20,8 +20,8 @@ lane and comparison by comparison:
 
 tests/lockstep/test_quiet_lanes.py runs every lane through both, bit for bit. One launch
 replaces about 40 numpy calls on (lanes, 2) arrays, whose cost does not grow with the lane
-count (bench/latency_sweep.py measures the sweep's speed). float64 throughout; every constant comes in :class:`GuardLimits`, so no
-literal is rounded to float32.
+count (bench/latency_sweep.py measures the sweep's speed). float64 throughout; every constant
+comes in :class:`GuardLimits`, so no literal is rounded to float32.
 """
 
 from __future__ import annotations

@@ -2,9 +2,10 @@
 
 The slave keeps every ``path_every``-th tool position for ``clay.png``. A Python list of tuples
 grows without bound over a long run (about 112 bytes a point, most of what a running slave's
-memory grew by: bench/record_memory_bench.py). :class:`ToolPath` keeps the points in a preallocated array of ``capacity`` rows;
-when it is full it keeps every other point and from then on takes every other offered point,
-so a run of any length keeps its whole path at a coarser spacing in fixed memory.
+memory grew by: bench/record_memory_bench.py). :class:`ToolPath` keeps the points in a
+preallocated array of ``capacity`` rows; when it is full it keeps every other point and from
+then on takes every other offered point, so a run of any length keeps its whole path at a
+coarser spacing in fixed memory.
 """
 
 from __future__ import annotations
