@@ -1,4 +1,4 @@
-"""Per-message cost of authenticated sessions (issue 17, common/wire/auth.py): the sender's tag
+"""Per-message cost of authenticated sessions (common/wire/auth.py): the sender's tag
 (HMAC-SHA256 under the session key, 16 bytes), the receiver's verification, and the receive
 path's decode-and-order with and without it, per message, in us. Target: <= 5 us per message
 added on this machine (the tick is 542 us). Figures only; nothing is asserted.

@@ -27,7 +27,7 @@ devices are a thread of this process, in ``process_cpu_per_cycle_us``). On the e
 the cycle's RPDOs and display frame wait for the next SYNC and go out in its burst
 (``CanHandleDriver.until_sync``, docs/master.md): the read that sends that SYNC (without a
 lead) pays for them.
-Figures are wall-clock on this machine (noisy: other programs on a 2-core machine move them
+Figures are wall-clock on this machine (noisy: other programs on a small machine move them
 a lot, so the 1-minute load average is printed with them). Nothing is asserted.
 """
 

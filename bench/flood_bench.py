@@ -1,4 +1,4 @@
-"""Flood benchmark (issue 17): ``haptic-master --rig model`` and ``haptic-slave`` on loopback,
+"""Flood benchmark: ``haptic-master --rig model`` and ``haptic-slave`` on loopback,
 and a third process flooding the master's receive key (``<prefix>/tool``) with 50-byte junk at
 ``--rate`` Hz for ``--flood`` s in the middle of the run.
 
@@ -6,7 +6,7 @@ Reports the master's tick rate inside the flood window (from its trace: every
 ``--trace-every``-th tick's time) and over the whole run, the watchdog trips of both sides,
 the master's malformed-message count and how many polls reached the flood bound
 (``[link.security] max_samples_per_poll``). Figures only; nothing is asserted (timing depends
-on the machine). Target (issue 17): >= 1845 Hz in the window and no watchdog trip under a
+on the machine). Target: >= 1845 Hz in the window and no watchdog trip under a
 50 kHz flood.
 
 The verdict is printed as it was measured, never rounded up: ``target_verdict`` is ``met``,
@@ -50,7 +50,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-#: The target of issue 17: the master's rate under the flood, Hz, and the flood's, Hz.
+#: The target: the master's rate under the flood, Hz, and the flood's, Hz.
 TARGET_RATE_HZ = 1845.0
 TARGET_FLOOD_HZ = 50000.0
 

@@ -1,49 +1,13 @@
-"""Memory of a long recorded run (issue 17): ``haptic-master --rig model`` and
-``haptic-slave`` on loopback, both with ``--record``, for ``--duration`` s (default 600: the
-issue's 10 minutes); each process's RSS sampled every second from /proc. Reports the RSS at
+"""Memory of a long recorded run: ``haptic-master --rig model`` and
+``haptic-slave`` on loopback, both with ``--record``, for ``--duration`` s (default 600,
+10 minutes); each process's RSS sampled every second from /proc. Reports the RSS at
 the start and the end of the measured span and the growth rate (least squares over the run
 after ``--settle`` s), kB/s, and the same slope over the first and the second half of that
 span (a leak keeps its slope; a warm-up flattens), with the growth over the last 5 minutes,
 and the RSS every ~10 s (``*_rss_series_kB``). Figures only.
 
-What it showed (issue 17; 2-core VM shared with other work, load average 6-10): the 2-3 minute
-slopes (18-57 kB/s for the slave, with *and* without ``--record``) are the start's, not a
-leak. tracemalloc: the Python heap of the recorded slave's loop is flat; the slave's node and
-Warp clay stepped alone grow 0 kB over 250k steps; two Links exchanging at 1850 Hz keep
-+12 kB of Python objects. The RSS that grows lives in glibc's per-thread arenas of Zenoh's
-threads (``/proc/PID/smaps``), is not given back by ``malloc_trim`` and slows down: over 10
-minutes the slave's slope in the second half was 0.95 kB/s recorded and 2.7 kB/s not (the
-master's 2.4 and 0.06). What recording itself kept was the MCAP writer's chunk index (one
-``ChunkIndex`` of about 370 B per chunk, written into the summary at the end): the recorder
-now spills them to an unnamed file beside the recording (common/records/recorder.py). Two
-10-minute recorded runs after that (``--env MALLOC_ARENA_MAX=2``, 2-core AMD EPYC, nothing
-else running): the slave flat (0.0 and 0.05 kB/s, +0 and +28 kB over the last 5 minutes;
-before: 0.59 kB/s, 1.7 in the second half); the master 1.3 and 1.6 kB/s (+252 and +668 kB
-over the last 5 minutes; before: 3.0 kB/s), its growth in glibc's main heap and the arena its
-threads share (``/proc/PID/smaps``), not found in our objects. One 10-minute run without
-recording, on a machine then at load 10, grew 25 MB in both programs in its second half:
-rerun before trusting one run.
-
-Where the master's growth lives (2026-12-02, the same 2-core AMD EPYC, nothing else running):
-memray (``memray run --aggregate --native``, ``PYTHONMALLOC=malloc``; every allocation of
-Python, numpy, msgpack and Zenoh's Rust code) on the recorded master for 40 s and for 160 s:
-its live heap held at 196.8-197.4 MB from 70 s to the end, and no allocation site held more
-at the high-water mark or at exit in the longer run beyond a few kB (the run's events). The
-RSS the master adds is therefore memory the allocators keep, not live data. 10-minute runs
-from 30 s on: the master +1.3 MB (1.6 kB/s in the second half, in steps of 100-500 kB, +332 kB
-over the last 5 minutes), the slave +360 kB (1.1 kB/s, +236 kB); with ``--env
-PYTHONMALLOC=malloc`` (no pymalloc arenas) +2.2 MB and +1.2 MB, most of it in the first
-minutes (0.78 and 0.0 kB/s in the second half, +204 and +0 kB over the last 5 minutes): not
-adopted, pymalloc is faster per object. 5-minute runs with ``MALLOC_MMAP_THRESHOLD_`` and
-``MALLOC_TRIM_THRESHOLD_`` fixed at 128 kB grew the slave 4 kB/s (worse) and the master as
-without.
-
-A 30-minute recorded run (``--duration 1800``, 2026-12-05, a 2-core Intel Xeon KVM guest,
-nothing else running; 160 MB of MCAP from the master, 174 MB from the slave): the master's
-RSS 334.5 -> 335.6 MB over the fit (0.07 kB/s; 0.20 kB/s in the first half, 0.02 in the
-second, +0 kB over the last 5 minutes), the slave's 343.5 -> 344.7 MB (0.07 kB/s; 0.22, then
-0.0; +0 kB); from 2 minutes on the master grew 88 kB and the slave 152 kB, the slave none
-after 10 minutes. The allocators' retention levels off: memory is flat.
+What it showed, run by run, with the machine and the date of each: docs/measurements/
+record_memory.md.
 
 ``--no-record`` runs the same without recording (the reference: what the recording adds).
 

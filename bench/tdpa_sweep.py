@@ -1,11 +1,12 @@
-"""Delay-robustness evidence (issue 16): the linear loop swept over round trips 0-1 s, jitter
+"""Delay-robustness evidence: the linear loop swept over round trips 0-1 s, jitter
 0-20 ms and loss 0-20 % (independent and bursty) with the paper's scheme and with the TDPA
 layer, every cell's figures, and the transparency cost against delay for both controls.
 
 Usage: ``python bench/tdpa_sweep.py [--quick] [--json] [--out DIR] [--check]``. ``--out``
 writes ``tdpa_sweep.json`` (every cell) and ``transparency.png``; ``--check`` exits 1 when a
 tdpa cell up to 1 s round trip, 20 % loss and 10 ms jitter is unbounded or ends with a gap
-over 2 mm (issue 16's target). Figures go to stdout; nothing here is asserted on timing.
+over 2 mm (the passivity layer's drift target). Figures go to stdout; nothing here is asserted
+on timing.
 """
 
 from __future__ import annotations
