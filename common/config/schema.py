@@ -13,6 +13,7 @@ from haptic.common.config.governor_schema import GOVERNOR_SCHEMA
 from haptic.common.config.link_schema import LINK_SCHEMA
 from haptic.common.config.lockstep_schema import LOCKSTEP_SCHEMA
 from haptic.common.config.master_schema import MASTER_SCHEMA
+from haptic.common.config.ros2_schema import ROS2_SCHEMA
 from haptic.common.config.runner_schema import RUNNER_SCHEMA
 from haptic.common.config.slave_schema import SLAVE_SCHEMA
 from haptic.common.model.errors import ConfigError
@@ -150,6 +151,7 @@ SCHEMA: Schema = {
     "supervision": SUPERVISION_SCHEMA,
     "governor": GOVERNOR_SCHEMA,
     "control": CONTROL_SCHEMA,
+    "ros2": ROS2_SCHEMA,
 }
 
 
