@@ -89,7 +89,7 @@ class LockstepSupervision:
     def from_config(cls, config: dict[str, Any], scenario: Scenario) -> LockstepSupervision:
         """The deployed programs' settings: ``[link]``'s watchdog, the slave's work area
         about the scenario's grid and ``[slave.safety]``."""
-        from haptic.slave_sim.program import DEFAULT_SYNC_TOLERANCE_M
+        from haptic.common.runtime.watchdog import DEFAULT_SYNC_TOLERANCE_M
 
         watchdog = config["link"]["watchdog"]
         grid = scenario.grid

@@ -25,17 +25,17 @@ from haptic.common.config.control_schema import (
     standby_passivity_settings,
 )
 from haptic.common.config.scenario import load_scenario, max_block_damping
-from haptic.common.model.teleop import model_from_config
 from haptic.common.model.work_area import work_area_from_config
 from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
+from haptic.common.runtime.console import script_description
 from haptic.common.runtime.failures import exit_on_link_error
 from haptic.common.runtime.program_harness import add_networked_options, check_networked_options
-from haptic.master.governor_setup import start_governor, tdpa_standby
+from haptic.common.runtime.watchdog import DEFAULT_SYNC_TOLERANCE_M
 from haptic.master.hardware.interface import HardwareError, create_hardware
-from haptic.master.node import MasterNode
-from haptic.master.program import DEFAULT_SYNC_TOLERANCE_M, MasterLoopOptions, run_linked_master
-from haptic.master.runner import run_master
 from haptic.master.settings import master_settings, with_work_area
+
+# The node, the loop, the governor and the model's synthesis bring Warp, python-control and
+# scipy: imported in main() after the parse, so --help and a bad flag answer at once.
 
 #: Run length of the master-only mode when --duration is not given, s.
 NO_LINK_DEFAULT_DURATION_S = 1.0
@@ -45,14 +45,15 @@ SIMULATED_RIGS = ("sim", "sim-inproc", "model")
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line."""
-    parser = argparse.ArgumentParser(prog="haptic-master", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="haptic-master", description=script_description(__doc__),
+                                     allow_abbrev=False)
     add_run_options(parser)
     parser.add_argument("--rig", help="handle hardware by name: can, sim, sim-inproc or model "
                         "([master] rig)")
     parser.add_argument("--can-interface", metavar="NAME",
                         help="python-can interface of the rig's bus ([master.can] interface), "
-                        "e.g. socketcan, or unix_datagram / udp_multicast to reach a "
-                        "haptic-rig-sim started by hand")
+                        "e.g. socketcan; unix_datagram (haptic-rig-sim's default) or "
+                        "udp_multicast to reach a haptic-rig-sim started by hand")
     parser.add_argument("--can-channel", metavar="CHANNEL",
                         help="channel on that interface ([master.can] channel), e.g. can0")
     parser.add_argument("--operator", help="simulated operator spec ([master.sim] operator), "
@@ -101,6 +102,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.no_link:
         return _main_alone(args)
+    from haptic.common.model.teleop import model_from_config
+    from haptic.master.governor_setup import start_governor, tdpa_standby
+    from haptic.master.node import MasterNode
+    from haptic.master.program import MasterLoopOptions, run_linked_master
+
     zenoh.init_log_from_env_or("error")
     with exit_on_config_error():
         for flag, given in (("--no-pace", args.no_pace), ("--json", args.json)):
@@ -164,6 +170,10 @@ def rig_time_steps(rig_time_s: float, rig: str, period_s: float) -> int:
 
 
 def _main_alone(args: argparse.Namespace) -> int:
+    from haptic.common.model.teleop import model_from_config
+    from haptic.master.node import MasterNode
+    from haptic.master.runner import run_master
+
     duration = NO_LINK_DEFAULT_DURATION_S if args.duration is None else args.duration
     with exit_on_config_error():
         if args.rig_time is not None:

@@ -48,6 +48,7 @@ from haptic.common.runtime.program_harness import ProgramHarness, recording_for
 from haptic.common.runtime.runner import StopSignals
 from haptic.common.runtime.runner_config import place_other_threads
 from haptic.common.runtime.stage_times import StageTimes
+from haptic.common.runtime.watchdog import DEFAULT_SYNC_TOLERANCE_M
 from haptic.common.wire.link import Link
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags
 from haptic.common.wire.passivity_link import PassivityLink
@@ -85,8 +86,6 @@ def _enable_drives(hardware: HandleHardware) -> HandleReading:
 #: The stages of one tick, in order (the summary's ``stages``).
 TICK_STAGES = ("read", "poll", "supervise", "node", "write", "send", "telemetry")
 
-#: Default tolerance of the resync position check, m per axis.
-DEFAULT_SYNC_TOLERANCE_M = 0.001
 #: the program's one lane, as a mask (MasterTick.switch_passivity)
 _ONE_LANE = np.ones(1, bool)
 

@@ -15,17 +15,18 @@ from haptic.common.analysis.preflight import add_preflight_options, run_prefligh
 from haptic.common.config import exit_on_config_error, load_config, override
 from haptic.common.config.scenario import load_scenario, max_block_damping
 from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
+from haptic.common.runtime.console import script_description
 from haptic.common.runtime.failures import exit_on_link_error
 from haptic.common.runtime.program_harness import add_networked_options, check_networked_options
 from haptic.common.runtime.runner_config import place_other_threads
+from haptic.common.runtime.watchdog import DEFAULT_SYNC_TOLERANCE_M
 from haptic.slave_sim.input_guard import InputGuardSettings
-from haptic.slave_sim.node import SlaveNode
-from haptic.slave_sim.program import DEFAULT_SYNC_TOLERANCE_M, phase_lock_from, run_slave
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line."""
-    parser = argparse.ArgumentParser(prog="haptic-slave", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="haptic-slave", description=script_description(__doc__),
+                                     allow_abbrev=False)
     add_run_options(parser)
     parser.add_argument("--scenario", help="scenario name or TOML path ([slave] scenario)")
     add_preflight_options(parser)
@@ -45,6 +46,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     2 for a configuration error (one line); 3 when the stability analysis refuses the loop;
     4 when the link cannot open (a port in use, an unreachable router; one line)."""
     args = build_parser().parse_args(argv)
+    # the node and the loop bring Warp, python-control and scipy: after the parse, so --help
+    # and a bad flag answer at once
+    from haptic.slave_sim.node import SlaveNode
+    from haptic.slave_sim.program import phase_lock_from, run_slave
+
     zenoh.init_log_from_env_or("error")
     with exit_on_config_error():
         config = load_config(args.config)

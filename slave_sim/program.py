@@ -60,8 +60,6 @@ from haptic.slave_sim.tool_path import ToolPath
 
 #: The stages of one tick, in order (the summary's ``stages``).
 TICK_STAGES = ("poll", "supervise", "node", "send", "telemetry")
-#: Default tolerance of the resync position check, m per axis.
-DEFAULT_SYNC_TOLERANCE_M = 0.001
 
 #: The columns of ``/slave/state`` in the recording (``--record``).
 SLAVE_RECORD_COLUMNS = (

@@ -28,13 +28,8 @@ import sys
 from dataclasses import dataclass
 from typing import Any, TextIO
 
-from haptic.common.analysis.report import AnalysisSettings, axis_loop
-from haptic.common.analysis.stability import delay_margin, is_stable
 from haptic.common.config import ConfigError, override
-from haptic.common.config.control_schema import drift_parameters
 from haptic.common.model.delay_profile import parse_delay_profile
-from haptic.common.model.synthesis import SynthesisError
-from haptic.common.model.teleop import model_from_config
 
 #: Exit status of a program that refuses to start an unstable loop.
 EXIT_UNSTABLE = 3
@@ -149,6 +144,14 @@ def with_damper_environment(config: dict[str, Any], damping_N_s_per_m: float
 def check_stability(config: dict[str, Any], round_trip_s: float,
                     sampled: bool = False) -> PreflightResult:
     """The verdict and delay margin of every axis of the configured loop at ``round_trip_s``."""
+    # here, not at the top: the programs add this module's options to their parsers, and a
+    # --help should not wait for python-control and scipy
+    from haptic.common.analysis.report import AnalysisSettings, axis_loop
+    from haptic.common.analysis.stability import delay_margin, is_stable
+    from haptic.common.config.control_schema import drift_parameters
+    from haptic.common.model.synthesis import SynthesisError
+    from haptic.common.model.teleop import model_from_config
+
     model = model_from_config(config)
     section = config["analysis"]
     settings = AnalysisSettings(

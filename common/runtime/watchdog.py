@@ -28,6 +28,10 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
+#: Default tolerance of the resync position check |yt - Ah1 yh|, m per axis (both programs'
+#: ``--sync-tolerance``; here, in a light module, so their parsers need nothing heavy).
+DEFAULT_SYNC_TOLERANCE_M = 0.001
+
 
 class WatchdogState(enum.StrEnum):
     WAITING = "waiting"

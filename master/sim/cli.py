@@ -31,6 +31,7 @@ from typing import Any
 
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.config.runner_schema import MAX_FIFO_PRIORITY
+from haptic.common.runtime.console import script_description
 from haptic.master.settings import emulator_settings
 from haptic.master.sim.rig_emulator import (
     DEFAULT_CHANNELS,
@@ -53,15 +54,17 @@ _FLAGS = {
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line."""
-    parser = argparse.ArgumentParser(prog="haptic-rig-sim", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="haptic-rig-sim", description=script_description(__doc__),
+                                     allow_abbrev=False)
     parser.add_argument("--config", metavar="FILE", help="TOML configuration (over the "
                         "defaults): [model], [master.can], [master.sim] and its emulator table")
     parser.add_argument("--can-interface", metavar="NAME",
-                        help="python-can interface ([master.sim.emulator] interface, "
-                        "udp_multicast)")
+                        help="python-can interface ([master.sim.emulator] interface; default "
+                        "unix_datagram, or udp_multicast)")
     parser.add_argument("--can-channel", metavar="CHANNEL",
-                        help="channel on it; for udp_multicast the multicast group "
-                        "([master.sim.emulator] channel, 239.74.163.2)")
+                        help="channel on it ([master.sim.emulator] channel); default: for "
+                        f"unix_datagram the directory {DEFAULT_CHANNELS.get('unix_datagram')}, "
+                        f"for udp_multicast the group {DEFAULT_CHANNELS.get('udp_multicast')}")
     parser.add_argument("--can-port", metavar="PORT", type=int,
                         help="udp_multicast UDP port ([master.sim.emulator] port; when that is "
                         f"0, python-can's default {DEFAULT_UDP_PORT})")
