@@ -30,27 +30,25 @@ to do this tick.
 
 from __future__ import annotations
 
-import enum
 from typing import Any
 
 import numpy as np
 
-from haptic.common.runtime.watchdog import PeerWatchdog, WatchdogState
-from haptic.common.wire.messages import Flags, ToolState
+from haptic.common.runtime.supervision import (
+    FORCES_ENABLED,
+    STOPPING,
+    WORK_AREA_STOP,
+    SupervisionCore,
+    Transition,
+)
+from haptic.common.runtime.watchdog import WatchdogState
+from haptic.common.wire.messages import ToolState
 from haptic.master.tool_guard import ToolInputGuard
 
 
-class Transition(enum.Enum):
-    """What changed this tick (the program acts on it)."""
-
-    NONE = "none"
-    ACTIVATE = "activate"  # forces on for the first time: MasterNode.activate
-    RESUME = "resume"  # forces on again after a safe state: MasterNode.resume
-    HOLD = "hold"  # forces off: hold the handle at hold_m
-
-
-class MasterSupervisor:
-    """Watchdog, resync check and fault latch of the master (see the module docstring).
+class MasterSupervisor(SupervisionCore):
+    """Watchdog, resync check and fault latch of the master (see the module docstring;
+    the watchdog and the resync check's geometry are the :class:`SupervisionCore`'s).
 
     ``position_ratio``: Ah1 per axis (x, y), dimensionless; ``sync_tolerance_m``: the resync
     position tolerance per axis, m; ``max_message_age_s``/``resync_messages``: the watchdog's;
@@ -61,18 +59,13 @@ class MasterSupervisor:
     def __init__(self, position_ratio: tuple[float, float], sync_tolerance_m: float,
                  max_message_age_s: float, resync_messages: int,
                  tool_guard: ToolInputGuard | None = None) -> None:
-        if not sync_tolerance_m > 0.0:
-            raise ValueError(f"sync_tolerance_m must be > 0 (got {sync_tolerance_m})")
-        self.ratio_x, self.ratio_y = (float(v) for v in position_ratio)
-        self.sync_tolerance_m = float(sync_tolerance_m)
-        self.watchdog = PeerWatchdog(max_message_age_s, resync_messages)
+        super().__init__(position_ratio, sync_tolerance_m, max_message_age_s, resync_messages)
         self.tool: ToolState | None = None
         self.enabled = False
         self.ever_enabled = False
         self.faulted = False
         self.hold_m = np.zeros(2)
         self.hardware_faults: list[str] = []
-        self.events: list[dict[str, Any]] = []
         self.tool_guard = tool_guard
         if tool_guard is not None:
             tool_guard.events = self.events
@@ -111,12 +104,10 @@ class MasterSupervisor:
         """The slave reports its forces enabled and its tool is at Ah1 yh within the
         tolerance on both axes."""
         tool = self.tool
-        if tool is None or not int(tool.flags) & _FORCES_ENABLED:
+        if tool is None or not int(tool.flags) & FORCES_ENABLED:
             return False
         tool_x_m, tool_y_m = tool.tool_position_m
-        tolerance = self.sync_tolerance_m
-        return (abs(tool_x_m - self.ratio_x * handle_x_m) < tolerance
-                and abs(tool_y_m - self.ratio_y * handle_y_m) < tolerance)
+        return self.positions_in_sync(tool_x_m, tool_y_m, handle_x_m, handle_y_m)
 
     def update(self, now_s: float, message: ToolState | None, handle_position_m: Any,
                faults: tuple[str, ...] | list[str] = (), cycle: int = 0,
@@ -130,7 +121,7 @@ class MasterSupervisor:
             self.tool = message
         handle_x_m, handle_y_m = (float(v) for v in handle_position_m)
         synced = self.in_sync(handle_x_m, handle_y_m)
-        stopping = message is not None and bool(int(message.flags) & _STOPPING)
+        stopping = message is not None and bool(int(message.flags) & STOPPING)
         state = self.watchdog.update(now_s, message is not None, silence_s, synced, peer_alive,
                                      stopping)
         input_fault = guard is not None and guard.faulted
@@ -138,11 +129,11 @@ class MasterSupervisor:
             self._await_sync = False
         tool = self.tool
         flags = 0 if tool is None else int(tool.flags)  # int arithmetic: IntFlag's costs 1 us
-        work_area_stop = bool(flags & _WORK_AREA_STOP)
+        work_area_stop = bool(flags & WORK_AREA_STOP)
         # the slave stopped its tool while this side applies forces (its watchdog, an input
         # fault): FORCES_ENABLED gone from its messages
         # (its last message is the watchdog's: an orderly end, not a stop to wait out)
-        slave_stopped = (tool is not None and self.enabled and not flags & _FORCES_ENABLED
+        slave_stopped = (tool is not None and self.enabled and not flags & FORCES_ENABLED
                          and not stopping)
         peer_stop = work_area_stop or slave_stopped
         if peer_stop and not self._await_peer:
@@ -205,19 +196,11 @@ class MasterSupervisor:
             return f"{self._peer_reason}: waiting for it at the handle"
         return self.watchdog.state_text()
 
-    @property
-    def trips(self) -> int:
-        """Watchdog trips so far."""
-        return self.watchdog.trips
-
     def state_name(self) -> str:
         """The watchdog's state, for the status line and the summary."""
         return self.watchdog.state.value
 
 
-_WORK_AREA_STOP = int(Flags.WORK_AREA_STOP)
-_FORCES_ENABLED = int(Flags.FORCES_ENABLED)
-_STOPPING = int(Flags.STOPPING)
 _WORK_AREA_REASON = "the slave's work-area guard stopped the tool"
 _SLAVE_STOPPED_REASON = ("the slave stopped its tool (its forces are off: its watchdog or an "
                          "input fault)")

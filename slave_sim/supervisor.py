@@ -21,26 +21,19 @@ Per tick, in two steps (the tool may be moved to the handle between them):
 
 from __future__ import annotations
 
-import enum
-from typing import Any
-
-from haptic.common.runtime.watchdog import PeerWatchdog, WatchdogState
-from haptic.common.wire.messages import Flags, HandleState
-
-_FORCES_ENABLED = int(Flags.FORCES_ENABLED)  # int arithmetic: IntFlag's costs about 1 us
-_STOPPING = int(Flags.STOPPING)
-
-
-class Transition(enum.Enum):
-    """What changed this tick (the program acts on it)."""
-
-    NONE = "none"
-    RESUME = "resume"  # the tool runs again: SlaveNode.resume
-    STOP = "stop"  # the tool stops: SlaveNode.safe_stop
+from haptic.common.runtime.supervision import (
+    FORCES_ENABLED,
+    STOPPING,
+    SupervisionCore,
+    Transition,
+)
+from haptic.common.runtime.watchdog import WatchdogState
+from haptic.common.wire.messages import HandleState
 
 
-class SlaveSupervisor:
-    """Watchdog, resync and work-area guard of the slave (see the module docstring).
+class SlaveSupervisor(SupervisionCore):
+    """Watchdog, resync and work-area guard of the slave (see the module docstring; the
+    watchdog and the resync check's geometry are the :class:`SupervisionCore`'s).
 
     ``position_ratio``: Ah1 per axis (x, y), dimensionless; ``sync_tolerance_m``: resync
     tolerance per axis, m; ``work_area_m``: (x_low, x_high, y_low, y_high), the tool's work
@@ -53,13 +46,9 @@ class SlaveSupervisor:
                  work_area_m: tuple[float, float, float, float], max_message_age_s: float,
                  resync_messages: int,
                  grid_m: tuple[float, float, float, float] | None = None) -> None:
-        if not sync_tolerance_m > 0.0:
-            raise ValueError(f"sync_tolerance_m must be > 0 (got {sync_tolerance_m})")
-        self.ratio_x, self.ratio_y = (float(v) for v in position_ratio)
-        self.sync_tolerance_m = float(sync_tolerance_m)
+        super().__init__(position_ratio, sync_tolerance_m, max_message_age_s, resync_messages)
         self.x_low_m, self.x_high_m, self.y_low_m, self.y_high_m = (float(v)
                                                                     for v in work_area_m)
-        self.watchdog = PeerWatchdog(max_message_age_s, resync_messages)
         self.handle_position_m = (0.0, 0.0)
         self.master_enabled = False
         self.running = False
@@ -72,7 +61,6 @@ class SlaveSupervisor:
         #: the message :meth:`receive` took is the master's last (``Flags.STOPPING``)
         self.peer_stopping = False
         self.grid_m = None if grid_m is None else tuple(float(v) for v in grid_m)
-        self.events: list[dict[str, Any]] = []
 
     def start_synced(self, handle_position_m: tuple[float, float]) -> None:
         """Count the link as up and in sync before the first tick, the master's forces on and
@@ -89,8 +77,8 @@ class SlaveSupervisor:
         if message is not None:
             flags = int(message.flags)
             self.handle_position_m = tuple(message.handle_position_m)  # type: ignore[assignment]
-            self.master_enabled = bool(flags & _FORCES_ENABLED)
-            self.peer_stopping = bool(flags & _STOPPING)
+            self.master_enabled = bool(flags & FORCES_ENABLED)
+            self.peer_stopping = bool(flags & STOPPING)
         return message is not None and not self.running and not self.outside
 
     def steady(self) -> bool:
@@ -106,9 +94,7 @@ class SlaveSupervisor:
     def in_sync(self, tool_x_m: float, tool_y_m: float) -> bool:
         """|yt - Ah1 yh| below the tolerance on both axes."""
         handle_x_m, handle_y_m = self.handle_position_m
-        tolerance = self.sync_tolerance_m
-        return (abs(tool_x_m - self.ratio_x * handle_x_m) < tolerance
-                and abs(tool_y_m - self.ratio_y * handle_y_m) < tolerance)
+        return self.positions_in_sync(tool_x_m, tool_y_m, handle_x_m, handle_y_m)
 
     def update(self, now_s: float, fresh: bool, tool_position_m: tuple[float, float],
                silence_s: float = 0.0, peer_alive: bool = True,
@@ -181,8 +167,3 @@ class SlaveSupervisor:
         if state is not WatchdogState.OK:
             return self.watchdog.state_text()
         return "the master's forces are off"
-
-    @property
-    def trips(self) -> int:
-        """Watchdog trips so far."""
-        return self.watchdog.trips
