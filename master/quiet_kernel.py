@@ -8,7 +8,8 @@ nothing but its stored message and return ``NONE``: :meth:`MasterSupervisor.stea
 watchdog not silent (the silence not above the supervisor's ``max_age_s``) and the newest
 tool message (the fresh one where a message came) carrying FORCES_ENABLED without
 WORK_AREA_STOP; the slave alive and no hardware fault are the caller's to ensure. Mirrors
-:meth:`MasterSupervisor.update` line by line; tests/lockstep/test_quiet_lanes.py runs every
+:meth:`MasterSupervisor.update` line by line, with the rules the slave's kernel shares
+(common/runtime/quiet_rules.py); tests/lockstep/test_quiet_lanes.py runs every
 lane through both, bit for bit. One launch replaces about 15 numpy calls a tick.
 """
 
@@ -20,6 +21,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from haptic.common.runtime.quiet_rules import flags_quiet, watchdog_stays_ok
 from haptic.common.runtime.replayed_launch import InPlaceInputs, ReplayedLaunch, host_array
 from haptic.common.wire.messages import Flags
 
@@ -65,8 +67,8 @@ def quiet_kernel(columns: int) -> Any:
                 newest_rows[lane, column] = rows[lane, column]
             tool_force[lane, 0] = force[lane, 0]
             tool_force[lane, 1] = force[lane, 1]
-        quiet = (steady[lane] and (not (silence_s[lane] > max_age_s[lane]))
-                 and (newest_flags[lane] & quiet_mask) == quiet_value)
+        quiet = (watchdog_stays_ok(steady[lane], silence_s[lane], max_age_s[lane])
+                 and flags_quiet(newest_flags[lane], quiet_mask, quiet_value))
         if came and quiet:
             stale[lane] = True
         fed[lane] = not quiet

@@ -18,6 +18,7 @@ lane and comparison by comparison:
   watchdog not silent, the message (where one came) carrying FORCES_ENABLED, and the tool
   inside its work area.
 
+The supervisor's rules the master's kernel shares are common/runtime/quiet_rules.py's.
 tests/lockstep/test_quiet_lanes.py runs every lane through both, bit for bit. One launch
 replaces about 40 numpy calls on (lanes, 2) arrays, whose cost does not grow with the lane
 count (bench/latency_sweep.py measures the sweep's speed). float64 throughout; every constant
@@ -31,6 +32,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from haptic.common.runtime.quiet_rules import flags_quiet, watchdog_stays_ok
 from haptic.common.runtime.replayed_launch import InPlaceInputs, ReplayedLaunch, host_array
 from haptic.common.wire.messages import Flags
 from haptic.common.wire.send_clock import LEAD_RISE_DIVISOR
@@ -40,6 +42,10 @@ from haptic.slave_sim.input_guard import InputGuardSettings
 wp.config.log_level = wp.LOG_WARNING
 
 DEVICE = "cpu"
+#: The flag bits of the master's message that decide a quiet lane, and the value they must
+#: have: its forces enabled, and not its last message (``STOPPING``, never quiet).
+QUIET_MASK = int(Flags.FORCES_ENABLED) | int(Flags.STOPPING)
+QUIET_VALUE = int(Flags.FORCES_ENABLED)
 
 
 @wp.struct
@@ -59,8 +65,8 @@ class GuardLimits:
     jump_margin_m: wp.float64
     jitter_allowance_ns: wp.int64
     lead_rise_divisor: wp.int64  # send_clock.LEAD_RISE_DIVISOR
-    forces_enabled_bit: wp.int64  # Flags.FORCES_ENABLED
-    stopping_bit: wp.int64  # Flags.STOPPING: the master's last message is never quiet
+    quiet_mask: wp.int64  # QUIET_MASK
+    quiet_value: wp.int64  # QUIET_VALUE
 
 
 @wp.func
@@ -136,14 +142,13 @@ def quiet_kernel(
                  and plain_axis(force[lane, 1], position[lane, 1], handle_force[lane, 1], step,
                                 limits.position_min_y_m, limits.position_max_y_m, limits)
                  and not (wp.max(jump_x, jump_y) > allowed_m))
-    enabled = ((flags[lane] & limits.forces_enabled_bit) != wp.int64(0)
-               and (flags[lane] & limits.stopping_bit) == wp.int64(0))
+    enabled = flags_quiet(flags[lane], limits.quiet_mask, limits.quiet_value)
     # the supervisor changes nothing (SlaveSupervisor.update returns NONE)
     x = tool[lane, 0]
     y = tool[lane, 2]
     inside = (work_area_m[lane, 0] <= x and x <= work_area_m[lane, 1]
               and work_area_m[lane, 2] <= y and y <= work_area_m[lane, 3])
-    still = steady[lane] and (not (silence_s[lane] > max_age_s[lane])) and inside
+    still = watchdog_stays_ok(steady[lane], silence_s[lane], max_age_s[lane]) and inside
     is_quiet = still and ((not came) or (plain and enabled))
     quiet[lane] = is_quiet
     taken = is_quiet and came
@@ -183,8 +188,8 @@ def guard_limits(settings: InputGuardSettings, period_s: float) -> Any:
     limits.jump_margin_m = float(settings.jump_margin_m)
     limits.jitter_allowance_ns = settings.jitter_allowance_ns
     limits.lead_rise_divisor = LEAD_RISE_DIVISOR
-    limits.forces_enabled_bit = int(Flags.FORCES_ENABLED)
-    limits.stopping_bit = int(Flags.STOPPING)
+    limits.quiet_mask = QUIET_MASK
+    limits.quiet_value = QUIET_VALUE
     return limits
 
 
@@ -257,4 +262,5 @@ class QuietLanes:
         return np.flatnonzero(~self.quiet).tolist()
 
 
-__all__ = ["GuardLimits", "QuietLanes", "guard_limits", "quiet_kernel"]
+__all__ = ["QUIET_MASK", "QUIET_VALUE", "GuardLimits", "QuietLanes", "guard_limits",
+           "quiet_kernel"]
