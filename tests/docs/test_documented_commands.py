@@ -375,3 +375,18 @@ def test_scratch_runner_reaps_its_jobs(tmp_path: Path) -> None:
     problems = run_block(scratch, shell_commands(block), jobs)
     assert len(problems) == 2 and "exited 1" in problems[0] and "SIGTERM" in problems[1]
     assert [job.process.returncode for job in jobs] == [-signal.SIGTERM]
+
+
+def test_the_readers_split_commands_and_find_stale_options() -> None:
+    """The readers themselves: continuations, ``&&``, ``;``, ``&``, comments and quotes; a
+    console block's output lines; an unknown option and a wrong choice are reported."""
+    block = Block("docs/x.md", 1, "console", (
+        "$ a --x 1 \\", "    --y 2 && b 'c;d' ; e &   # f", "printed", "$ g"))
+    commands = shell_commands(block)
+    assert [(c.text, c.background) for c in commands] == [
+        ("a --x 1 --y 2", False), ("b 'c;d'", False), ("e", True), ("g", False)]
+    assert commands[2].expected == ["printed"] and commands[3].line == 5
+    synopsis = Block("docs/x.md", 1, "", ("haptic-sim sweep [--mode linear|cube]", "    [--nope]"))
+    problems = [p for inv in block_invocations(synopsis) for p in option_problems(inv)]
+    assert problems == ["haptic-sim sweep: --mode 'cube' is not one of ('linear', 'clay')",
+                        "haptic-sim sweep: no option --nope"]
