@@ -206,7 +206,7 @@ def bench_can_cycle(config: dict, cycles: int, rig: str,
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
     parser.add_argument("--cycles", type=int, default=5000)
     parser.add_argument("--lanes", type=int, default=64)
     parser.add_argument("--rigs", default=",".join(RIGS),

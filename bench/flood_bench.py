@@ -165,7 +165,7 @@ def run(rate_hz: float, flood_s: float, max_samples: int, lead_s: float = 6.0,
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     parser.add_argument("--rate", type=float, default=50000.0, help="junk messages per s")
     parser.add_argument("--flood", type=float, default=3.0, help="flood length, s")
     parser.add_argument("--max-samples", type=int, default=64,

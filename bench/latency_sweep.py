@@ -69,7 +69,7 @@ def settings_for(quick: bool, mode: str) -> SweepSettings:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="the CI grid (well under 3 min)")
     parser.add_argument("--mode", choices=("linear", "clay"), default="linear")
     parser.add_argument("--json", action="store_true")

@@ -188,7 +188,7 @@ def summarise_one_way(one_way_s: np.ndarray) -> dict[str, float]:
 def echo_node(side: str, argv: list[str]) -> int:
     """A minimal node on the real runner and link: poll, watchdog, send. Returns the exit
     status."""
-    parser = argparse.ArgumentParser(prog=f"loop_bench {side}")
+    parser = argparse.ArgumentParser(allow_abbrev=False, prog=f"loop_bench {side}")
     add_run_options(parser)
     args = parser.parse_args(argv)
     with exit_on_config_error():
@@ -566,7 +566,7 @@ def main(argv: list[str] | None = None) -> int:
     if len(argv) >= 2 and argv[0] == "--role":
         role, rest = argv[1], argv[2:]
         if role == "pong":
-            parser = argparse.ArgumentParser(prog="loop_bench pong")
+            parser = argparse.ArgumentParser(allow_abbrev=False, prog="loop_bench pong")
             parser.add_argument("--endpoint", required=True)
             parser.add_argument("--prefix", required=True)
             args = parser.parse_args(rest)
@@ -576,7 +576,7 @@ def main(argv: list[str] | None = None) -> int:
             return echo_node(role, rest)
         print(f"unknown role {role}", file=sys.stderr)
         return 2
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=10.0, help="loop run length, s")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--master-cmd", help="master command (default: haptic-master)")

@@ -848,7 +848,7 @@ def equivalents_table() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     parser.add_argument("--module", action="append", metavar="PATH",
                         help=f"a module to mutate (repeatable; default all: {', '.join(MODULES)})")
     parser.add_argument("--json", action="store_true", help="print JSON on stdout")

@@ -129,7 +129,7 @@ def run(duration_s: float, settle_s: float, linear: bool, record: bool = True,
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=600.0)
     parser.add_argument("--settle", type=float, default=30.0,
                         help="seconds after the start not in the fit (start-up, allocations)")

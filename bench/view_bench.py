@@ -252,7 +252,7 @@ def browser_figures(duration_s: float, backoff: bool, chromium: str) -> dict[str
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
     parser.add_argument("--duration", type=float, default=6.0, help="networked run, s")
     parser.add_argument("--browser", action="store_true",
                         help="only the runs with a headless Chromium page on the view, the "

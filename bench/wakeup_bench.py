@@ -178,7 +178,7 @@ def _case_lines(result: dict[str, Any], period_s: float) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     parser.add_argument("--round-trips", type=int, default=5000,
                         help="round trips back to back per case (default 5000)")
     parser.add_argument("--period", type=float, default=0.00054,

@@ -13,7 +13,7 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -29,19 +29,18 @@ from haptic.common.config.control_schema import (
 )
 from haptic.common.config.scenario import load_scenario, max_block_damping
 from haptic.common.model.delay_profile import DelayProfileError, parse_delay_profile
-from haptic.common.model.teleop import model_from_config
 from haptic.common.runtime.cli_options import add_retired_delay_option
+from haptic.common.runtime.console import quiet_on_closed_stdout, script_description
 from haptic.common.wire.injection import InjectionConfig
-from haptic.lockstep.simulator import (
-    ENVIRONMENTS,
-    TRANSPARENT_SAFETY,
-    TRANSPARENT_SUPERVISION,
-    LockstepSimulator,
-    LockstepSupervision,
-)
-from haptic.master.margin_governor import governor_for
+from haptic.lockstep.environments import ENVIRONMENTS
 from haptic.master.settings import master_settings
 from haptic.master.sim.operator import parse_operator_spec
+
+if TYPE_CHECKING:
+    from haptic.lockstep.simulator import LockstepSimulator
+
+# The simulator, the model's synthesis and the governor bring Warp, python-control and scipy:
+# each command imports them after the parse, so --help and a bad flag answer at once.
 
 
 def _floats(text: str) -> tuple[float, ...]:
@@ -55,11 +54,13 @@ def _floats(text: str) -> tuple[float, ...]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
-    parser = argparse.ArgumentParser(prog="haptic-sim", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="haptic-sim", description=script_description(__doc__),
+                                     allow_abbrev=False)
     parser.add_argument("--config", type=Path, help="TOML configuration (default: the paper's)")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    run = sub.add_parser("run", help="one lockstep run: traces saved and plotted")
+    run = sub.add_parser("run", help="one lockstep run: traces saved and plotted",
+                         allow_abbrev=False)
     run.add_argument("--scenario", default=None, help="scenario name or .toml (default: config)")
     run.add_argument("--environment", choices=ENVIRONMENTS, default=None,
                      help="tool environment (default: the scenario's)")
@@ -89,11 +90,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", type=Path, default=Path("haptic-sim-run"))
     run.add_argument("--json", action="store_true", help="print a JSON summary")
 
-    repro = sub.add_parser("repro", help="reproduce the paper's section 4")
+    repro = sub.add_parser("repro", help="reproduce the paper's section 4", allow_abbrev=False)
     repro.add_argument("--out", type=Path, default=Path("haptic-sim-repro"))
     repro.add_argument("--json", action="store_true", help="print the table as JSON")
 
-    sweep = sub.add_parser("sweep", help="latency sweep against the analysis")
+    sweep = sub.add_parser("sweep", help="latency sweep against the analysis",
+                           allow_abbrev=False)
     sweep.add_argument("--mode", choices=("linear", "clay"), default="linear")
     sweep.add_argument("--quick", action="store_true",
                        help="the mode's quick grid (delays in 2 ms steps; linear: six gains, "
@@ -138,6 +140,15 @@ def _check_seconds(name: str, value: float) -> None:
 
 def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, Any]:
     """Run one scenario; write traces.npz and traces.png; return a summary."""
+    from haptic.common.model.teleop import model_from_config
+    from haptic.lockstep.simulator import (
+        TRANSPARENT_SAFETY,
+        TRANSPARENT_SUPERVISION,
+        LockstepSimulator,
+        LockstepSupervision,
+    )
+    from haptic.master.margin_governor import governor_for
+
     for name, value in (("--round-trip-delay", args.delay), ("--jitter", args.jitter)):
         _check_seconds(name, value)
     if not args.duration > 0.0:
@@ -223,8 +234,6 @@ def run_text(summary: dict[str, Any]) -> str:
     """``haptic-sim run``'s summary as ``name: value`` lines for the terminal: the analysis
     as the programs' stability line, a table as ``key value`` pairs, a pair of axes as
     ``x, y``, a list of events one a line."""
-    from haptic.common.analysis.preflight import PreflightResult
-
     lines = []
     for key, value in summary.items():
         if key == "analysis":
@@ -283,6 +292,7 @@ def _plot_run(path: Path, time_s: np.ndarray, traces: dict[str, np.ndarray], tit
     plt.close(fig)
 
 
+@quiet_on_closed_stdout
 def main(argv: list[str] | None = None) -> int:
     """Entry point: 0 on success, 1 for a failed ``sweep --check``, 2 for a config error."""
     args = build_parser().parse_args(argv)
@@ -313,6 +323,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
     """Run the sweep, write its files, print its figures; 1 when --check fails."""
+    from haptic.common.model.teleop import model_from_config
     from haptic.lockstep.sweep import (
         SweepSettings,
         auto_workers,

@@ -41,6 +41,7 @@ from haptic.common.model.work_area import shared_work_area, slave_work_area_m
 from haptic.common.wire.injection import InjectionConfig
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, HandleState, ToolState
 from haptic.lockstep.delay_line import DelayLine, source_schedule
+from haptic.lockstep.environments import ENVIRONMENTS
 from haptic.lockstep.governed import GovernedLanes
 from haptic.lockstep.stacked import StackedLTI
 from haptic.master.margin_governor import MarginGovernor
@@ -57,8 +58,6 @@ from haptic.slave_sim.node import SlaveNode, slave_compensators
 from haptic.slave_sim.resync import ToolResync
 from haptic.slave_sim.supervisor import SlaveSupervisor
 from haptic.slave_sim.tick import HandleColumns, SlaveTick
-
-ENVIRONMENTS = ("linear", "clay", "clay+linear")
 
 #: Safety settings that never act on a sweep's signals: the lockstep compares the loop with
 #: the analysis, which has no saturation, ramp or trip (docs/lockstep.md).

@@ -16,6 +16,7 @@ import zenoh
 
 from haptic.common.config import exit_on_config_error, load_config, override
 from haptic.common.config.link_schema import split_endpoints
+from haptic.common.runtime.console import script_description
 from haptic.common.runtime.failures import exit_on_link_error
 from haptic.common.runtime.runner import StopSignals
 from haptic.common.wire.errors import LinkOpenError
@@ -27,7 +28,8 @@ from haptic.view.state import ViewState
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="haptic-view", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="haptic-view", description=script_description(__doc__),
+                                     allow_abbrev=False)
     parser.add_argument("--port", metavar="N", type=int, default=8765,
                         help="HTTP port on 127.0.0.1 (default 8765; 0: any free port)")
     parser.add_argument("--config", metavar="FILE", help="TOML configuration (over the defaults)")

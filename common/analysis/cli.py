@@ -7,17 +7,22 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from haptic.common.analysis.report import Analysis, AnalysisSettings, analyse
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, to_toml
 from haptic.common.config.control_schema import drift_parameters
-from haptic.common.model.synthesis import SynthesisError
-from haptic.common.model.teleop import TeleopModel, model_from_config
 from haptic.common.runtime.cli_options import add_renamed_option, add_retired_delay_option
+from haptic.common.runtime.console import quiet_on_closed_stdout
 from haptic.common.runtime.summary import json_safe
+
+if TYPE_CHECKING:
+    from haptic.common.analysis.report import Analysis, AnalysisSettings
+    from haptic.common.model.teleop import TeleopModel
+
+# The analysis and the model's synthesis bring python-control and scipy: imported after the
+# parse, so --help and a bad flag answer at once.
 
 #: Cells per side of the stability map written by --out.
 MAP_CELLS = 28
@@ -28,7 +33,7 @@ ENVIRONMENTS = ("config", "clay")
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface."""
     parser = argparse.ArgumentParser(
-        prog="haptic-analyze",
+        prog="haptic-analyze", allow_abbrev=False,
         description="Stability of the teleoperation loop under a round-trip network delay: "
         "eq 30 small-gain check, exact Nyquist verdict, delay margin and largest stable gains.",
     )
@@ -54,6 +59,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _settings(config: dict[str, Any], model: TeleopModel, sampled: bool) -> AnalysisSettings:
+    from haptic.common.analysis.report import AnalysisSettings
+
     section = config["analysis"]
     return AnalysisSettings(
         max_frequency_rad_s=section["max_frequency_rad_s"],
@@ -127,9 +134,14 @@ def write_plots(model: TeleopModel, analysis: Analysis, settings: AnalysisSettin
     ]
 
 
+@quiet_on_closed_stdout
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (2 for a configuration error)."""
     args = build_parser().parse_args(argv)
+    from haptic.common.analysis.report import analyse
+    from haptic.common.model.synthesis import SynthesisError
+    from haptic.common.model.teleop import model_from_config
+
     with exit_on_config_error():
         config = load_config(args.config)
         if args.print_config:
@@ -175,6 +187,7 @@ def _clay(args: argparse.Namespace, config: dict[str, Any], model: TeleopModel,
         COUPLING_DAMPING_N_S_PER_M,
         COUPLING_STIFFNESS_N_PER_M,
     )
+    from haptic.common.model.synthesis import SynthesisError
 
     if args.out is not None:
         raise ConfigError("--out", "not with --environment clay")

@@ -51,6 +51,7 @@ from haptic.common.launch.guidance import (
     warp_kernel_cache_dir,
 )
 from haptic.common.runtime.cli_options import add_retired_delay_option
+from haptic.common.runtime.console import script_description
 from haptic.common.runtime.machine import usable_cpu_count, usable_cpus
 from haptic.common.runtime.summary import finite_figure, loop_cpu_text
 from haptic.common.wire.auth import write_key_file
@@ -104,7 +105,8 @@ def session_cpu_args(layout: str, cpus: Sequence[int]) -> tuple[list[str], list[
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="haptic-session", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="haptic-session", description=script_description(__doc__),
+                                     allow_abbrev=False)
     parser.add_argument("--duration", type=float, default=4.0, metavar="S",
                         help="run length of the loops in the simulated rig's time, s (default "
                         "4; a loaded machine takes longer in wall time, never less scenario)")

@@ -18,18 +18,22 @@ import numpy as np
 
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.config.scenario import load_scenario
-from haptic.slave_sim.node import SlaveNode
+from haptic.common.runtime.console import script_description
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (2 for a configuration error)."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].strip("`"))
+    parser = argparse.ArgumentParser(prog="haptic-slave-sim",
+                                     description=script_description(__doc__),
+                                     allow_abbrev=False)
     parser.add_argument("--config", help="configuration TOML (default: the shipped one)")
     parser.add_argument("--scenario", help="scenario name or TOML path (default: [slave])")
     parser.add_argument("--duration", type=float, default=4.0, help="simulated time, s")
     parser.add_argument("--out", type=Path, default=Path("out/slave"), help="output folder")
     args = parser.parse_args(argv)
     import warp
+
+    from haptic.slave_sim.node import SlaveNode  # Warp's kernels: after the parse
 
     warp.config.log_level = warp.LOG_WARNING  # no start-up banner in the summary
     with exit_on_config_error():

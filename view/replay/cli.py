@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from haptic.common.records.recording import Recording, read_recording
+from haptic.common.runtime.console import quiet_on_closed_stdout, script_description
 
 
 def side_of(recording: Recording) -> str:
@@ -307,7 +308,8 @@ def _save(figure: Any, path: Path) -> Path:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="haptic-replay", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="haptic-replay", description=script_description(__doc__),
+                                     allow_abbrev=False)
     parser.add_argument("files", nargs="+", metavar="FILE", help="MCAP recordings (--record)")
     parser.add_argument("--out", metavar="DIR", type=Path, default=Path("out/replay"),
                         help="where the PNGs go (default out/replay)")
@@ -322,6 +324,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@quiet_on_closed_stdout
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; the exit status is the module docstring's."""
     args = build_parser().parse_args(argv)

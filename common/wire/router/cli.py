@@ -22,6 +22,8 @@ import threading
 
 import zenoh
 
+from haptic.common.runtime.console import script_description
+
 DEFAULT_LISTEN = "tcp/0.0.0.0:7447"
 
 
@@ -44,7 +46,8 @@ def router_config(
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="haptic-router", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="haptic-router", description=script_description(__doc__),
+                                     allow_abbrev=False)
     parser.add_argument("--zenoh-config", metavar="FILE",
                         help="Zenoh json5 configuration file (as --zenoh-config of the programs)")
     parser.add_argument(
