@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import re
 import subprocess
 import sys
 import tomllib
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -277,6 +279,14 @@ def program_options(program: str) -> Options:
     done = subprocess.run(args, capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert done.returncode == 0, f"{program} --help: exit {done.returncode}\n{done.stderr}"
     return _from_help(done.stdout)
+
+
+def prefetch_options(names: set[str]) -> None:
+    """Read the ``--help`` of the programs without a parser builder in parallel (each imports
+    its stack once, most of the options check's time)."""
+    slow = sorted(name for name in names if name not in PARSER_BUILDERS)
+    with ThreadPoolExecutor(max_workers=os.cpu_count() or 2) as pool:
+        list(pool.map(program_options, slow))
 
 
 def option_problems(invocation: Invocation) -> list[str]:

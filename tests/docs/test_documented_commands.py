@@ -41,6 +41,7 @@ from tests.docs.doc_commands import (
     inline_spans,
     invocations,
     option_problems,
+    prefetch_options,
     rel,
     shell_commands,
 )
@@ -301,8 +302,15 @@ def _documented_invocations(path: Path) -> list:
     return found
 
 
+@pytest.fixture(scope="module")
+def options_read() -> None:
+    """The programs' options, read once for every file."""
+    prefetch_options({inv.program for path in doc_files()
+                      for inv in _documented_invocations(path)})
+
+
 @pytest.mark.parametrize("path", doc_files(), ids=rel)
-def test_documented_options_exist(path: Path) -> None:
+def test_documented_options_exist(path: Path, options_read: None) -> None:
     """Each ``--option`` of a documented invocation is the program's, by its exact name, and
     each literal choice is one of the option's."""
     problems = [f"{inv.file}:{inv.line}: {problem}" for inv in _documented_invocations(path)
