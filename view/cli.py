@@ -22,9 +22,14 @@ from haptic.common.runtime.runner import StopSignals
 from haptic.common.wire.errors import LinkOpenError
 from haptic.common.wire.link import zenoh_config
 from haptic.common.wire.link_config import LinkConfig, link_config_from
+from haptic.common.wire.protected_mode import require_protection
 from haptic.view.server import DEFAULT_MAX_RATE_HZ, ViewServer
 from haptic.view.source import ZenohSource
 from haptic.view.state import ViewState
+
+#: The ways out of the protected mode's refusal, for the view (common/wire/protected_mode.py).
+VIEW_WAYS_OUT = ("give it the programs' --session-key FILE ([link.security] session_key_file), "
+                 "or say --insecure ([link.security] insecure = true) to watch unauthenticated")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,6 +46,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="the programs' pre-shared key file (link.security."
                         "session_key_file): with one, they admit only transports that "
                         "authenticate with it, a viewer's too")
+    parser.add_argument("--insecure", action="store_const", const=True, default=None,
+                        help="connect beyond loopback without a session key "
+                        "(link.security.insecure; refused without it, exit 2)")
     parser.add_argument("--rate", metavar="HZ", type=float, default=DEFAULT_MAX_RATE_HZ,
                         help=f"display rate: Zenoh polls and frames per second per browser "
                         f"(default {DEFAULT_MAX_RATE_HZ:g})")
@@ -74,7 +82,8 @@ def _view_server(state: ViewState, port: int, rate_hz: float) -> ViewServer:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point: 0 after SIGINT/SIGTERM; 2 for a configuration error; 4 when the Zenoh
+    """Entry point: 0 after SIGINT/SIGTERM; 2 for a configuration error, a session beyond
+    loopback without a session key and without ``--insecure`` among them; 4 when the Zenoh
     session or the HTTP port cannot be opened (one line)."""
     args = build_parser().parse_args(argv)
     zenoh.init_log_from_env_or("error")
@@ -88,14 +97,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ConfigError("--rate", f"must be > 0 Hz (got {args.rate})")
         if args.session_key is not None:
             config = override(config, "link.security.session_key_file", args.session_key)
+        if args.insecure is not None:
+            config = override(config, "link.security.insecure", args.insecure)
         link = view_link_config(config, args.connect)
         zconf = zenoh_config(link)
+        marker = require_protection(zconf, link.session_key is not None, link.insecure,
+                                    VIEW_WAYS_OUT).marker
     prefix = config["link"]["transport"]["key_prefix"]
     state = ViewState(backoff=args.backoff)
     with exit_on_link_error("haptic-view"), StopSignals() as signals, \
             ZenohSource(zconf, prefix, state, args.rate, transport_key=link.transport_key), \
             _view_server(state, args.port, args.rate) as server:
-        print(f"haptic-view: {server.url} (keys {prefix}/...)", file=sys.stderr, flush=True)
+        print(f"haptic-view: {server.url} (keys {prefix}/...)" + (f" {marker}" if marker else ""),
+              file=sys.stderr, flush=True)
         while not signals.requested:
             time.sleep(0.2)
     stats = server.stats()

@@ -5,7 +5,7 @@ a :class:`~haptic.common.wire.link_config.LinkConfig`.
 
 from __future__ import annotations
 
-from haptic.common.config.loader import Field, Schema
+from haptic.common.config.fields import Field, Schema
 from haptic.common.model.delay_profile import delay_profile_problem
 
 #: How injected jitter is drawn within [0, jitter_s].
@@ -143,6 +143,13 @@ SECURITY_SCHEMA: Schema = {
         "bool", "With a session key in peer mode, Zenoh admits only transports that "
         "authenticate with credentials derived from it: a process without the key cannot "
         "join, read or flood the session (common/wire/transport_auth.py).",
+    ),
+    "insecure": Field(
+        "bool", "Protected mode off (common/wire/protected_mode.py): let a session that "
+        "listens on or connects to a non-loopback address (or scouts by multicast) run with "
+        "neither a session key nor mutual TLS, so anyone who reaches it can drive the handle "
+        "and the tool; the status line and summary then say UNAUTHENTICATED. false (the "
+        "default): such a start is refused (exit 2). Loopback never needs it.",
     ),
     "max_samples_per_poll": Field(
         "int", "Flood bound: samples one poll takes from the receive ring at most; the rest "

@@ -5,6 +5,9 @@ on the parsed arguments. Order of precedence, lowest first: the shipped defaults
 file of ``--config``, then the flags. For Zenoh itself: the ``--zenoh-config`` json5 file,
 then the ``[link]`` settings and connection flags, then every ``--zenoh-set KEY=VALUE``.
 
+A session that reaches other hosts needs a session key or mutual TLS, or ``--insecure``
+(common/wire/protected_mode.py): :func:`run_options_from_args` refuses it otherwise.
+
 Injection flags (``--one-way-delay``, ``--jitter``, ``--loss`` ...) set what *this side's receiving*
 link injects, one way (``[link.<side>.injection]``). Every invalid value raises a
 :class:`~haptic.common.config.ConfigError` naming the flag and the key; wrap the call in
@@ -60,6 +63,7 @@ _LINK_FLAGS = {
     "key_prefix": ("--key-prefix", "transport.key_prefix"),
     "max_message_age": ("--max-message-age", "watchdog.max_message_age_s"),
     "session_key": ("--session-key", "security.session_key_file"),
+    "insecure": ("--insecure", "security.insecure"),
 }
 
 
@@ -155,6 +159,12 @@ def add_connection_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--session-key", metavar="FILE",
                        help="authenticate the session with the pre-shared key in FILE (64 hex "
                        "digits, mode 600; link.security.session_key_file)")
+    group.add_argument(
+        "--insecure", action="store_const", const=True, default=None,
+        help="let a session that reaches other hosts (a non-loopback endpoint) run with neither "
+        "a session key nor mutual TLS: anyone who reaches it can drive the handle and the tool "
+        "(link.security.insecure; refused without it, exit 2)",
+    )
     group.add_argument(
         "--zenoh-config", metavar="FILE", help="a Zenoh json5 configuration file, loaded first"
     )
@@ -273,6 +283,7 @@ def run_options_from_args(
         zenoh_overrides=_zenoh_overrides(getattr(args, "zenoh_set", None) or []),
     )
     check_zenoh_config(link)
+    check_protected_mode(link)
     summary = getattr(args, "json_summary", None)
     return RunOptions(
         config=config,
@@ -294,6 +305,16 @@ def check_zenoh_config(link: LinkConfig) -> None:
         flag = "--zenoh-config" if link.zenoh_config_file else "--zenoh-set"
         text = " ".join(str(error).split())[:240]
         raise ConfigError(flag, f"zenoh rejected the configuration: {text}") from None
+
+
+def check_protected_mode(link: LinkConfig) -> None:
+    """Refuse a session that reaches other hosts with neither a session key nor mutual TLS,
+    unless ``link.insecure`` (:class:`ConfigError`, one line naming the ways out;
+    common/wire/protected_mode.py). Before anything opens: nothing is sent."""
+    from haptic.common.wire.link import zenoh_config
+    from haptic.common.wire.protected_mode import require_protection
+
+    require_protection(zenoh_config(link), link.session_key is not None, link.insecure)
 
 
 def add_renamed_option(parser: Any, old: str, new: str) -> None:

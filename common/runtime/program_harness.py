@@ -86,8 +86,11 @@ class ProgramHarness:
         Returns ``None`` when it came (Zenoh's threads are then prioritised as configured),
         otherwise the exit status: 0 when stopped first, 1 when it did not come in time."""
         config = self.link.config
+        marker = self.unauthenticated_marker
         self.say(f"{preface}waiting for the {self.peer} on {config.key_prefix} (listen "
-                 f"{','.join(config.listen) or '-'}, connect {','.join(config.connect) or '-'})")
+                 f"{','.join(config.listen) or '-'}, connect {','.join(config.connect) or '-'})"
+                 + (f"; {marker}: anyone who reaches the session can drive the handle and "
+                    "the tool" if marker else ""))
         if not self.link.wait_for_peer(peer_wait_s, lambda: signals.requested):
             if signals.requested:
                 self.say(f"stopped before the {self.peer} came")
@@ -153,11 +156,20 @@ class ProgramHarness:
         if self.display is not None:
             self.display.offer_status(values, new_events)
 
+    @property
+    def unauthenticated_marker(self) -> str:
+        """``UNAUTHENTICATED (--insecure)`` when the user let the session run with neither a
+        session key nor mutual TLS (common/wire/protected_mode.py), else empty."""
+        protection = getattr(self.link, "protection", None)
+        return protection.marker if protection is not None else ""
+
     def status_line(self, watchdog: PeerWatchdog, text: str) -> str:
-        """The live status line: the link's delay and loss, the watchdog's state, ``text``
-        (this side's figures)."""
+        """The live status line: the unauthenticated marker (if any), the link's delay and
+        loss, the watchdog's state, ``text`` (this side's figures)."""
         stats = self.link.stats()
-        return (f"link p50 {stats.one_way_delay_p50_s * 1e3:.3f} ms  loss "
+        marker = self.unauthenticated_marker
+        return ((f"{marker}  " if marker else "")
+                + f"link p50 {stats.one_way_delay_p50_s * 1e3:.3f} ms  loss "
                 f"{stats.loss_ratio * 100:.2f} %  {watchdog.state.value}  {text}")
 
     def run(self, step: StepFunction, status_text: Callable[[], str], signals: StopSignals,
@@ -227,7 +239,11 @@ class ProgramHarness:
             summary.update(self.recording.close(end_ns, summary))
         if self.options.json_summary is not None:
             write_json_summary(self.options.json_summary, summary)
-        self.say(format_summary(summary))
+        marker = self.unauthenticated_marker
+        self.say(format_summary(summary) + (
+            f"\nsession {marker}: nothing authenticated the peer's messages (reachable: "
+            f"{', '.join(summary.get('link_reachable') or []) or 'loopback only'})"
+            if marker else ""))
 
 
 @contextmanager

@@ -27,6 +27,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import zenoh
 
+from haptic.common.config import ConfigError
 from haptic.common.wire.auth import (
     HELLO_PERIOD_S,
     NONCE_BYTES,
@@ -52,6 +53,7 @@ from haptic.common.wire.messages import (
     encode_tool_around_send_time,
     send_time_bytes,
 )
+from haptic.common.wire.protected_mode import Protection, require_protection
 from haptic.common.wire.receive import LinkStats, ReceivePath
 from haptic.common.wire.transport_auth import open_session
 
@@ -168,18 +170,26 @@ class Link:
         self.unpaired_sends = 0
         self._mismatch_since: float | None = None
         """Messages not sent because this authenticated side was not paired yet."""
+        self.protection: Protection | None = None
+        """The protected mode's verdict on the open session (None before :meth:`open`)."""
 
     # -- lifecycle ---------------------------------------------------------------------------
 
     def open(self) -> Link:
         """Open the session and declare the publisher, subscribers and liveliness token.
         Raises :class:`~haptic.common.runtime.failures.LinkOpenError` (one line) when Zenoh cannot
-        open the session."""
+        open the session, or, before anything opens, when the protected mode refuses it (the
+        programs check that earlier, as a configuration error: common/wire/protected_mode.py)."""
         if self._session is not None:
             return self
         c = self.config
+        zconf = zenoh_config(c)
         try:
-            self._session = open_session(zenoh_config(c), c.transport_key)
+            self.protection = require_protection(zconf, c.session_key is not None, c.insecure)
+        except ConfigError as error:
+            raise LinkOpenError(str(error)) from None
+        try:
+            self._session = open_session(zconf, c.transport_key)
         except zenoh.ZError as error:  # a port in use, an unreachable router, a bad file
             raise LinkOpenError(
                 f"cannot open the Zenoh session (mode {c.mode}, listen "
@@ -572,4 +582,6 @@ class Link:
             self.auth.rejected_hellos if self.auth is not None else 0)
         result["link_unpaired_sends"] = self.unpaired_sends
         result["link_peer_alive"] = self.peer_alive
+        if self.protection is not None:
+            result.update(self.protection.summary())
         return result

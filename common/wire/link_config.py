@@ -55,6 +55,9 @@ class LinkConfig:
     transport_auth: bool = True
     """With a session key in peer mode: Zenoh admits only transports that authenticate with
     credentials derived from it (common/wire/transport_auth.py)."""
+    insecure: bool = False
+    """Protected mode off: a session that reaches other hosts may open with neither a session
+    key nor mutual TLS (common/wire/protected_mode.py); it then says it is unauthenticated."""
     seed: int = 0
     injection: InjectionConfig = field(default_factory=InjectionConfig)
     zenoh_config_file: str | None = None
@@ -114,7 +117,10 @@ class LinkConfig:
             ("transport/link/tx/queue/size/real_time", str(self.tx_queue_size_real_time)),
             ("transport/link/tx/lease", str(max(1, round(self.lease_s * 1000)))),
         ]
-        if self.listen and self.mode != "client":  # a client only connects (to its router)
+        if self.mode != "client" and (self.listen or not self.zenoh_config_file):
+            # A client only connects (to its router). A peer without listen endpoints listens
+            # on none: Zenoh's default is tcp/[::]:0, every interface (with a Zenoh file, the
+            # file's listen, or that default, stays: common/wire/protected_mode.py judges it).
             settings.append(("listen/endpoints", json.dumps(list(self.listen))))
         if self.connect:
             settings.append(("connect/endpoints", json.dumps(list(self.connect))))

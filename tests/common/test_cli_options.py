@@ -37,6 +37,7 @@ def test_flags_override_config_for_this_side_only():
         "--connect", "tcp/10.0.0.1:7447", "--connect", "tcp/10.0.0.2:7447",
         "--key-prefix", "haptic/lab-3", "--duration", "5", "--json-summary", "out.json",
         "--zenoh-set", "transport/link/tx/lease=2000", "--max-message-age", "0.05",
+        "--insecure",  # LAN addresses without a key (tests/wire/test_protected_mode.py)
     ])
     link = options.link
     assert link.injection.delay_s == 0.02 and link.injection.jitter_s == 0.005
@@ -95,7 +96,7 @@ def test_config_file_link_table(tmp_path):
         "preserve_order = true\nloss_probability = 0.05\nburst_enter_probability = 0.0\n"
         "burst_exit_probability = 1.0\nburst_loss_probability = 1.0\nseed = 3\n"
     )
-    link = parse(["--one-way-delay", "0.03"], "slave", config_file=path).link
+    link = parse(["--one-way-delay", "0.03", "--insecure"], "slave", config_file=path).link
     assert link.connect == ("tcp/192.168.1.10:7447",)
     assert link.injection.loss_probability == 0.05
     assert link.injection.delay_s == 0.03  # the flag wins over the file

@@ -9,28 +9,51 @@ import subprocess
 import sys
 import time
 import uuid
+from dataclasses import replace
 from pathlib import Path
 
-from haptic.common.config import load_config
+import pytest
+
+from haptic.common.config import ConfigError, load_config, override
+from haptic.common.runtime.cli_options import check_protected_mode
+from haptic.common.wire.auth import write_key_file
 from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import link_config_from
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 
 
-def test_two_hosts_config():
-    config = load_config(DEPLOY / "two-hosts.toml")
+SHIPPED_KEY = "/etc/haptic/rig-1.key"
+
+
+def with_test_key(path: Path, tmp_path: Path) -> dict:
+    """The shipped file's configuration with its key file (on the hosts, /etc/haptic/) replaced
+    by a fresh one under ``tmp_path``."""
+    config = load_config(path)
+    assert config["link"]["security"]["session_key_file"] == SHIPPED_KEY
+    key = write_key_file(tmp_path / "rig-1.key")
+    return override(config, "link.security.session_key_file", str(key))
+
+
+def test_two_hosts_config(tmp_path):
+    config = with_test_key(DEPLOY / "two-hosts.toml", tmp_path)
     master = link_config_from(config, "master")
     slave = link_config_from(config, "slave")
     assert master.listen == ("tcp/0.0.0.0:7447",) and master.mode == "peer"
     assert slave.connect == ("tcp/192.168.1.10:7447",)
+    for link in (master, slave):  # the protected mode admits them: a key (nothing is opened)
+        assert link.session_key is not None and not link.insecure
+        check_protected_mode(link)
 
 
-def test_router_config():
-    config = load_config(DEPLOY / "router.toml")
+def test_router_config(tmp_path):
+    config = with_test_key(DEPLOY / "router.toml", tmp_path)
     for side in ("master", "slave"):
         link = link_config_from(config, side)
         assert link.mode == "client" and link.connect == ("tcp/192.168.1.5:7447",)
+        check_protected_mode(link)
+        with pytest.raises(ConfigError, match="protected mode"):  # the same without the key
+            check_protected_mode(replace(link, session_key=None))
 
 
 def free_port() -> int:

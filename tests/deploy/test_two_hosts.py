@@ -53,9 +53,12 @@ from haptic.common.config import load_config
 from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import link_config_from
 role, side, endpoint, seconds, overrides, zfile = sys.argv[1:7]
+# Without the shipped file the probe is TLS without a certificate of its own: the protected
+# mode would refuse it before Zenoh does; insecure lets the test see the router refuse it.
 config = link_config_from(load_config(), side, mode="client", connect=(endpoint,), listen=(),
                           key_prefix="haptic/rig-1", zenoh_config_file=zfile or None,
-                          zenoh_overrides=tuple(map(tuple, json.loads(overrides))))
+                          zenoh_overrides=tuple(map(tuple, json.loads(overrides))),
+                          insecure=not zfile)
 try:
     link = Link(config).open()
 except Exception as error:
@@ -216,6 +219,8 @@ def run_session(processes: Processes, certs, out: Path, topology: str) -> float:
         # the other side's messages arrived: a measured one-way delay, forces
         assert summary["link_one_way_delay_p50_s"] is not None, side
         assert summary["max_abs_force_N"] > 0.0, side
+        # the protected mode admitted the session for its mutual TLS, not an --insecure
+        assert summary["link_protection"] == "mutual TLS", side
         print(f"{topology}: {side} received p50 {summary['link_one_way_delay_p50_s'] * 1e6:.0f}"
               f" us p99 {summary['link_one_way_delay_p99_s'] * 1e6:.0f} us, "
               f"max |force| {summary['max_abs_force_N']:.2f} N")

@@ -10,6 +10,13 @@ either can serve the deployment::
 ``--zenoh-config`` is loaded first, then ``--listen`` (replaces ``listen/endpoints``), then every
 ``--zenoh-set`` (json5 value). Mode is always ``router``. Runs until SIGINT or SIGTERM, then
 closes its session and exits 0; a configuration Zenoh rejects exits 2 with one line.
+
+Protected mode (common/wire/protected_mode.py): a router that listens on or connects to a
+non-loopback address without mutual TLS (deploy/zenoh/router.json5) exits 2 with one line
+unless ``--insecure`` is given; it then says ``UNAUTHENTICATED (--insecure)`` in its
+listening line. A router has no session key of its own: the programs' keys authenticate their
+messages end to end through it, but without mutual TLS anyone who reaches it can join, read
+the positions and forces and flood the keys.
 """
 
 from __future__ import annotations
@@ -22,9 +29,15 @@ import threading
 
 import zenoh
 
+from haptic.common.config import ConfigError
 from haptic.common.runtime.console import script_description
+from haptic.common.wire.protected_mode import require_protection
 
 DEFAULT_LISTEN = "tcp/0.0.0.0:7447"
+#: The ways out of the protected mode's refusal, for a router.
+ROUTER_WAYS_OUT = ("give it mutual TLS (--zenoh-config FILE with transport/link/tls "
+                   "enable_mtls, deploy/zenoh/router.json5), or say --insecure to relay "
+                   "unauthenticated")
 
 
 def router_config(
@@ -58,11 +71,21 @@ def main(argv: list[str] | None = None) -> int:
         "--zenoh-set", action="append", default=[], metavar="KEY=VALUE",
         help="a Zenoh configuration override, VALUE in json5, applied last (repeatable)",
     )
+    parser.add_argument(
+        "--insecure", action="store_true",
+        help="listen on a non-loopback address without mutual TLS (refused without it, exit 2): "
+        "anyone who reaches the router can join the session",
+    )
     args = parser.parse_args(argv)
     try:
         config = router_config(args.zenoh_config, args.listen, args.zenoh_set)
     except Exception as error:  # noqa: BLE001 - zenoh raises its own ZError
         print(f"haptic-router: {' '.join(str(error).split())[:240]}", file=sys.stderr)
+        return 2
+    try:
+        marker = require_protection(config, False, args.insecure, ROUTER_WAYS_OUT).marker
+    except ConfigError as error:
+        print(f"haptic-router: {str(error).removeprefix(f'{error.key}: ')}", file=sys.stderr)
         return 2
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -75,8 +98,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     with session:
         listening = config.get_json("listen/endpoints")
-        print(f"zenoh router {session.zid()} listening on {listening}", file=sys.stderr,
-              flush=True)
+        print(f"zenoh router {session.zid()} listening on {listening}"
+              + (f" {marker}" if marker else ""), file=sys.stderr, flush=True)
         while not stop.wait(0.2):
             pass
     return 0
