@@ -232,6 +232,30 @@ def block_invocations(block: Block) -> list[Invocation]:
     return found
 
 
+def deploy_files() -> list[Path]:
+    """The deployment files whose comments and unit lines give command lines."""
+    deploy = ROOT / "deploy"
+    return [*sorted(deploy.glob("*.toml")), *sorted(deploy.glob("zenoh/*.json5")),
+            *sorted(deploy.glob("systemd/*.service"))]
+
+
+def file_invocations(path: Path) -> list[Invocation]:
+    """Invocations in a deployment file's comments (``#``, ``//``) and ``ExecStart=`` lines,
+    a program's install path dropped and backslash continuations joined."""
+    found, logical, start = [], "", 0
+    for number, raw in enumerate(path.read_text().splitlines(), 1):
+        text = raw.strip().lstrip("#/").strip().removeprefix("ExecStart=")
+        text = re.sub(r"\S*/bin/(haptic-[\w-]+)", r"\1", text)
+        if not logical:
+            start = number
+        if text.endswith("\\"):
+            logical += text[:-1] + " "
+            continue
+        found += invocations(rel(path), start, logical + text)
+        logical = ""
+    return found
+
+
 @dataclass(frozen=True)
 class Options:
     """A parser's long options, each with its choices (None: any value); an option hidden

@@ -35,9 +35,11 @@ from tests.docs.doc_commands import (
     Command,
     attribution,
     block_invocations,
+    deploy_files,
     doc_files,
     fenced_blocks,
     figure_blocks,
+    file_invocations,
     inline_spans,
     invocations,
     option_problems,
@@ -314,6 +316,14 @@ def test_documented_options_exist(path: Path, options_read: None) -> None:
     """Each ``--option`` of a documented invocation is the program's, by its exact name, and
     each literal choice is one of the option's."""
     problems = [f"{inv.file}:{inv.line}: {problem}" for inv in _documented_invocations(path)
+                for problem in option_problems(inv)]
+    assert not problems, "\n".join(problems)
+
+
+@pytest.mark.parametrize("path", deploy_files(), ids=rel)
+def test_deploy_files_name_real_options(path: Path, options_read: None) -> None:
+    """The command lines in deploy/'s comments and systemd units use real options."""
+    problems = [f"{inv.file}:{inv.line}: {problem}" for inv in file_invocations(path)
                 for problem in option_problems(inv)]
     assert not problems, "\n".join(problems)
 
