@@ -402,6 +402,9 @@ def test_scratch_runner_reaps_its_jobs(tmp_path: Path) -> None:
     problems = run_block(scratch, shell_commands(block), jobs)
     assert len(problems) == 2 and "exited 1" in problems[0] and "SIGTERM" in problems[1]
     assert [job.process.returncode for job in jobs] == [-signal.SIGTERM]
+    quoted = Block("docs/x.md", 1, "console", ("$ echo one; echo two", "two", "$ echo 3", "4"))
+    problems = run_block(scratch, shell_commands(quoted))
+    assert problems == ["docs/x.md:4 `echo 3` did not print the line the docs quote: '4'"]
 
 
 def test_the_readers_split_commands_and_find_stale_options() -> None:
