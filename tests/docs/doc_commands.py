@@ -352,7 +352,7 @@ def figure_blocks(path: Path) -> list[Block]:
             and any(MEASURED.search(line) for line in block.lines)]
 
 
-def attribution(path: Path, block: Block, lines_before: int = 4) -> re.Match | None:
+def attribution(path: Path, block: Block, lines_before: int = 4) -> re.Match[str] | None:
     """The ``Measured with `CMD` on MACHINE, YYYY-MM-DD`` line in the few non-blank lines
     before a block (the prose may wrap it)."""
     lines = path.read_text().splitlines()[:block.line - 1]

@@ -3,7 +3,8 @@
 - Every command of a ``sh``/``bash``/``console``/``shell`` block is either run (in a scratch
   folder that reaches the repository's files; background jobs, ``kill %N`` and a shortened
   variant where SHORTER says so) with its exit status and quoted output checked, or on SKIPS
-  with a reason. A command on neither list fails: a newly documented command must be handled.
+  with a reason. A newly documented command is run unless SKIPS names it (so it fails until it
+  runs, or is skipped with a reason), and an entry that matches no documented command fails.
 - Every program invocation in a code span or block uses options the program's parser has,
   and the literal choices it gives are among the option's choices.
 - Every ``toml`` block validates with the configuration (or scenario) loader, merged over the
@@ -35,6 +36,7 @@ from tests.docs.doc_commands import (
     SHELL_LABELS,
     Block,
     Command,
+    Invocation,
     attribution,
     block_invocations,
     deploy_files,
@@ -299,7 +301,7 @@ def test_documented_commands_run(block: Block, commands: list[Command], tmp_path
     assert not problems, "\n".join(problems)
 
 
-def _documented_invocations(path: Path) -> list:
+def _documented_invocations(path: Path) -> list[Invocation]:
     found = [inv for block in fenced_blocks(path) for inv in block_invocations(block)]
     found += [inv for line, span in inline_spans(path) for inv in invocations(rel(path), line,
                                                                                span)]
