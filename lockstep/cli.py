@@ -31,6 +31,7 @@ from haptic.common.config.scenario import load_scenario, max_block_damping
 from haptic.common.model.delay_profile import DelayProfileError, parse_delay_profile
 from haptic.common.runtime.cli_options import add_retired_delay_option
 from haptic.common.runtime.console import quiet_on_closed_stdout, script_description
+from haptic.common.runtime.warp_init import init_warp
 from haptic.common.wire.injection import InjectionConfig
 from haptic.lockstep.environments import ENVIRONMENTS
 from haptic.master.settings import master_settings
@@ -296,6 +297,7 @@ def _plot_run(path: Path, time_s: np.ndarray, traces: dict[str, np.ndarray], tit
 def main(argv: list[str] | None = None) -> int:
     """Entry point: 0 on success, 1 for a failed ``sweep --check``, 2 for a config error."""
     args = build_parser().parse_args(argv)
+    init_warp()  # the nodes' kernels and the clay are Warp's
     with exit_on_config_error():
         config = load_config(args.config)
         if args.command == "run":

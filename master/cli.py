@@ -30,6 +30,7 @@ from haptic.common.runtime.cli_options import add_run_options, run_options_from_
 from haptic.common.runtime.console import script_description
 from haptic.common.runtime.failures import exit_on_link_error
 from haptic.common.runtime.program_harness import add_networked_options, check_networked_options
+from haptic.common.runtime.warp_init import init_warp
 from haptic.common.runtime.watchdog import DEFAULT_SYNC_TOLERANCE_M
 from haptic.master.hardware.interface import HardwareError, create_hardware
 from haptic.master.settings import master_settings, with_work_area
@@ -107,6 +108,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from haptic.master.node import MasterNode
     from haptic.master.program import MasterLoopOptions, run_linked_master
 
+    init_warp()  # the node's kernels run on Warp's CPU device
     zenoh.init_log_from_env_or("error")
     with exit_on_config_error():
         for flag, given in (("--no-pace", args.no_pace), ("--json", args.json)):
@@ -174,6 +176,7 @@ def _main_alone(args: argparse.Namespace) -> int:
     from haptic.master.node import MasterNode
     from haptic.master.runner import run_master
 
+    init_warp()
     duration = NO_LINK_DEFAULT_DURATION_S if args.duration is None else args.duration
     with exit_on_config_error():
         if args.rig_time is not None:

@@ -19,6 +19,7 @@ from haptic.common.runtime.console import script_description
 from haptic.common.runtime.failures import exit_on_link_error
 from haptic.common.runtime.program_harness import add_networked_options, check_networked_options
 from haptic.common.runtime.runner_config import place_other_threads
+from haptic.common.runtime.warp_init import init_warp
 from haptic.common.runtime.watchdog import DEFAULT_SYNC_TOLERANCE_M
 from haptic.slave_sim.input_guard import InputGuardSettings
 
@@ -74,10 +75,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                           clay_damping_N_s_per_m=max_block_damping(scenario))
     if refused is not None:
         return refused
-    import warp
-
-    warp.config.log_level = warp.LOG_WARNING  # no start-up banner
-    warp.config.quiet = True
+    init_warp()  # after the placement: Warp's threads inherit it
     with exit_on_config_error():
         node = SlaveNode.from_config(options.config, scenario)
     with exit_on_link_error("haptic-slave"):

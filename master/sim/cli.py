@@ -32,6 +32,7 @@ from typing import Any
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.config.runner_schema import MAX_FIFO_PRIORITY
 from haptic.common.runtime.console import script_description
+from haptic.common.runtime.warp_init import init_warp
 from haptic.master.settings import emulator_settings
 from haptic.master.sim.rig_emulator import (
     DEFAULT_CHANNELS,
@@ -139,6 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status: 0 after SIGINT/SIGTERM, ``--duration`` or the end
     of ``--parent-pid``; 1 when the bus cannot open; 2 for a configuration error (one line)."""
     args = build_parser().parse_args(argv)
+    init_warp()  # the devices' rig model is Warp's, on its CPU device
     with exit_on_config_error():
         rig, bus_options = _configure(args)
     stop = StopRequest(args.duration, args.parent_pid)

@@ -19,6 +19,7 @@ import numpy as np
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.config.scenario import load_scenario
 from haptic.common.runtime.console import script_description
+from haptic.common.runtime.warp_init import init_warp
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -31,11 +32,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=4.0, help="simulated time, s")
     parser.add_argument("--out", type=Path, default=Path("out/slave"), help="output folder")
     args = parser.parse_args(argv)
-    import warp
-
     from haptic.slave_sim.node import SlaveNode  # Warp's kernels: after the parse
 
-    warp.config.log_level = warp.LOG_WARNING  # no start-up banner in the summary
+    init_warp()  # no start-up banner in the summary
     with exit_on_config_error():
         if not (math.isfinite(args.duration) and 0.0 < args.duration <= 3600.0):
             raise ConfigError("--duration", f"must be in (0, 3600] s (got {args.duration:g})")
