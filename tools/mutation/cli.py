@@ -1,0 +1,237 @@
+"""The command line: score the configured modules, or those a change touched (CI mode).
+
+Exit status: 0 when every module whose run completed scores at least ``--min-score``; 1 when
+one scores below it; 2 for a usage error or a module whose tests fail unmutated; 130 when
+stopped. A module the time budget did not reach, or did not let finish, is reported as not
+run (or unfinished) and fails nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import signal
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from . import changed, equivalents, finder, modules, runner
+from .runner import BaselineError, Job, ModuleResult
+
+ROOT = Path(__file__).resolve().parents[2]
+PROGRAM = "python3 tools/mutation/run.py"
+DEFAULT_MIN_SCORE = 0.95
+#: The data files: the configured modules and the equivalent mutants.
+MODULES_FILE = modules.DEFAULT_PATH
+EQUIVALENTS_FILE = equivalents.DEFAULT_PATH
+#: module path -> its test files (the test-finder, memoised).
+TestsOf = Callable[[str], list[str]]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of the command line (its options are the documented ones)."""
+    parser = argparse.ArgumentParser(
+        prog=PROGRAM, allow_abbrev=False, description="Mutation score of the configured modules "
+        "(tools/mutation/modules.toml): how many small planted bugs their tests catch.")
+    parser.add_argument("--module", action="append", metavar="PATH",
+                        help="a configured module to mutate (repeatable; default: all)")
+    parser.add_argument("--changed-since", nargs="?", const="", default=None, metavar="REF",
+                        help="only the configured modules the change since REF touched (the "
+                        "module or one of its tests); without REF the merge base with "
+                        f"{changed.MAIN_BRANCH}, or HEAD~1 when there is none")
+    parser.add_argument("--time-budget-s", type=float, default=None, metavar="S",
+                        help="stop after S seconds: modules not reached are reported as not "
+                        "run, a module cut short as unfinished (neither fails)")
+    parser.add_argument("--min-score", type=float, default=DEFAULT_MIN_SCORE, metavar="X",
+                        help="exit 1 when a module whose run completed scores below X "
+                        f"(default {DEFAULT_MIN_SCORE})")
+    parser.add_argument("--json", action="store_true", help="print JSON on stdout")
+    parser.add_argument("--all", action="store_true",
+                        help="every mutant, also of the sampled modules (the kernels)")
+    parser.add_argument("--jobs", type=int, default=1, metavar="N",
+                        help="mutants tested at once (default 1; one per free core)")
+    parser.add_argument("--survivors", action="store_true",
+                        help="print each surviving mutant's diff (stderr)")
+    parser.add_argument("--count", action="store_true",
+                        help="only count the mutants per module, run nothing")
+    parser.add_argument("--tests", action="store_true",
+                        help="only list each module's tests (found from their imports), "
+                        "run nothing")
+    parser.add_argument("--equivalents", action="store_true",
+                        help="print the table of equivalent mutants (Markdown), run nothing")
+    parser.add_argument("--progress", action="store_true", help="one line per mutant on stderr")
+    return parser
+
+
+def _tests_of(graph: finder.ImportGraph, depth: dict[str, int]) -> TestsOf:
+    """A memo of the test-finder: module path -> its test files, at the module's ``depth``."""
+    memo: dict[str, list[str]] = {}
+
+    def tests_of(path: str) -> list[str]:
+        if path not in memo:
+            memo[path] = finder.tests_for(path, graph, depth.get(path, 1))
+        return memo[path]
+
+    return tests_of
+
+
+def _select(args: argparse.Namespace, configured: list[str], tests_of: TestsOf) -> list[str]:
+    """The modules to run: ``--module``'s, the touched ones, or all; SystemExit(2) on a
+    usage error."""
+    if args.changed_since is None:
+        return args.module or configured
+    try:
+        ref = args.changed_since or changed.default_base(ROOT)
+        files = changed.changed_files(ROOT, ref)
+    except changed.GitError as error:
+        print(f"mutation: --changed-since: {error}", file=sys.stderr)
+        raise SystemExit(2) from None
+    any_test = any(f.startswith(finder.TESTS_DIR + "/") for f in files)
+    paths = changed.touched(args.module or configured, files,
+                            tests_of if any_test else lambda _path: ())
+    print(f"mutation: changed since {ref[:12]}: {len(files)} file(s), "
+          f"{len(paths)} configured module(s) touched: {', '.join(paths) or 'none'}",
+          file=sys.stderr, flush=True)
+    return paths
+
+
+def _line(path: str, result: ModuleResult) -> str:
+    """One module's outcome, one line."""
+    state = "" if result.complete else (f", unfinished ({result.killed + result.survived} of "
+                                        f"{result.planned} tested)")
+    return (f"mutation: {path}: {result.killed} killed, {result.survived} survived "
+            f"({result.score * 100:.1f} %), {result.equivalent} equivalent, "
+            f"{result.seconds:.0f} s{state}")
+
+
+def _run(args: argparse.Namespace, paths: list[str], every: dict[str, int], tests_of: TestsOf,
+         entries: list[equivalents.Equivalent]) -> dict[str, ModuleResult | None]:
+    """Score each of ``paths`` in turn (None: not reached within the time budget)."""
+    start = time.monotonic()
+    deadline = None if args.time_budget_s is None else start + args.time_budget_s
+    package_dir = finder.package_dirs(ROOT)
+    results: dict[str, ModuleResult | None] = {}
+    for path in paths:
+        if deadline is not None and time.monotonic() >= deadline:
+            results[path] = None
+            print(f"mutation: {path}: not run (time budget)", file=sys.stderr, flush=True)
+            continue
+        job = Job(path, finder.module_name(path, package_dir), tests_of(path), every[path])
+        if not job.tests:
+            raise BaselineError(f"no test imports {path} (nor a module that imports it)")
+        results[path] = result = runner.score_module(
+            ROOT, job, entries, jobs=args.jobs, everything=args.all, progress=args.progress,
+            deadline=deadline)
+        print(_line(path, result), file=sys.stderr, flush=True)
+    return results
+
+
+def _report(args: argparse.Namespace, results: dict[str, ModuleResult | None],
+            elapsed_s: float) -> None:
+    """The table (or JSON) on stdout, the survivors' diffs on stderr with ``--survivors``."""
+    done = {p: r for p, r in results.items() if r is not None}
+    killed = sum(r.killed for r in done.values())
+    total = killed + sum(r.survived for r in done.values())
+    total_score = killed / total if total else 1.0
+    if args.json:
+        print(json.dumps({"modules": {p: (r.as_dict() if r else None)
+                                      for p, r in results.items()},
+                          "total_score": round(total_score, 4), "seconds": round(elapsed_s, 1),
+                          "jobs": args.jobs, "sampled": not args.all}, indent=2))
+    else:
+        print(f"{'module':34s} {'killed':>7s} {'survived':>9s} {'score':>7s} {'equiv.':>7s} "
+              f"{'of':>5s} {'time':>6s}")
+        for path, r in results.items():
+            if r is None:
+                print(f"{path:34s} not run (time budget)")
+                continue
+            print(f"{path:34s} {r.killed:7d} {r.survived:9d} {r.score * 100:6.1f}% "
+                  f"{r.equivalent:7d} {r.generated:5d} {r.seconds:5.0f}s"
+                  f"{'' if r.complete else '  unfinished'}")
+        print(f"{'total':34s} {killed:7d} {total - killed:9d} {total_score * 100:6.1f}% "
+              f"{'':13s} {elapsed_s:5.0f}s")
+    if args.survivors:
+        for path, r in done.items():
+            original = (ROOT / path).read_text()
+            for mutant in r.survivors:
+                print(f"--- survivor {path}:{mutant.line} {mutant.operator}", file=sys.stderr)
+                print(mutant.diff(original), file=sys.stderr)
+
+
+def _stop(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def _inspect(args: argparse.Namespace, paths: list[str], tests_of: TestsOf,
+             entries: list[equivalents.Equivalent]) -> None:
+    """``--equivalents``, ``--count`` or ``--tests``: print, run nothing."""
+    from .mutants import mutants
+
+    if args.equivalents:
+        print(equivalents.markdown_table(entries))
+    elif args.count:
+        counts = {path: len(mutants(ROOT, path)) for path in paths}
+        print(json.dumps(counts) if args.json else "\n".join(f"{n:5d}  {p}"
+                                                             for p, n in counts.items()))
+    else:
+        found = {path: tests_of(path) for path in paths}
+        print(json.dumps(found, indent=2) if args.json else "\n".join(
+            f"{p}:\n" + "".join(f"    {t}\n" for t in tests) for p, tests in found.items()))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; the exit status (see the module's docstring)."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.jobs < 1:
+        parser.error("--jobs must be at least 1")
+    try:
+        configured = modules.load(ROOT, MODULES_FILE)
+        entries = equivalents.load(EQUIVALENTS_FILE, frozenset(c.path for c in configured))
+    except (modules.ModulesError, equivalents.EquivalentsError) as error:
+        parser.error(str(error))
+    every = {c.path: c.every for c in configured}
+    for path in args.module or ():
+        if path not in every:
+            parser.error(f"--module {path}: not configured (tools/mutation/modules.toml)")
+    tests_of = _tests_of(finder.ImportGraph(ROOT), {c.path: c.depth for c in configured})
+    paths = _select(args, list(every), tests_of)
+    if args.equivalents or args.count or args.tests:
+        _inspect(args, paths, tests_of, entries)
+        return 0
+    return _score(args, paths, every, tests_of, entries)
+
+
+def _score(args: argparse.Namespace, paths: list[str], every: dict[str, int], tests_of: TestsOf,
+           entries: list[equivalents.Equivalent]) -> int:
+    """Preload, score ``paths``, report; the exit status."""
+    start = time.monotonic()
+    cache_dir = tempfile.mkdtemp(prefix="mutation-warp-cache-")
+    signal.signal(signal.SIGTERM, _stop)
+    try:
+        if paths:
+            runner.preload(cache_dir)
+        results = _run(args, paths, every, tests_of, entries)
+    except KeyboardInterrupt:
+        print("mutation: stopped", file=sys.stderr)
+        return 130
+    except BaselineError as error:
+        print(f"mutation: {error}", file=sys.stderr)
+        return 2
+    finally:
+        runner.end_children()
+        shutil.rmtree(cache_dir, ignore_errors=True)
+    elapsed_s = time.monotonic() - start
+    _report(args, results, elapsed_s)
+    below = [p for p, r in results.items()
+             if r is not None and r.complete and r.score < args.min_score]
+    tested = sum(r.killed + r.survived for r in results.values() if r is not None)
+    print(f"mutation: {len(paths)} module(s), {tested} mutants tested in {elapsed_s:.0f} s "
+          f"({elapsed_s / 60:.1f} min, --jobs {args.jobs})", file=sys.stderr)
+    for path in below:
+        print(f"mutation: {path} scores {results[path].score * 100:.1f} %, below "
+              f"{args.min_score * 100:.1f} %", file=sys.stderr)
+    return 1 if below else 0

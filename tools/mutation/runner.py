@@ -1,0 +1,300 @@
+"""Running the tests against the mutants: one forked child per mutant, nothing on disk.
+
+A parent process imports the heavy libraries once (:data:`PRELOAD`) and forks one child per
+mutant; the child serves the mutated source for the one module (an import hook, plus
+``linecache`` so that Warp compiles the mutated kernel source) and runs pytest on the module's
+tests with ``-x``. A mutant is *killed* when they fail (or crash, or exceed the time limit),
+*survived* when they pass. Nothing is written into the source tree; Warp kernels compile into
+a private cache the caller deletes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .equivalents import Equivalent, reason_for
+from .mutants import Mutant, mutants
+
+#: Imported once in the parent, before forking (a child pays none of it).
+PRELOAD = ("numpy", "scipy.linalg", "scipy.signal", "control", "msgpack", "zenoh", "warp",
+           "hypothesis", "pytest", "mcap", "can", "canopen", "cantools", "matplotlib")
+#: pytest plugins a mutant run does without (unraisableexception's gc.collect() alone costs
+#: most of a second per run over the preloaded libraries).
+PYTEST_PLUGINS_OFF = ("-p", "no:cacheprovider", "-p", "no:unraisableexception", "-p",
+                      "no:threadexception", "-p", "no:benchmark", "-p", "no:junitxml", "-p",
+                      "no:pastebin", "-p", "no:doctest")
+#: The longest a baseline (the tests on the unmutated module) may take.
+BASELINE_LIMIT_S = 600.0
+
+#: Children running now (pid -> mutant, None for a baseline), ended if the parent stops.
+_RUNNING: dict[int, Mutant | None] = {}
+
+
+class BaselineError(RuntimeError):
+    """A module's tests do not pass on the unmutated module."""
+
+
+@dataclass
+class ModuleResult:
+    """The outcome for one module. ``complete`` is False when the time budget ended the run
+    before every mutant was tested (the counts are then those of the mutants tested)."""
+
+    killed: int = 0
+    survived: int = 0
+    timed_out: int = 0
+    equivalent: int = 0  # listed as equivalent: not run, not counted
+    generated: int = 0  # all mutants of the module, before sampling
+    planned: int = 0  # the mutants to run: sampled, less the equivalent ones
+    seconds: float = 0.0
+    complete: bool = True
+    tests: list[str] = field(default_factory=list)  # in the order run, fastest first
+    survivors: list[Mutant] = field(default_factory=list)
+
+    @property
+    def score(self) -> float:
+        """killed / (killed + survived); 1.0 when nothing was tested."""
+        total = self.killed + self.survived
+        return self.killed / total if total else 1.0
+
+    def as_dict(self) -> dict[str, object]:
+        return {"killed": self.killed, "survived": self.survived, "score": round(self.score, 4),
+                "timed_out": self.timed_out, "equivalent": self.equivalent,
+                "generated": self.generated, "planned": self.planned,
+                "complete": self.complete, "seconds": round(self.seconds, 1),
+                "tests": self.tests}
+
+
+def serve_mutant(name: str, path: Path, source: str) -> None:
+    """In the child: import module ``name`` from ``source`` instead of its file (and let
+    linecache, which inspect and Warp read kernel source through, return it too)."""
+    import importlib.abc
+    import importlib.util
+    import linecache
+
+    filename = str(path)
+    linecache.cache[filename] = (len(source), None, source.splitlines(True), filename)
+
+    class Loader(importlib.abc.Loader):
+        def create_module(self, spec):  # noqa: ANN001, ANN202
+            return None
+
+        def exec_module(self, module):  # noqa: ANN001, ANN202
+            module.__file__ = filename
+            exec(compile(source, filename, "exec", dont_inherit=True), module.__dict__)
+
+        def get_source(self, fullname):  # noqa: ANN001, ANN202
+            return source
+
+    class Finder(importlib.abc.MetaPathFinder):
+        def find_spec(self, fullname, target_path=None, target=None):  # noqa: ANN001, ANN202
+            if fullname != name:
+                return None
+            return importlib.util.spec_from_loader(name, Loader(), origin=filename)
+
+    sys.meta_path.insert(0, Finder())
+
+
+class _Durations:
+    """A pytest plugin summing each test file's time (setup, call and teardown)."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+
+    def pytest_runtest_logreport(self, report) -> None:  # noqa: ANN001
+        file = report.nodeid.split("::")[0]
+        self.seconds[file] = self.seconds.get(file, 0.0) + report.duration
+
+
+def _child(root: Path, tests: list[str], timeout_s: float, mutant: tuple[str, Mutant] | None,
+           durations_file: str | None = None) -> None:
+    """In a forked child: run ``tests`` (on ``mutant``: module name and mutant) and exit 0
+    when they pass; with ``durations_file``, write each file's seconds there (JSON)."""
+    status = 3
+    try:
+        os.chdir(root)
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, 1)
+        os.dup2(null, 2)
+        for signum in (signal.SIGALRM, signal.SIGTERM, signal.SIGINT):
+            signal.signal(signum, signal.SIG_DFL)
+        signal.alarm(max(1, int(timeout_s)))
+        if mutant is not None:
+            serve_mutant(mutant[0], root / mutant[1].path, mutant[1].source)
+        from hypothesis import HealthCheck
+        from hypothesis import settings as hypothesis_settings
+
+        # The same examples for every mutant and the baseline, no shared example database,
+        # and no health check that a loaded machine fails (that would count as a kill).
+        hypothesis_settings.register_profile(
+            "mutation", derandomize=True, database=None, deadline=None,
+            suppress_health_check=list(HealthCheck))
+        hypothesis_settings.load_profile("mutation")
+        import pytest
+
+        plugin = _Durations()
+        code = pytest.main(["-x", "-q", "--no-header", *PYTEST_PLUGINS_OFF,
+                            *(str(root / t) for t in tests)], plugins=[plugin])
+        if durations_file is not None:
+            Path(durations_file).write_text(json.dumps(plugin.seconds))
+        status = 0 if code == 0 else 1
+    finally:
+        sys.stdout.flush()
+        os._exit(status)
+
+
+def _outcome(status: int) -> str:
+    """``passed``, ``failed`` or ``timeout`` from a child's wait status."""
+    if os.WIFSIGNALED(status):
+        return "timeout" if os.WTERMSIG(status) == signal.SIGALRM else "failed"
+    return "passed" if os.WEXITSTATUS(status) == 0 else "failed"
+
+
+def baseline(root: Path, tests: list[str], timeout_s: float) -> tuple[str, dict[str, float]]:
+    """Run ``tests`` unmutated: the outcome and each test file's seconds."""
+    with tempfile.NamedTemporaryFile(suffix=".json") as handle:
+        pid = os.fork()
+        if pid == 0:
+            _child(root, tests, timeout_s, None, handle.name)
+        _RUNNING[pid] = None
+        _, status = os.waitpid(pid, 0)
+        del _RUNNING[pid]
+        text = Path(handle.name).read_text()
+    seconds = {file: float(s) for file, s in json.loads(text or "{}").items()}
+    return _outcome(status), seconds
+
+
+def run_mutants(root: Path, name: str, tests: list[str], timeout_s: float,
+                found: list[Mutant], jobs: int,
+                deadline: float | None = None) -> Iterator[tuple[Mutant, str]]:
+    """Yield (mutant, outcome) for each of ``found`` (module ``name``), ``jobs`` children at a
+    time; past ``deadline`` (time.monotonic()) none is started and the running ones are ended
+    without an outcome."""
+    pending = list(reversed(found))
+    while pending or _RUNNING:
+        if deadline is not None and time.monotonic() >= deadline:
+            end_children()
+            return
+        while pending and len(_RUNNING) < jobs:
+            mutant = pending.pop()
+            pid = os.fork()
+            if pid == 0:
+                _child(root, tests, timeout_s, (name, mutant))
+            _RUNNING[pid] = mutant
+        pid, status = os.waitpid(-1, os.WNOHANG)
+        if pid == 0:
+            time.sleep(0.02)
+            continue
+        mutant = _RUNNING.pop(pid, None)
+        if mutant is not None:
+            yield mutant, _outcome(status)
+
+
+def end_children() -> None:
+    """Kill and reap every child still running."""
+    for pid in list(_RUNNING):
+        try:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        except (ProcessLookupError, ChildProcessError):
+            pass
+        _RUNNING.pop(pid, None)
+
+
+def preload(cache_dir: str) -> None:
+    """Import :data:`PRELOAD` (those installed) and set Warp to compile into ``cache_dir``;
+    SystemExit if that imported a ``haptic`` module (a child must import each afresh)."""
+    import importlib
+
+    for module in PRELOAD:
+        try:
+            importlib.import_module(module)
+        except ImportError:
+            pass
+    import warp as wp
+
+    wp.config.log_level = wp.LOG_WARNING
+    wp.config.kernel_cache_dir = cache_dir
+    wp.config.enable_backward = False  # no kernel here is differentiated: half the compile
+    wp.init()
+    import gc
+
+    gc.collect()
+    gc.freeze()  # the children's collections skip the preloaded heap
+    loaded = [m for m in sys.modules if m == "haptic" or m.startswith("haptic.")]
+    if loaded:
+        raise SystemExit(f"mutation: preloading imported {loaded}")
+
+
+@dataclass
+class Job:
+    """What to score: a module, the name it is imported by, its tests and sampling."""
+
+    path: str
+    name: str
+    tests: list[str]
+    every: int = 1
+
+
+def _planned(root: Path, job: Job, result: ModuleResult, everything: bool,
+             equivalents: list[Equivalent]) -> list[Mutant]:
+    """The module's mutants to run (sampled unless ``everything``, less the equivalent)."""
+    found = mutants(root, job.path)
+    result.generated = len(found)
+    if not everything and job.every > 1:
+        found = found[::job.every]
+    runnable = [m for m in found if reason_for(m, equivalents) is None]
+    result.equivalent = len(found) - len(runnable)
+    result.planned = len(runnable)
+    return runnable
+
+
+def score_module(root: Path, job: Job, equivalents: list[Equivalent], *, jobs: int = 1,
+                 everything: bool = False, progress: bool = False,
+                 deadline: float | None = None) -> ModuleResult:
+    """Baseline (the tests must pass unmutated: BaselineError otherwise; its time sets each
+    mutant's limit and its per-file times the order, fastest first), then the mutants. Past
+    ``deadline`` the result is returned incomplete."""
+    result = ModuleResult()
+    start = time.monotonic()
+    limit = BASELINE_LIMIT_S if deadline is None else max(1.0, min(BASELINE_LIMIT_S,
+                                                                   deadline - start))
+    outcome, seconds = baseline(root, job.tests, limit)
+    baseline_s = time.monotonic() - start
+    if outcome != "passed":
+        if outcome == "timeout" and deadline is not None and time.monotonic() >= deadline:
+            result.complete, result.seconds = False, baseline_s
+            return result
+        raise BaselineError(f"the tests of {job.path} fail unmutated ({outcome}); run: "
+                            f"python3 -m pytest -x {' '.join(job.tests)}")
+    result.tests = sorted(job.tests, key=lambda t: (seconds.get(t, 0.0), t))
+    # A mutated Warp kernel compiles first; a mutant much slower than the baseline is stuck
+    # (an endless loop, say) and counts as killed.
+    timeout_s = 3.0 * baseline_s + 20.0
+    runnable = _planned(root, job, result, everything, equivalents)
+    original = (root / job.path).read_text()
+    mark = {"passed": "SURVIVED", "failed": "killed", "timeout": "killed (timeout)"}
+    for number, (mutant, outcome) in enumerate(run_mutants(
+            root, job.name, result.tests, timeout_s, runnable, jobs, deadline), 1):
+        if outcome == "passed":
+            result.survived += 1
+            result.survivors.append(mutant)
+        else:
+            result.killed += 1
+            result.timed_out += outcome == "timeout"
+        if progress:
+            print(f"  [{number}/{len(runnable)}] {job.path}:{mutant.line} {mutant.operator}: "
+                  f"{mark[outcome]}", file=sys.stderr, flush=True)
+            if outcome == "passed":
+                print(mutant.diff(original), file=sys.stderr, flush=True)
+    result.complete = result.killed + result.survived == len(runnable)
+    result.survivors.sort(key=lambda m: m.line)
+    result.seconds = time.monotonic() - start
+    return result
