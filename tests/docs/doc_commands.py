@@ -66,8 +66,8 @@ class Command:
 
 
 def doc_files() -> list[Path]:
-    """README.md, docs/*.md and deploy/*.md."""
-    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")),
+    """README.md, docs/*.md (and the folders under docs/, docs/measurements/) and deploy/*.md."""
+    return [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")),
             *sorted((ROOT / "deploy").glob("*.md"))]
 
 
