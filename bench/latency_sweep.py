@@ -39,6 +39,7 @@ import numpy as np
 
 from haptic.common.config import load_config
 from haptic.common.model.teleop import model_from_config
+from haptic.common.runtime.warp_init import init_warp
 from haptic.lockstep.sweep import (
     SweepSettings,
     auto_workers,
@@ -86,6 +87,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="also run cells over the real Zenoh link, paced in real time "
                         "(about 3 s each)")
     args = parser.parse_args(argv)
+    init_warp()  # as haptic-sim: no native CUDA-driver warning on a CPU-only host
     problem = device_problem(args.device, args.mode)
     if problem is not None:
         print(f"config error: --device: {problem}", file=sys.stderr)
