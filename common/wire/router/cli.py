@@ -30,7 +30,6 @@ import threading
 import zenoh
 
 from haptic.common.config import ConfigError
-from haptic.common.runtime.console import script_description
 from haptic.common.wire.protected_mode import require_protection
 
 DEFAULT_LISTEN = "tcp/0.0.0.0:7447"
@@ -59,8 +58,11 @@ def router_config(
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="haptic-router", description=script_description(__doc__),
-                                     allow_abbrev=False)
+    # the docstring's first sentence, as plain text (common/runtime/console.py's
+    # script_description is a layer above common/wire)
+    parser = argparse.ArgumentParser(
+        prog="haptic-router", allow_abbrev=False,
+        description="A Zenoh router in Python for client-mode deployments.")
     parser.add_argument("--zenoh-config", metavar="FILE",
                         help="Zenoh json5 configuration file (as --zenoh-config of the programs)")
     parser.add_argument(
