@@ -26,6 +26,7 @@ from haptic.common.config.control_schema import (
 )
 from haptic.common.config.scenario import load_scenario, max_block_damping
 from haptic.common.model.work_area import work_area_from_config
+from haptic.common.ros2.options import add_ros2_options, apply_ros2_options
 from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
 from haptic.common.runtime.console import script_description
 from haptic.common.runtime.failures import exit_on_link_error
@@ -67,6 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_preflight_options(parser)
     add_networked_options(parser, "slave", "write master_trace.npz (every --trace-every-th "
                           "tick) here at the end", DEFAULT_SYNC_TOLERANCE_M)
+    add_ros2_options(parser)
     alone = parser.add_argument_group("master alone")
     alone.add_argument("--no-link", action="store_true",
                        help="run the master alone, no slave (default duration 1 s)")
@@ -92,7 +94,7 @@ def _config(args: argparse.Namespace) -> dict:
                 raise ConfigError(f"{flag} ({key})", str(error).removeprefix(f"{key}: ")) from None
     if args.k is not None:
         config = override(config, "model.ch1.gain_k", args.k)
-    return config
+    return apply_ros2_options(config, args)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

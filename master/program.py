@@ -41,6 +41,7 @@ from haptic.common.model.passivity import passivity_summary
 from haptic.common.model.teleop import TeleopModel
 from haptic.common.records.run_recording import RunRecording
 from haptic.common.records.trace import TraceRecorder
+from haptic.common.ros2.options import start_ros2
 from haptic.common.runtime.cli_options import RunOptions
 from haptic.common.runtime.display import DisplayPublisher
 from haptic.common.runtime.inert import InertMonitor
@@ -220,6 +221,7 @@ def _run_linked_master(
     loop = _Loop()
     stages = StageTimes(TICK_STAGES)
     run = None
+    ros2 = None
     status_code = 0
     with StopSignals() as signals:
         try:
@@ -245,6 +247,8 @@ def _run_linked_master(
                 if loop_options.display and link.session is not None:
                     harness.attach_display(DisplayPublisher(
                         link.session, link_config.key_prefix, "master").start())
+                ros2 = start_ros2(options.config, "master", period_s, say=harness.say,
+                                  loop_counts=harness.loop_counts)
 
                 clock = time.perf_counter_ns
                 inert = InertMonitor(options.config["supervision"]["inert_after_s"],
@@ -379,6 +383,17 @@ def _run_linked_master(
                     harness.status(tick, now_ns, watchdog, (watchdog.events, supervisor.events,
                                                             loop.node_events, governor_events),
                                    forces_enabled=enabled, **governed)
+                    if ros2 is not None:  # off the loop: two reference swaps at their rates
+                        ros2.offer(tick, lambda: {
+                            "time_s": now_s, "force_N": (fhx, fhy), "position_m": (yhx, yhy),
+                            "effort_N": (felt[0], felt[1])}, lambda: {
+                            **link.summary(), "watchdog_state": watchdog.state.value,
+                            "watchdog_trips": watchdog.trips, "forces_enabled": enabled,
+                            "safe_state": not enabled, "safety_events": len(
+                                supervisor.events) + len(loop.node_events),
+                            **(passivity_summary(tick_stages.state.passivity,
+                                                 node.passivity_standby)
+                               if tick_stages.state is not None else {})})
                     stages.record(now_ns, (read_ns, poll_ns, supervise_ns, node_ns, write_ns,
                                            send_ns, clock()))
 
@@ -433,6 +448,9 @@ def _run_linked_master(
             except Exception:  # noqa: BLE001 - best effort; cleanup follows
                 pass
             hardware.cleanup()
+            if ros2 is not None:  # the tokens withdrawn, the session closed
+                ros2.stop()
+                extra_summary.update(ros2.figures)
     if run is None:
         return status_code or 1
     if supervisor.faulted:

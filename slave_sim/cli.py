@@ -14,6 +14,7 @@ import zenoh
 from haptic.common.analysis.preflight import add_preflight_options, run_preflight
 from haptic.common.config import exit_on_config_error, load_config, override
 from haptic.common.config.scenario import load_scenario, max_block_damping
+from haptic.common.ros2.options import add_ros2_options, apply_ros2_options
 from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
 from haptic.common.runtime.console import script_description
 from haptic.common.runtime.failures import exit_on_link_error
@@ -39,6 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "message arrives, s (slave.phase_lock.margin_s)")
     group.add_argument("--no-phase-lock", action="store_true",
                        help="let the loop tick free-running (slave.phase_lock.enabled = false)")
+    add_ros2_options(parser)
     return parser
 
 
@@ -63,6 +65,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             config = override(config, "slave.phase_lock.margin_s", args.phase_margin)
         if args.no_phase_lock:
             config = override(config, "slave.phase_lock.enabled", False)
+        config = apply_ros2_options(config, args)
         options = run_options_from_args(args, "slave", config=config)
         check_networked_options(args)
         scenario = load_scenario(options.config["slave"]["scenario"])

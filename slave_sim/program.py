@@ -41,6 +41,7 @@ from haptic.common.model.work_area import slave_work_area_m, work_area_from_conf
 from haptic.common.records.cutting import cutting_figures, steady_cut_fields
 from haptic.common.records.run_recording import RunRecording
 from haptic.common.records.trace import TraceRecorder
+from haptic.common.ros2.options import start_ros2
 from haptic.common.runtime.display import DisplayPublisher
 from haptic.common.runtime.inert import InertMonitor
 from haptic.common.runtime.program_harness import ProgramHarness, recording_for
@@ -167,6 +168,23 @@ def _display_publisher(link: Link, node: SlaveNode, state: Any,
                             on_clay=on_clay).start()
 
 
+def _ros2_clay(node: SlaveNode, state: Any) -> dict[str, Any]:
+    """The clay's height map (m, read off the loop: on a CPU clay a view of the live array)
+    and its x and y ranges (m) for the ROS 2 point cloud; nothing without clay."""
+    if node.environment_kind != "clay":
+        return {}
+    clay = state.environment
+    heights = clay.heights
+    grid = clay.workpiece.grid
+
+    def clay_source() -> np.ndarray:
+        view = heights.numpy() if hasattr(heights, "numpy") else heights
+        return view[0]
+
+    return {"clay_source": clay_source,
+            "clay_ranges": (tuple(grid.x_range_m), tuple(grid.y_range_m))}
+
+
 def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                extra_summary: dict[str, Any], recording: RunRecording | None) -> int:
     period_s = node.sample_period_s
@@ -221,6 +239,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             _record_clay(recording, state, harness.realtime_start_ns, layout=True)
         if getattr(args, "display", False) and link.session is not None:
             harness.attach_display(_display_publisher(link, node, state, recording))
+        ros2 = start_ros2(options.config, "slave", period_s, say=harness.say,
+                          loop_counts=harness.loop_counts, **_ros2_clay(node, state))
 
         clock = time.perf_counter_ns
         # the master's governed k (never above ours) and the echo of its send time
@@ -318,6 +338,16 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
                 "safe_state": not ready_flag})
             harness.status(tick, now_ns, watchdog, (watchdog.events, supervisor.events),
                            running=running)
+            if ros2 is not None:  # off the loop: two reference swaps at their rates
+                ros2.offer(tick, lambda: {
+                    "time_s": now_s, "force_N": (float(ft[0]), float(ft[1])),
+                    "position_m": (float(position[0]), float(position[1])),
+                    "velocity_m_s": (float(velocity[0]), float(velocity[1]))}, lambda: {
+                    **link.summary(), "watchdog_state": watchdog.state.value,
+                    "watchdog_trips": watchdog.trips, "running": running,
+                    "safe_state": not ready_flag, "safety_events": len(supervisor.events),
+                    "clay_engagement": engagement, "removed_volume_m3": removed,
+                    **passivity_summary(state.passivity, node.passivity_standby)})
             stages.record(now_ns, (poll_ns, supervise_ns, node_ns, send_ns, clock()))
 
         def stop_safely() -> None:
@@ -340,6 +370,9 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
             watchdog, f"ft {flags_box['ft'][0]:+.2f} N  engagement "
             f"{flags_box['engagement']:.2f}{inert.status()}"), signals, stop_safely,
             before_loop=first_output)
+        if ros2 is not None:  # the tokens withdrawn, the session closed
+            ros2.stop()
+            extra_summary.update(ros2.figures)
         guard_summary = {**guard.summary(), **inert.summary(run.elapsed_s)}
     final = state.tool_position_m()[0]
     # yt - Ah1 yh at the last tick the tool ran: once the master stops (its last message

@@ -50,6 +50,7 @@ from haptic.common.launch.guidance import (
     missed_guidance_lines,
     warp_kernel_cache_dir,
 )
+from haptic.common.ros2.options import add_ros2_options, forwarded_ros2_args
 from haptic.common.runtime.cli_options import add_retired_delay_option
 from haptic.common.runtime.console import script_description
 from haptic.common.runtime.machine import usable_cpu_count, usable_cpus
@@ -134,6 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "[runner] as it is")
     parser.add_argument("--master-args", default="", help="extra master arguments (one string)")
     parser.add_argument("--slave-args", default="", help="extra slave arguments (one string)")
+    add_ros2_options(parser)
     return parser
 
 
@@ -205,6 +207,7 @@ def run_session(args: argparse.Namespace) -> int:
         common.append("--allow-unstable")
     if args.governor:
         common.append("--governor")
+    common += forwarded_ros2_args(args)
     files = {"master": out / "master.json", "slave": out / "slave.json"}
     for path in files.values():
         path.unlink(missing_ok=True)

@@ -61,3 +61,15 @@ def test_a_bad_value_in_a_file_is_one_line_and_exit_status_2(tmp_path: Path) -> 
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "ros2.publish_rate_hz" in lines[0]
+
+
+def test_ros2_with_a_bad_ros_domain_id_is_one_line_and_exit_status_2() -> None:
+    import os
+
+    for program in ("haptic.slave_sim.cli", "haptic.master.cli"):
+        result = subprocess.run([sys.executable, "-m", program, "--ros2"],
+                                capture_output=True, text=True, timeout=120,
+                                env={**os.environ, "ROS_DOMAIN_ID": "999"})
+        assert result.returncode == 2, (program, result.stderr[-2000:])
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and "ros2.domain_id" in lines[0] and "999" in lines[0]
