@@ -253,7 +253,7 @@ def _foreground(scratch: Scratch, command: Command) -> list[str]:
     where = f"{command.file}:{command.line} `{command.text}`"
     output = done.stdout + done.stderr
     if done.returncode != 0:
-        return [f"{where} exited {done.returncode}:\n{output[-3000:]}"]
+        return [f"{where} exited {done.returncode}:\n{output[-6000:]}"]
     printed = {line.strip() for line in output.splitlines()}
     return [f"{where} did not print the line the docs quote: {line!r}"
             for line in command.expected if line not in printed]
@@ -298,7 +298,8 @@ def test_documented_commands_run(block: Block, commands: list[Command], tmp_path
     """The documented commands run and exit 0 (the long-lived ones shortened, SHORTER)."""
     scratch = Scratch(tmp_path)
     problems = run_block(scratch, commands)
-    assert not problems, "\n".join(problems)
+    if problems:
+        pytest.fail("\n".join(problems), pytrace=False)
 
 
 def _documented_invocations(path: Path) -> list[Invocation]:
