@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from tools.mutation import changed, cli
+from tools.mutation.runner import ModuleResult
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -94,6 +95,15 @@ def test_an_unknown_ref_is_a_usage_error(repo: Path, capsys) -> None:
         cli.main(["--changed-since", "no-such-ref", "--tests"])
     assert caught.value.code == 2
     assert "no-such-ref" in capsys.readouterr().err
+
+
+def test_only_a_completed_run_below_the_minimum_fails() -> None:
+    results = {"low.py": ModuleResult(killed=9, survived=1),
+               "ok.py": ModuleResult(killed=19, survived=1),
+               "cut.py": ModuleResult(killed=1, survived=1, planned=10, complete=False),
+               "late.py": None}
+    assert cli.below_min_score(results, 0.95) == ["low.py"]
+    assert cli.below_min_score(results, 0.9) == []
 
 
 @pytest.mark.parametrize("command", [["tools/mutation/run.py"], ["-m", "tools.mutation"]])

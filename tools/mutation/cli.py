@@ -100,8 +100,10 @@ def _select(args: argparse.Namespace, configured: list[str], tests_of: TestsOf) 
 
 def _line(path: str, result: ModuleResult) -> str:
     """One module's outcome, one line."""
-    state = "" if result.complete else (f", unfinished ({result.killed + result.survived} of "
-                                        f"{result.planned} tested)")
+    tested = result.killed + result.survived
+    if not result.complete and not tested:
+        return f"mutation: {path}: unfinished (time budget), nothing tested"
+    state = "" if result.complete else f", unfinished ({tested} of {result.planned} tested)"
     return (f"mutation: {path}: {result.killed} killed, {result.survived} survived "
             f"({result.score * 100:.1f} %), {result.equivalent} equivalent, "
             f"{result.seconds:.0f} s{state}")
@@ -145,8 +147,8 @@ def _report(args: argparse.Namespace, results: dict[str, ModuleResult | None],
         print(f"{'module':34s} {'killed':>7s} {'survived':>9s} {'score':>7s} {'equiv.':>7s} "
               f"{'of':>5s} {'time':>6s}")
         for path, r in results.items():
-            if r is None:
-                print(f"{path:34s} not run (time budget)")
+            if r is None or not (r.complete or r.killed + r.survived):
+                print(f"{path:34s} {'not run' if r is None else 'unfinished'} (time budget)")
                 continue
             print(f"{path:34s} {r.killed:7d} {r.survived:9d} {r.score * 100:6.1f}% "
                   f"{r.equivalent:7d} {r.generated:5d} {r.seconds:5.0f}s"
@@ -159,6 +161,13 @@ def _report(args: argparse.Namespace, results: dict[str, ModuleResult | None],
             for mutant in r.survivors:
                 print(f"--- survivor {path}:{mutant.line} {mutant.operator}", file=sys.stderr)
                 print(mutant.diff(original), file=sys.stderr)
+
+
+def below_min_score(results: dict[str, ModuleResult | None], min_score: float) -> list[str]:
+    """The modules whose run completed with a score below ``min_score`` (a module not run or
+    cut short by the time budget is none of them)."""
+    return [p for p, r in results.items()
+            if r is not None and r.complete and r.score < min_score]
 
 
 def _stop(signum: int, _frame: object) -> None:
@@ -226,8 +235,7 @@ def _score(args: argparse.Namespace, paths: list[str], every: dict[str, int], te
         shutil.rmtree(cache_dir, ignore_errors=True)
     elapsed_s = time.monotonic() - start
     _report(args, results, elapsed_s)
-    below = [p for p, r in results.items()
-             if r is not None and r.complete and r.score < args.min_score]
+    below = below_min_score(results, args.min_score)
     tested = sum(r.killed + r.survived for r in results.values() if r is not None)
     print(f"mutation: {len(paths)} module(s), {tested} mutants tested in {elapsed_s:.0f} s "
           f"({elapsed_s / 60:.1f} min, --jobs {args.jobs})", file=sys.stderr)

@@ -275,6 +275,9 @@ def score_module(root: Path, job: Job, equivalents: list[Equivalent], *, jobs: i
         raise BaselineError(f"the tests of {job.path} fail unmutated ({outcome}); run: "
                             f"python3 -m pytest -x {' '.join(job.tests)}")
     result.tests = sorted(job.tests, key=lambda t: (seconds.get(t, 0.0), t))
+    if progress:
+        print(f"  baseline: {len(job.tests)} test file(s) pass in {baseline_s:.1f} s; fastest "
+              f"first: {', '.join(result.tests)}", file=sys.stderr, flush=True)
     # A mutated Warp kernel compiles first; a mutant much slower than the baseline is stuck
     # (an endless loop, say) and counts as killed.
     timeout_s = 3.0 * baseline_s + 20.0
