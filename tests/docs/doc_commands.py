@@ -51,6 +51,7 @@ class Block:
 
     @property
     def text(self) -> str:
+        """The block's text, as a file would hold it."""
         return "\n".join(self.lines) + "\n"
 
 
@@ -72,6 +73,7 @@ def doc_files() -> list[Path]:
 
 
 def rel(path: Path) -> str:
+    """A path relative to the repository root, as the docs write it."""
     return path.relative_to(ROOT).as_posix()
 
 
@@ -266,6 +268,7 @@ class Options:
 
 
 def _from_parser(parser: argparse.ArgumentParser) -> Options:
+    """The options of an argparse parser and of its subcommands' parsers."""
     choices: dict[str, tuple[str, ...] | None] = {}
     subcommands: dict[str, Options] = {}
     for action in parser._actions:

@@ -67,6 +67,7 @@ class Skip:
 
 
 def _skip(file: str, reason: str, *commands: str) -> list[Skip]:
+    """One reason for several commands of a file."""
     return [Skip(file, command, reason) for command in commands]
 
 
@@ -146,6 +147,7 @@ SHORTER: dict[tuple[str, str], tuple[str, str]] = {
 
 
 def _all_commands() -> list[tuple[Block, list[Command]]]:
+    """Every shell block of the docs with its commands."""
     found = []
     for path in doc_files():
         for block in fenced_blocks(path):
@@ -155,11 +157,13 @@ def _all_commands() -> list[tuple[Block, list[Command]]]:
 
 
 def _skipped(command: Command) -> Skip | None:
+    """The SKIPS entry of a command, if any."""
     return next((skip for skip in SKIPS
                  if (skip.file, skip.command) == (command.file, command.text)), None)
 
 
 def _runnable_blocks() -> list[tuple[Block, list[Command]]]:
+    """The shell blocks with at least one command to run."""
     return [(block, commands) for block, commands in _all_commands()
             if any(_skipped(command) is None for command in commands)]
 
@@ -175,6 +179,7 @@ def test_every_documented_command_is_run_or_skipped() -> None:
 
 
 def _free_port() -> int:
+    """A TCP port free on loopback now."""
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         return sock.getsockname()[1]
@@ -303,6 +308,7 @@ def test_documented_commands_run(block: Block, commands: list[Command], tmp_path
 
 
 def _documented_invocations(path: Path) -> list[Invocation]:
+    """The program invocations of a doc file's blocks and inline code."""
     found = [inv for block in fenced_blocks(path) for inv in block_invocations(block)]
     found += [inv for line, span in inline_spans(path) for inv in invocations(rel(path), line,
                                                                                span)]
@@ -334,6 +340,7 @@ def test_deploy_files_name_real_options(path: Path, options_read: None) -> None:
 
 
 def _toml_blocks() -> list[Block]:
+    """Every ``toml`` block of the docs."""
     return [block for path in doc_files() for block in fenced_blocks(path)
             if block.label == "toml"]
 
