@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import re
 
-from haptic.common.config.loader import Field, Schema
+from haptic.common.config.fields import Field, Schema
 
 #: The topic groups ``topics`` may list (docs/ros2.md has the topics each one publishes).
 ROS2_TOPIC_GROUPS = ("wrench", "pose", "joint_states", "tf", "diagnostics", "clay")
