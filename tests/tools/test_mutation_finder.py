@@ -91,6 +91,18 @@ def test_depth_two_adds_the_tests_of_the_modules_that_import_it(tmp_path: Path) 
     assert "tests/test_user.py" in finder.tests_for("common/guard.py", graph, depth=2)
 
 
+def test_the_tests_named_for_a_module_come_first_then_the_narrowest(tmp_path: Path) -> None:
+    project(tmp_path)
+    write(tmp_path, {"tests/test_wide.py": "import haptic.master.node, haptic.common.guard\n",
+                     "tests/test_config_limits.py": "import haptic.common.guard\n"})
+    graph = finder.ImportGraph(tmp_path)
+    tests = ["tests/test_wide.py", "tests/test_lazy.py", "tests/test_config_limits.py"]
+    assert finder.ordered("common/config/loader.py", tests, graph) == [
+        "tests/test_config_limits.py", "tests/test_lazy.py", "tests/test_wide.py"]
+    assert finder.ordered("common/guard.py", tests, graph) == [
+        "tests/test_config_limits.py", "tests/test_lazy.py", "tests/test_wide.py"]
+
+
 def test_imports_are_read_wherever_they_are() -> None:
     source = textwrap.dedent("""\
         import haptic.master.node as node

@@ -48,6 +48,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--min-score", type=float, default=DEFAULT_MIN_SCORE, metavar="X",
                         help="exit 1 when a module whose run completed scores below X "
                         f"(default {DEFAULT_MIN_SCORE})")
+    parser.add_argument("--tests-cap-s", type=float, default=None, metavar="S",
+                        help="run a module's tests, the likeliest first, for about S seconds "
+                        "in the baseline and use those reached (default: modules.toml's "
+                        "tests_cap_s; 0: all of them)")
     parser.add_argument("--json", action="store_true", help="print JSON on stdout")
     parser.add_argument("--all", action="store_true",
                         help="every mutant, also of the sampled modules (the kernels)")
@@ -67,12 +71,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _tests_of(graph: finder.ImportGraph, depth: dict[str, int]) -> TestsOf:
-    """A memo of the test-finder: module path -> its test files, at the module's ``depth``."""
+    """A memo of the test-finder: module path -> its test files at the module's ``depth``,
+    the likeliest to catch its mutants first."""
     memo: dict[str, list[str]] = {}
 
     def tests_of(path: str) -> list[str]:
         if path not in memo:
-            memo[path] = finder.tests_for(path, graph, depth.get(path, 1))
+            found = finder.tests_for(path, graph, depth.get(path, 1))
+            memo[path] = finder.ordered(path, found, graph)
         return memo[path]
 
     return tests_of
@@ -109,7 +115,8 @@ def _line(path: str, result: ModuleResult) -> str:
             f"{result.seconds:.0f} s{state}")
 
 
-def _run(args: argparse.Namespace, paths: list[str], every: dict[str, int], tests_of: TestsOf,
+def _run(args: argparse.Namespace, paths: list[str], configured: dict[str, modules.Configured],
+         tests_of: TestsOf,
          entries: list[equivalents.Equivalent]) -> dict[str, ModuleResult | None]:
     """Score each of ``paths`` in turn (None: not reached within the time budget)."""
     start = time.monotonic()
@@ -121,7 +128,9 @@ def _run(args: argparse.Namespace, paths: list[str], every: dict[str, int], test
             results[path] = None
             print(f"mutation: {path}: not run (time budget)", file=sys.stderr, flush=True)
             continue
-        job = Job(path, finder.module_name(path, package_dir), tests_of(path), every[path])
+        settings = configured[path]
+        job = Job(path, finder.module_name(path, package_dir), tests_of(path), settings.every,
+                  settings.tests_cap_s if args.tests_cap_s is None else args.tests_cap_s or None)
         if not job.tests:
             raise BaselineError(f"no test imports {path} (nor a module that imports it)")
         results[path] = result = runner.score_module(
@@ -202,19 +211,20 @@ def main(argv: list[str] | None = None) -> int:
         entries = equivalents.load(EQUIVALENTS_FILE, frozenset(c.path for c in configured))
     except (modules.ModulesError, equivalents.EquivalentsError) as error:
         parser.error(str(error))
-    every = {c.path: c.every for c in configured}
+    by_path = {c.path: c for c in configured}
     for path in args.module or ():
-        if path not in every:
+        if path not in by_path:
             parser.error(f"--module {path}: not configured (tools/mutation/modules.toml)")
     tests_of = _tests_of(finder.ImportGraph(ROOT), {c.path: c.depth for c in configured})
-    paths = _select(args, list(every), tests_of)
+    paths = _select(args, list(by_path), tests_of)
     if args.equivalents or args.count or args.tests:
         _inspect(args, paths, tests_of, entries)
         return 0
-    return _score(args, paths, every, tests_of, entries)
+    return _score(args, paths, by_path, tests_of, entries)
 
 
-def _score(args: argparse.Namespace, paths: list[str], every: dict[str, int], tests_of: TestsOf,
+def _score(args: argparse.Namespace, paths: list[str], configured: dict[str, modules.Configured],
+           tests_of: TestsOf,
            entries: list[equivalents.Equivalent]) -> int:
     """Preload, score ``paths``, report; the exit status."""
     start = time.monotonic()
@@ -223,7 +233,7 @@ def _score(args: argparse.Namespace, paths: list[str], every: dict[str, int], te
     try:
         if paths:
             runner.preload(cache_dir)
-        results = _run(args, paths, every, tests_of, entries)
+        results = _run(args, paths, configured, tests_of, entries)
     except KeyboardInterrupt:
         print("mutation: stopped", file=sys.stderr)
         return 130

@@ -181,3 +181,22 @@ def tests_for(path: str, graph: ImportGraph, depth: int = 1,
         reached |= level
         hops += 1
     return sorted(test for test, modules in imported.items() if modules & reached)
+
+
+def _first_token(stem: str) -> str:
+    return stem.removeprefix("test_").split("_")[0]
+
+
+def ordered(path: str, tests: Iterable[str], graph: ImportGraph) -> list[str]:
+    """``tests`` of module file ``path``, the likeliest to catch its mutants soonest first:
+    those named for it (the first word of the test file's name is the first word of the
+    module's name or its folder's: ``test_config_limits.py`` for ``config/loader.py``), then
+    by how few project modules each imports (the unit tests before the integration tests)."""
+    folder, _, name = path.rpartition("/")
+    words = {_first_token(name.removesuffix(".py")), folder.rpartition("/")[2]}
+
+    def key(test: str) -> tuple[bool, int, str]:
+        stem = test.rpartition("/")[2].removesuffix(".py")
+        return (_first_token(stem) not in words, len(graph.test_imports(test)), test)
+
+    return sorted(tests, key=key)

@@ -5,6 +5,8 @@ run), an optional ``[every]`` table (path -> N: every N-th mutant only, unless `
 an optional ``[depth]`` table (path -> N: the tests of the modules up to N - 1 imports away
 count too; see :func:`tools.mutation.finder.tests_for`). :func:`load` refuses an unknown key,
 a path that is not a file, a duplicate, or a table's entry for a path not listed or below 1.
+An optional ``tests_cap_s`` caps each module's tests: the baseline runs them, the likeliest
+first, until that many seconds have passed, and the files it reached are the ones used.
 """
 
 from __future__ import annotations
@@ -26,12 +28,13 @@ class ModulesError(ValueError):
 
 @dataclass(frozen=True)
 class Configured:
-    """One module under mutation: its path, the sampling of its mutants (1: all) and the
-    import depth its tests are found at."""
+    """One module under mutation: its path, the sampling of its mutants (1: all), the
+    import depth its tests are found at and the cap on their time (None: all of them)."""
 
     path: str
     every: int = 1
     depth: int = 1
+    tests_cap_s: float | None = None
 
 
 def parse(text: str, root: Path, source: str = "modules.toml") -> list[Configured]:
@@ -41,7 +44,7 @@ def parse(text: str, root: Path, source: str = "modules.toml") -> list[Configure
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise ModulesError(f"{source}: {error}") from None
-    unknown = sorted(set(data) - {"modules", *_TABLES})
+    unknown = sorted(set(data) - {"modules", "tests_cap_s", *_TABLES})
     if unknown:
         raise ModulesError(f"{source}: unknown key(s) {', '.join(unknown)}")
     paths = data.get("modules", [])
@@ -61,8 +64,12 @@ def parse(text: str, root: Path, source: str = "modules.toml") -> list[Configure
                 raise ModulesError(f"{source}: [{name}] {path} is not in modules")
             if not isinstance(n, int) or isinstance(n, bool) or n < 1:
                 raise ModulesError(f"{source}: [{name}] {path} must be an integer >= 1")
-    return [Configured(path, tables["every"].get(path, 1), tables["depth"].get(path, 1))
-            for path in paths]
+    cap = data.get("tests_cap_s")
+    if cap is not None and (not isinstance(cap, int | float) or isinstance(cap, bool)
+                            or cap <= 0):
+        raise ModulesError(f"{source}: tests_cap_s must be a number of seconds > 0")
+    return [Configured(path, tables["every"].get(path, 1), tables["depth"].get(path, 1),
+                       None if cap is None else float(cap)) for path in paths]
 
 
 def load(root: Path, path: Path = DEFAULT_PATH) -> list[Configured]:

@@ -102,21 +102,58 @@ def serve_mutant(name: str, path: Path, source: str) -> None:
     sys.meta_path.insert(0, Finder())
 
 
-class _Durations:
-    """A pytest plugin summing each test file's time (setup, call and teardown)."""
+class _Baseline:
+    """A pytest plugin for the baseline: each test file's time (setup, call and teardown),
+    the files run to their end, whether a test failed, and a time cap: once ``cap_s`` has
+    passed, the run stops after the current test (a file it cuts short is not used), once
+    at least one file has run to its end."""
 
-    def __init__(self) -> None:
+    def __init__(self, cap_s: float | None) -> None:
+        self.cap_s = cap_s
+        self.start = time.monotonic()
         self.seconds: dict[str, float] = {}
+        self.completed: list[str] = []
+        self.failed = False
+        self.capped = False
+        self._last: dict[str, str] = {}
+        self._session = None
+
+    def pytest_sessionstart(self, session) -> None:  # noqa: ANN001
+        self._session = session
+
+    def pytest_collection_modifyitems(self, items) -> None:  # noqa: ANN001
+        self._last = {item.nodeid.split("::")[0]: item.nodeid for item in items}
+
+    def pytest_collection_finish(self, session) -> None:  # noqa: ANN001
+        self.start = time.monotonic()  # the cap is on the tests' time, not the collection's
 
     def pytest_runtest_logreport(self, report) -> None:  # noqa: ANN001
         file = report.nodeid.split("::")[0]
         self.seconds[file] = self.seconds.get(file, 0.0) + report.duration
+        self.failed |= report.failed
+
+    def pytest_runtest_logfinish(self, nodeid: str, location: object) -> None:
+        file = nodeid.split("::")[0]
+        if self._last.get(file) == nodeid:
+            self.completed.append(file)
+        if (self.cap_s is not None and time.monotonic() - self.start > self.cap_s
+                and 0 < len(self.completed) < len(self._last)):
+            self.capped = True
+            self._session.shouldstop = "mutation: the tests' time cap"
+
+    def verdict(self, code: int) -> int:
+        """The child's exit status: 0 when every test run passed (the cap may have stopped
+        the run early: exit code 2 with ``capped``)."""
+        passed = not self.failed and (code == 0 or (code == 2 and self.capped))
+        return 0 if passed else 1
 
 
 def _child(root: Path, tests: list[str], timeout_s: float, mutant: tuple[str, Mutant] | None,
-           durations_file: str | None = None) -> None:
+           baseline_file: str | None = None, cap_s: float | None = None) -> None:
     """In a forked child: run ``tests`` (on ``mutant``: module name and mutant) and exit 0
-    when they pass; with ``durations_file``, write each file's seconds there (JSON)."""
+    when they pass; for a baseline (``baseline_file``), stop after the test running when
+    ``cap_s`` has passed and write each file's seconds and the files run to their end there
+    (JSON)."""
     status = 3
     try:
         os.chdir(root)
@@ -139,12 +176,13 @@ def _child(root: Path, tests: list[str], timeout_s: float, mutant: tuple[str, Mu
         hypothesis_settings.load_profile("mutation")
         import pytest
 
-        plugin = _Durations()
+        plugin = _Baseline(cap_s)
         code = pytest.main(["-x", "-q", "--no-header", *PYTEST_PLUGINS_OFF,
                             *(str(root / t) for t in tests)], plugins=[plugin])
-        if durations_file is not None:
-            Path(durations_file).write_text(json.dumps(plugin.seconds))
-        status = 0 if code == 0 else 1
+        if baseline_file is not None:
+            Path(baseline_file).write_text(json.dumps(
+                {"seconds": plugin.seconds, "completed": plugin.completed}))
+        status = plugin.verdict(int(code))
     finally:
         sys.stdout.flush()
         os._exit(status)
@@ -157,18 +195,21 @@ def _outcome(status: int) -> str:
     return "passed" if os.WEXITSTATUS(status) == 0 else "failed"
 
 
-def baseline(root: Path, tests: list[str], timeout_s: float) -> tuple[str, dict[str, float]]:
-    """Run ``tests`` unmutated: the outcome and each test file's seconds."""
+def baseline(root: Path, tests: list[str], timeout_s: float,
+             cap_s: float | None = None) -> tuple[str, dict[str, float], list[str]]:
+    """Run ``tests`` unmutated, in their order, until ``cap_s`` has passed (then the test
+    running ends the run): the outcome, each test file's seconds and the files run to their
+    end."""
     with tempfile.NamedTemporaryFile(suffix=".json") as handle:
         pid = os.fork()
         if pid == 0:
-            _child(root, tests, timeout_s, None, handle.name)
+            _child(root, tests, timeout_s, None, handle.name, cap_s)
         _RUNNING[pid] = None
         _, status = os.waitpid(pid, 0)
         del _RUNNING[pid]
-        text = Path(handle.name).read_text()
-    seconds = {file: float(s) for file, s in json.loads(text or "{}").items()}
-    return _outcome(status), seconds
+        data = json.loads(Path(handle.name).read_text() or "{}")
+    seconds = {file: float(s) for file, s in data.get("seconds", {}).items()}
+    return _outcome(status), seconds, list(data.get("completed", []))
 
 
 def run_mutants(root: Path, name: str, tests: list[str], timeout_s: float,
@@ -177,6 +218,8 @@ def run_mutants(root: Path, name: str, tests: list[str], timeout_s: float,
     """Yield (mutant, outcome) for each of ``found`` (module ``name``), ``jobs`` children at a
     time; past ``deadline`` (time.monotonic()) none is started and the running ones are ended
     without an outcome."""
+    if not tests:
+        raise ValueError("no tests to run the mutants against")
     pending = list(reversed(found))
     while pending or _RUNNING:
         if deadline is not None and time.monotonic() >= deadline:
@@ -235,12 +278,14 @@ def preload(cache_dir: str) -> None:
 
 @dataclass
 class Job:
-    """What to score: a module, the name it is imported by, its tests and sampling."""
+    """What to score: a module, the name it is imported by, its tests (the likeliest to catch
+    its mutants first), its sampling, and the cap on its tests' time (None: every test)."""
 
     path: str
     name: str
     tests: list[str]
     every: int = 1
+    tests_cap_s: float | None = None
 
 
 def _planned(root: Path, job: Job, result: ModuleResult, everything: bool,
@@ -259,14 +304,15 @@ def _planned(root: Path, job: Job, result: ModuleResult, everything: bool,
 def score_module(root: Path, job: Job, equivalents: list[Equivalent], *, jobs: int = 1,
                  everything: bool = False, progress: bool = False,
                  deadline: float | None = None) -> ModuleResult:
-    """Baseline (the tests must pass unmutated: BaselineError otherwise; its time sets each
-    mutant's limit and its per-file times the order, fastest first), then the mutants. Past
-    ``deadline`` the result is returned incomplete."""
+    """Baseline (the tests must pass unmutated: BaselineError otherwise; the files it reached
+    within the job's time cap are the ones used, its time sets each mutant's limit and its
+    per-file times the order, fastest first), then the mutants. Past ``deadline`` the result
+    is returned incomplete."""
     result = ModuleResult()
     start = time.monotonic()
     limit = BASELINE_LIMIT_S if deadline is None else max(1.0, min(BASELINE_LIMIT_S,
                                                                    deadline - start))
-    outcome, seconds = baseline(root, job.tests, limit)
+    outcome, seconds, completed = baseline(root, job.tests, limit, job.tests_cap_s)
     baseline_s = time.monotonic() - start
     if outcome != "passed":
         if outcome == "timeout" and deadline is not None and time.monotonic() >= deadline:
@@ -274,10 +320,14 @@ def score_module(root: Path, job: Job, equivalents: list[Equivalent], *, jobs: i
             return result
         raise BaselineError(f"the tests of {job.path} fail unmutated ({outcome}); run: "
                             f"python3 -m pytest -x {' '.join(job.tests)}")
-    result.tests = sorted(job.tests, key=lambda t: (seconds.get(t, 0.0), t))
+    if not completed:
+        raise BaselineError(f"no test file of {job.path} ran to its end: {job.tests}")
+    result.tests = sorted(completed, key=lambda t: (seconds.get(t, 0.0), t))
     if progress:
-        print(f"  baseline: {len(job.tests)} test file(s) pass in {baseline_s:.1f} s; fastest "
-              f"first: {', '.join(result.tests)}", file=sys.stderr, flush=True)
+        left = len(job.tests) - len(completed)
+        print(f"  baseline: {len(completed)} test file(s) pass in {baseline_s:.1f} s"
+              f"{f' ({left} left out by the time cap)' if left else ''}; fastest first: "
+              f"{', '.join(result.tests)}", file=sys.stderr, flush=True)
     # A mutated Warp kernel compiles first; a mutant much slower than the baseline is stuck
     # (an endless loop, say) and counts as killed.
     timeout_s = 3.0 * baseline_s + 20.0
