@@ -90,6 +90,14 @@ def test_the_default_base_is_head_1_without_a_remote_else_the_merge_base(repo: P
     assert changed.changed_files(repo, first) == {"common/a.py", "common/b.py"}
 
 
+def test_without_a_parent_the_whole_tree_is_the_change(tmp_path: Path) -> None:
+    (tmp_path / "a.py").write_text("A = 1\n")
+    git(tmp_path, "init", "-q")
+    git(tmp_path, "add", "-A")
+    git(tmp_path, "commit", "-q", "-m", "first")
+    assert changed.changed_files(tmp_path, changed.default_base(tmp_path)) == {"a.py"}
+
+
 def test_an_unknown_ref_is_a_usage_error(repo: Path, capsys) -> None:
     with pytest.raises(SystemExit) as caught:
         cli.main(["--changed-since", "no-such-ref", "--tests"])

@@ -30,11 +30,16 @@ def _git(root: Path, *args: str) -> str:
 
 def default_base(root: Path) -> str:
     """The merge base of HEAD with :data:`MAIN_BRANCH`, or ``HEAD~1`` when there is no such
-    branch (no remote), as a commit id."""
+    branch (no remote), as a commit id; git's empty tree when HEAD has no parent either (a
+    first commit, a shallow clone): then every file is part of the change."""
     try:
         return _git(root, "merge-base", "HEAD", MAIN_BRANCH).strip()
     except GitError:
-        return _git(root, "rev-parse", "--verify", "HEAD~1").strip()
+        pass
+    try:
+        return _git(root, "rev-parse", "--verify", "--quiet", "HEAD~1").strip()
+    except GitError:
+        return _git(root, "hash-object", "-t", "tree", "/dev/null").strip()
 
 
 def changed_files(root: Path, ref: str) -> set[str]:
