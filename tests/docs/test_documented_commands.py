@@ -114,6 +114,15 @@ SKIPS: list[Skip] = [
            "ip link set can0 down", "ip link set can0 type can bitrate 1000000 restart-ms 100",
            "ip link set can0 txqueuelen 1000", "ip link set can0 up",
            "ip -details -statistics link show can0", "candump can0"),
+    *_skip("docs/ros2.md", "ROS 2 only: needs a ROS 2 install with rmw_zenoh_cpp, foxglove_bridge "
+           "(tests/common/ros2 check the wire format without one)",
+           "ros2 run rmw_zenoh_cpp rmw_zenohd", "ros2 node list", "ros2 topic list -t",
+           "ros2 topic echo /haptic/handle/wrench", "ros2 topic hz /haptic/tool/pose",
+           "ros2 topic echo /diagnostics",
+           "ros2 launch foxglove_bridge foxglove_bridge_launch.xml port:=8766",
+           "ros2 bag record -o haptic_run /haptic/handle/wrench /haptic/handle/pose "
+           "/haptic/handle/joint_states /haptic/tool/wrench /haptic/tool/pose /haptic/clay/points "
+           "/tf /diagnostics", "ros2 bag info haptic_run"),
     *_skip("deploy/README.md", "systemd: the installed units on a deployed host",
            "systemctl enable --now haptic-router", "systemctl enable --now haptic-slave",
            "systemctl enable --now haptic-master", "systemctl status haptic-master",
