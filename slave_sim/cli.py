@@ -23,6 +23,7 @@ from haptic.common.runtime.runner_config import place_other_threads
 from haptic.common.runtime.warp_init import init_warp
 from haptic.common.runtime.watchdog import DEFAULT_SYNC_TOLERANCE_M
 from haptic.slave_sim.input_guard import InputGuardSettings
+from haptic.slave_sim.plant_options import add_plant_options
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     group.add_argument("--no-phase-lock", action="store_true",
                        help="let the loop tick free-running (slave.phase_lock.enabled = false)")
     add_ros2_options(parser)
+    add_plant_options(parser)
     return parser
 
 
@@ -81,7 +83,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     init_warp()  # after the placement: Warp's threads inherit it
     with exit_on_config_error():
         node = SlaveNode.from_config(options.config, scenario)
-    with exit_on_link_error("haptic-slave"):
+    from haptic.slave_sim.robot_plant import plant_for
+
+    with exit_on_link_error("haptic-slave"), plant_for(args, options.config, node):
         return run_slave(node, options, args, {"scenario": scenario.name,
                                                "analysis": analysis.as_dict(), **placement})
 

@@ -1,0 +1,99 @@
+"""``haptic-slave --plant ros2``: the slave's compensators drive an emulated robot over ROS 2
+(tests/slave_sim/robot_emulator.py, an independent ROS 2-over-Zenoh implementation) whose
+tool cuts the scenario's clay; the cut reproduces the virtual tool's within 10 %."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from haptic.common.config import load_config
+from haptic.common.config.scenario import load_scenario
+from tests.common.ros2.zenoh_graph import free_port, zenoh_router
+from tests.slave_sim.robot_emulator import EmulatedRobot
+
+DURATION_S = 3.0
+
+
+def _session(out: Path, *extra: str) -> dict:
+    """Run haptic-session; the slave's summary."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "haptic.common.launch.cli", "--duration", repr(DURATION_S),
+         "--out", str(out), "--cpu-layout", "free", *extra],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        output, _ = process.communicate(timeout=500)
+    finally:
+        if process.poll() is None:
+            process.kill()  # by its own PID; reaped below
+        process.wait()
+    assert process.returncode == 0, output[-4000:]
+    return json.loads((out / "slave.json").read_text())
+
+
+@pytest.mark.slow
+def test_the_robot_plant_cuts_as_the_virtual_tool(tmp_path: Path) -> None:
+    from haptic.slave_sim.clay.sim import make_clay
+
+    virtual = _session(tmp_path / "virtual")
+    scenario = load_scenario("constant-rate")
+    period_s = load_config()["model"]["sample_period_s"]
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with zenoh_router(endpoint):
+        robot = EmulatedRobot(endpoint, make_clay(scenario, period_s, "warp", "cpu"),
+                              scenario.tool.start_position_m, period_s)
+        try:
+            plant = _session(tmp_path / "robot", "--ros2-endpoint", endpoint,
+                             "--slave-args", "--plant ros2")
+        finally:
+            robot.close()
+    assert robot.commands > 1000 and robot.bad_attachments == 0
+    print({key: (virtual.get(key), plant.get(key)) for key in (
+        "cut_mean_force_N", "cut_mean_speed_m_s", "cutting_time_s", "removed_volume_m3")})
+    for key in ("cut_mean_force_N", "cut_mean_speed_m_s"):
+        assert plant[key] == pytest.approx(virtual[key], rel=0.10), key
+
+
+def test_the_robot_watchdog_holds_the_robot_when_its_force_stops(tmp_path: Path) -> None:
+    from haptic.common.ros2.publisher import open_client_session
+    from haptic.common.ros2.settings import Ros2Settings
+    from haptic.slave_sim.clay.sim import make_clay
+    from haptic.slave_sim.plant_options import RobotTopics
+    from haptic.slave_sim.robot_plant import RobotPlant
+
+    scenario = load_scenario("constant-rate")
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    said: list[str] = []
+    with zenoh_router(endpoint):
+        robot = EmulatedRobot(endpoint, make_clay(scenario, 1e-3, "numpy"),
+                              scenario.tool.start_position_m, 1e-3)
+        session = open_client_session(endpoint)
+        try:
+            plant = RobotPlant(session, Ros2Settings(0, "/haptic", endpoint, 100.0,
+                                                     frozenset()),
+                               RobotTopics(watchdog_s=0.2), say=said.append)
+            still = np.zeros((1, 2))
+            moving = np.array([[0.01, 0.0]])
+            deadline = time.monotonic() + 10.0
+            while plant.force.received < 5 and time.monotonic() < deadline:
+                plant.step(None, still, still, moving, still)
+                time.sleep(0.005)
+            assert plant.force.received >= 5 and not plant.tripped
+            commands = robot.commands
+            robot.close()  # the robot goes silent
+            time.sleep(0.3)
+            result = plant.step(None, still, still, moving, still)
+            assert plant.tripped and plant.trips == 1 and len(said) == 1
+            assert "watchdog" in said[0] and np.all(result.force_N == 0.0)
+            assert plant.figures["robot_watchdog_trips"] == 1
+            assert commands > 0
+            plant.close()
+        finally:
+            robot.close()
+            session.close()
