@@ -12,8 +12,8 @@ plant: from then on it commands zero velocity (the robot holds), reports no forc
 the trip and says so once. Before the first force the robot is taken as not touching
 anything (ft = 0) and is still commanded.
 
-The command is serialized by rosbags and published from the loop's thread (about 30 us a
-step on a 2-core VM); the force is deserialized only when a new sample came.
+The command is serialized by rosbags and published from the loop's thread (tens of us a
+step); the force is deserialized only when a new sample came.
 """
 
 from __future__ import annotations

@@ -31,7 +31,7 @@ TWIST = "geometry_msgs/msg/TwistStamped"
 
 @functools.cache
 def typestore() -> Any:
-    """rosbags' Jazzy type store (loaded once, about 0.4 s)."""
+    """rosbags' Jazzy type store (loaded once, on first use: a fraction of a second)."""
     from rosbags.typesys import Stores, get_typestore
 
     return get_typestore(Stores.ROS2_JAZZY)
