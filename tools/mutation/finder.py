@@ -112,7 +112,9 @@ class ImportGraph:
         return names
 
     def _resolve(self, name: str, seen: frozenset[str] = frozenset()) -> set[str]:
-        """The module files that importing ``name`` stands for (none outside the project)."""
+        """The module files that importing ``name`` stands for (none outside the project): a
+        module's file, or for ``package.attribute`` the module the package's ``__init__``
+        takes ``attribute`` from (followed through a package that re-exports it in turn)."""
         if not (name == PACKAGE or name.startswith(PACKAGE + ".")):
             return set()
         found = module_file(name, self.root, self.package_dir)
@@ -125,9 +127,10 @@ class ImportGraph:
         target = self._reexports(init).get(attribute)
         if target is None:
             return set()
-        return {target} | (self._resolve(f"{module_name(target, self.package_dir)}.{attribute}",
-                                         seen | {init}) - {target} if target.endswith(
-            "__init__.py") else set())
+        if not target.endswith("__init__.py"):
+            return {target}
+        further = f"{module_name(target, self.package_dir)}.{attribute}"
+        return {target} | self._resolve(further, seen | {init})
 
     @cache  # noqa: B019
     def module_imports(self, path: str) -> frozenset[str]:
