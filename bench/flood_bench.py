@@ -30,7 +30,6 @@ import argparse
 import json
 import os
 import shlex
-import socket
 import subprocess
 import sys
 import tempfile
@@ -42,13 +41,7 @@ import numpy as np
 
 from haptic.common.launch.cli import watchdog_trips_split
 from haptic.common.wire.auth import write_key_file
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
+from haptic.common.wire.ports import free_port as _free_port
 
 #: The target: the master's rate under the flood, Hz, and the flood's, Hz.
 TARGET_RATE_HZ = 1845.0

@@ -42,7 +42,6 @@ import math
 import os
 import shlex
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -69,15 +68,9 @@ from haptic.common.runtime.summary import (
 from haptic.common.runtime.watchdog import PeerWatchdog
 from haptic.common.wire.link import Link
 from haptic.common.wire.messages import Flags
+from haptic.common.wire.ports import free_port
 
 PEER_WAIT_S = 10.0
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 nobody listens on right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _peer_config(listen: str | None = None, connect: str | None = None) -> zenoh.Config:

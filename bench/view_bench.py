@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import socket
 import subprocess
 import sys
 import tempfile
@@ -32,6 +31,7 @@ import uuid
 from pathlib import Path
 
 from haptic.common.records.run_recording import RunRecording
+from haptic.common.wire.ports import free_port as _free_port
 
 
 def recorder_figures(calls: int = 50_000) -> dict[str, float]:
@@ -59,12 +59,6 @@ def recorder_figures(calls: int = 50_000) -> dict[str, float]:
             "writer_messages": figures["record_written"],
             "writer_drain_after_loop_s": drain_s,
             "writer_messages_per_s_lower_bound": figures["record_written"] / max(drain_s, 1e-9)}
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _reap(processes: list[subprocess.Popen]) -> None:

@@ -22,7 +22,6 @@ band of the margin is reported in the band, not judged (as the lockstep sweep's 
 
 from __future__ import annotations
 
-import socket
 import time
 import uuid
 from dataclasses import dataclass, replace
@@ -34,6 +33,7 @@ from haptic.common.model.teleop import TeleopModel
 from haptic.common.wire.injection import InjectionConfig
 from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import LinkConfig
+from haptic.common.wire.ports import free_port as _free_port
 from haptic.lockstep.simulator import LockstepSimulator
 from haptic.lockstep.sweep import BAND, PULSE_FORCE_N, PULSE_SAMPLES, analytic_margin_s
 from haptic.master.sim.operator import parse_operator_spec
@@ -72,12 +72,6 @@ class RealLinkCell:
     def disagrees_outside_band(self) -> bool:
         """A disagreement the check fails on: outside the band of the analytic boundary."""
         return not self.agree and not self.in_band
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _configs(one_way_s: tuple[float, float]) -> tuple[LinkConfig, LinkConfig]:

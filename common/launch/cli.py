@@ -34,7 +34,6 @@ import math
 import shlex
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -56,6 +55,7 @@ from haptic.common.runtime.console import script_description
 from haptic.common.runtime.machine import usable_cpu_count, usable_cpus
 from haptic.common.runtime.summary import finite_figure, loop_cpu_text
 from haptic.common.wire.auth import write_key_file
+from haptic.common.wire.ports import free_port
 
 DEFAULT_OPERATOR = "regulate:fx=3.6,onset=0.2,max=5"
 #: Seconds a child gets after SIGTERM before SIGKILL.
@@ -75,13 +75,6 @@ CPU_LAYOUTS = ("split", "free")
 #: The slave loop's SCHED_FIFO priority in the split layout (refused without CAP_SYS_NICE:
 #: then normal scheduling and a warning).
 SPLIT_SLAVE_PRIORITY = 40
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 nobody listens on right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def session_cpu_args(layout: str, cpus: Sequence[int]) -> tuple[list[str], list[str]]:

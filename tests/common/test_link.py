@@ -7,7 +7,6 @@ import json
 import math
 import os
 import signal
-import socket
 import subprocess
 import sys
 import textwrap
@@ -20,14 +19,9 @@ from haptic.common.wire.injection import InjectionConfig
 from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import LinkConfig
 from haptic.common.wire.messages import Flags, HandleState, ToolState
+from haptic.common.wire.ports import free_port
 
 WAIT_S = 10.0
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def configs(slave_injection: InjectionConfig | None = None, **common):

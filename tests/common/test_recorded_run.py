@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import signal
-import socket
 import subprocess
 import sys
 import uuid
@@ -17,15 +16,10 @@ from pathlib import Path
 import pytest
 
 from haptic.common.records.recording import read_recording
+from haptic.common.wire.ports import free_port as _free_port
 from haptic.view.replay import cli as replay
 
 WAIT_S = 60.0
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")

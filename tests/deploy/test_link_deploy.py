@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -19,6 +18,7 @@ from haptic.common.runtime.cli_options import check_protected_mode
 from haptic.common.wire.auth import write_key_file
 from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import link_config_from
+from haptic.common.wire.ports import free_port
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 
@@ -54,12 +54,6 @@ def test_router_config(tmp_path):
         check_protected_mode(link)
         with pytest.raises(ConfigError, match="protected mode"):  # the same without the key
             check_protected_mode(replace(link, session_key=None))
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def test_client_mode_through_the_python_router():

@@ -7,7 +7,6 @@ from __future__ import annotations
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -19,6 +18,7 @@ import zenoh
 from haptic.common.config import load_config
 from haptic.common.wire.link import Link, zenoh_config
 from haptic.common.wire.link_config import link_config_from
+from haptic.common.wire.ports import free_port
 from haptic.common.wire.router.cli import router_config
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
@@ -78,12 +78,6 @@ def test_make_certs_chain_and_names(certs):
     assert (certs.rogue / "ca.pem").read_bytes() != (certs.good / "ca.pem").read_bytes()
     assert rogue != good
     assert os.stat(certs.good / "master.key").st_mode & 0o077 == 0
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def client_link(side: str, endpoint: str, overrides, zenoh_file: str) -> Link:

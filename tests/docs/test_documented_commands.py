@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import tomllib
@@ -31,6 +30,7 @@ from haptic.common.config import load_config, override
 from haptic.common.config.scenario import scenario_from_table
 from haptic.common.wire.auth import write_key_file
 from haptic.common.wire.link_config import link_config_from
+from haptic.common.wire.ports import free_port as _free_port
 from tests.docs.doc_commands import (
     ROOT,
     SHELL_LABELS,
@@ -188,13 +188,6 @@ def test_every_documented_command_is_run_or_skipped() -> None:
     stale += [key for key in SHORTER if key not in documented]
     assert not stale, f"entries that match no documented command: {stale}"
     assert all(skip.reason for skip in SKIPS)
-
-
-def _free_port() -> int:
-    """A TCP port free on loopback now."""
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 class Scratch:

@@ -15,17 +15,11 @@ from pathlib import Path
 
 import pytest
 
+from haptic.common.wire.ports import free_port as _free_port
+
 WAIT_S = 60.0
 #: When the tool's delay steps from 2 to 40 ms one way, s (CONFIG's delay_profile).
 STEP_AT_S = 1.5
-
-
-def _free_port() -> int:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 CONFIG = f"""

@@ -9,7 +9,6 @@ nothing here asserts timing."""
 from __future__ import annotations
 
 import json
-import socket
 import subprocess
 import sys
 import time
@@ -19,13 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from haptic.common.wire.ports import free_port as _free_port
+
 WAIT_S = 90.0
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _config(tmp_path: Path, mode: str) -> Path:

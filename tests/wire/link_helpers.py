@@ -2,20 +2,12 @@
 
 from __future__ import annotations
 
-import socket
 import time
 
 from haptic.common.wire.link import Link
 
 #: How long a test waits for a pairing, s.
 WAIT_S = 15.0
-
-
-def free_port() -> int:
-    """A TCP port free on 127.0.0.1 now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def pair(*links: Link) -> None:

@@ -25,8 +25,9 @@ from haptic.common.wire.errors import LinkOpenError
 from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import LinkConfig, link_config_from
 from haptic.common.wire.messages import KIND_TOOL, SCHEMA_VERSION, ToolState
+from haptic.common.wire.ports import free_port
 from tests.wire.attacks import forged_payload
-from tests.wire.link_helpers import WAIT_S, free_port, pair
+from tests.wire.link_helpers import WAIT_S, pair
 
 PSK = bytes(range(32))
 

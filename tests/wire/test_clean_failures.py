@@ -4,7 +4,6 @@ and a file that is not MCAP each end in one line and the documented exit status.
 from __future__ import annotations
 
 import os
-import socket
 import subprocess
 import sys
 import uuid
@@ -16,14 +15,9 @@ from haptic.common.runtime.failures import LINK_ERROR_EXIT_STATUS
 from haptic.common.wire.errors import LinkOpenError, one_line
 from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import LinkConfig
+from haptic.common.wire.ports import free_port
 
 BINARY = bytes(range(256)) * 8
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture()

@@ -4,7 +4,6 @@ Behaviour only; the loop rate under a flood is bench/flood_bench.py's figure."""
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 import uuid
@@ -14,13 +13,8 @@ import zenoh
 from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import LinkConfig
 from haptic.common.wire.messages import KIND_TOOL
+from haptic.common.wire.ports import free_port as _free_port
 from tests.wire.attacks import flood, forged_payload
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _pair(max_samples: int):

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import socket
 import subprocess
 import sys
 import uuid
@@ -16,6 +15,7 @@ from haptic.common.config import ConfigError, load_config, override
 from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import LinkConfig
 from haptic.common.wire.messages import Flags, HandleState
+from haptic.common.wire.ports import free_port as _free_port
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from tests.wire.attacks import steady_master
 
@@ -81,12 +81,6 @@ def test_a_new_epoch_is_not_a_position_jump() -> None:
     g = guard()
     assert g.admit(message(0, position=(0.0, 0.0)), 0.0)
     assert g.admit(message(0, position=(0.1, 0.0), epoch=8), TS)
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.mark.slow

@@ -10,7 +10,6 @@ wildcard listener only (it would send nothing even if it were not refused)."""
 from __future__ import annotations
 
 import argparse
-import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -28,6 +27,7 @@ from haptic.common.wire.auth import write_key_file
 from haptic.common.wire.errors import LinkOpenError
 from haptic.common.wire.link import Link, zenoh_config
 from haptic.common.wire.link_config import LinkConfig
+from haptic.common.wire.ports import free_port
 from haptic.common.wire.protected_mode import (
     ZenohSettings,
     decide,
@@ -255,12 +255,6 @@ def test_the_installed_entry_refuses_in_its_own_process():
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "listen tcp/0.0.0.0:0" in lines[0]
     assert all(way in lines[0] for way in WAYS_OUT)
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def test_status_line_and_summary_say_unauthenticated_with_insecure(monkeypatch, capsys):

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-import socket
 import subprocess
 import sys
 import uuid
@@ -18,6 +17,7 @@ from haptic.common.config import ConfigError, load_config, override
 from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import LinkConfig
 from haptic.common.wire.messages import Flags, ToolState
+from haptic.common.wire.ports import free_port as _free_port
 from haptic.master.supervisor import MasterSupervisor, Transition
 from haptic.master.tool_guard import ToolGuardSettings, ToolInputGuard
 from tests.wire.attacks import steady_slave
@@ -112,12 +112,6 @@ def test_supervisor_waits_for_the_tool_at_the_handle_after_a_fault() -> None:
         s.update(seq * TS, message(seq, position=(0.0, 0.0)), (0.005, 0.0))
     assert not s.enabled and not s.tool_guard.faulted
     assert s.update(60 * TS, message(60), (0.0, 0.0)) is Transition.RESUME
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.mark.slow

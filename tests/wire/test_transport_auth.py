@@ -19,13 +19,14 @@ from haptic.common.wire.auth import write_key_file
 from haptic.common.wire.link import Link, zenoh_config
 from haptic.common.wire.link_config import LinkConfig, link_config_from
 from haptic.common.wire.messages import KIND_TOOL
+from haptic.common.wire.ports import free_port
 from haptic.common.wire.transport_auth import (
     open_session,
     transport_key,
     transport_password,
 )
 from tests.wire.attacks import forged_payload
-from tests.wire.link_helpers import WAIT_S, free_port, pair
+from tests.wire.link_helpers import WAIT_S, pair
 
 PSK = bytes(range(32))
 
