@@ -121,3 +121,10 @@ def test_the_command_line_help_works(command: list[str]) -> None:
     assert done.returncode == 0, done.stderr
     for option in ("--changed-since", "--time-budget-s", "--min-score", "--module"):
         assert option in done.stdout
+
+
+def test_the_command_line_takes_no_abbreviations(capsys) -> None:
+    with pytest.raises(SystemExit) as caught:
+        cli.build_parser().parse_args(["--changed", "HEAD"])
+    assert caught.value.code == 2
+    assert "--changed" in capsys.readouterr().err
