@@ -230,6 +230,7 @@ def _run_linked_master(
             print(f"haptic-master: hardware error: {error}", file=sys.stderr)
             return 1
         extra_summary.update(emulator_placement(hardware))
+        extra_summary.update(hardware.summary())  # e.g. the CAN drives' fallbacks
         try:
             with Link(link_config) as link:
                 harness = ProgramHarness("haptic-master", "slave", options, link, period_s,

@@ -42,6 +42,7 @@ class CanSettings:
     data_bitrate: int = 5_000_000
     sync_counter_overflow: int = 240
     sync_lead_s: float = 0.0
+    allow_no_drive_watchdog: bool = False
 
     @property
     def eds_files(self) -> tuple[str, str]:

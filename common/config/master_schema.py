@@ -100,6 +100,11 @@ CAN_SCHEMA: Schema = {
         "written to every drive whose EDS has 0x1019 (none of them lacking it); 0 off.",
         minimum=0, maximum=240,
         check=lambda v: None if v != 1 else "must be 0 (off) or 2..240 (CiA 301 0x1019)"),
+    "allow_no_drive_watchdog": Field(
+        "bool", "Accept a drive whose EDS leaves it no drive-side watchdog: no heartbeat "
+        "consumer (0x1016), no RPDO deadline (0x1400:05, or rpdo_timeout_s = 0) and no life "
+        "guarding (0x100C/0x100D). Such a drive keeps following its last target when the "
+        "master stalls; false (the default) refuses it at configure."),
 }
 
 def _emulator_interface(name: Any) -> str | None:

@@ -97,13 +97,16 @@ class BusLoad:
                 "or CAN FD ([master.can] fd = true, data_bitrate)")
 
 
-def cycle_frames(sensor_bytes: int = 8, sync_bytes: int = 0) -> tuple[CycleFrame, ...]:
+def cycle_frames(sensor_bytes: int = 8, sync_bytes: int = 0,
+                 tpdo_bytes: tuple[int, ...] = (6, 6),
+                 rpdo_bytes: tuple[int, ...] = (6, 6)) -> tuple[CycleFrame, ...]:
     """The frames of one control cycle: SYNC (``sync_bytes``: 1 with the SYNC counter), both
-    TPDO1 (statusword + position, 6 bytes), the sensor frame, both RPDO1 (controlword +
-    target, 6 bytes)."""
-    return (CycleFrame("SYNC", sync_bytes), CycleFrame("TPDO1 x", 6), CycleFrame("TPDO1 y", 6),
-            CycleFrame("sensor", sensor_bytes), CycleFrame("RPDO1 x", 6),
-            CycleFrame("RPDO1 y", 6))
+    drives' TPDO (statusword + position, 6 bytes where the driver maps it; ``tpdo_bytes``,
+    x then y: a static mapping may carry more), the sensor frame, both RPDOs (controlword +
+    target, ``rpdo_bytes``)."""
+    return (CycleFrame("SYNC", sync_bytes), CycleFrame("TPDO1 x", tpdo_bytes[0]),
+            CycleFrame("TPDO1 y", tpdo_bytes[1]), CycleFrame("sensor", sensor_bytes),
+            CycleFrame("RPDO1 x", rpdo_bytes[0]), CycleFrame("RPDO1 y", rpdo_bytes[1]))
 
 
 def bus_load(sample_period_s: float, bitrate: int, fd: bool, data_bitrate: int,

@@ -2,11 +2,14 @@
 two-channel force sensor (DBC), behind :class:`~haptic.master.hardware.interface.HandleHardware`.
 
 One control cycle is one SYNC: :meth:`CanHandleDriver.read` sends SYNC and waits (at most
-``pdo_timeout_s``) for both drives' TPDO1 (statusword, position actual value) and the
-sensor frame sampled at that SYNC (or, where :meth:`CanHandleDriver.sync` sent the SYNC ahead
-of the tick, ``[master.can] sync_lead_s`` before it, collects the frames that came
-meanwhile); :meth:`CanHandleDriver.write` sends each drive's RPDO1
-(controlword, target position), which the drive applies at the next SYNC. A command
+``pdo_timeout_s``) for both drives' TPDO (TPDO1 unless the EDS fixes another: statusword,
+position actual value) and the sensor frame sampled at that SYNC (or, where
+:meth:`CanHandleDriver.sync` sent the SYNC ahead of the tick, ``[master.can] sync_lead_s``
+before it, collects the frames that came meanwhile); :meth:`CanHandleDriver.write` sends each
+drive's RPDO (RPDO1 unless the EDS fixes another: controlword, target position), which the
+drive applies at the next SYNC. What each drive's EDS lacks is replaced by a named fallback
+(:mod:`haptic.master.hardware.canopen_setup`), logged at configure and listed in
+:attr:`CanHandleDriver.fallbacks` and :meth:`CanHandleDriver.summary`. A command
 written in cycle k therefore acts over [t_{k+1}, t_{k+2}): zero-order hold plus one sample
 of delay, the contract the analysis and the simulated rig use.
 
@@ -16,6 +19,7 @@ encoder resolution, raw sensor counts -> N with the configured scale and offset.
 
 from __future__ import annotations
 
+import logging
 import math
 import struct
 import sys
@@ -29,7 +33,16 @@ from can.broadcastmanager import ThreadBasedCyclicSendTask
 
 from haptic.master.hardware import cia402
 from haptic.master.hardware.bus_load import BusLoad, bus_load, cycle_frames
-from haptic.master.hardware.canopen_setup import SdoStep, configuration_steps, variable
+from haptic.master.hardware.canopen_setup import (
+    CSP_SUPPORTED,
+    RPDO1_OBJECTS,
+    TPDO1_OBJECTS,
+    DrivePlan,
+    PlanSettings,
+    describe,
+    plan_drive,
+    variable,
+)
 from haptic.master.hardware.cia402 import DriveState
 from haptic.master.hardware.drive_device import load_drive_dictionary
 from haptic.master.hardware.force_sensor import STATUS_OK, ForceSensorCodec, load_database
@@ -44,6 +57,7 @@ from haptic.master.settings import CanSettings, master_settings
 
 AXES = ("x", "y")
 INT32_MAX = 2**31 - 1
+logger = logging.getLogger(__name__)
 
 
 class CanHandleDriver(HandleHardware):
@@ -130,9 +144,15 @@ class CanHandleDriver(HandleHardware):
         #: disabled drives must not fault; while active, read() sends it, so a stalled loop
         #: stops the drives by their heartbeat consumer
         self._idle_heartbeat: Any = None
+        self._idle_guards: list[Any] = []
         #: errors that stopped the idle heartbeat task (bus gone), for diagnosis
         self.idle_heartbeat_errors: list[str] = []
         nodes = settings.node_ids
+        #: What configure found in each drive's EDS: the fallbacks taken (one line each,
+        #: naming the drive), per drive its PDOs, watchdogs and fallbacks (summary()).
+        self.fallbacks: list[str] = []
+        self.plans: list[DrivePlan] = []
+        self._standard_layout()
         #: frame id -> (kind, axis) of every frame read() acts on.
         self._dispatch: dict[int, tuple[int, int]] = {}
         for axis, node in enumerate(nodes):
@@ -151,14 +171,32 @@ class CanHandleDriver(HandleHardware):
             can.Message(arbitration_id=cia402.SYNC_COB_ID, data=bytes([count]),
                         is_extended_id=False, is_fd=self._fd, bitrate_switch=self._fd)
             for count in range(1, 241)]
-        # What this driver sends (NMT, SYNC, its RPDO1s, SDO requests, its heartbeat; extra
-        # frames by id): an interface that hands a process its own frames back
-        # (udp_multicast) does not make them late frames.
+        # What this driver sends (NMT, SYNC, its RPDOs, SDO requests, its heartbeat; extra
+        # frames by id; PDOs of the drives that stay on unused): an interface that hands a
+        # process its own frames back (udp_multicast) does not make them late frames.
         self._own_ids = ({cia402.NMT_COB_ID, cia402.SYNC_COB_ID,
                           HEARTBEAT_BASE + settings.master_node_id}
                          | {cia402.RPDO1_BASE + n for n in nodes}
                          | {cia402.SDO_RX_BASE + n for n in nodes})
         self._own_extended_ids: set[int] = set()
+
+    def _standard_layout(self) -> None:
+        """Per axis, until a plan says otherwise (:meth:`_use_plans`): RPDO1 and TPDO1 as
+        the driver maps them, the drive's heartbeat watched, no node guarding."""
+        #: per axis: whether the master watches the drive's heartbeat (or its answers to
+        #: node guarding), whether it is guarded; the guarding requests the master sends
+        #: with its heartbeat
+        self._heartbeat_supervised = [True, True]
+        self._guarded = [False, False]
+        self._guard_requests: list[can.Message] = []
+        #: per axis: the PDOs' names, COB-IDs and payload codecs (TPDO: the statusword and
+        #: the position, in the reverse order where the flag says so; RPDO: packs them)
+        self._tpdo_names = ["TPDO1", "TPDO1"]
+        self._tpdo_codecs = [_TPDO1, _TPDO1]
+        self._tpdo_reversed = [False, False]
+        self._rpdo_ids = [cia402.RPDO1_BASE + node for node in self.settings.node_ids]
+        self._rpdo_codecs = [_RPDO1, _RPDO1]
+        self._rpdo_reversed = [False, False]
 
     # --- lifecycle -------------------------------------------------------------------
 
@@ -176,24 +214,31 @@ class CanHandleDriver(HandleHardware):
         :class:`HardwareError` naming the options when it is above
         ``[master.can] bus_load_limit``."""
         settings = self.settings
+        tpdo = tuple(plan.tpdo.size for plan in self.plans) or (6, 6)
+        rpdo = tuple(plan.rpdo.size for plan in self.plans) or (6, 6)
         budget = bus_load(self.sample_period_s, settings.bitrate, self._fd,
                           settings.data_bitrate, settings.bus_load_limit,
                           settings.heartbeat_period_s,
-                          cycle_frames(sync_bytes=1 if settings.sync_counter_overflow else 0))
+                          cycle_frames(sync_bytes=1 if settings.sync_counter_overflow else 0,
+                                       tpdo_bytes=tpdo, rpdo_bytes=rpdo))
         self.bus_load = budget
         if not budget.ok:
             raise HardwareError(budget.refusal())
         return budget
 
     def configure(self) -> None:
-        """Check the bus-load budget, open the bus, configure each drive from its EDS by SDO
-        (every write read back; :mod:`haptic.master.hardware.canopen_setup`), start the nodes (NMT)
-        and take a first sample. On any failure every node is left pre-operational and the
-        bus is closed."""
+        """Plan each drive's configuration from its EDS and check the bus-load budget (a bad
+        EDS or budget never touches a drive), log each fallback taken (one line), open the
+        bus, configure each drive by SDO (every write read back, every object the EDS fixes
+        read; :mod:`haptic.master.hardware.canopen_setup`), start the nodes (NMT) and take a
+        first sample. On any failure every node is left pre-operational and the bus is
+        closed."""
         if self._state is not LifecycleState.UNCONFIGURED:
             return
+        plans = self._plans()
         budget = self.check_bus_load()
-        plans = self._plans()  # before the bus: a bad EDS never touches a drive
+        for line in self.fallbacks:
+            logger.warning("haptic-master: %s", line)
         if self.announce_bus_load:
             print(f"haptic-master: {budget.summary()}; {self.sync_counter_note}",
                   file=sys.stderr, flush=True)
@@ -211,7 +256,7 @@ class CanHandleDriver(HandleHardware):
                 self._nmt(cia402.NMT_PRE_OPERATIONAL, node)
             self.identities = []
             for axis, node in enumerate(self.settings.node_ids):
-                self._configure_drive(axis, node, *plans[axis])
+                self._configure_drive(axis, node, plans[axis])
             self._expect_heartbeats(time.monotonic())
             for node in self.settings.node_ids:
                 self._nmt(cia402.NMT_START, node)
@@ -232,10 +277,11 @@ class CanHandleDriver(HandleHardware):
             raise
         self._target_counts = self._position_counts.copy()
 
-    def _plans(self) -> list[tuple[Any, list[SdoStep]]]:
-        """Each drive's dictionary (its EDS) and configuration steps. The SYNC counter
-        (0x1019) is on when configured and every drive's EDS has the object (one SYNC
-        serves all: a drive without it expects SYNCs without data)."""
+    def _plans(self) -> list[DrivePlan]:
+        """Each drive's plan from its EDS (:mod:`~haptic.master.hardware.canopen_setup`), the
+        fallbacks taken (:attr:`fallbacks`) and the cyclic frames' layout. The SYNC
+        counter (0x1019) is on when configured and every drive's EDS has the object writable
+        (one SYNC serves all: a drive without it expects SYNCs without data)."""
         settings = self.settings
         window_counts = int(round(settings.following_error_window_m
                                   / settings.metres_per_count))
@@ -247,8 +293,27 @@ class CanHandleDriver(HandleHardware):
                 dictionaries.append((load_drive_dictionary(eds, node), what))
             except (OSError, ValueError, KeyError) as error:
                 raise HardwareError(f"cannot read the {what}: {error}") from None
-        overflow = settings.sync_counter_overflow
-        lacking = [what for dictionary, what in dictionaries if 0x1019 not in dictionary]
+        overflow = self._counter_for_bus(settings.sync_counter_overflow, dictionaries)
+        plan_settings = PlanSettings(
+            self.sample_period_s, settings.master_node_id, settings.heartbeat_period_s,
+            settings.heartbeat_timeout_s, settings.rpdo_timeout_s,
+            min(window_counts, 0xFFFFFFFF), overflow, settings.allow_no_drive_watchdog,
+            self._fd)
+        plans = []
+        for node, (dictionary, what) in zip(settings.node_ids, dictionaries, strict=True):
+            plans.append(plan_drive(dictionary, node, plan_settings, what))
+        self.plans = plans
+        self.fallbacks = [f"{AXES[axis]} drive (node {settings.node_ids[axis]}): {line}"
+                          for axis, plan in enumerate(plans) for line in plan.fallbacks]
+        if self.sync_counter_note.startswith("SYNC counter off: the"):
+            self.fallbacks.append(self.sync_counter_note)
+        self._use_plans(plans)
+        return plans
+
+    def _counter_for_bus(self, overflow: int, dictionaries: list[tuple[Any, str]]) -> int:
+        """The SYNC counter's overflow value in use (0 off) and its note."""
+        lacking = [what for dictionary, what in dictionaries
+                   if 0x1019 not in dictionary or not dictionary[0x1019].writable]
         if overflow and lacking:
             self.sync_counter_note = (f"SYNC counter off: the {' and the '.join(lacking)} "
                                       f"{'have' if len(lacking) > 1 else 'has'} no 0x1019")
@@ -258,13 +323,43 @@ class CanHandleDriver(HandleHardware):
                                       else "SYNC counter off ([master.can] "
                                       "sync_counter_overflow = 0)")
         self.sync_counter_overflow = overflow
-        plans = []
-        for node, (dictionary, what) in zip(settings.node_ids, dictionaries, strict=True):
-            plans.append((dictionary, configuration_steps(
-                dictionary, node, self.sample_period_s, settings.master_node_id,
-                settings.heartbeat_period_s, settings.heartbeat_timeout_s,
-                settings.rpdo_timeout_s, min(window_counts, 0xFFFFFFFF), what, overflow)))
-        return plans
+        return overflow
+
+    def _use_plans(self, plans: list[DrivePlan]) -> None:
+        """The cyclic frames' ids and layouts, the supervision and the node guarding the
+        plans ask for."""
+        nodes = self.settings.node_ids
+        self._guard_requests = []
+        for axis, (node, plan) in enumerate(zip(nodes, plans, strict=True)):
+            old_tpdo = next(i for i, v in self._dispatch.items() if v == (_TPDO, axis))
+            del self._dispatch[old_tpdo]
+            self._dispatch[plan.tpdo.cob_id] = (_TPDO, axis)
+            self._own_ids.discard(self._rpdo_ids[axis])
+            self._rpdo_ids[axis] = plan.rpdo.cob_id
+            self._own_ids.add(plan.rpdo.cob_id)
+            self._own_ids.update(plan.ignored_cob_ids)
+            self._tpdo_names[axis] = plan.tpdo.name
+            self._tpdo_codecs[axis], self._tpdo_reversed[axis] = plan.tpdo.codec(
+                plan.dictionary, TPDO1_OBJECTS)
+            self._rpdo_codecs[axis], self._rpdo_reversed[axis] = plan.rpdo.codec(
+                plan.dictionary, RPDO1_OBJECTS)
+            self._heartbeat_supervised[axis] = plan.heartbeat_supervised
+            self._guarded[axis] = plan.guarded
+            if plan.guarded:
+                self._guard_requests.append(can.Message(
+                    arbitration_id=HEARTBEAT_BASE + node, is_remote_frame=True, dlc=1,
+                    is_extended_id=False))
+
+    def summary(self) -> dict[str, Any]:
+        """What the run's summary gets from the driver: ``fallbacks`` (one line each, naming
+        the drive), ``can_drives`` (per drive its PDOs, watchdogs and fallbacks) and
+        ``can_sync_counter`` (:attr:`sync_counter_note`); empty before configure."""
+        if not self.plans:
+            return {}
+        return {"fallbacks": list(self.fallbacks),
+                "can_drives": {AXES[axis]: describe(plan)
+                               for axis, plan in enumerate(self.plans)},
+                "can_sync_counter": self.sync_counter_note}
 
     def _next_sync(self) -> can.Message:
         """This cycle's SYNC: without data, or with the counter 1..overflow (CiA 301)."""
@@ -293,30 +388,39 @@ class CanHandleDriver(HandleHardware):
         self._stop_taken = [False, False]
         self._stop_reported = [False, False]
 
-    def _configure_drive(self, axis: int, node: int, dictionary: Any,
-                         steps: list[SdoStep]) -> None:
+    def _configure_drive(self, axis: int, node: int, plan: DrivePlan) -> None:
         name = f"{AXES[axis]} drive (node {node})"
+        dictionary = plan.dictionary
         device_type = self._sdo_read(node, variable(dictionary, 0x1000, 0, name), name)
         if device_type & 0xFFFF != 402:
             raise HardwareError(f"{name} is not a CiA 402 drive (0x1000 device type "
                                 f"0x{device_type:08X})")
+        if plan.check_modes:
+            modes = self._sdo_read(node, variable(dictionary, 0x6502, 0, name), name)
+            if not modes & CSP_SUPPORTED:
+                raise HardwareError(f"{name} has no cyclic synchronous position: 0x6502 "
+                                    f"reads 0x{modes:08X} (bit 7, mode 8, clear)")
         identity = {"device_type": device_type}
         for subindex, key in ((1, "vendor_id"), (2, "product_code"), (3, "revision"),
                               (4, "serial_number")):
-            identity[key] = self._sdo_read(node, variable(dictionary, 0x1018, subindex, name),
-                                           name)
+            if subindex in plan.identity:
+                identity[key] = self._sdo_read(
+                    node, variable(dictionary, 0x1018, subindex, name), name)
         info = dictionary.device_information
         for key, expected in (("vendor_id", info.vendor_number),
                               ("product_code", info.product_number)):
-            if expected and identity[key] != expected:
+            if expected and key in identity and identity[key] != expected:
                 raise HardwareError(f"{name} reports {key} 0x{identity[key]:08X}, its EDS "
                                     f"describes 0x{expected:08X}: another device or EDS")
         self.identities.append(identity)
-        for step in steps:
-            self._sdo_write(node, step.variable, step.value, name)
+        for step in plan.steps:
+            if step.write:
+                self._sdo_write(node, step.variable, step.value, name)
             back = self._sdo_read(node, step.variable, name)
             if back != step.value:
                 raise HardwareError(f"{name}: {step.label} reads back {back} after writing "
+                                    f"{step.value}" if step.write else
+                                    f"{name}: {step.label} reads {back}, not the EDS's fixed "
                                     f"{step.value}")
         mode = self._sdo_read(node, variable(dictionary, 0x6061, 0, name), name)
         if mode != cia402.MODE_CYCLIC_SYNC_POSITION:
@@ -515,10 +619,18 @@ class CanHandleDriver(HandleHardware):
         self._idle_heartbeat = ThreadBasedCyclicSendTask(
             self._bus, threading.Lock(), message, self._heartbeat_period_s,
             on_error=stop_on_error)
+        # the guarded drives' requests, each a task of its own (a task with several
+        # messages sends one of them per period)
+        self._idle_guards = [ThreadBasedCyclicSendTask(
+            self._bus, threading.Lock(), request, self._heartbeat_period_s,
+            on_error=stop_on_error) for request in self._guard_requests]
 
     def _stop_idle_heartbeat(self) -> None:
-        task, self._idle_heartbeat = self._idle_heartbeat, None
-        if task is not None:
+        tasks = [self._idle_heartbeat, *self._idle_guards]
+        self._idle_heartbeat, self._idle_guards = None, []
+        for task in tasks:
+            if task is None:
+                continue
             task.stop()
             # stop() only flags the thread: wait for a send in progress to finish, so the
             # bus is never shut down under it (python-can would log a traceback)
@@ -560,9 +672,12 @@ class CanHandleDriver(HandleHardware):
         self._sync_pending = True
 
     def _heartbeat_if_due(self, now: float) -> None:
-        """Send the master's heartbeat when it is due (``now``: time.monotonic(), s)."""
+        """Send the master's heartbeat, and the node guarding requests of the drives guarded
+        instead of consuming it, when it is due (``now``: time.monotonic(), s)."""
         if now >= self._heartbeat_due_s:
             self._send(HEARTBEAT_BASE + self.settings.master_node_id, self._master_heartbeat)
+            if self._guard_requests:
+                self._put_all(self._guard_requests)
             self._heartbeat_due_s = max(self._heartbeat_due_s + self._heartbeat_period_s, now)
 
     def read(self) -> HandleReading:
@@ -611,11 +726,14 @@ class CanHandleDriver(HandleHardware):
             kind, axis = dispatch.get(message.arbitration_id, _OTHER)
             if kind == _TPDO:
                 data = message.data
-                if len(data) != 6:
-                    faults.append(f"{AXES[axis]} drive TPDO1 malformed: PDO payload of "
-                                  f"{len(data)} bytes, expected 6")
+                codec = self._tpdo_codecs[axis]
+                if len(data) != codec.size:
+                    faults.append(f"{AXES[axis]} drive {self._tpdo_names[axis]} malformed: "
+                                  f"PDO payload of {len(data)} bytes, expected {codec.size}")
                     continue
-                statusword, counts = _TPDO1.unpack(data)
+                statusword, counts = codec.unpack(data)
+                if self._tpdo_reversed[axis]:
+                    statusword, counts = counts, statusword
                 have_drive[axis] = True
                 self._drive_states[axis] = cia402.decode_statusword(statusword)
                 self._position_counts[axis] = counts
@@ -628,11 +746,12 @@ class CanHandleDriver(HandleHardware):
             elif kind == _SENSOR:
                 have_sensor = True
                 force_N = self._sensor_force(bytes(message.data), faults)
-            elif kind in (_EMCY, _HEARTBEAT):
+            elif kind in (_EMCY, _HEARTBEAT) and not message.is_remote_frame:
                 self._supervision_frame(kind, axis, bytes(message.data), faults, drive_fault)
         for axis, node in enumerate(self.settings.node_ids):
             if not have_drive[axis]:
-                faults.append(f"missing TPDO1 from the {AXES[axis]} drive (node {node})")
+                faults.append(f"missing {self._tpdo_names[axis]} from the {AXES[axis]} drive "
+                              f"(node {node})")
             elif self._drive_states[axis] in (DriveState.FAULT, DriveState.FAULT_REACTION_ACTIVE):
                 faults.append(f"{AXES[axis]} drive in {self._drive_states[axis].value}")
                 drive_fault[axis] = True
@@ -644,6 +763,8 @@ class CanHandleDriver(HandleHardware):
                 drive_fault[axis] = True
             elif self._master_stop is not None and self._state is LifecycleState.ACTIVE:
                 self._check_quick_stop(axis, events, faults, drive_fault)
+            if not self._heartbeat_supervised[axis]:
+                continue  # it produces none: its TPDO at each SYNC is what shows it alive
             if now - self._heartbeat_seen_s[axis] > self._heartbeat_timeout_s and (
                     not self._heartbeat_lost[axis]):
                 self._heartbeat_lost[axis] = True
@@ -692,6 +813,8 @@ class CanHandleDriver(HandleHardware):
             self._heartbeat_seen_s[axis] = time.monotonic()
             self._heartbeat_lost[axis] = False
             state = data[0] if data else -1
+            if self._guarded[axis] and state > 0:
+                state &= 0x7F  # bit 7 of a node guarding answer: its toggle bit
             if self._state is not LifecycleState.UNCONFIGURED and state != 0x05:
                 faults.append(f"{AXES[axis]} drive heartbeat reports NMT state "
                               f"{_NMT_STATE_NAMES.get(state, hex(state))}, not operational")
@@ -703,8 +826,8 @@ class CanHandleDriver(HandleHardware):
         is not a late frame."""
         assert self._bus is not None
         while (message := self._bus.recv(timeout=0.0)) is not None:
-            if message.arbitration_id in (self._own_extended_ids if message.is_extended_id
-                                          else self._own_ids):
+            if message.is_remote_frame or message.arbitration_id in (
+                    self._own_extended_ids if message.is_extended_id else self._own_ids):
                 continue  # our own frame, back from an interface that echoes
             kind, axis = self._dispatch.get(message.arbitration_id, _OTHER)
             if kind in (_EMCY, _HEARTBEAT):
@@ -821,21 +944,22 @@ class CanHandleDriver(HandleHardware):
             send_burst(self._bus, frames)
 
     def _rpdo_frame(self, axis: int, controlword: int, count: int) -> can.Message:
-        """``axis``'s drive RPDO1: ``controlword`` and the target position ``count``."""
+        """``axis``'s drive RPDO: ``controlword`` and the target position ``count``."""
         fd = self._fd
-        return can.Message(arbitration_id=cia402.RPDO1_BASE + self.settings.node_ids[axis],
-                           data=_RPDO1.pack(controlword, count), is_extended_id=False,
-                           is_fd=fd, bitrate_switch=fd)
+        data = (self._rpdo_codecs[axis].pack(count, controlword) if self._rpdo_reversed[axis]
+                else self._rpdo_codecs[axis].pack(controlword, count))
+        return can.Message(arbitration_id=self._rpdo_ids[axis], data=data,
+                           is_extended_id=False, is_fd=fd, bitrate_switch=fd)
 
     def _send_rpdos(self, controlword: int, counts: list[int]) -> None:
-        """Both drives' RPDO1 (``controlword`` and the target ``counts``, per axis) as one
+        """Both drives' RPDO (``controlword`` and the target ``counts``, per axis) as one
         burst, as :meth:`burst` would send them."""
         self._put_all([self._rpdo_frame(0, controlword, counts[0]),
                        self._rpdo_frame(1, controlword, counts[1])])
         self._last_controlword[0] = self._last_controlword[1] = controlword
 
     def _send_rpdo(self, axis: int, controlword: int) -> None:
-        """One drive's RPDO1 (the enable sequence's per-axis steps)."""
+        """One drive's RPDO (the enable sequence's per-axis steps)."""
         self._put(self._rpdo_frame(axis, controlword, int(self._target_counts[axis])))
         self._last_controlword[axis] = controlword
 
@@ -884,7 +1008,7 @@ class CanHandleDriver(HandleHardware):
                                         f"({_abort_text(code)}) on {obj}")
                 return reply
             kind, axis = self._dispatch.get(message.arbitration_id, _OTHER)
-            if kind in (_EMCY, _HEARTBEAT):
+            if kind in (_EMCY, _HEARTBEAT) and not message.is_remote_frame:
                 self._supervision_frame(kind, axis, bytes(message.data),
                                         self._pending_faults, [False, False])
         raise HardwareError(f"{label}: no SDO reply from node {node} for {obj}")
@@ -913,6 +1037,7 @@ _OTHER = (0, 0)
 HEARTBEAT_BASE = 0x700
 _TPDO1 = struct.Struct("<Hi")  # statusword, position actual value (counts)
 _RPDO1 = struct.Struct("<Hi")  # controlword, target position (counts)
+
 #: An SDO request without a reply is sent again after this long, s (until the deadline).
 SDO_RESEND_S = 0.25
 

@@ -93,6 +93,12 @@ class HandleHardware(ABC):
         with the loops); None otherwise (real devices, devices in this process)."""
         return None
 
+    def summary(self) -> dict[str, Any]:
+        """What the hardware adds to the run's summary after configure (the CAN backends: the
+        fallbacks taken for what a drive's EDS lacks, each drive's PDOs and watchdogs); the
+        default adds nothing."""
+        return {}
+
     def sync(self) -> None:
         """Start the next control cycle ahead of its :meth:`read` (the CAN backends send its
         SYNC: the devices sample and answer while the loop waits for its tick, the runner's

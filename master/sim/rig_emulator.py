@@ -300,6 +300,9 @@ class EmulatedRigHardware(HandleHardware):
             self._stop_emulator()
             raise
 
+    def summary(self) -> dict[str, Any]:
+        return self.driver.summary() if self.driver is not None else {}
+
     def device_process_cpu_s(self) -> float | None:
         """The emulator process's CPU time so far, s (None when it is not running)."""
         process = self.process

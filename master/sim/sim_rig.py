@@ -186,13 +186,18 @@ class SimulatedCanRig:
         #: Each drive's object dictionary (its EDS) and communication objects.
         self.devices = [
             DriveObjects(node, eds, self._send, drive,
-                         lambda axis=axis: self._position_counts(axis), fd=settings.fd)
+                         lambda axis=axis: self._position_counts(axis), fd=settings.fd,
+                         sync_period_s=model.period_s)
             for axis, (node, eds, drive) in enumerate(zip(settings.node_ids, settings.eds_files,
                                                           self.drives, strict=True))]
         for axis, drive in enumerate(self.drives):
             drive.position_counts = self._position_counts(axis)
         #: When each drive last heard the heartbeat it consumes (monotonic s; None: not yet).
         self._heartbeat_heard: list[float | None] = [None, None]
+        #: When each drive last got a node guarding request (monotonic s; None: not yet) and
+        #: the toggle bit of its next answer.
+        self._guarded_at: list[float | None] = [None, None]
+        self._guard_toggle = [0, 0]
         self._heartbeat_due = [0.0, 0.0]
         #: When the serving loop next looks at the heartbeat timers (0: at once), s.
         self._timers_due_s = 0.0
@@ -373,7 +378,22 @@ class SimulatedCanRig:
                         self._connection_lost(axis, EMCY_HEARTBEAT)
                     else:
                         next_s = min(next_s, heard + timeout_s - now_s)
+                next_s = min(next_s, self._life_guard(axis, device, now_s))
         return next_s
+
+    def _life_guard(self, axis: int, device: DriveObjects, now_s: float) -> float:
+        """Life guarding (CiA 301): once guarded, a drive whose next request is later than
+        guard time x life time factor has lost its master (EMCY 0x8130, then its 0x6007
+        reaction); returns the time to look again, s (under the lock)."""
+        guarded = self._guarded_at[axis]
+        lifetime_s = device.guard_time_ms * device.life_time_factor * 1e-3
+        if guarded is None or lifetime_s <= 0.0:
+            return 1.0
+        if now_s - guarded > lifetime_s:
+            self._guarded_at[axis] = None  # one trip per loss
+            self._connection_lost(axis, EMCY_HEARTBEAT)
+            return 1.0
+        return guarded + lifetime_s - now_s
 
     def _connection_lost(self, axis: int, emcy_code: int) -> None:
         """The drive lost its master (heartbeat or RPDO deadline): EMCY, then the abort
@@ -481,10 +501,14 @@ class SimulatedCanRig:
                     self._timers_due_s = 0.0  # its consumer starts now
                 self._heartbeat_heard[axis] = time.monotonic()  # changes no input
                 continue
-            if frame_id == device.rpdo.cob_id and device.rpdo.enabled:
+            if frame_id == 0x700 + drive.node_id and not data:
+                self._answer_guarding(axis)  # a node guarding request (a remote frame)
+                return
+            rpdo = device.rpdos_by_id.get(frame_id)
+            if rpdo is not None:
                 if drive.nmt_state == NMT_OPERATIONAL_STATE:
                     self._discard_prepared()
-                    values = device.decode_rpdo(data)
+                    values = device.decode_rpdo(data, rpdo)
                     if isinstance(values, int):  # a length error: not processed
                         self._send(cia402.EMCY_BASE + drive.node_id,
                                    cia402.emcy_frame(values))
@@ -501,6 +525,18 @@ class SimulatedCanRig:
                         self._timers_due_s = 0.0  # a heartbeat time may have changed
                 return
         # Anything else (another node's frames, this bus's own frames coming back) is not ours.
+
+    def _answer_guarding(self, axis: int) -> None:
+        """A node guarding request to ``axis``'s drive: the answer (toggle bit 7 and the NMT
+        state) and, with a guard time and life time factor set, life guarding from now on
+        (under the lock; changes no input)."""
+        drive, device = self.drives[axis], self.devices[axis]
+        toggle = self._guard_toggle[axis]
+        self._guard_toggle[axis] ^= 0x80
+        self._send(0x700 + drive.node_id, bytes([toggle | device.heartbeat_payload()[0]]))
+        if self._guarded_at[axis] is None:
+            self._timers_due_s = 0.0  # its life guarding starts now
+        self._guarded_at[axis] = time.monotonic()
 
     def _on_nmt(self, command: int, node: int) -> None:
         for drive in self.drives:
@@ -526,6 +562,8 @@ class SimulatedCanRig:
                         DriveState.SWITCH_ON_DISABLED, 0, 0)
                 drive.nmt_state = NMT_PRE_OPERATIONAL_STATE
                 self._heartbeat_heard[self.drives.index(drive)] = None
+                self._guarded_at[self.drives.index(drive)] = None
+                self._guard_toggle[self.drives.index(drive)] = 0
                 self.sync_counter_seen[self.drives.index(drive)] = 0
                 self._send(0x700 + drive.node_id, b"\x00")
 
@@ -603,7 +641,7 @@ class SimulatedCanRig:
             if enabled or drive.state is DriveState.QUICK_STOP_ACTIVE:
                 targets[0, axis] = self.settings.metres_from_count(drive.target_counts)
             # RPDO deadline (0x1400:05) in SYNC time (interpolation periods).
-            timer_s = device.rpdo.event_timer_ms * 1e-3
+            timer_s = device.rpdo_deadline_ms * 1e-3
             if enabled and timer_s > 0.0 and not received_rpdo:
                 drive.syncs_without_rpdo += 1
                 if drive.syncs_without_rpdo * device.interpolation_period_s > timer_s:
@@ -648,21 +686,13 @@ class SimulatedCanRig:
                 continue
             drive.sync_count += 1
             self._check_following_error(drive, device, frames)
-            if drive.nmt_state != NMT_OPERATIONAL_STATE or not device.tpdo.enabled or (
+            if drive.nmt_state != NMT_OPERATIONAL_STATE or not device.tpdos or (
                     device.sync_cob_id != cia402.SYNC_COB_ID):
                 continue
             if drive.drop_tpdo > 0:
                 drive.drop_tpdo -= 1
                 continue
-            payload = device.encode_tpdo(drive, drive.position_counts)
-            kind = device.tpdo.transmission_type
-            if 1 <= kind <= 240:
-                due = drive.sync_count % kind == 0
-            else:  # 0 acyclic synchronous, 254/255 event-driven: on a change
-                due = payload != drive.last_tpdo
-            if due:
-                drive.last_tpdo = payload
-                frames.append((device.tpdo.cob_id, payload))
+            self._tpdos(drive, device, frames)
         counter = self._sensor_counter
         drop_sensor, status_cycles = self._drop_sensor, self._sensor_status_cycles
         if drop_sensor > 0:
@@ -682,6 +712,26 @@ class SimulatedCanRig:
                 else 0, data) for frame_id, data in frames]
         return _SyncAnswer(drives, sample, raw, (counter + 1) % 256, drop_sensor,
                            status_cycles, undo, rng_undo)
+
+    @staticmethod
+    def _tpdos(drive: DriveRuntime, device: DriveObjects,
+               frames: list[tuple[int, bytes]]) -> None:
+        """The drive's enabled TPDOs due at this SYNC, as mapped, into ``frames``: every
+        n-th SYNC for transmission type n (1-240), on a change of the payload for the others
+        (0 acyclic synchronous, 254/255 event-driven)."""
+        sent = []
+        for number, tpdo in enumerate(device.tpdos):
+            payload = device.encode_tpdo(drive, drive.position_counts, tpdo)
+            kind = tpdo.transmission_type
+            last = drive.last_tpdos[number] if number < len(drive.last_tpdos) else b""
+            if 1 <= kind <= 240:
+                due = drive.sync_count % kind == 0
+            else:
+                due = payload != last
+            sent.append(payload if due else last)
+            if due:
+                frames.append((tpdo.cob_id, payload))
+        drive.last_tpdos = tuple(sent)
 
     def _check_following_error(self, drive: DriveRuntime, device: DriveObjects,
                                frames: list[tuple[int, bytes]]) -> None:
@@ -761,6 +811,9 @@ class SimulatedRigHardware(HandleHardware):
 
     def deactivate(self) -> None:
         self.driver.deactivate()
+
+    def summary(self) -> dict[str, Any]:
+        return self.driver.summary()
 
     def cleanup(self) -> None:
         try:

@@ -123,15 +123,15 @@ def test_a_drive_that_aborts_a_mapping_is_refused_reported_and_left_pre_operatio
 
 def test_an_eds_without_an_object_the_loop_needs_is_refused_before_the_bus(
         tmp_path: Path) -> None:
-    eds = packaged_eds_path().read_text().replace("[60C2]", "[60C9]").replace(
-        "[60C2sub", "[60C9sub")
-    path = tmp_path / "no60c2.eds"
+    eds = packaged_eds_path().read_text().replace("[6064]", "[6069]")
+    path = tmp_path / "no6064.eds"
     path.write_text(eds)
     config = _config(master__can__y_eds_file=str(path))
     settings = master_settings(config)
     driver = CanHandleDriver(settings.can, {"interface": "virtual", "channel": "unused"},
                              0.05, TS_S)
-    with pytest.raises(PlanError, match=r"y drive's EDS .* has no object 0x60C2:01"):
+    with pytest.raises(PlanError, match=r"y drive's EDS .* has no object 0x6064:00: the "
+                       r"cyclic synchronous position loop cannot run without it$"):
         driver.configure()
     assert driver.lifecycle_state is LifecycleState.UNCONFIGURED
 

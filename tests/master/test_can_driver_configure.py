@@ -636,7 +636,7 @@ def test_a_following_error_window_beyond_32_bits_is_written_as_the_largest() -> 
     for window_m, expected in ((1e4, 0xFFFFFFFF), (0.01, None)):
         driver = plans_of(**{"master.can.following_error_window_m": window_m})
         steps = {(step.variable.index, step.variable.subindex): step.value
-                 for step in driver._plans()[0][1]}
+                 for step in driver._plans()[0].steps}
         settings = driver.settings
         assert steps[(0x6065, 0)] == (expected if expected is not None else round(
             window_m / settings.metres_per_count))

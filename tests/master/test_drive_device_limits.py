@@ -250,12 +250,12 @@ def test_a_fresh_runtime_is_a_drive_at_power_on() -> None:
         "mode": 0, "controlword": 0, "received_controlword": None, "received_target": None,
         "target_counts": 0, "position_counts": 0, "pending_fault_code": 0,
         "persistent_fault_code": 0, "error_code": 0, "drop_tpdo": 0, "syncs_without_rpdo": 0,
-        "following_error_syncs": 0, "status_extra": 0, "last_tpdo": b"", "sync_count": 0}
+        "following_error_syncs": 0, "status_extra": 0, "last_tpdos": (), "sync_count": 0}
 
 
 def test_a_runtime_copy_is_equal_and_independent() -> None:
     """DriveRuntime.copy: the same fields, and changing the copy leaves the original."""
-    runtime = DriveRuntime(4, mode=8, target_counts=17, last_tpdo=b"\x01")
+    runtime = DriveRuntime(4, mode=8, target_counts=17, last_tpdos=(b"\x01",))
     clone = runtime.copy()
     assert clone == runtime and clone is not runtime and type(clone) is DriveRuntime
     clone.target_counts = 18

@@ -212,6 +212,9 @@ def test_two_processes_exchange_forces_and_positions(pair, tmp_path) -> None:
         assert summary["process_cpu_cores"] > 0.0 and summary["loop_thread_cpu_per_step_s"] > 0
     assert master_summary["rig_emulator_cpu_cores"] > 0.0
     assert "rig_emulator_cpu_cores" not in slave_summary
+    # the CAN driver's part: the packaged EDS calls for no fallback
+    assert master_summary["fallbacks"] == [] and "fallbacks" not in slave_summary
+    assert master_summary["can_drives"]["x"]["rpdo"] == "RPDO1 0x201"
 
 
 def test_killed_slave_trips_the_master_and_a_new_slave_resumes(pair, tmp_path) -> None:

@@ -409,7 +409,7 @@ def test_frames_held_until_the_sync_go_out_just_before_it_and_before_anything_la
 def test_a_prepared_answer_copies_the_drives() -> None:
     from haptic.master.hardware.drive_device import DriveRuntime
 
-    drive = DriveRuntime(3, target_counts=5, last_tpdo=b"\x01")
+    drive = DriveRuntime(3, target_counts=5, last_tpdos=(b"\x01",))
     clone = drive.copy()
     assert clone == drive and clone is not drive
     clone.target_counts = 9
