@@ -14,7 +14,12 @@ import zenoh
 from haptic.common.analysis.preflight import add_preflight_options, run_preflight
 from haptic.common.config import exit_on_config_error, load_config, override
 from haptic.common.config.scenario import load_scenario, max_block_damping
-from haptic.common.ros2.options import add_ros2_options, apply_ros2_options
+from haptic.common.ros2.options import (
+    add_ros2_options,
+    apply_ros2_options,
+    require_ros2_protection,
+)
+from haptic.common.ros2.settings import Ros2Settings
 from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
 from haptic.common.runtime.console import script_description
 from haptic.common.runtime.failures import exit_on_link_error
@@ -73,6 +78,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         scenario = load_scenario(options.config["slave"]["scenario"])
         phase_lock_from(options.config, options.config["model"]["sample_period_s"])
         InputGuardSettings.from_config(options.config)  # [slave.safety]'s cross-key checks
+        if getattr(args, "plant", "virtual") == "ros2":
+            require_ros2_protection(Ros2Settings.from_config(options.config).endpoint,
+                                    options.config["link"]["security"]["insecure"])
     # before Warp's, the recorder's and Zenoh's threads start: they inherit these CPUs
     placement = place_other_threads(options.runner)
     with exit_on_config_error():

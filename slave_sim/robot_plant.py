@@ -147,7 +147,7 @@ def plant_for(args: Any, config: Any, node: Any) -> Iterator[RobotPlant | None]:
         raise SystemExit(2)
     from haptic.common.ros2.publisher import open_client_session
 
-    settings = Ros2Settings.from_config(config)
+    settings = Ros2Settings.from_config(config)  # its protection was checked at start
     try:
         session = open_client_session(settings.endpoint)
     except Exception as error:  # noqa: BLE001 - one line, exit 4 (a link that cannot open)

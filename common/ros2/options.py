@@ -30,8 +30,28 @@ def apply_ros2_options(config: dict[str, Any], args: argparse.Namespace) -> dict
     if getattr(args, "ros2_endpoint", None) is not None:
         config = override(config, "ros2.endpoint", args.ros2_endpoint)
     if config["ros2"]["enabled"]:
-        Ros2Settings.from_config(config)
+        settings = Ros2Settings.from_config(config)
+        insecure = bool(config["link"]["security"]["insecure"] or getattr(args, "insecure", None))
+        require_ros2_protection(settings.endpoint, insecure)
     return config
+
+
+#: What to do when the ROS 2 session would reach other hosts: rmw_zenoh's router has no
+#: session key of ours, so only the user's word lets it run.
+ROS2_WAYS_OUT = ("run rmw_zenohd on this host and join it on loopback (--ros2-endpoint "
+                 "tcp/localhost:7447), or say --insecure ([link.security] insecure = true)")
+
+
+def require_ros2_protection(endpoint: str, insecure: bool) -> None:
+    """Protected mode for the ROS 2 session: a router on another host is refused (a
+    ConfigError naming ``link.security``, before any session opens) unless ``insecure``:
+    whoever reaches that router can read the run and, with ``--plant ros2``, push the tool
+    with a forged force."""
+    from haptic.common.ros2.publisher import client_config
+    from haptic.common.wire.protected_mode import require_protection
+
+    require_protection(client_config(endpoint), session_key=False, insecure=insecure,
+                       ways_out=ROS2_WAYS_OUT)
 
 
 def start_ros2(config: Mapping[str, Any], side: str, period_s: float, *,

@@ -49,16 +49,25 @@ CLAY_MAX_CELLS = (128, 32)
 ClaySource = Callable[[], "np.ndarray | None"]
 
 
-def open_client_session(endpoint: str) -> Any:
-    """A Zenoh session in client mode to ``endpoint`` (no scouting); raises if the router
-    cannot be reached."""
+def client_config(endpoint: str) -> Any:
+    """The ``zenoh.Config`` of a client-mode session to ``endpoint``: no listener, no
+    scouting, so it reaches that router and nothing else."""
     import zenoh
 
     config = zenoh.Config()
     config.insert_json5("mode", '"client"')
     config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("listen/endpoints", "[]")
     config.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(config)
+    return config
+
+
+def open_client_session(endpoint: str) -> Any:
+    """A Zenoh session in client mode to ``endpoint`` (:func:`client_config`); raises if the
+    router cannot be reached."""
+    import zenoh
+
+    return zenoh.open(client_config(endpoint))
 
 
 class Ros2Publisher:
