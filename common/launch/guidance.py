@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib.metadata
 import math
 import os
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -82,17 +83,18 @@ def what_still_holds(slave: dict[str, Any], gap_target_m: float,
 def missed_guidance_lines(slave: dict[str, Any], gap_target_m: float,
                           trips_during_run: int) -> list[str]:
     """What a missed real-time verdict means, what still holds, and what to try."""
-    lines = [
-        "    what this means: some ticks ran late or were skipped on this host, so the loop's",
-        "    timing is not what a rig PC must give the operator; the session itself completed,",
-        "    and the physics runs on the sample clock, so its results do not depend on it.",
+    paragraphs = [
+        "what this means: some ticks ran late or were skipped on this host, so the loops' "
+        "timing is not what a rig PC must give the operator; the session itself completed, "
+        "and the physics runs on the sample clock, so its results do not depend on it.",
     ]
     held = what_still_holds(slave, gap_target_m, trips_during_run)
     if held:
-        lines.append("    still holds: " + "; ".join(held) + ".")
-    lines += [
-        "    to try: a quieter host (no other busy process),",
-        "    `--rig model` (the rig's model in the master's process, without the emulated",
-        "    drives' process), or a rig PC with isolated CPUs and SCHED_FIFO (deploy/README.md).",
-    ]
-    return lines
+        paragraphs.append("still holds: " + "; ".join(held) + ".")
+    paragraphs.append(
+        "to try: a quieter host (no other busy process), `--rig model` (the rig's model in "
+        "the master's process, without the emulated drives' process), or a rig PC with "
+        "isolated CPUs and SCHED_FIFO (deploy/README.md).")
+    return [line for text in paragraphs
+            for line in textwrap.wrap(text, width=96, initial_indent="    ",
+                                      subsequent_indent="      ")]
