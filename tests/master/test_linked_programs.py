@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 import re
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -20,15 +19,10 @@ import numpy as np
 import pytest
 
 from haptic.common.runtime.summary import REQUIRED_SUMMARY_KEYS
+from haptic.common.wire.ports import free_port as _free_port
 
 #: One-way cap on waiting for anything a child does, s.
 WAIT_S = 40.0
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _linear_config(tmp_path: Path) -> Path:
