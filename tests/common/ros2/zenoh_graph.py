@@ -5,7 +5,6 @@ subscriber over rmw_zenoh would see them."""
 from __future__ import annotations
 
 import json
-import socket
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -15,11 +14,9 @@ from typing import Any
 
 import zenoh
 
+from haptic.common.wire.ports import free_port
 
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
+__all__ = ["free_port", "ros2_listener", "zenoh_router"]
 
 
 def _config(mode: str, endpoint: str) -> zenoh.Config:
