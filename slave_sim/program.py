@@ -373,6 +373,8 @@ def _run_slave(node: SlaveNode, options: Any, args: argparse.Namespace,
         if ros2 is not None:  # the tokens withdrawn, the session closed
             ros2.stop()
             extra_summary.update(ros2.figures)
+        if node.environment_kind == "ros2":  # the robot plant's counters
+            extra_summary.update(node.environment.figures)
         guard_summary = {**guard.summary(), **inert.summary(run.elapsed_s)}
     final = state.tool_position_m()[0]
     # yt - Ah1 yh at the last tick the tool ran: once the master stops (its last message

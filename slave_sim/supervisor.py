@@ -58,6 +58,7 @@ class SlaveSupervisor(SupervisionCore):
         #: only once in sync (it moves through the clay at a bounded speed)
         self.rejoining = False
         self.input_fault = False
+        self.plant_fault = False
         #: the message :meth:`receive` took is the master's last (``Flags.STOPPING``)
         self.peer_stopping = False
         self.grid_m = None if grid_m is None else tuple(float(v) for v in grid_m)
@@ -88,7 +89,7 @@ class SlaveSupervisor(SupervisionCore):
         quiet lanes, slave_sim/quiet_kernel.py), :meth:`receive` only stores the handle's
         position and :meth:`update` changes nothing and returns ``NONE``."""
         return (self.running and self.master_enabled and not self.outside
-                and not self.rejoining and not self.input_fault
+                and not self.rejoining and not self.input_fault and not self.plant_fault
                 and self.watchdog.state is WatchdogState.OK)
 
     def in_sync(self, tool_x_m: float, tool_y_m: float) -> bool:
@@ -98,10 +99,15 @@ class SlaveSupervisor(SupervisionCore):
 
     def update(self, now_s: float, fresh: bool, tool_position_m: tuple[float, float],
                silence_s: float = 0.0, peer_alive: bool = True,
-               input_fault: bool = False) -> Transition:
+               input_fault: bool = False, plant_fault: bool = False) -> Transition:
         """One tick, after :meth:`receive` (and the resync it asked for); returns what
-        changed (see :class:`Transition`). ``input_fault``: the input guard holds a fault."""
+        changed (see :class:`Transition`). ``input_fault``: the input guard holds a fault;
+        ``plant_fault``: the tool's plant lost its own supervision (a robot over ROS 2 whose
+        force stopped coming): the tool stops like on an input fault, so its forces go off
+        and the master holds the handle."""
         self.input_fault = input_fault
+        self.plant_fault = plant_fault
+        input_fault = input_fault or plant_fault
         tool_x_m, tool_y_m = tool_position_m
         synced = self.in_sync(tool_x_m, tool_y_m)
         stopping = self.peer_stopping
@@ -148,6 +154,7 @@ class SlaveSupervisor(SupervisionCore):
             transition = Transition.STOP
             if not (self.outside or self.rejoining):
                 reason = (self.watchdog.state_text() if not watchdog_ok
+                          else "the robot plant's watchdog tripped" if plant_fault
                           else "input fault" if input_fault
                           else "the master is in its safe state")
                 self.events.append({"time_s": now_s, "kind": "tool_stopped",
@@ -161,6 +168,8 @@ class SlaveSupervisor(SupervisionCore):
             return "the tool is stopped by the work-area guard"
         if self.rejoining:
             return "the tool rejoins the handle after a work-area stop"
+        if self.plant_fault:
+            return "the robot plant's watchdog tripped"
         if self.input_fault:
             return "input fault"
         state = self.watchdog.state

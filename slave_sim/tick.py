@@ -245,11 +245,13 @@ class SlaveTick:
         fresh_list = fresh.tolist()
         running, ready, outside = self.running, self._ready, self._outside
         resume, stop = [], []
+        # a plant with a watchdog of its own (slave_sim/robot_plant.py) reports its trip
+        plant_fault = bool(getattr(self.node.environment, "tripped", False))
         for lane, supervisor in enumerate(supervisors):
             transition = supervisor.update(now_s, fresh_list[lane], tool[lane],
                                            0.0 if silence_s is None else silence_s[lane],
                                            True if peer_alive is None else peer_alive[lane],
-                                           guards[lane].faulted)
+                                           guards[lane].faulted, plant_fault)
             running[lane] = supervisor.running
             ready[lane] = supervisor.ready
             outside[lane] = supervisor.outside

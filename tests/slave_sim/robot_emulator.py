@@ -47,7 +47,9 @@ class EmulatedRobot:
 
     def __init__(self, endpoint: str, clay: Any, start_m: tuple[float, float], period_s: float,
                  namespace: str = "haptic", domain: int = 0, mass_kg: float = 2.0,
-                 servo_N_s_per_m: float = 20000.0) -> None:
+                 servo_N_s_per_m: float = 20000.0, silent_after: int | None = None) -> None:
+        """``silent_after``: stop publishing the force after that many commands (a robot
+        whose driver hangs), while still taking commands."""
         config = zenoh.Config()
         config.insert_json5("mode", '"client"')
         config.insert_json5("connect/endpoints", json.dumps([endpoint]))
@@ -71,6 +73,7 @@ class EmulatedRobot:
         self.gid = bytes(range(100, 116))
         self.sequence = 0
         self.commands = 0
+        self.silent_after = silent_after
         self.bad_attachments = 0
         self.lock = threading.Lock()
         self.closed = False
@@ -101,6 +104,8 @@ class EmulatedRobot:
         result = self.clay.step(self.state, previous, self.position.copy(),
                                 self.velocity.copy())
         self.force = np.asarray(result.force_N[0], float)
+        if self.silent_after is not None and self.commands > self.silent_after:
+            return
         stamp = time.time_ns()
         self.sequence += 1
         self.publisher.put(

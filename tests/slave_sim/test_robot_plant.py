@@ -97,3 +97,29 @@ def test_the_robot_watchdog_holds_the_robot_when_its_force_stops(tmp_path: Path)
         finally:
             robot.close()
             session.close()
+
+
+@pytest.mark.slow
+def test_a_robot_that_stops_publishing_stops_the_tool_and_holds_the_handle(
+        tmp_path: Path) -> None:
+    """The robot's force stops coming mid-cut: the plant's watchdog trips, the slave's tool
+    stops (its forces off, a ``tool_stopped`` event naming the robot) and the master holds
+    its handle (``handle_held``): the safe state, as for any stop of the slave's tool."""
+    from haptic.slave_sim.clay.sim import make_clay
+
+    scenario = load_scenario("constant-rate")
+    period_s = load_config()["model"]["sample_period_s"]
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with zenoh_router(endpoint):
+        robot = EmulatedRobot(endpoint, make_clay(scenario, period_s, "warp", "cpu"),
+                              scenario.tool.start_position_m, period_s, silent_after=2000)
+        try:
+            slave = _session(tmp_path / "robot", "--ros2-endpoint", endpoint,
+                             "--slave-args", "--plant ros2")
+        finally:
+            robot.close()
+    master = json.loads((tmp_path / "robot" / "master.json").read_text())
+    assert slave["robot_watchdog_trips"] == 1 and slave["robot_forces_received"] >= 1000
+    stops = [e for e in slave["events"] if e["kind"] == "tool_stopped"]
+    assert any("robot plant's watchdog" in e["reason"] for e in stops), slave["events"]
+    assert any(e["kind"] == "handle_held" for e in master["events"]), master["events"]

@@ -254,3 +254,16 @@ def test_a_tick_without_a_message_is_no_goodbye() -> None:
     assert not supervisor.peer_stopping
     assert supervisor.update(0.01, False, (0.05, 0.0), silence_s=0.001) is Transition.NONE
     assert supervisor.running and supervisor.watchdog.peer_ends == 0
+
+
+def test_a_plant_fault_stops_the_tool_and_withdraws_its_forces() -> None:
+    """A robot plant whose own watchdog tripped: the tool stops, this side is not ready (its
+    messages lose FORCES_ENABLED, so the master holds its handle), and the reason says so."""
+    supervisor = make()
+    start(supervisor)
+    supervisor.receive(handle(0.05, seq=10))
+    assert supervisor.update(0.1, True, (0.05, 0.0), plant_fault=True) is Transition.STOP
+    assert not supervisor.running and not supervisor.ready and not supervisor.steady()
+    assert supervisor.events[-1]["reason"] == (
+        "the robot plant's watchdog tripped: the tool stops")
+    assert supervisor.stop_reason() == "the robot plant's watchdog tripped"
