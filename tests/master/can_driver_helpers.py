@@ -7,6 +7,7 @@ from __future__ import annotations
 import uuid
 
 import can
+import numpy as np
 
 from haptic.common.config import load_config, override
 from haptic.master.hardware import cia402
@@ -133,3 +134,18 @@ def plans_of(**overrides) -> CanHandleDriver:
                              {"interface": "virtual", "channel": "unused"}, 0.01, 0.00054)
     driver._plans()
     return driver
+
+
+def moves_towards_an_offset(hardware, cycles: int) -> None:
+    """Activate, ``cycles`` cycles commanding a small offset with every reading ok and the
+    drives moving the handle towards it, deactivate; no rig error, no late frame."""
+    hardware.activate()
+    start = hardware.read().position_m
+    for _ in range(cycles):
+        hardware.write(np.array([0.0005, -0.0005]))
+        reading = hardware.read()
+        assert reading.ok, reading.faults
+    moved = reading.position_m - start
+    assert moved[0] > 2e-5 and moved[1] < -2e-5, moved
+    hardware.deactivate()
+    assert hardware.rig.errors == [] and hardware.driver.late_frames == 0

@@ -16,7 +16,12 @@ import pytest
 from haptic.common.config import ConfigError, load_config, override
 from haptic.master.hardware.canopen_setup import PlanError
 from haptic.master.hardware.interface import HardwareError, LifecycleState
-from tests.master.can_driver_helpers import answering, inactive_rig, sdo_downloads
+from tests.master.can_driver_helpers import (
+    answering,
+    inactive_rig,
+    moves_towards_an_offset,
+    sdo_downloads,
+)
 from tests.master.eds_variants import (
     entry_set,
     packaged,
@@ -35,20 +40,6 @@ def _x_eds(tmp_path: Path, text: str, **overrides):
     path = written(tmp_path, "x.eds", text)
     return inactive_rig(**{"master.can.x_eds_file": str(path), **overrides})
 
-
-def _runs(hardware, cycles: int = 20) -> None:
-    """Activate, ``cycles`` cycles towards a small offset with every reading ok, the drives
-    moving the handle towards it, deactivate."""
-    hardware.activate()
-    start = hardware.read().position_m
-    for _ in range(cycles):
-        hardware.write(np.array([0.0005, -0.0005]))
-        reading = hardware.read()
-        assert reading.ok, reading.faults
-    moved = reading.position_m - start
-    assert moved[0] > 2e-5 and moved[1] < -2e-5, moved
-    hardware.deactivate()
-    assert hardware.rig.errors == [] and hardware.driver.late_frames == 0
 
 
 def _configured_with(tmp_path: Path, text: str, caplog, **overrides):
@@ -90,7 +81,7 @@ def test_a_drive_without_the_rpdo_deadline_runs_on_its_heartbeat_consumer(
         assert hardware.summary()["can_drives"]["x"]["watchdogs"] == ["heartbeat consumer (0x1016)"]
         assert hardware.rig.devices[0].rpdo_deadline_ms == 0
         assert hardware.rig.devices[1].rpdo_deadline_ms == 100
-        _runs(hardware)
+        moves_towards_an_offset(hardware, 20)
 
 
 @pytest.mark.parametrize(("index", "line"), [
@@ -111,7 +102,7 @@ def test_a_drive_without_an_optional_object_runs_with_its_fallback(
             assert device.interpolation_period_s == pytest.approx(0.00054)
         if index == 0x6065:
             assert device.following_error_window_counts == 0xFFFFFFFF  # CiA 402: off
-        _runs(hardware)
+        moves_towards_an_offset(hardware, 20)
 
 
 def test_a_read_only_interpolation_period_at_another_value_is_a_fallback(
@@ -215,7 +206,7 @@ def test_allow_no_drive_watchdog_accepts_it_with_the_fallback_named(
                                     "following its last target (allowed by [master.can] "
                                     "allow_no_drive_watchdog)")
         assert hardware.summary()["can_drives"]["x"]["watchdogs"] == []
-        _runs(hardware)
+        moves_towards_an_offset(hardware, 20)
 
 
 def test_allow_no_drive_watchdog_is_a_validated_key_off_by_default() -> None:

@@ -9,12 +9,16 @@ from __future__ import annotations
 from pathlib import Path
 
 import can
-import numpy as np
 import pytest
 
 from haptic.master.hardware.canopen_setup import PlanError
 from haptic.master.hardware.interface import HardwareError, LifecycleState
-from tests.master.can_driver_helpers import frames_heard, inactive_rig, sdo_downloads
+from tests.master.can_driver_helpers import (
+    frames_heard,
+    inactive_rig,
+    moves_towards_an_offset,
+    sdo_downloads,
+)
 from tests.master.eds_variants import packaged, pdo, without, written
 
 CONTROLWORD, TARGET = 0x60400010, 0x607A0020
@@ -33,19 +37,6 @@ def _replaced(*pdos: str, drop: tuple[int, ...] = (0x1400, 0x1600, 0x1800, 0x1A0
     """The packaged EDS with its PDO objects ``drop`` replaced by ``pdos``."""
     return without(packaged(), *drop) + "".join(pdos)
 
-
-def _moves(hardware, cycles: int = 60) -> None:
-    """Activate and command an offset: every reading ok, the handle moving towards it."""
-    hardware.activate()
-    start = hardware.read().position_m
-    for _ in range(cycles):
-        hardware.write(np.array([0.0005, -0.0005]))
-        reading = hardware.read()
-        assert reading.ok, reading.faults
-    moved = reading.position_m - start
-    assert moved[0] > 2e-5 and moved[1] < -2e-5, moved
-    hardware.deactivate()
-    assert hardware.rig.errors == [] and hardware.driver.late_frames == 0
 
 
 def test_static_pdo1_mappings_are_read_back_and_used(tmp_path: Path) -> None:
@@ -72,7 +63,7 @@ def test_static_pdo1_mappings_are_read_back_and_used(tmp_path: Path) -> None:
             drives["fallbacks"]
         frames = dict(hardware.driver.bus_load.frames)
         assert frames["TPDO1 x"] > frames["TPDO1 y"]  # 7 bytes against 6
-        _moves(hardware)
+        moves_towards_an_offset(hardware, 60)
 
 
 def test_a_static_mapping_in_another_pdo_and_order_is_used(tmp_path: Path) -> None:
@@ -95,7 +86,7 @@ def test_a_static_mapping_in_another_pdo_and_order_is_used(tmp_path: Path) -> No
         assert [p.cob_id for p in device.tpdos] == [0x381]
         assert hardware.driver._rpdo_frame(0, 0x0F, 7).data == bytes(
             [7, 0, 0, 0, 0x0F, 0])  # target first
-        _moves(hardware)
+        moves_towards_an_offset(hardware, 60)
 
 
 def test_a_drive_whose_static_mappings_cannot_carry_the_loop_is_refused(tmp_path: Path) -> None:
@@ -154,4 +145,5 @@ def test_other_pdos_the_eds_starts_enabled_are_disabled(tmp_path: Path) -> None:
             "x drive (node 1): TPDO2 (0x1801) stays on (read-only COB-ID): its frames are "
             "ignored"]
         assert [p.cob_id for p in hardware.rig.devices[0].tpdos] == [0x181, 0x281]
-        _moves(hardware)  # its statusword changes as the drive is enabled: TPDO2 frames
+        # its statusword changes as the drive is enabled: TPDO2 frames
+        moves_towards_an_offset(hardware, 60)
