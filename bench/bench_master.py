@@ -52,7 +52,7 @@ from haptic.master.node import MasterNode
 from haptic.master.program import device_process_cpu
 from haptic.master.runner import early_sync
 from haptic.master.settings import master_settings
-from haptic.master.sim.rig_model import RigModel
+from haptic.master.simulated_rig.rig_block import RigModel
 
 #: The simulated rigs: name -> (backend, configuration overrides).
 RIGS: dict[str, tuple[str, dict[str, object]]] = {

@@ -35,7 +35,7 @@ from haptic.common.runtime.warp_init import init_warp
 from haptic.common.wire.injection import InjectionConfig
 from haptic.lockstep.environments import ENVIRONMENTS
 from haptic.master.settings import master_settings
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 
 if TYPE_CHECKING:
     from haptic.lockstep.simulator import LockstepSimulator

@@ -36,7 +36,7 @@ from haptic.common.wire.link_config import LinkConfig
 from haptic.common.wire.ports import free_port as _free_port
 from haptic.lockstep.simulator import LockstepSimulator
 from haptic.lockstep.sweep import BAND, PULSE_FORCE_N, PULSE_SAMPLES, analytic_margin_s
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 
 #: Sleep until this long before a tick's deadline, then spin (docs/link.md's pacing).
 SPIN_S = 0.0003

@@ -28,7 +28,7 @@ from haptic.common.model.teleop import TeleopModel, model_from_config
 from haptic.common.records.cutting import cutting_steadiness
 from haptic.lockstep.simulator import TRANSPARENT_SAFETY, LockstepSimulator
 from haptic.lockstep.sweep import analytic_margin_s
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 
 GAINS = (3.0, 13.0, 19.0)
 #: Force above which the tool counts as in contact with the clay, N.

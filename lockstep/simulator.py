@@ -47,8 +47,8 @@ from haptic.lockstep.stacked import StackedLTI
 from haptic.master.margin_governor import MarginGovernor
 from haptic.master.node import MasterNode, master_compensator
 from haptic.master.settings import SafetySettings, with_work_area
-from haptic.master.sim.operator import OperatorModel
-from haptic.master.sim.rig_model import RigModel
+from haptic.master.simulated_rig.operator import OperatorModel
+from haptic.master.simulated_rig.rig_block import RigModel
 from haptic.master.supervisor import MasterSupervisor
 from haptic.master.tick import MasterTick, ToolColumns
 from haptic.slave_sim.clay.sim import ClayStepResult

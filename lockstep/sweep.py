@@ -42,7 +42,7 @@ from haptic.lockstep.simulator import (
     line_schedules,
 )
 from haptic.lockstep.verdict import GROWTH_THRESHOLD, growth_verdict
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 from haptic.slave_sim.clay.sim import device_problem as clay_device_problem
 from haptic.slave_sim.clay.sim import resolve_device
 

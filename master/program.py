@@ -158,7 +158,8 @@ def device_process_cpu(start_s: float | None, end_s: float | None,
 
 def emulator_placement(hardware: Any) -> dict[str, Any]:
     """The summary's ``rig_emulator_cpus`` (the CPUs the emulated drives' process was put on:
-    the loop's, master/sim/rig_emulator.py; None: anywhere) and its warning where the placement
+    the loop's, master/simulated_rig/rig_emulator.py; None: anywhere) and its warning where the
+    placement
     was refused (also printed); nothing for hardware without an emulator process."""
     if not hasattr(hardware, "emulator_cpus"):
         return {}

@@ -11,7 +11,7 @@ import numpy as np
 
 from haptic.common.config import ConfigError
 from haptic.common.model.work_area import SharedWorkArea
-from haptic.master.sim.operator import OperatorModel, parse_operator_spec
+from haptic.master.simulated_rig.operator import OperatorModel, parse_operator_spec
 
 
 @dataclass(frozen=True)

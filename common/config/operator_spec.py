@@ -1,5 +1,5 @@
 """The operator spec string ``kind:key=value,...`` of the simulated rig's operator models
-(haptic.master.sim.operator): its grammar, defaults and checks, as plain data, so the
+(haptic.master.simulated_rig.operator): its grammar, defaults and checks, as plain data, so the
 configuration can validate ``[master.sim] operator`` and the ``[lockstep]`` operators
 without importing the master package."""
 
@@ -9,7 +9,7 @@ import math
 
 from haptic.common.model.errors import ConfigError
 
-#: The operator kinds (haptic.master.sim.operator documents each).
+#: The operator kinds (haptic.master.simulated_rig.operator documents each).
 OPERATOR_KINDS = ("constant", "regulate", "track")
 
 _DEFAULTS: dict[str, dict[str, float | str]] = {

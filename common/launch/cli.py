@@ -80,7 +80,8 @@ SPLIT_SLAVE_PRIORITY = 40
 def session_cpu_args(layout: str, cpus: Sequence[int]) -> tuple[list[str], list[str]]:
     """The master's and the slave's run options of a CPU layout on ``cpus`` (the CPUs this
     process may use). ``split`` on two CPUs or more: the master's loop on the last CPU, where
-    its emulated drives follow it (master/sim/rig_emulator.py: they answer the SYNC while its
+    its emulated drives follow it (master/simulated_rig/rig_emulator.py: they answer the SYNC while
+    its
     loop sleeps); the slave's loop under SCHED_FIFO on the first; every other thread of both
     programs on the CPUs but the master's (the first alone on two). On a 2-core Intel Xeon
     guest the README session then met its loop targets in 3 of 6 runs, the slave in all 6,

@@ -19,7 +19,8 @@ guarding, no window, 0x60C2 = the rig's SYNC period, 0x1005 = 0x80, 0x6007 = 1 f
 as a device's firmware would give it one.
 
 The drive's motion state (CiA 402 state, targets, the model's position) lives in
-:class:`DriveRuntime`, which the rig (:mod:`haptic.master.sim.sim_rig`) copies and steps once per
+:class:`DriveRuntime`, which the rig (:mod:`haptic.master.simulated_rig.can_devices`) copies and
+steps once per
 SYNC; the dictionary reads the dynamic objects (statusword, position actual value, mode
 display, error code) from it through a read callback.
 """

@@ -164,9 +164,9 @@ HardwareFactory = Callable[[dict[str, Any]], HandleHardware]
 #: (the CAN stack) load only when that backend is chosen.
 BACKENDS: dict[str, str] = {
     "can": "haptic.master.hardware.can_driver:can_hardware",
-    "model": "haptic.master.sim.model_rig:model_rig_hardware",
-    "sim": "haptic.master.sim.rig_emulator:emulated_rig_hardware",
-    "sim-inproc": "haptic.master.sim.sim_rig:simulated_rig_hardware",
+    "model": "haptic.master.simulated_rig.model_backend:model_rig_hardware",
+    "sim": "haptic.master.simulated_rig.rig_emulator:emulated_rig_hardware",
+    "sim-inproc": "haptic.master.simulated_rig.can_devices:simulated_rig_hardware",
 }
 
 

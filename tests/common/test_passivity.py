@@ -206,7 +206,7 @@ def test_both_sides_close_a_gap_the_controllers_left_in_lockstep() -> None:
     from haptic.common.model.teleop import model_from_config
     from haptic.lockstep.simulator import LockstepSimulator
     from haptic.lockstep.sweep import SweepSettings, sweep_injection
-    from haptic.master.sim.operator import parse_operator_spec
+    from haptic.master.simulated_rig.operator import parse_operator_spec
 
     model = model_from_config(load_config(None))
     delay = int(round(0.2 / model.sample_period_s))
@@ -234,7 +234,7 @@ def test_two_port_passivity_in_a_delayed_lockstep_run() -> None:
     from haptic.common.config.scenario import load_scenario
     from haptic.common.model.teleop import model_from_config
     from haptic.lockstep.simulator import LockstepSimulator
-    from haptic.master.sim.operator import parse_operator_spec
+    from haptic.master.simulated_rig.operator import parse_operator_spec
 
     model = model_from_config(load_config(None))
     delay = int(round(0.1 / model.sample_period_s))

@@ -28,7 +28,7 @@ SHELL_LABELS = frozenset({"sh", "bash", "console", "shell"})
 PARSER_BUILDERS = {
     "haptic-analyze": "haptic.common.analysis.cli",
     "haptic-master": "haptic.master.cli",
-    "haptic-rig-sim": "haptic.master.sim.cli",
+    "haptic-rig-sim": "haptic.master.simulated_rig.cli",
     "haptic-sim": "haptic.lockstep.cli",
     "haptic-slave": "haptic.slave_sim.cli",
     "haptic-session": "haptic.common.launch.cli",

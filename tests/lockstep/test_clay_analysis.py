@@ -22,7 +22,7 @@ from haptic.lockstep.sweep import (
     sweep_model,
 )
 from haptic.lockstep.verdict import growth_verdict
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 
 
 def test_clay_impedance_is_b_s_at_low_frequency_and_softer_above() -> None:

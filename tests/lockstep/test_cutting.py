@@ -9,7 +9,7 @@ import pytest
 from haptic.common.config.scenario import load_scenario
 from haptic.common.records.cutting import cutting_steadiness, steady_cut_fields
 from haptic.lockstep.simulator import TRANSPARENT_SAFETY, LockstepSimulator
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 from haptic.slave_sim.clay.sim import make_clay
 
 

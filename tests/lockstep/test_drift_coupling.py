@@ -16,7 +16,7 @@ from haptic.common.model.drift import DriftCoupling
 from haptic.common.model.teleop import model_from_config
 from haptic.lockstep.simulator import LockstepSimulator
 from haptic.lockstep.verdict import growth_verdict
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 from haptic.slave_sim.node import SlaveNode
 
 STRONG = (10000.0, 50.0)  # kp N/m, wc rad/s: strong enough to move the margin by samples

@@ -13,7 +13,7 @@ import pytest
 from haptic.common.config.scenario import load_scenario
 from haptic.lockstep.simulator import LockstepSimulator, LockstepSupervision
 from haptic.master.settings import master_settings
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 from haptic.slave_sim.node import SlaveNode
 
 

@@ -15,7 +15,7 @@ from haptic.common.wire.injection import InjectionConfig
 from haptic.lockstep.simulator import LockstepSimulator
 from haptic.lockstep.verdict import growth_verdict
 from haptic.master.margin_governor import GovernorSettings, MarginGovernor
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 
 DURATION_S = 6.0
 STEP_AT_S = 3.0

@@ -12,8 +12,8 @@ from haptic.common.wire.messages import Flags, HandleState, ToolState
 from haptic.lockstep.simulator import LockstepSimulator, LockstepSupervision
 from haptic.master.node import MasterNode
 from haptic.master.settings import master_settings
-from haptic.master.sim.operator import parse_operator_spec
-from haptic.master.sim.rig_model import RigModel
+from haptic.master.simulated_rig.operator import parse_operator_spec
+from haptic.master.simulated_rig.rig_block import RigModel
 from haptic.master.supervisor import MasterSupervisor
 from haptic.master.tick import MasterTick
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings

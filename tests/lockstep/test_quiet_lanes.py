@@ -27,7 +27,7 @@ from haptic.lockstep.simulator import (
 )
 from haptic.master.margin_governor import GovernorSettings, MarginGovernor
 from haptic.master.settings import master_settings
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 from haptic.master.tick import MasterTick
 from haptic.slave_sim.input_guard import InputGuardSettings
 from haptic.slave_sim.tick import SlaveTick

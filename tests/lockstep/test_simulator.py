@@ -10,7 +10,7 @@ from haptic.common.config.scenario import load_scenario
 from haptic.common.model.synthesis import synthesize_axis
 from haptic.common.wire.injection import InjectionConfig
 from haptic.lockstep.simulator import LockstepSimulator
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 
 
 def _linear(model, gains):

@@ -29,7 +29,7 @@ from haptic.lockstep.sweep import (
     run_sweep,
     write_csv,
 )
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ from haptic.common.config.scenario import load_scenario
 from haptic.common.model.passivity import PassivitySettings
 from haptic.common.model.teleop import model_from_config
 from haptic.lockstep.simulator import TRANSPARENT_SAFETY, LockstepSimulator
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 
 PAPER_FORCE_N = 3.6
 PAPER_SPEED_M_S = 0.038

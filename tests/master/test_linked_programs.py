@@ -137,7 +137,7 @@ def _tolerate_a_loaded_machine(pair: Pair) -> None:
     the loops for 30-150 ms), where a test is not about them: watchdogs of 0.1 s on both
     sides, and heartbeat consumers of 5 s on the emulated drives (a stalled master faulted
     them after the shipped 0.3 s, a latched safe state), as other tests on them do
-    (test_sim_rig.py). The master's wait for the emulated devices' PDOs is the simulated
+    (test_can_devices.py). The master's wait for the emulated devices' PDOs is the simulated
     rig's own generous ``[master.sim] pdo_timeout_s`` (0.5 s)."""
     pair.config.write_text(pair.config.read_text() + "[link.watchdog]\nmax_message_age_s = 0.1\n"
                            "[master.can]\nheartbeat_timeout_s = 5.0\n")

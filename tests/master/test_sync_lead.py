@@ -14,9 +14,9 @@ import pytest
 from haptic.common.config import ConfigError, load_config, override
 from haptic.common.runtime.runner import RealTimeRunner
 from haptic.master.hardware.interface import create_hardware, starts_cycles_early
-from haptic.master.sim.model_rig import ModelRigHardware
-from haptic.master.sim.rig_emulator import EmulatedRigHardware
-from haptic.master.sim.sim_rig import SimulatedRigHardware
+from haptic.master.simulated_rig.can_devices import SimulatedRigHardware
+from haptic.master.simulated_rig.model_backend import ModelRigHardware
+from haptic.master.simulated_rig.rig_emulator import EmulatedRigHardware
 from tests.common.test_runner import FakeClock
 
 PERIOD_NS = 540_000

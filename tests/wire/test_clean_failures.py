@@ -31,7 +31,7 @@ def _program_mains():
     from haptic.common.analysis import cli as analyze_cli
     from haptic.lockstep import cli as lockstep_cli
     from haptic.master import cli as master_cli
-    from haptic.master.sim import cli as rig_sim_cli
+    from haptic.master.simulated_rig import cli as rig_sim_cli
     from haptic.slave_sim import cli as slave_cli
     from haptic.slave_sim.scenario import cli as run_scenario
     from haptic.view import cli as view_cli

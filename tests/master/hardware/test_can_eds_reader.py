@@ -15,8 +15,8 @@ from haptic.master.hardware.canopen_setup import PlanError
 from haptic.master.hardware.drive_device import DriveObjects, DriveRuntime
 from haptic.master.hardware.eds_reader import file_value, node_formula, read_dictionary
 from haptic.master.hardware.interface import HardwareError
-from tests.master.can_driver_helpers import inactive_rig, plans_of
-from tests.master.eds_variants import entry_set, packaged, written
+from tests.master.hardware.can_driver_helpers import inactive_rig, plans_of
+from tests.master.hardware.eds_variants import entry_set, packaged, written
 
 CORPUS = Path(__file__).parent / "eds_corpus"
 

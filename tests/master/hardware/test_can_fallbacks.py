@@ -16,13 +16,13 @@ import pytest
 from haptic.common.config import ConfigError, load_config, override
 from haptic.master.hardware.canopen_setup import PlanError
 from haptic.master.hardware.interface import HardwareError, LifecycleState
-from tests.master.can_driver_helpers import (
+from tests.master.hardware.can_driver_helpers import (
     answering,
     inactive_rig,
     moves_towards_an_offset,
     sdo_downloads,
 )
-from tests.master.eds_variants import (
+from tests.master.hardware.eds_variants import (
     entry_set,
     packaged,
     variable,

@@ -1,5 +1,6 @@
 """The CAN driver against drives built from EDS and DCF files nobody in this project wrote
-(tests/master/eds_corpus/, SOURCES.md says where each comes from): both drives emulated from
+(tests/master/hardware/eds_corpus/, SOURCES.md says where each comes from): both drives emulated
+from
 the file (canopen's ``LocalNode`` with its object dictionary, master/hardware/drive_device.py),
 then configure, activate, 200 cycles and deactivate with the fallbacks the file calls for,
 or a refusal in one line that names why. docs/master.md has the table these tests pin."""
@@ -15,7 +16,7 @@ import pytest
 
 from haptic.master.hardware.cia402 import DriveState
 from haptic.master.hardware.interface import HardwareError, LifecycleState
-from tests.master.can_driver_helpers import inactive_rig
+from tests.master.hardware.can_driver_helpers import inactive_rig
 
 CORPUS = Path(__file__).parent / "eds_corpus"
 DOCS = Path(__file__).parents[2] / "docs" / "master.md"

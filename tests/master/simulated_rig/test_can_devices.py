@@ -24,8 +24,12 @@ from haptic.master.hardware.interface import (
 from haptic.master.node import MasterNode
 from haptic.master.runner import run_master
 from haptic.master.settings import master_settings
-from haptic.master.sim.rig_model import RigModel
-from haptic.master.sim.sim_rig import NMT_OPERATIONAL_STATE, SimulatedCanRig, SimulatedRigHardware
+from haptic.master.simulated_rig.can_devices import (
+    NMT_OPERATIONAL_STATE,
+    SimulatedCanRig,
+    SimulatedRigHardware,
+)
+from haptic.master.simulated_rig.rig_block import RigModel
 
 
 def _config(operator: str = "constant:fx=0,fy=0", **overrides):
@@ -251,7 +255,7 @@ def test_the_handle_moves_as_ch1_predicts_for_a_constant_operator_force() -> Non
        inertial force 0.25 yh'' right after each SYNC, where the acceleration jumps with the
        new command (Gh has relative degree 2), and Ch1's integrator sums that bias. It is
        1.6 % of the travel at Ts = 0.54 ms and shrinks in proportion to Ts
-       (test_rig_model checks the convergence); we allow 3 %.
+       (test_rig_block checks the convergence); we allow 3 %.
     """
     config = _config("constant:fx=0.6,fy=-0.4,onset=0.25,rise=0.05")
     model = model_from_config(config)

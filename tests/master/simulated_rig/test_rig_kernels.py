@@ -1,7 +1,8 @@
 """The rig's and the operator's Warp kernels against an independent numpy oracle.
 
 The oracle below is the rig block and the three operator models written with numpy array
-calls, as :mod:`haptic.master.sim.rig_model` and :mod:`haptic.master.sim.operator` document them
+calls, as :mod:`haptic.master.simulated_rig.rig_block` and
+:mod:`haptic.master.simulated_rig.operator` document them
 (the implementation the kernels replaced). Random targets (some non-finite), tool forces (some
 NaN or infinite) and every operator kind must give the same samples and states.
 """
@@ -15,8 +16,8 @@ import pytest
 
 from haptic.common.config import load_config
 from haptic.common.model.teleop import model_from_config
-from haptic.master.sim.operator import OperatorModel, parse_operator_spec
-from haptic.master.sim.rig_model import RigModel
+from haptic.master.simulated_rig.operator import OperatorModel, parse_operator_spec
+from haptic.master.simulated_rig.rig_block import RigModel
 
 
 class ReferenceOperator:

@@ -7,7 +7,7 @@ import pytest
 
 from haptic.common.config import ConfigError
 from haptic.common.config.operator_spec import check_operator_spec
-from haptic.master.sim.operator import parse_operator_spec
+from haptic.master.simulated_rig.operator import parse_operator_spec
 
 TS = 0.00054
 

@@ -3,7 +3,7 @@
 Per axis the handle actuator Gh (eqs 31, 32: position command m -> handle position m, the
 servo and the operator's grasp inside) is discretised by zero-order hold at Ts in a state
 space that also gives the handle's velocity and acceleration. The operator model
-(:mod:`haptic.master.sim.operator`) supplies the intent force ``uh``; the force the sensor
+(:mod:`haptic.master.simulated_rig.operator`) supplies the intent force ``uh``; the force the sensor
 measures is (eq 33 with the paper's sign convention)::
 
     fh = uh - Th (yh - y_grasp),   Th = m s^2 + b s + k  (N/m)
@@ -21,7 +21,8 @@ algebraic loop.
 
 The block holds only matrices; :class:`RigState` (owned by the caller) holds the state of
 every lane, so a lockstep simulator can step many lanes at once, without CAN. The step runs
-as one Warp kernel over the lanes (:mod:`haptic.master.sim.rig_kernels`), with the operator
+as one Warp kernel over the lanes (:mod:`haptic.master.simulated_rig.rig_kernels`), with the
+operator
 model's law inside it.
 """
 
@@ -37,7 +38,7 @@ import scipy.linalg
 
 from haptic.common.model.teleop import TeleopModel
 from haptic.common.runtime.replayed_launch import ReplayedLaunch
-from haptic.master.sim.operator import OperatorModel, OperatorState
+from haptic.master.simulated_rig.operator import OperatorModel, OperatorState
 
 AXES = ("x", "y")
 
@@ -60,7 +61,7 @@ class RigState:
     where the operator's arm is at rest; ``operator``: the operator model's state; ``rng``:
     the seeded generator for sensor noise. The step's inputs: ``target_m`` (lanes, 2), m
     (NaN: keep the applied command) and ``tool_force_N`` (lanes, 2), N; ``sample`` (lanes, 12)
-    the last step's outputs (:data:`~haptic.master.sim.rig_kernels.SAMPLE_PAIRS`).
+    the last step's outputs (:data:`~haptic.master.simulated_rig.rig_kernels.SAMPLE_PAIRS`).
     """
 
     plant: np.ndarray
@@ -164,7 +165,7 @@ class RigModel:
         self.operator_impedance = impedance
         self._constants: tuple | None = None
         # Load (or compile, about 2 s the first time) the kernels now, never inside a tick.
-        from haptic.master.sim import rig_kernels
+        from haptic.master.simulated_rig import rig_kernels
 
         _warp().load_module(rig_kernels, device="cpu")
         _warp().load_module(rig_kernels.rig_step_kernel(self.n_states).module, device="cpu")
@@ -224,7 +225,7 @@ class RigModel:
     def initial_state(self, position_m: np.ndarray, rng: np.random.Generator) -> RigState:
         """Every lane at rest at ``position_m`` (lanes, 2), holding that position, the
         operator grasping the handle there."""
-        from haptic.master.sim import rig_kernels
+        from haptic.master.simulated_rig import rig_kernels
 
         wp = _warp()
         position = np.atleast_2d(np.asarray(position_m, float))
@@ -270,7 +271,7 @@ class RigModel:
     def step_inputs(self, state: RigState) -> np.ndarray:
         """One SYNC on the inputs already in ``state.target_m`` and ``state.tool_force_N``;
         returns ``state.sample`` (lanes, 12), a view the next step overwrites (columns in
-        :data:`~haptic.master.sim.rig_kernels.SAMPLE_PAIRS` order)."""
+        :data:`~haptic.master.simulated_rig.rig_kernels.SAMPLE_PAIRS` order)."""
         if self.force_noise_std_N > 0.0:
             state.noise_N[...] = self.force_noise_std_N * state.rng.standard_normal(
                 state.noise_N.shape)

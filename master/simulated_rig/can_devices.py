@@ -1,6 +1,7 @@
 """The simulated rig: two CiA 402 drives and the force sensor as CAN frame logic.
 
-:class:`SimulatedCanRig` runs the pure :class:`~haptic.master.sim.rig_model.RigModel` and speaks
+:class:`SimulatedCanRig` runs the pure :class:`~haptic.master.simulated_rig.rig_block.RigModel` and
+speaks
 the real frames (NMT, SDO, RPDO1/TPDO1, SYNC, EMCY, heartbeat, the sensor's DBC frame), so the
 CAN driver (:class:`~haptic.master.hardware.can_driver.CanHandleDriver`) runs unchanged against it.
 Each drive is a conformant CiA 301/402 device (:mod:`haptic.master.hardware.drive_device`: canopen's
@@ -15,7 +16,8 @@ SYNC.
 
 The frame logic does not care who feeds it frames. :meth:`SimulatedCanRig.start` serves
 python-can's ``virtual`` bus from a background thread of this process (backend
-``sim-inproc``: the tests that inject faults use it); :mod:`haptic.master.sim.rig_emulator`
+``sim-inproc``: the tests that inject faults use it);
+:mod:`haptic.master.simulated_rig.rig_emulator`
 serves a bus that crosses processes from its own process, ``haptic-rig-sim`` (backend
 ``sim``, as a real rig's drives are separate devices). Both call :meth:`SimulatedCanRig.serve`.
 
@@ -78,7 +80,7 @@ from haptic.master.hardware.unix_can import (
     wire_flags,
 )
 from haptic.master.settings import CanSettings, master_settings
-from haptic.master.sim.rig_model import RigModel, RigSample, RigState
+from haptic.master.simulated_rig.rig_block import RigModel, RigSample, RigState
 
 #: COB-ID of the emulator-only operator display frame: the tool force (N) the master reflects,
 #: for the simulated operator. A 29-bit (extended) identifier, outside CANopen's 11-bit

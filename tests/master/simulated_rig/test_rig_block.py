@@ -9,8 +9,8 @@ import pytest
 from haptic.common.config import load_config
 from haptic.common.model.lti import discretize
 from haptic.common.model.teleop import model_from_config
-from haptic.master.sim.operator import parse_operator_spec
-from haptic.master.sim.rig_model import RigModel
+from haptic.master.simulated_rig.operator import parse_operator_spec
+from haptic.master.simulated_rig.rig_block import RigModel
 
 
 @pytest.fixture(scope="module")

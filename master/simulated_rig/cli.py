@@ -34,7 +34,8 @@ from haptic.common.config.runner_schema import MAX_FIFO_PRIORITY
 from haptic.common.runtime.console import script_description
 from haptic.common.runtime.warp_init import init_warp
 from haptic.master.settings import emulator_settings
-from haptic.master.sim.rig_emulator import (
+from haptic.master.simulated_rig.can_devices import SimulatedCanRig
+from haptic.master.simulated_rig.rig_emulator import (
     DEFAULT_CHANNELS,
     DEFAULT_UDP_PORT,
     StopRequest,
@@ -42,7 +43,6 @@ from haptic.master.sim.rig_emulator import (
     use_batch_scheduling,
     use_fifo_scheduling,
 )
-from haptic.master.sim.sim_rig import SimulatedCanRig
 
 # flag dest -> (flag, key)
 _FLAGS = {

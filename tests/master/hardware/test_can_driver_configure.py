@@ -22,8 +22,8 @@ from haptic.master.hardware.cia402 import DriveState
 from haptic.master.hardware.drive_device import packaged_eds_path
 from haptic.master.hardware.interface import HardwareError, LifecycleState, create_hardware
 from haptic.master.settings import master_settings
-from haptic.master.sim.sim_rig import NMT_PRE_OPERATIONAL_STATE, SimulatedRigHardware
-from tests.master.can_driver_helpers import (
+from haptic.master.simulated_rig.can_devices import NMT_PRE_OPERATIONAL_STATE, SimulatedRigHardware
+from tests.master.hardware.can_driver_helpers import (
     HEARTBEAT_BASE,
     active_rig,
     answering,

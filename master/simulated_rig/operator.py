@@ -2,7 +2,8 @@
 produces, per axis (x, y), vectorised over lanes.
 
 The force the handle's sensor measures is ``fh = uh - Th yh`` (the arm impedance Th acts on
-the handle's motion, see :mod:`haptic.master.sim.rig_model`); these models give ``uh`` only.
+the handle's motion, see :mod:`haptic.master.simulated_rig.rig_block`); these models give ``uh``
+only.
 Three scripted intents, chosen by a spec string ``kind:key=value,...``:
 
 - ``constant:fx=3,fy=0,onset=0.05,rise=0.02`` - a constant force (N) per axis, applied from
@@ -64,7 +65,8 @@ def _warp() -> Any:
 @dataclass(frozen=True)
 class OperatorModel:
     """One scripted operator (see the module docstring for the kinds and parameters). Its
-    law runs in a Warp kernel (:func:`haptic.master.sim.rig_kernels.operator_intent`), alone
+    law runs in a Warp kernel (:func:`haptic.master.simulated_rig.rig_kernels.operator_intent`),
+    alone
     through :meth:`intent_force` or inside the rig's step."""
 
     kind: str
@@ -75,7 +77,7 @@ class OperatorModel:
 
     def kernel_params(self, period_s: float) -> Any:
         """The parameters as the kernel's struct, for the sample period ``period_s`` (s)."""
-        from haptic.master.sim import rig_kernels
+        from haptic.master.simulated_rig import rig_kernels
 
         params = rig_kernels.OperatorParams()
         params.kind = _KINDS[self.kind]
@@ -112,7 +114,7 @@ class OperatorModel:
         """The intent force uh (N), shape (lanes, 2), at the state's time; then advances the
         state by ``period_s``. ``handle_offset_m`` is the handle position relative to where
         the operator grasped it; ``tool_force_N`` is the tool force the operator feels."""
-        from haptic.master.sim import rig_kernels
+        from haptic.master.simulated_rig import rig_kernels
 
         wp = _warp()
         lanes = state.lanes

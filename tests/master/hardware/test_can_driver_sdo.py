@@ -15,7 +15,7 @@ from haptic.master.hardware.can_driver import CanHandleDriver, _abort_text
 from haptic.master.hardware.cia402 import DriveState
 from haptic.master.hardware.interface import HardwareError
 from haptic.master.settings import master_settings
-from tests.master.can_driver_helpers import (
+from tests.master.hardware.can_driver_helpers import (
     HEARTBEAT_BASE,
     bare_driver,
     inactive_rig,

@@ -2,8 +2,9 @@
 
 A real rig's drives and force sensor are separate devices on the CAN bus; so is their
 emulation. :func:`run_emulator` is the emulator process's serving loop (``haptic-rig-sim``,
-:mod:`haptic.master.sim.cli`): the frame logic of
-:class:`~haptic.master.sim.sim_rig.SimulatedCanRig` on a python-can bus that crosses processes,
+:mod:`haptic.master.simulated_rig.cli`): the frame logic of
+:class:`~haptic.master.simulated_rig.can_devices.SimulatedCanRig` on a python-can bus that crosses
+processes,
 blocking on the bus's receive (no spinning) and answering each SYNC with both TPDO1s and the
 sensor frame. :class:`EmulatedRigHardware` (backend ``sim``) is the unchanged
 :class:`~haptic.master.hardware.can_driver.CanHandleDriver` on that bus plus the emulator as a child
@@ -17,7 +18,8 @@ frame (docs/master.md has the figures).
 
 The simulated operator feels the tool force the master reflects: ``present_tool_force`` sends
 it to the emulator as the operator display frame
-(:data:`~haptic.master.sim.sim_rig.OPERATOR_DISPLAY_ID`, emulator-only) after the cycle's RPDOs,
+(:data:`~haptic.master.simulated_rig.can_devices.OPERATOR_DISPLAY_ID`, emulator-only) after the
+cycle's RPDOs,
 all of them in the next SYNC's datagram (one wake-up of the emulator a cycle); where the display
 frame comes before its SYNC, the emulator prepares its answer while it waits
 (``SimulatedCanRig.prepare_ahead``).
@@ -62,7 +64,7 @@ from haptic.master.hardware.interface import (
 )
 from haptic.master.hardware.unix_can import INTERFACE as UNIX_INTERFACE
 from haptic.master.settings import master_settings
-from haptic.master.sim.sim_rig import (
+from haptic.master.simulated_rig.can_devices import (
     OPERATOR_DISPLAY_ID,
     OPERATOR_READY_ID,
     SimulatedCanRig,
@@ -329,7 +331,7 @@ class EmulatedRigHardware(HandleHardware):
             config_path = file.name
         try:
             loop_cpus = parse_cpus(str(self.config["runner"]["loop_cpus"]))
-            command = [sys.executable, "-m", "haptic.master.sim.cli", "--config",
+            command = [sys.executable, "-m", "haptic.master.simulated_rig.cli", "--config",
                        config_path, "--can-interface", bus_options["interface"],
                        "--can-channel", bus_options["channel"], "--parent-pid", str(os.getpid()),
                        "--operator-waits-for-lamp", *emulator_scheduling(self.config["runner"])]

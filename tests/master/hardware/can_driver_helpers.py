@@ -15,7 +15,7 @@ from haptic.master.hardware.can_driver import CanHandleDriver
 from haptic.master.hardware.cia402 import DriveState
 from haptic.master.hardware.interface import create_hardware
 from haptic.master.settings import master_settings
-from haptic.master.sim.sim_rig import SimulatedRigHardware
+from haptic.master.simulated_rig.can_devices import SimulatedRigHardware
 
 HEARTBEAT_BASE = 0x700  # CiA 301's NMT error control COB-ID base, not the driver's constant
 

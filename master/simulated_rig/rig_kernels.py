@@ -1,10 +1,10 @@
 """NVIDIA Warp kernels of the simulated rig: the handle axes and the scripted operator, one
 thread per lane (kept in a plain module so Warp can compile them).
 
-:func:`operator_intent` is the operator models' law (:mod:`haptic.master.sim.operator`
+:func:`operator_intent` is the operator models' law (:mod:`haptic.master.simulated_rig.operator`
 documents the kinds and parameters); :data:`operator_kernel` runs it alone,
 :func:`rig_step_kernel` (compiled for the number of plant states) inside one SYNC of the rig
-(:mod:`haptic.master.sim.rig_model`). The model rig of the real-time master steps one lane
+(:mod:`haptic.master.simulated_rig.rig_block`). The model rig of the real-time master steps one lane
 per tick through a recorded launch; the lockstep simulator steps a whole sweep's lanes with
 the same kernel. Arithmetic is float64 throughout.
 """
@@ -35,7 +35,7 @@ FLOAT64_MAX = 1.7976931348623157e308
 
 @wp.struct
 class OperatorParams:
-    """One operator model's parameters (SI units; see haptic.master.sim.operator)."""
+    """One operator model's parameters (SI units; see haptic.master.simulated_rig.operator)."""
 
     kind: wp.int32
     shape: wp.int32

@@ -13,13 +13,13 @@ import pytest
 
 from haptic.master.hardware.canopen_setup import PlanError
 from haptic.master.hardware.interface import HardwareError, LifecycleState
-from tests.master.can_driver_helpers import (
+from tests.master.hardware.can_driver_helpers import (
     frames_heard,
     inactive_rig,
     moves_towards_an_offset,
     sdo_downloads,
 )
-from tests.master.eds_variants import packaged, pdo, without, written
+from tests.master.hardware.eds_variants import packaged, pdo, without, written
 
 CONTROLWORD, TARGET = 0x60400010, 0x607A0020
 STATUSWORD, MODE_DISPLAY, POSITION, VELOCITY = 0x60410010, 0x60610008, 0x60640020, 0x606C0020

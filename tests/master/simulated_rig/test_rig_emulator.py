@@ -31,14 +31,14 @@ from haptic.master.hardware.interface import HardwareError, LifecycleState, crea
 from haptic.master.node import MasterNode
 from haptic.master.runner import run_master
 from haptic.master.settings import master_settings
-from haptic.master.sim.cli import main as rig_sim_main
-from haptic.master.sim.rig_emulator import READY_PREFIX, EmulatedRigHardware
-from haptic.master.sim.sim_rig import (
+from haptic.master.simulated_rig.can_devices import (
     OPERATOR_DISPLAY_ID,
     SimulatedCanRig,
     decode_operator_display,
     encode_operator_display,
 )
+from haptic.master.simulated_rig.cli import main as rig_sim_main
+from haptic.master.simulated_rig.rig_emulator import READY_PREFIX, EmulatedRigHardware
 
 #: Cap on waiting for anything a child does, s.
 WAIT_S = 40.0
@@ -50,7 +50,7 @@ def _config(operator: str = "constant:fx=0,fy=0", **overrides: object) -> dict:
     # emulator's own test below). Here the master's driver runs in the test process, and a
     # pause of that process beyond the shipped 0.3 s consumer time (a gen-2 collection of a
     # long test session's heap; a 0.3 s collection every 0.15 s faulted 6 of 8 such runs
-    # with EMCY 0x8130) latches the drives in Fault, as test_sim_rig.py explains.
+    # with EMCY 0x8130) latches the drives in Fault, as test_can_devices.py explains.
     config = override(config, "master.can.heartbeat_timeout_s", 5.0)
     for key, value in overrides.items():
         config = override(config, key.replace("__", "."), value)
@@ -342,7 +342,7 @@ def test_beside_a_fifo_loop_the_emulator_runs_one_priority_above_it() -> None:
     """A master loop in SCHED_FIFO on its CPUs would starve emulated drives of normal
     scheduling there (they answer while it waits, and it spins before each tick): they run in
     SCHED_FIFO one above it. Elsewhere: normal beside a normal loop, batch off its CPUs."""
-    from haptic.master.sim.rig_emulator import emulator_scheduling
+    from haptic.master.simulated_rig.rig_emulator import emulator_scheduling
 
     assert emulator_scheduling({"loop_cpus": "1", "realtime_priority": 40}) == [
         "--scheduling", "fifo", "--rt-priority", "41"]
@@ -595,7 +595,7 @@ def test_a_bad_config_file_exits_2_naming_the_key(tmp_path, capsys) -> None:
 
 
 def _start_emulator(*argv: str) -> tuple[subprocess.Popen, str]:
-    process = subprocess.Popen([sys.executable, "-m", "haptic.master.sim.cli", *argv],
+    process = subprocess.Popen([sys.executable, "-m", "haptic.master.simulated_rig.cli", *argv],
                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     assert process.stdout is not None
     ready = process.stdout.readline()
@@ -635,7 +635,7 @@ def test_the_emulator_ends_after_its_duration_and_when_its_parent_is_gone(tmp_pa
     # A parent that starts an emulator watching it, prints its PID and exits (SIGKILL-like:
     # no cleanup): the emulator notices and ends by itself.
     script = ("import os, subprocess, sys\n"
-              "child = subprocess.Popen([sys.executable, '-m', 'haptic.master.sim.cli',"
+              "child = subprocess.Popen([sys.executable, '-m', 'haptic.master.simulated_rig.cli',"
               f" '--can-channel', {str(tmp_path / 'orphan')!r}, '--parent-pid',"
               " str(os.getpid())], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,"
               " text=True)\n"

@@ -22,7 +22,7 @@ from haptic.master.hardware.cia402 import DriveState
 from haptic.master.hardware.drive_device import packaged_eds_path
 from haptic.master.hardware.force_sensor import ForceSensorCodec, load_database
 from haptic.master.hardware.interface import create_hardware
-from tests.master.can_driver_helpers import (
+from tests.master.hardware.can_driver_helpers import (
     HEARTBEAT_BASE,
     active_rig,
     bare_driver,

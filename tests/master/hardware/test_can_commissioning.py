@@ -25,7 +25,7 @@ from haptic.master.hardware.cia402 import DriveState
 from haptic.master.hardware.drive_device import packaged_eds_path
 from haptic.master.hardware.interface import HardwareError, LifecycleState, create_hardware
 from haptic.master.settings import master_settings
-from haptic.master.sim.sim_rig import (
+from haptic.master.simulated_rig.can_devices import (
     NMT_OPERATIONAL_STATE,
     NMT_PRE_OPERATIONAL_STATE,
     SimulatedCanRig,

@@ -1,9 +1,11 @@
 """The ``model`` backend: the rig block stepped directly behind the hardware interface.
 
-Where ``sim`` (:mod:`haptic.master.sim.sim_rig`) runs the rig model behind emulated CiA 402 drives
+Where ``sim`` (:mod:`haptic.master.simulated_rig.can_devices`) runs the rig model behind emulated
+CiA 402 drives
 and the force sensor on python-can's virtual bus (the real driver's code path, a thread and
 about 170 us of frame traffic per cycle), ``model`` steps the same
-:class:`~haptic.master.sim.rig_model.RigModel` kernel inside ``read()``: no bus, no thread, a few
+:class:`~haptic.master.simulated_rig.rig_block.RigModel` kernel inside ``read()``: no bus, no
+thread, a few
 us.
 It keeps the timing contract (a command written in cycle k is applied at SYNC k+1) and the
 sensor's quantisation (encoder counts and force counts from ``[master.can]``), so the loop
@@ -26,7 +28,7 @@ from haptic.master.hardware.interface import (
     LifecycleState,
 )
 from haptic.master.settings import CanSettings, master_settings
-from haptic.master.sim.rig_model import RigModel
+from haptic.master.simulated_rig.rig_block import RigModel
 
 
 class ModelRigHardware(HandleHardware):

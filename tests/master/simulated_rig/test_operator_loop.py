@@ -8,8 +8,8 @@ from haptic.common.config import load_config
 from haptic.common.model.teleop import model_from_config
 from haptic.master.node import MasterNode
 from haptic.master.settings import master_settings
-from haptic.master.sim.operator import parse_operator_spec
-from haptic.master.sim.rig_model import RigModel
+from haptic.master.simulated_rig.operator import parse_operator_spec
+from haptic.master.simulated_rig.rig_block import RigModel
 
 
 def test_regulating_operator_holds_the_cutting_force_against_a_damper() -> None:
