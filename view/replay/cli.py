@@ -175,6 +175,86 @@ def haptic_topics(recording: Recording) -> list[str]:
             if items and topic.startswith(("/master/", "/slave/"))]
 
 
+def _plot_forces_against_time(plt: Any, s_state: dict[str, np.ndarray],
+                              m_state: dict[str, np.ndarray], path: Path) -> Path:
+    """The slave's tool forces and received handle force and the master's handle and felt
+    forces (N) against time (s), whichever side was recorded."""
+    figure, axes = plt.subplots(figsize=(9, 4.5), dpi=110)
+    if s_state:
+        axes.plot(s_state["time_s"], s_state["tool_force_x_N"], label="ft x (slave)")
+        axes.plot(s_state["time_s"], s_state["tool_force_y_N"], label="ft y (slave)")
+        axes.plot(s_state["time_s"], s_state["handle_force_x_N"], label="fh x received",
+                  alpha=0.7)
+    if m_state:
+        axes.plot(m_state["time_s"], m_state["handle_force_x_N"], label="fh x (master)",
+                  alpha=0.7)
+        axes.plot(m_state["time_s"], m_state["felt_force_x_N"], label="felt ft x (master)",
+                  alpha=0.7)
+    axes.set_xlabel("time (s)")
+    axes.set_ylabel("force (N)")
+    axes.set_title("Forces against time")
+    axes.grid(True, alpha=0.3)
+    axes.legend(fontsize=8)
+    return _save(figure, path)
+
+
+def _plot_tool_against_position(plt: Any, s_state: dict[str, np.ndarray],
+                                out: Path) -> list[Path]:
+    """The tool's velocity (mm/s) and force (N) against its x position (mm): two PNGs."""
+    x_mm = s_state["tool_position_x_m"] * 1e3
+    figure, axes = plt.subplots(figsize=(9, 4.5), dpi=110)
+    axes.plot(x_mm, s_state["tool_velocity_x_m_s"] * 1e3, linewidth=0.8)
+    axes.set_xlabel("tool position x (mm)")
+    axes.set_ylabel("tool velocity x (mm/s)")
+    axes.set_title("Velocity against position")
+    axes.grid(True, alpha=0.3)
+    written = [_save(figure, out / "velocity_position.png")]
+
+    figure, axes = plt.subplots(figsize=(9, 4.5), dpi=110)
+    axes.plot(x_mm, s_state["tool_force_x_N"], linewidth=0.8, label="ft x")
+    axes.plot(x_mm, np.hypot(s_state["tool_force_x_N"], s_state["tool_force_y_N"]),
+              linewidth=0.8, label="|ft|")
+    axes.set_xlabel("tool position x (mm)")
+    axes.set_ylabel("tool force (N)")
+    axes.set_title("Force against position")
+    axes.grid(True, alpha=0.3)
+    axes.legend(fontsize=8)
+    written.append(_save(figure, out / "force_position.png"))
+    return written
+
+
+def _plot_workpiece(plt: Any, plan: tuple[np.ndarray, tuple[float, ...]],
+                    layout: dict[str, Any], s_state: dict[str, np.ndarray], path: Path) -> Path:
+    """The clay's heights (mm) at the end over x and y (mm), each block outlined and named
+    with its damping (N s/m), and the tool's path when the slave's state was recorded."""
+    heights, (x0, x1, y0, y1) = plan
+    aspect = (y1 - y0) / (x1 - x0)
+    figure, axes = plt.subplots(figsize=(10, max(2.5, 10 * aspect + 1.0)), dpi=110)
+    image = axes.imshow(heights, origin="lower", extent=[x0, x1, y0, y1], cmap="viridis",
+                        interpolation="nearest")
+    figure.colorbar(image, ax=axes, label="clay height (mm)", shrink=0.8)
+    ids = np.array(layout["block_id"])
+    xs = np.linspace(x0, x1, ids.shape[1] + 1)[:-1] + (x1 - x0) / ids.shape[1] / 2
+    ys = np.linspace(y0, y1, ids.shape[0] + 1)[:-1] + (y1 - y0) / ids.shape[0] / 2
+    for index, name in enumerate(layout["block_names"]):
+        mask = (ids == index).astype(float)
+        if mask.any() and not mask.all():
+            axes.contour(xs, ys, mask, levels=[0.5], colors="white", linewidths=0.8)
+        if mask.any():
+            row, col = np.argwhere(ids == index).mean(axis=0)
+            axes.text(xs[int(col)], ys[int(row)],
+                      f"{name}\n{layout['block_damping_N_s_per_m'][index]:g} N s/m",
+                      color="white", ha="center", va="center", fontsize=7)
+    if s_state:
+        axes.plot(s_state["tool_position_x_m"] * 1e3, s_state["tool_position_y_m"] * 1e3,
+                  color="red", linewidth=1.0, label="tool path")
+        axes.legend(fontsize=8, loc="upper right")
+    axes.set_xlabel("x (mm)")
+    axes.set_ylabel("y (mm)")
+    axes.set_title("Workpiece at the end of the run, with the tool path")
+    return _save(figure, path)
+
+
 def write_plots(recordings: Sequence[Recording], out: Path) -> list[Path]:
     """The paper-style PNGs of the recordings into ``out``; returns the paths written."""
     import matplotlib
@@ -189,77 +269,16 @@ def write_plots(recordings: Sequence[Recording], out: Path) -> list[Path]:
     master = by_side.get("master")
     s_state = _with_columns(slave.columns("/slave/state") if slave else {}, _SLAVE_PLOTTED)
     m_state = _with_columns(master.columns("/master/state") if master else {}, _MASTER_PLOTTED)
-
     if s_state or m_state:
-        figure, axes = plt.subplots(figsize=(9, 4.5), dpi=110)
-        if s_state:
-            axes.plot(s_state["time_s"], s_state["tool_force_x_N"], label="ft x (slave)")
-            axes.plot(s_state["time_s"], s_state["tool_force_y_N"], label="ft y (slave)")
-            axes.plot(s_state["time_s"], s_state["handle_force_x_N"], label="fh x received",
-                      alpha=0.7)
-        if m_state:
-            axes.plot(m_state["time_s"], m_state["handle_force_x_N"], label="fh x (master)",
-                      alpha=0.7)
-            axes.plot(m_state["time_s"], m_state["felt_force_x_N"], label="felt ft x (master)",
-                      alpha=0.7)
-        axes.set_xlabel("time (s)")
-        axes.set_ylabel("force (N)")
-        axes.set_title("Forces against time")
-        axes.grid(True, alpha=0.3)
-        axes.legend(fontsize=8)
-        written.append(_save(figure, out / "force_time.png"))
-
+        written.append(_plot_forces_against_time(plt, s_state, m_state,
+                                                 out / "force_time.png"))
     if s_state:
-        x_mm = s_state["tool_position_x_m"] * 1e3
-        figure, axes = plt.subplots(figsize=(9, 4.5), dpi=110)
-        axes.plot(x_mm, s_state["tool_velocity_x_m_s"] * 1e3, linewidth=0.8)
-        axes.set_xlabel("tool position x (mm)")
-        axes.set_ylabel("tool velocity x (mm/s)")
-        axes.set_title("Velocity against position")
-        axes.grid(True, alpha=0.3)
-        written.append(_save(figure, out / "velocity_position.png"))
-
-        figure, axes = plt.subplots(figsize=(9, 4.5), dpi=110)
-        axes.plot(x_mm, s_state["tool_force_x_N"], linewidth=0.8, label="ft x")
-        axes.plot(x_mm, np.hypot(s_state["tool_force_x_N"], s_state["tool_force_y_N"]),
-                  linewidth=0.8, label="|ft|")
-        axes.set_xlabel("tool position x (mm)")
-        axes.set_ylabel("tool force (N)")
-        axes.set_title("Force against position")
-        axes.grid(True, alpha=0.3)
-        axes.legend(fontsize=8)
-        written.append(_save(figure, out / "force_position.png"))
-
+        written += _plot_tool_against_position(plt, s_state, out)
     layout = slave.last("/slave/workpiece") if slave else None
     clay = slave.last("/slave/clay") if slave else None
     plan = _clay_plan(layout, clay)
     if plan is not None:
-        heights, (x0, x1, y0, y1) = plan
-        aspect = (y1 - y0) / (x1 - x0)
-        figure, axes = plt.subplots(figsize=(10, max(2.5, 10 * aspect + 1.0)), dpi=110)
-        image = axes.imshow(heights, origin="lower", extent=[x0, x1, y0, y1], cmap="viridis",
-                            interpolation="nearest")
-        figure.colorbar(image, ax=axes, label="clay height (mm)", shrink=0.8)
-        ids = np.array(layout["block_id"])
-        xs = np.linspace(x0, x1, ids.shape[1] + 1)[:-1] + (x1 - x0) / ids.shape[1] / 2
-        ys = np.linspace(y0, y1, ids.shape[0] + 1)[:-1] + (y1 - y0) / ids.shape[0] / 2
-        for index, name in enumerate(layout["block_names"]):
-            mask = (ids == index).astype(float)
-            if mask.any() and not mask.all():
-                axes.contour(xs, ys, mask, levels=[0.5], colors="white", linewidths=0.8)
-            if mask.any():
-                row, col = np.argwhere(ids == index).mean(axis=0)
-                axes.text(xs[int(col)], ys[int(row)],
-                          f"{name}\n{layout['block_damping_N_s_per_m'][index]:g} N s/m",
-                          color="white", ha="center", va="center", fontsize=7)
-        if s_state:
-            axes.plot(s_state["tool_position_x_m"] * 1e3, s_state["tool_position_y_m"] * 1e3,
-                      color="red", linewidth=1.0, label="tool path")
-            axes.legend(fontsize=8, loc="upper right")
-        axes.set_xlabel("x (mm)")
-        axes.set_ylabel("y (mm)")
-        axes.set_title("Workpiece at the end of the run, with the tool path")
-        written.append(_save(figure, out / "clay.png"))
+        written.append(_plot_workpiece(plt, plan, layout, s_state, out / "clay.png"))
     return written
 
 
