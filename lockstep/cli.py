@@ -38,7 +38,7 @@ from haptic.master.settings import master_settings
 from haptic.master.simulated_rig.operator import parse_operator_spec
 
 if TYPE_CHECKING:
-    from haptic.lockstep.simulator import LockstepSimulator
+    from haptic.lockstep.simulator import LockstepResult, LockstepSimulator
 
 # The simulator, the model's synthesis and the governor bring Warp, python-control and scipy:
 # each command imports them after the parse, so --help and a bad flag answer at once.
@@ -139,6 +139,62 @@ def _check_seconds(name: str, value: float) -> None:
         raise ConfigError(name, f"must be a finite number >= 0 s (got {value})")
 
 
+def _check_run_flags(args: argparse.Namespace) -> None:
+    """The run's delays, jitter and duration (s) and loss probability are in range (raises
+    :class:`ConfigError` naming the flag)."""
+    for name, value in (("--round-trip-delay", args.delay), ("--jitter", args.jitter)):
+        _check_seconds(name, value)
+    if not args.duration > 0.0:
+        raise ConfigError("--duration", "must be > 0 s")
+    if not 0.0 <= args.loss <= 1.0:
+        raise ConfigError("--loss", "must be in [0, 1]")
+
+
+def _run_injections(args: argparse.Namespace) -> list[InjectionConfig | None]:
+    """The handle line's and the tool line's injection (jitter, loss, delay profile), None
+    for a line with none."""
+    lines = []
+    for flag, text in (("--delay-profile-to-slave", args.delay_profile_to_slave),
+                       ("--delay-profile-to-master", args.delay_profile_to_master)):
+        try:
+            profile = parse_delay_profile(text)
+        except DelayProfileError as error:
+            raise ConfigError(flag, str(error)) from None
+        injection = None
+        if args.jitter > 0.0 or args.loss > 0.0 or profile is not None:
+            injection = InjectionConfig(jitter_s=args.jitter, loss_probability=args.loss,
+                                        delay_profile=profile)
+        lines.append(injection)
+    return lines
+
+
+def _save_run_traces(out: Path, result: LockstepResult, title: str) -> None:
+    """Lane 0's traces (and the governed gain, when governed) as ``out``/traces.npz and
+    traces.png."""
+    out.mkdir(parents=True, exist_ok=True)
+    traces = {name: values[:, 0] for name, values in result.traces.items()}
+    if result.governed is not None:
+        traces["gain_k"] = result.governed.gains_k[:, 0]
+    np.savez(out / "traces.npz", time_s=result.time_s, **traces)
+    _plot_run(out / "traces.png", result.time_s, traces, title)
+
+
+def _warn_if_unstable(analysis: PreflightResult, gain: float, scenario: Any,
+                      environment: str) -> None:
+    """Say on stderr when the sampled analysis finds the run's gain and delay unstable (the
+    run still goes ahead: it shows what that does)."""
+    if analysis.stable:
+        return
+    margin = analysis.delay_margin_s
+    print(f"haptic-sim run: k = {gain:g} at {analysis.round_trip_delay_s * 1e3:.2f} ms round "
+          "trip is UNSTABLE in the sampled analysis ("
+          + ("unstable even without delay" if margin == 0.0 else
+             f"delay margin {margin * 1e3:.2f} ms")
+          + ("" if environment == "linear" else
+             f"; the clay as its damping, {max_block_damping(scenario):g} N s/m")
+          + "); the run shows what that does", file=sys.stderr)
+
+
 def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, Any]:
     """Run one scenario; write traces.npz and traces.png; return a summary."""
     from haptic.common.model.teleop import model_from_config
@@ -150,12 +206,7 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
     )
     from haptic.master.margin_governor import governor_for
 
-    for name, value in (("--round-trip-delay", args.delay), ("--jitter", args.jitter)):
-        _check_seconds(name, value)
-    if not args.duration > 0.0:
-        raise ConfigError("--duration", "must be > 0 s")
-    if not 0.0 <= args.loss <= 1.0:
-        raise ConfigError("--loss", "must be in [0, 1]")
+    _check_run_flags(args)
     model = model_from_config(config)
     gain = model.ch1_gain_k if args.k is None else args.k
     model = model.with_gain(gain)
@@ -178,45 +229,21 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
                                   passivity=(standby_passivity_settings(config) if standby
                                              else passivity_settings(config)),
                                   passivity_standby=standby)
-    lines = []
-    for flag, text in (("--delay-profile-to-slave", args.delay_profile_to_slave),
-                       ("--delay-profile-to-master", args.delay_profile_to_master)):
-        try:
-            profile = parse_delay_profile(text)
-        except DelayProfileError as error:
-            raise ConfigError(flag, str(error)) from None
-        injection = None
-        if args.jitter > 0.0 or args.loss > 0.0 or profile is not None:
-            injection = InjectionConfig(jitter_s=args.jitter, loss_probability=args.loss,
-                                        delay_profile=profile)
-        lines.append(injection)
+    to_slave, to_master = _run_injections(args)
     governors = [governor_for(model, config, tdpa_available=standby)] if governed else None
     delay_samples = int(round(args.delay / model.sample_period_s))
-    result = simulator.run(args.duration, delay_samples, to_slave=lines[0],
-                           to_master=lines[1], seed=int(config["lockstep"]["seed"]),
+    delay_s = delay_samples * model.sample_period_s
+    result = simulator.run(args.duration, delay_samples, to_slave=to_slave,
+                           to_master=to_master, seed=int(config["lockstep"]["seed"]),
                            record_lanes=[0], governors=governors)
     out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    traces = {name: values[:, 0] for name, values in result.traces.items()}
-    if result.governed is not None:
-        traces["gain_k"] = result.governed.gains_k[:, 0]
-    np.savez(out / "traces.npz", time_s=result.time_s, **traces)
-    _plot_run(out / "traces.png", result.time_s, traces, f"{scenario.name}, k = {gain:g}, "
-              f"delay {delay_samples * model.sample_period_s * 1e3:.2f} ms")
-    analysis = _analysis(config, gain, scenario, environment,
-                         delay_samples * model.sample_period_s)
-    if not analysis.stable:
-        margin = analysis.delay_margin_s
-        print(f"haptic-sim run: k = {gain:g} at {analysis.round_trip_delay_s * 1e3:.2f} ms round "
-              "trip is UNSTABLE in the sampled analysis ("
-              + ("unstable even without delay" if margin == 0.0 else
-                 f"delay margin {margin * 1e3:.2f} ms")
-              + ("" if environment == "linear" else
-                 f"; the clay as its damping, {max_block_damping(scenario):g} N s/m")
-              + "); the run shows what that does", file=sys.stderr)
+    _save_run_traces(out, result, f"{scenario.name}, k = {gain:g}, "
+                     f"delay {delay_s * 1e3:.2f} ms")
+    analysis = _analysis(config, gain, scenario, environment, delay_s)
+    _warn_if_unstable(analysis, gain, scenario, environment)
     return {
         "scenario": scenario.name, "environment": environment, "k": gain,
-        "round_trip_delay_s": delay_samples * model.sample_period_s,
+        "round_trip_delay_s": delay_s,
         "analysis": analysis.as_dict(),
         "duration_s": result.steps * result.sample_period_s,
         "peak_handle_force_N": result.peak_handle_force_N[0].tolist(),
