@@ -78,7 +78,7 @@ def bench_blocks(config: dict, cycles: int, lanes: int) -> dict[str, dict[str, f
     results = {}
     for count in (1, lanes):
         rig_state = rig.initial_state(np.zeros((count, 2)), np.random.default_rng(0))
-        node_state = node.activate(np.zeros((count, 2)))
+        node_state = node.initial_state(np.zeros((count, 2)))
         command = np.zeros((count, 2))
         zero = np.zeros((count, 2))
         node_times = np.empty(cycles)
@@ -108,7 +108,7 @@ def _run_cycles(hardware: HandleHardware, node: MasterNode, cycles: int, pace: b
     cycles."""
     period_s = node.period_s
     reading = hardware.read()
-    state = node.activate(reading.position_m[None])
+    state = node.initial_state(reading.position_m[None])
     hardware.present_forces_enabled(True)  # the master alone: forces on from the start
     zero = np.zeros((1, 2))
     reads = np.empty(cycles)

@@ -227,32 +227,52 @@ class MasterNode:
             self._limits = limits
         return self._matrices, self._limits
 
-    def activate(self, position_m: np.ndarray,
-                 reuse: MasterNodeState | None = None) -> MasterNodeState:
-        """A fresh state for lanes starting at ``position_m`` (lanes, 2): the command holds
-        that position, forces are not yet enabled.
-
-        ``reuse``: a state of this node for as many lanes that nobody uses any more; its
-        buffers and recorded launches are set to the fresh values in place and it is returned
-        (the same values as a new state, without the 0.25-0.7 ms of allocating about twenty
-        Warp arrays and recording the launches: a tick can afford it)."""
+    def initial_state(self, position_m: np.ndarray) -> MasterNodeState:
+        """A new state for lanes starting at ``position_m`` (lanes, 2), m, as :meth:`activate`
+        leaves one: the command holds that position, forces are not yet enabled, a lane whose
+        position is not finite is tripped. It allocates the Warp buffers and records the
+        launches (about twenty arrays: make it before the real-time loop; :meth:`activate` and
+        :meth:`resume` then set it afresh in place)."""
         position = np.array(np.atleast_2d(position_m), float)
         lanes = position.shape[0]
         (matrices, per_lane), limits = self._kernel_constants()
         if per_lane and matrices[0].shape[0] != lanes:
             raise ValueError(f"compensator stacked for {matrices[0].shape[0]} lanes, "
                              f"activated with {lanes}")
-        faulted_at_start = ~np.all(np.isfinite(position), axis=1)
+        state = self._new_state(np.nan_to_num(position), matrices, per_lane, limits)
+        self._trip_non_finite(state, position, None)
+        return state
+
+    def activate(self, state: MasterNodeState, position_m: np.ndarray,
+                 lanes: np.ndarray | None = None, continue_run: bool = False) -> None:
+        """Start ``lanes`` of ``state`` afresh, in place, at ``position_m`` (lanes, 2), m: the
+        command holds that position, the compensator is zero, forces are not yet enabled; a
+        lane whose position is not finite is tripped. Nothing is allocated (the real-time
+        loop's activation).
+
+        ``lanes`` None: the whole state, its step count and events included, and its
+        passivity port (whose monotone counters and switch carry on with ``continue_run``: a
+        renewal within a run); a (lanes,) bool mask: those lanes' rows only, an event of
+        theirs at the state's current step (the passivity port carries on as it is)."""
+        position = np.array(np.atleast_2d(position_m), float)
+        if position.shape[0] != state.lanes:
+            raise ValueError(f"cannot activate a state of {state.lanes} lanes for "
+                             f"{position.shape[0]}")
         safe = np.nan_to_num(position)
-        if reuse is None:
-            state = self._new_state(safe, matrices, per_lane, limits)
-        elif reuse.lanes != lanes:
-            raise ValueError(f"cannot reuse a state of {reuse.lanes} lanes for {lanes}")
+        if lanes is None:
+            self._reinitialise(state, safe, continue_run)
         else:
-            state = self._reinitialise(reuse, safe)
+            self._reinitialise_rows(state, safe, np.asarray(lanes, bool))
+        self._trip_non_finite(state, position, lanes)
+
+    def _trip_non_finite(self, state: MasterNodeState, position_m: np.ndarray,
+                         lanes: np.ndarray | None) -> None:
+        """Trip ``lanes`` (None: all) whose activation position (lanes, 2) is not finite."""
+        faulted_at_start = ~np.all(np.isfinite(position_m), axis=1)
+        if lanes is not None:
+            faulted_at_start &= lanes
         for lane in np.flatnonzero(faulted_at_start):
             self._trip(state, lane, "non-finite handle position at activation", None)
-        return state
 
     def _new_state(self, safe: np.ndarray, matrices: tuple, per_lane: int,
                    limits: Any) -> MasterNodeState:
@@ -315,27 +335,31 @@ class MasterNode:
                                                  origin))
         return state
 
-    def resume(self, position_m: np.ndarray, reason: str = "link resynchronised",
-               reuse: MasterNodeState | None = None) -> MasterNodeState:
-        """A fresh state after a link outage, at ``position_m`` (lanes, 2), m: like
-        :meth:`activate` (command holds the position, compensator zero), but the forces ramp
-        in over ``ramp_time_s`` at once instead of waiting for small-force samples: the
-        operator may be pushing through the outage, and the ramp alone keeps the force from
-        jumping. One ``enable`` event per healthy lane. ``reuse``: as for :meth:`activate`."""
-        state = self.activate(position_m, reuse)
-        healthy = ~state.faulted
+    def resume(self, state: MasterNodeState, position_m: np.ndarray,
+               lanes: np.ndarray | None = None, reason: str = "link resynchronised",
+               continue_run: bool = False) -> None:
+        """Start ``lanes`` afresh after a link outage, in place, at ``position_m`` (lanes, 2),
+        m: like :meth:`activate` (same ``lanes`` and ``continue_run``; command holds the
+        position, compensator zero), but the forces ramp in over ``ramp_time_s`` at once
+        instead of waiting for small-force samples: the operator may be pushing through the
+        outage, and the ramp alone keeps the force from jumping. One ``enable`` event per
+        healthy lane."""
+        self.activate(state, position_m, lanes, continue_run)
+        healthy = ~state.faulted if lanes is None else np.asarray(lanes, bool) & ~state.faulted
         state.forces_enabled[healthy] = True
         state.small_force_count[healthy] = self.safety.ramp_small_samples
+        time_s = state.step * self.period_s
         for lane in np.flatnonzero(healthy):
-            state.events.append(SafetyEvent(0, 0.0, int(lane), "enable",
+            state.events.append(SafetyEvent(state.step, time_s, int(lane), "enable",
                                             f"forces ramp in over {self.safety.ramp_time_s:g} s "
                                             f"({reason})"))
-        return state
 
-    def _reinitialise(self, state: MasterNodeState, safe_m: np.ndarray) -> MasterNodeState:
-        """``state``'s buffers set to what :meth:`activate` gives a new state at ``safe_m``
-        (lanes, 2), m (finite); the compensator's matrices and the recorded launches are
-        kept (they are this node's)."""
+    def _reinitialise(self, state: MasterNodeState, safe_m: np.ndarray,
+                      continue_run: bool) -> None:
+        """``state``'s buffers set to what :meth:`initial_state` gives at ``safe_m`` (lanes,
+        2), m (finite); the compensator's matrices and the recorded launches are kept (they
+        are this node's). ``continue_run``: the passivity port's ``sent_J``, ``peer_sent_J``
+        and ``active`` are kept (the peer keeps seeing ``sent_J`` grow)."""
         for held in (state.origin_m, state.last_command_m, state.last_position_m,
                      state.hold_m, state.command_m):
             held[...] = safe_m
@@ -349,15 +373,34 @@ class MasterNode:
         state.events = []
         port = state.passivity
         if port is not None:
+            kept = (port.sent_J, port.peer_sent_J, port.active) if continue_run else ()
             for item in fields(port):
                 value = getattr(port, item.name)
-                if isinstance(value, np.ndarray):
+                if isinstance(value, np.ndarray) and not any(value is k for k in kept):
                     value[...] = 0
-            port.active[...] = not self.passivity_standby
+            if not continue_run:
+                port.active[...] = not self.passivity_standby
             port.previous_position_m[...] = safe_m
             state.peer_energy_J[...] = np.nan
             state.peer_target_m[...] = np.nan
-        return state
+
+    def _reinitialise_rows(self, state: MasterNodeState, safe_m: np.ndarray,
+                           lanes: np.ndarray) -> None:
+        """The rows of ``lanes`` ((lanes,) bool) of every per-lane array of ``state`` set to
+        what :meth:`initial_state` gives at ``safe_m`` (lanes, 2), m; the passivity port is
+        left as it is."""
+        for held in (state.origin_m, state.last_command_m, state.last_position_m,
+                     state.hold_m, state.command_m):
+            held[lanes] = safe_m[lanes]
+        for cleared in (state.compensator, state.small_force_count, state.forces_enabled,
+                        state.ramp_elapsed_s, state.force_scale, state.faulted, state.limiting,
+                        state.handle_force_used_N, state.tool_force_used_N, state.inputs):
+            cleared[lanes] = 0
+        state.gain_ratio[lanes] = 1.0
+        if state.peer_energy_J is not None:
+            state.peer_energy_J[lanes] = np.nan
+        if state.peer_target_m is not None:
+            state.peer_target_m[lanes] = np.nan
 
     def trip(self, state: MasterNodeState, lanes: np.ndarray, reason: str) -> None:
         """Put ``lanes`` (bool mask or indices) in the safe state for an outside reason

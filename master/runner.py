@@ -85,7 +85,7 @@ def run_master(
     hardware.activate()
     hardware.present_forces_enabled(True)  # alone, the master's forces are on from the start
     reading = hardware.read()
-    state = node.activate(reading.position_m[None, :])
+    state = node.initial_state(reading.position_m[None, :])
     faults: list[str] = []
     forces, positions, commands, scales = [], [], [], []
 

@@ -25,7 +25,7 @@ its message, and every other lane goes through its supervisor as the program's d
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -98,10 +98,11 @@ class MasterTick:
         self.node = node
         self.supervisors = list(supervisors)
         self.lanes = len(self.supervisors)
+        #: the node's state: None until the forces first come on, then the same object for
+        #: the rest of the run ((re)activations set it afresh in place)
         self.state: MasterNodeState | None = None
-        #: a node state nobody uses, the next (re)activation's to fill in place
-        #: (MasterNode.activate's ``reuse``): the state a renewal replaced, or :meth:`prepare`'s
-        self._spare: MasterNodeState | None = None
+        #: :meth:`prepare`'s state, the first activation's to fill in place
+        self._prepared: MasterNodeState | None = None
         #: the tick time (s) at which the node's state was last made for all lanes: its
         #: events' times count from here
         self.node_offset_s = 0.0
@@ -152,18 +153,18 @@ class MasterTick:
                 supervisor.start_synced()
         self._columns_current = False
         if synced:
-            self.state = self.node.activate(np.nan_to_num(position))
+            self.state = self.node.initial_state(np.nan_to_num(position))
             self.enabled[:] = True
 
     def prepare(self, position_m: Any) -> None:
         """Make the node state the first activation fills in place, at ``position_m`` ((lanes,
         2) or (2,), m), and launch its kernels once: before the loop, since allocating its
         buffers and recording and first running its launches cost 0.25-1.1 ms, more than a
-        tick. Later (re)activations reuse the state each one replaces."""
+        tick. Later (re)activations set that same state afresh in place."""
         position = np.nan_to_num(np.broadcast_to(np.asarray(position_m, float), (self.lanes, 2)))
-        spare = self.node.activate(position)
-        self.node.step_inputs(spare)  # the kernels' first launches, on nothing that is used
-        self._spare = spare
+        state = self.node.initial_state(position)
+        self.node.step_inputs(state)  # the kernels' first launches, on nothing that is used
+        self._prepared = state
 
     def supervise(self, now_s: float, messages: Sequence[ToolState | None],
                   handle_position_m: np.ndarray, faults: Sequence[Sequence[str]] | None = None,
@@ -276,57 +277,36 @@ class MasterTick:
 
     def _renew(self, now_s: float, position_m: np.ndarray, activate: np.ndarray,
                resume: np.ndarray) -> None:
-        """A fresh node state for the ``activate`` and ``resume`` lanes (the others keep
-        theirs: their rows are copied over from a state made for every lane)."""
-        node = self.node
-        if self.state is None or activate.all() or resume.all():
-            self._keep_events()
+        """Start the node afresh, in place, in the ``activate`` and ``resume`` lanes at
+        ``position_m`` (lanes, 2), m. When every lane starts afresh (or the state is the run's
+        first) the whole state does, and its events' times count from ``now_s``; otherwise
+        the other lanes carry on and only those lanes' rows are set."""
+        node, state = self.node, self.state
+        if state is None or activate.all() or resume.all():
+            first = state is None
+            if first:
+                state = self._prepared
+                self._prepared = None
+                if state is None:  # not prepared: made here (allocates)
+                    state = node.initial_state(position_m)
+            else:  # its events keep their absolute times
+                self._pending_events.extend(self.take_node_events())
             every_lane_resumes = bool(resume.all())
-            previous = self.state
-            spare, self._spare = self._spare, None
-            self.state = (node.resume(position_m, reuse=spare) if every_lane_resumes
-                          else node.activate(position_m, reuse=spare))
-            if previous is not None and previous.passivity is not None:
-                # the passivity layer's energies are monotone over the whole run
-                self.state.passivity.continue_from(previous.passivity)
-            if self.node.passivity_standby:  # switched on stays on
-                self.state.passivity.active[...] = self.standby_active
-            self._spare = previous  # read above for the last time: the next one's to fill
+            if every_lane_resumes:
+                node.resume(state, position_m, continue_run=not first)
+            else:
+                node.activate(state, position_m, continue_run=not first)
+            if node.passivity_standby:  # switched on stays on
+                state.passivity.active[...] = self.standby_active
+            self.state = state
             self.node_offset_s = now_s
             if every_lane_resumes or not resume.any():
                 return
             activate = np.zeros_like(activate)  # done; the resumed lanes follow
         if activate.any():
-            self._spare = self._copy_rows(node.activate(position_m, reuse=self._spare),
-                                          activate)
+            node.activate(state, position_m, activate)
         if resume.any():
-            self._spare = self._copy_rows(node.resume(position_m, reuse=self._spare), resume)
-
-    def _keep_events(self) -> None:
-        """Move the current state's events (with their absolute times) aside before the
-        state is replaced."""
-        self._pending_events.extend(self.take_node_events())
-
-    def _copy_rows(self, fresh: MasterNodeState, lanes: np.ndarray) -> MasterNodeState | None:
-        """Copy ``lanes``' rows of every per-lane array of ``fresh`` into the current state
-        (in place: the arrays are the kernel's buffers), with ``fresh``'s events of them.
-        Returns ``fresh`` when it is free again (the next renewal's spare), else None."""
-        state = self.state
-        if state is None:
-            self.state = fresh
-            return None
-        for item in fields(state):
-            if item.name.startswith("_"):
-                continue
-            value = getattr(state, item.name)
-            if isinstance(value, np.ndarray) and value.shape[:1] == (self.lanes,):
-                value[lanes] = getattr(fresh, item.name)[lanes]
-        offset = state.step * self.node.period_s
-        for event in fresh.events:
-            if lanes[event.lane]:
-                state.events.append(type(event)(state.step, offset, event.lane, event.kind,
-                                                event.reason, event.axis))
-        return fresh
+            node.resume(state, position_m, resume)
 
     def control(self, handle_force_N: np.ndarray, handle_position_m: np.ndarray,
                 tool_force_N: np.ndarray | None = None) -> MasterTickOutput:

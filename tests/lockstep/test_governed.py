@@ -90,7 +90,7 @@ def test_scaled_inputs_are_the_design_at_the_lower_gain(paper_model) -> None:
     commands = []
     for gain, ratio in ((13.0, 8.0 / 13.0), (8.0, 1.0)):
         node = MasterNode.from_model(paper_model.with_gain(gain), TRANSPARENT_SAFETY)
-        state = node.activate(np.zeros((1, 2)))
+        state = node.initial_state(np.zeros((1, 2)))
         state.gain_ratio[:] = ratio
         commands.append(np.array([node.step(state, u[:, 0:2], u[:, 2:4], u[:, 4:6])
                                   for u in inputs]))

@@ -60,7 +60,7 @@ def test_compensator_is_ch1_minus_ct1_from_the_synthesis(model) -> None:
 def test_activation_holds_the_position_and_forces_wait_for_small_samples(model) -> None:
     node = MasterNode.from_model(model, _safety(ramp_small_samples=5))
     start = np.array([[0.01, -0.02]])
-    state = node.activate(start)
+    state = node.initial_state(start)
     big = np.array([[3.0, 0.0]])
     for _ in range(50):  # the operator already pushes: nothing moves
         command = node.step(state, big, start, np.zeros((1, 2)))
@@ -77,7 +77,7 @@ def test_activation_holds_the_position_and_forces_wait_for_small_samples(model) 
 def test_forces_ramp_in_over_the_configured_time(model) -> None:
     ts = model.sample_period_s
     node = MasterNode.from_model(model, _safety(ramp_time_s=100 * ts))
-    state = node.activate(np.zeros((1, 2)))
+    state = node.initial_state(np.zeros((1, 2)))
     _enable(node, state, np.zeros((1, 2)))
     scales = []
     for _ in range(150):
@@ -94,7 +94,7 @@ def test_open_loop_output_is_the_compensator_response(model) -> None:
     node = MasterNode.from_model(model, _safety())
     block = node.compensator
     origin = np.array([[0.02, 0.03]])
-    state = node.activate(origin)
+    state = node.initial_state(origin)
     _enable(node, state, origin)
     reference = block.initial_state(1)
     rng = np.random.default_rng(3)
@@ -107,8 +107,8 @@ def test_open_loop_output_is_the_compensator_response(model) -> None:
 
 def test_force_limit_saturates_with_one_event_per_onset(model) -> None:
     node = MasterNode.from_model(model, _safety(force_limit_N=2.0))
-    clipped = node.activate(np.zeros((1, 2)))
-    reference = node.activate(np.zeros((1, 2)))
+    clipped = node.initial_state(np.zeros((1, 2)))
+    reference = node.initial_state(np.zeros((1, 2)))
     _enable(node, clipped, np.zeros((1, 2)))
     _enable(node, reference, np.zeros((1, 2)))
     for _ in range(20):
@@ -125,7 +125,7 @@ def test_force_limit_saturates_with_one_event_per_onset(model) -> None:
 
 def test_force_beyond_the_trip_level_puts_the_lane_in_its_safe_state(model) -> None:
     node = MasterNode.from_model(model, _safety(force_trip_N=30.0))
-    state = node.activate(np.zeros((2, 2)))
+    state = node.initial_state(np.zeros((2, 2)))
     _enable(node, state, np.zeros((2, 2)))
     position = np.array([[0.001, 0.002], [0.003, 0.004]])
     force = np.array([[1.0, 0.0], [0.0, -31.0]])
@@ -145,7 +145,7 @@ def test_force_beyond_the_trip_level_puts_the_lane_in_its_safe_state(model) -> N
 def test_non_finite_input_never_reaches_the_command(model, where: str) -> None:
     node = MasterNode.from_model(model, _safety())
     start = np.array([[0.01, 0.01]])
-    state = node.activate(start)
+    state = node.initial_state(start)
     _enable(node, state, start)
     for _ in range(20):
         node.step(state, np.array([[2.0, 0.0]]), start, np.zeros((1, 2)))
@@ -168,7 +168,7 @@ def test_non_finite_input_never_reaches_the_command(model, where: str) -> None:
 def test_command_rate_is_limited_without_wind_up(model) -> None:
     ts = model.sample_period_s
     node = MasterNode.from_model(model, _safety(velocity_limit_m_per_s=0.01))
-    state = node.activate(np.zeros((1, 2)))
+    state = node.initial_state(np.zeros((1, 2)))
     _enable(node, state, np.zeros((1, 2)))
     commands = [node.step(state, np.array([[20.0, 0.0]]), np.zeros((1, 2)),
                           np.zeros((1, 2)))[0] for _ in range(400)]
@@ -186,7 +186,7 @@ def test_command_rate_is_limited_without_wind_up(model) -> None:
 def test_command_is_clamped_into_the_workspace(model) -> None:
     node = MasterNode.from_model(model, _safety(workspace_min_m=(-0.01, -0.01),
                                                 workspace_max_m=(0.002, 0.01)))
-    state = node.activate(np.zeros((1, 2)))
+    state = node.initial_state(np.zeros((1, 2)))
     _enable(node, state, np.zeros((1, 2)))
     for _ in range(3000):
         command = node.step(state, np.array([[20.0, 0.0]]), np.zeros((1, 2)), np.zeros((1, 2)))
@@ -204,14 +204,14 @@ def test_measured_speed_and_position_trips(model) -> None:
     ts = model.sample_period_s
     node = MasterNode.from_model(model, _safety(velocity_trip_m_per_s=0.5,
                                                 velocity_limit_m_per_s=0.2))
-    state = node.activate(np.zeros((2, 2)))
+    state = node.initial_state(np.zeros((2, 2)))
     jump = np.array([[0.6 * ts, 0.0], [0.0, 0.4 * ts]])  # lane 0 at 0.6 m/s, lane 1 at 0.4
     node.step(state, np.zeros((2, 2)), jump, np.zeros((2, 2)))
     assert state.faulted.tolist() == [True, False]
     assert "speed" in state.events[-1].reason
     node = MasterNode.from_model(model, _safety(workspace_max_m=(0.1, 0.1),
                                                 workspace_trip_margin_m=0.005))
-    state = node.activate(np.array([[0.104, 0.0]]))
+    state = node.initial_state(np.array([[0.104, 0.0]]))
     node.step(state, np.zeros((1, 2)), np.array([[0.104, 0.0]]), np.zeros((1, 2)))
     assert not state.faulted[0]
     node.step(state, np.zeros((1, 2)), np.array([[0.1055, 0.0]]), np.zeros((1, 2)))
@@ -220,7 +220,7 @@ def test_measured_speed_and_position_trips(model) -> None:
 
 def test_outside_trip_records_a_reason_and_holds(model) -> None:
     node = MasterNode.from_model(model, _safety())
-    state = node.activate(np.array([[0.0, 0.0], [0.01, 0.0]]))
+    state = node.initial_state(np.array([[0.0, 0.0], [0.01, 0.0]]))
     node.trip(state, np.array([False, True]), "hardware: missing TPDO1")
     command = node.step(state, np.full((2, 2), 0.1), np.array([[0.0, 0.0], [0.01, 0.0]]),
                         np.zeros((2, 2)))
@@ -248,7 +248,8 @@ def test_resume_ramps_forces_in_without_the_small_force_gate(paper_model) -> Non
     safety = master_settings(load_config()).safety
     node = MasterNode.from_model(paper_model, safety)
     start = np.array([[0.02, -0.01]])
-    state = node.resume(start)
+    state = node.initial_state(start)
+    node.resume(state, start)
     assert state.forces_enabled[0] and state.events[0].kind == "enable"
     push = np.array([[3.0, 0.0]])  # the operator pushes through the outage
     first = node.step(state, push, start, np.zeros((1, 2)))
@@ -278,11 +279,11 @@ def test_tdpa_node_matches_the_numpy_reference_port() -> None:
     start = np.zeros((lanes, 2))
     tdpa = MasterNode.from_model(model, safety, settings)
     paper = MasterNode.from_model(model, safety)
-    state = tdpa.activate(start)
+    state = tdpa.initial_state(start)
     assert np.isnan(state.peer_energy_J).all()  # no energy received yet
     assert state.peer_target_m.shape == (lanes, 2)  # the tool in handle coordinates (x, y)
     assert np.isnan(state.peer_target_m).all()  # no tool position received yet
-    reference_state = paper.activate(start)
+    reference_state = paper.initial_state(start)
     port = PassivityPort.create(settings, model.sample_period_s, lanes, settings.master_keep_J)
     rng = np.random.default_rng(5)
     position = np.zeros((lanes, 2))
@@ -328,7 +329,7 @@ def test_gain_ratio_scales_the_compensator_inputs_not_the_used_forces() -> None:
     safety = dataclasses.replace(master_settings(config).safety, ramp_small_force_N=1e9,
                                  ramp_small_samples=1, ramp_time_s=0.01)
     node = MasterNode.from_model(model, safety)
-    state = node.activate(np.zeros((3, 2)))
+    state = node.initial_state(np.zeros((3, 2)))
     np.testing.assert_array_equal(state.gain_ratio, np.ones(3))
     state.gain_ratio[0] = 0.5
     rng = np.random.default_rng(9)

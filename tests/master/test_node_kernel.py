@@ -243,7 +243,7 @@ def _inputs(rng: np.random.Generator, steps: int, lanes: int) -> tuple[np.ndarra
 
 def _compare(node: MasterNode, oracle: ReferenceMasterNode, start: np.ndarray,
              inputs: tuple[np.ndarray, ...]) -> None:
-    state, expected = node.activate(start), oracle.activate(start)
+    state, expected = node.initial_state(start), oracle.activate(start)
     for fh, yh, ft in zip(*inputs, strict=True):
         command = node.step(state, fh, yh, ft)
         reference = oracle.step(expected, fh, yh, ft)
@@ -288,7 +288,7 @@ def test_used_forces_are_what_the_compensator_integrated(paper_model) -> None:
     zero once the lane has tripped."""
     safety = _safety(ramp_small_samples=2, ramp_time_s=0.01, force_limit_N=5.0)
     node = MasterNode.from_model(paper_model, safety)
-    state = node.activate(np.zeros((1, 2)))
+    state = node.initial_state(np.zeros((1, 2)))
     for _ in range(2):
         node.step(state, np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2)))
     assert state.forces_enabled[0]
@@ -308,7 +308,7 @@ def test_used_forces_are_what_the_compensator_integrated(paper_model) -> None:
 
 def test_step_inputs_reads_the_state_buffer_and_returns_a_live_view(paper_model) -> None:
     node = MasterNode.from_model(paper_model, _safety(ramp_small_samples=1, ramp_time_s=0.0))
-    state = node.activate(np.zeros((1, 2)))
+    state = node.initial_state(np.zeros((1, 2)))
     state.inputs[0] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     node.step_inputs(state)
     state.inputs[0] = (2.0, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -329,8 +329,8 @@ def test_the_program_tick_and_the_lockstep_lanes_step_the_same_law(paper_model) 
     lanes, steps = 3, 400
     fh, yh, ft = _inputs(rng, steps, lanes)
     start = np.zeros((lanes, 2))
-    together = node.activate(start)
-    alone = [node.activate(start[lane:lane + 1]) for lane in range(lanes)]
+    together = node.initial_state(start)
+    alone = [node.initial_state(start[lane:lane + 1]) for lane in range(lanes)]
     for k in range(steps):
         commands = node.step(together, fh[k], yh[k], ft[k])
         for lane, state in enumerate(alone):

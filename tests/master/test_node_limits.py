@@ -44,7 +44,7 @@ def block(paper_model):
 def _enabled(node: MasterNode, start: np.ndarray | None = None):
     """A lane past its small-force gate (compensator still zero), at ``start``."""
     start = np.zeros((1, 2)) if start is None else start
-    state = node.activate(start)
+    state = node.initial_state(start)
     for _ in range(node.safety.ramp_small_samples):
         node.step(state, np.zeros((1, 2)), start, np.zeros((1, 2)))
     assert state.forces_enabled[0] and not state.faulted[0]
@@ -189,7 +189,7 @@ def test_workspace_trip_margin(block, axis, side, level, trips) -> None:
     offset = {"under": 0.25 - 2.0**-20, "at": 0.25, "over": 0.25 + 2.0**-20}[level]
     position = np.zeros((1, 2))
     position[0, axis] = edge + outward * offset
-    state = node.activate(np.zeros((1, 2)))
+    state = node.initial_state(np.zeros((1, 2)))
     node.step(state, np.zeros((1, 2)), position, np.zeros((1, 2)))
     assert bool(state.faulted[0]) is trips
     if trips:
@@ -283,7 +283,7 @@ def test_a_command_resting_exactly_on_a_wall_is_not_clamped(block, side) -> None
 @pytest.mark.parametrize("samples", [1, 4])
 def test_the_force_gate_needs_exactly_n_strictly_small_samples(block, samples) -> None:
     node = MasterNode(block, _safety(ramp_small_samples=samples, ramp_small_force_N=0.5))
-    state = node.activate(np.zeros((1, 2)))
+    state = node.initial_state(np.zeros((1, 2)))
     for at_threshold in ([[0.0, -0.5]], [[0.5, 0.0]]):  # not small: |f| < 0.5 N is required
         for _ in range(samples + 3):
             node.step(state, np.array(at_threshold), np.zeros((1, 2)), np.zeros((1, 2)))
@@ -323,7 +323,8 @@ def test_events_carry_step_and_time_and_are_frozen(block) -> None:
 
 def test_resume_events_are_at_step_zero(block) -> None:
     node = MasterNode(block, _safety())
-    state = node.resume(np.zeros((2, 2)))
+    state = node.initial_state(np.zeros((2, 2)))
+    node.resume(state, np.zeros((2, 2)))
     assert state.lanes == 2
     assert [(e.kind, e.step, e.time_s, e.lane) for e in state.events] == [
         ("enable", 0, 0.0, 0), ("enable", 0, 0.0, 1)]
@@ -331,7 +332,7 @@ def test_resume_events_are_at_step_zero(block) -> None:
 
 def test_trips_in_one_step_are_ordered_by_reason_then_lane(block) -> None:
     node = MasterNode(block, _safety())
-    state = node.activate(np.zeros((3, 2)))
+    state = node.initial_state(np.zeros((3, 2)))
     position = np.zeros((3, 2))
     position[0, 1] = np.nan  # lane 0: non-finite position, y (code 3)
     position[1, 0] = np.nan  # lane 1: non-finite position, x (code 2)
@@ -341,7 +342,7 @@ def test_trips_in_one_step_are_ordered_by_reason_then_lane(block) -> None:
     assert [(e.lane, e.reason, e.axis) for e in state.events] == [
         (0, "non-finite handle position", "y"), (1, "non-finite handle position", "x"),
         (2, "non-finite tool force", "x")]
-    state = node.activate(np.zeros((2, 2)))
+    state = node.initial_state(np.zeros((2, 2)))
     position = np.zeros((2, 2))
     position[1, 1] = np.nan  # lane 1: position y (code 3), before lane 0's tool force
     tool = np.zeros((2, 2))
@@ -366,8 +367,8 @@ def test_a_stacked_compensator_needs_one_lane_each(paper_model) -> None:
                                       for k in (1.0, 5.0, 13.0)])
     node = MasterNode(stacked, _safety())
     with pytest.raises(ValueError, match="compensator stacked for 3 lanes, activated with 2"):
-        node.activate(np.zeros((2, 2)))
-    assert node.activate(np.zeros((3, 2))).lanes == 3
+        node.initial_state(np.zeros((2, 2)))
+    assert node.initial_state(np.zeros((3, 2))).lanes == 3
 
 
 def test_the_kernel_steps_a_general_coupled_block(block) -> None:
@@ -396,8 +397,8 @@ def test_the_passivity_layer_waits_switched_off_only_when_asked_and_built(block)
     switched off for the governor; without the layer there is nothing to stand by."""
     running = MasterNode(block, _safety(), PassivitySettings())
     assert running.passivity_standby is False
-    assert running.activate(np.zeros((1, 2))).passivity.active.tolist() == [True]
+    assert running.initial_state(np.zeros((1, 2))).passivity.active.tolist() == [True]
     standby = MasterNode(block, _safety(), PassivitySettings(), passivity_standby=True)
     assert standby.passivity_standby is True
-    assert standby.activate(np.zeros((1, 2))).passivity.active.tolist() == [False]
+    assert standby.initial_state(np.zeros((1, 2))).passivity.active.tolist() == [False]
     assert MasterNode(block, _safety(), None, passivity_standby=True).passivity_standby is False

@@ -1,7 +1,7 @@
-"""A node state re-initialised in place (``MasterNode.activate(..., reuse=state)``) is a new
+"""A node state activated again in place (``MasterNode.activate(state, ...)``) is a new
 state: every array, the passivity port and the recorded launches give what a freshly made state
-gives, whatever the reused state went through; and the tick's renewals reuse the state each one
-replaces, so a (re)activation in the loop allocates nothing.
+gives, whatever the state went through; and the tick's renewals set its one state afresh in
+place, the prepared one, so a (re)activation in the loop allocates nothing.
 """
 
 from __future__ import annotations
@@ -81,13 +81,16 @@ def _assert_same(state, expected) -> None:
 def test_a_reused_state_is_a_new_state_and_steps_like_one(paper_model, mode, renewal) -> None:
     node = _node(paper_model, mode)
     rng = np.random.default_rng(7)
-    old = node.activate(np.full((3, 2), 0.01))
-    _churn(node, old, rng)
-    assert old.faulted[0] and old.forces_enabled.any() and old.events
+    reused = node.initial_state(np.full((3, 2), 0.01))
+    _churn(node, reused, rng)
+    assert reused.faulted[0] and reused.forces_enabled.any() and reused.events
     start = np.array([[0.01, -0.002], [np.nan, 0.0], [0.03, 0.004]])  # lane 1 trips at start
-    make = node.activate if renewal == "activate" else node.resume
-    reused, fresh = make(start, reuse=old), make(start)
-    assert reused is old  # the same buffers, set afresh
+    fresh = node.initial_state(start)
+    if renewal == "activate":
+        node.activate(reused, start)
+    else:
+        node.resume(reused, start)
+        node.resume(fresh, start)
     _assert_same(reused, fresh)
     inputs = np.random.default_rng(11)
     for _ in range(200):  # the same law from here on: the recorded launches are intact
@@ -101,29 +104,28 @@ def test_a_reused_state_is_a_new_state_and_steps_like_one(paper_model, mode, ren
     _assert_same(reused, fresh)
 
 
-def test_reuse_refuses_a_state_of_another_lane_count(paper_model) -> None:
+def test_activation_refuses_a_state_of_another_lane_count(paper_model) -> None:
     node = _node(paper_model, "paper")
     with pytest.raises(ValueError, match="2 lanes for 3"):
-        node.activate(np.zeros((3, 2)), reuse=node.activate(np.zeros((2, 2))))
+        node.activate(node.initial_state(np.zeros((2, 2))), np.zeros((3, 2)))
 
 
-def _scenario_tick(node: MasterNode, paper_model, reuse: bool) -> tuple[list, list]:
+def _scenario_tick(node: MasterNode, paper_model, prepared: bool) -> tuple[list, list]:
     """One lane through its first ACTIVATE and two outages (HOLD, then RESUME); returns the
-    node state after each tick and the commands. ``reuse=False``: every renewal allocates
-    (the spare taken away before each tick), the reference."""
+    node state after each tick and the commands. ``prepared=False``: the first activation
+    allocates the state (no :meth:`MasterTick.prepare`), the reference."""
     ts = paper_model.sample_period_s
     ratio = tuple(float(a.position_ratio_ah1) for a in paper_model.axes)
     tick = MasterTick(node, [MasterSupervisor(ratio, 0.001, 0.01, 5)])
     tick.start(np.zeros(2))
-    if reuse:
+    if prepared:
         tick.prepare(np.zeros(2))
+    made = tick._prepared
     outages = (range(150, 200), range(300, 350))
     position = np.zeros((1, 2))
     states, commands, transitions = [], [], []
     last_heard = 0
     for k in range(450):
-        if not reuse:
-            tick._spare = None
         quiet = any(k in outage for outage in outages)
         message = None
         if not quiet:
@@ -140,18 +142,19 @@ def _scenario_tick(node: MasterNode, paper_model, reuse: bool) -> tuple[list, li
         position = out.command_m.copy()
     assert transitions.count(Transition.ACTIVATE) == 1
     assert transitions.count(Transition.RESUME) == 2
+    assert (made is not None) == prepared and (made is None or states[-1] is made)
     return states, commands
 
 
-def test_the_tick_renews_into_the_state_it_replaced(paper_model) -> None:
+def test_the_tick_renews_its_prepared_state_in_place(paper_model) -> None:
     node = _node(paper_model, "tdpa")
-    states, commands = _scenario_tick(node, paper_model, reuse=True)
-    _, reference = _scenario_tick(node, paper_model, reuse=False)
+    states, commands = _scenario_tick(node, paper_model, prepared=True)
+    _, reference = _scenario_tick(node, paper_model, prepared=False)
     np.testing.assert_array_equal(np.array(commands), np.array(reference))
     distinct = []
     for state in states:
         if state is not None and not any(state is seen for seen in distinct):
             distinct.append(state)
-    # the prepared state, then one more: three renewals, two states taking turns
-    assert len(distinct) == 2
-    assert states[-1] is distinct[0] and states[-1].forces_enabled.all()
+    # the prepared state through three renewals: one state, set afresh in place
+    assert len(distinct) == 1
+    assert states[-1].forces_enabled.all()

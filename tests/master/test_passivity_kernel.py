@@ -31,8 +31,8 @@ def test_kernel_matches_the_numpy_reference() -> None:
     start = np.zeros((lanes, 2))
     tdpa = MasterNode.from_model(model, safety, settings)
     paper = MasterNode.from_model(model, safety)
-    kernel_state = tdpa.activate(start)
-    reference_state = paper.activate(start)
+    kernel_state = tdpa.initial_state(start)
+    reference_state = paper.initial_state(start)
     port = PassivityPort.create(settings, model.sample_period_s, lanes, settings.master_keep_J)
     rng = np.random.default_rng(3)
     position = np.zeros((lanes, 2))
@@ -91,7 +91,7 @@ def test_the_handle_command_drifts_to_the_tool_while_the_operator_lets_go() -> N
     node = MasterNode.from_model(model, safety, settings)
     ts = model.sample_period_s
     start = np.zeros((3, 2))
-    state = node.activate(start)
+    state = node.initial_state(start)
     target = np.array([[0.003, 0.0], [np.nan, np.nan], [0.003, 0.0]])
     force = np.zeros((3, 2))
     node.step(state, force, start, np.zeros((3, 2)))  # the start-up gate opens
@@ -120,10 +120,10 @@ def test_a_standby_layer_switched_per_lane_matches_the_reference_and_off_is_the_
     start = np.zeros((lanes, 2))
     standby = MasterNode.from_model(model, safety, settings, passivity_standby=True)
     paper = MasterNode.from_model(model, safety)
-    kernel_state = standby.activate(start)
+    kernel_state = standby.initial_state(start)
     assert standby.passivity_standby and not kernel_state.passivity.active.any()
-    reference_state = paper.activate(start)
-    plain_state = paper.activate(start)
+    reference_state = paper.initial_state(start)
+    plain_state = paper.initial_state(start)
     port = PassivityPort.create(settings, model.sample_period_s, lanes, settings.master_keep_J,
                                 active=False)
     switches = {300: ([1, 3, 4], True), 1200: ([3], False), 2000: ([0, 3], True)}

@@ -22,7 +22,7 @@ def test_regulating_operator_holds_the_cutting_force_against_a_damper() -> None:
     node = MasterNode.from_model(model, master_settings(config).safety)
     rig = RigModel.from_model(model, parse_operator_spec("regulate:fx=3.6,fy=0,onset=0.25"))
     rig_state = rig.initial_state(np.zeros((1, 2)), np.random.default_rng(0))
-    node_state = node.activate(np.zeros((1, 2)))
+    node_state = node.initial_state(np.zeros((1, 2)))
     ts = model.sample_period_s
     command = np.zeros((1, 2))
     tool_force = np.zeros((1, 2))
