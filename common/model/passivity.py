@@ -33,7 +33,7 @@ the port's force by ``d = excess f / |f|^2`` (``f . d`` = the excess, dissipated
 - slave: the tool's step shrinks along ft (it pushes less far into the clay).
 
 Pitfalls and what this module does about them (each pinned by a test in
-tests/common/test_passivity.py):
+tests/common/model/test_passivity.py):
 
 - division by ``|f|^2`` near zero (the velocity floor of an impedance-type damper): below
   ``force_floor_N`` the controller does not act and the deficit waits for the next step;

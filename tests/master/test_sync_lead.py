@@ -17,7 +17,7 @@ from haptic.master.hardware.interface import create_hardware, starts_cycles_earl
 from haptic.master.simulated_rig.can_devices import SimulatedRigHardware
 from haptic.master.simulated_rig.model_backend import ModelRigHardware
 from haptic.master.simulated_rig.rig_emulator import EmulatedRigHardware
-from tests.common.test_runner import FakeClock
+from tests.helpers.fake_clock import FakeClock
 
 PERIOD_NS = 540_000
 

@@ -126,5 +126,24 @@ def test_every_configured_module_has_tests_in_the_repository() -> None:
         tests = finder.tests_for(configured.path, graph)
         assert tests, configured.path
         assert all((ROOT / t).is_file() for t in tests)
-    assert "tests/common/test_watchdog.py" in finder.tests_for("common/runtime/watchdog.py",
+    assert "tests/common/runtime/test_watchdog.py" in finder.tests_for("common/runtime/watchdog.py",
                                                                graph)
+
+
+def test_every_test_file_importing_a_configured_module_is_found_for_it() -> None:
+    """Read from the test files' text, not from the finder's graph: a test file naming a
+    configured module's dotted name in an import (``import``, ``from ... import``, lazily
+    too) is one of that module's tests."""
+    graph = finder.ImportGraph(ROOT)
+    sources = {test: (ROOT / test).read_text() for test in graph.test_files()}
+    checked = 0
+    for configured in modules.load(ROOT):
+        name = finder.module_name(configured.path, graph.package_dir)
+        package, _, leaf = name.rpartition(".")
+        importing = {test for test, source in sources.items()
+                     if f"import {name}\n" in source or f"from {name} import" in source
+                     or f"from {package} import {leaf}\n" in source}
+        found = finder.tests_for(configured.path, graph, configured.depth)
+        assert importing <= set(found), (configured.path, sorted(importing - set(found)))
+        checked += bool(importing)
+    assert checked > 20

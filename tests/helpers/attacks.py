@@ -1,7 +1,7 @@
 """Attack scripts (issue 17): what a faulty or hostile process on the host or LAN sends.
 
 Each is a function over a :class:`haptic.common.wire.link.Link` (or raw Zenoh puts) so tests can run
-them against the real programs; ``python -m tests.wire.attacks --help`` runs them by hand.
+them against the real programs; ``python -m tests.helpers.attacks --help`` runs them by hand.
 """
 
 from __future__ import annotations

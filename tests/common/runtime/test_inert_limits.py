@@ -1,7 +1,7 @@
 """The inert-session monitor at exact values (common/runtime/inert.py): the threshold itself,
 a timer that starts again after each interruption, the events' times and words, episodes and
 their time summed, and the summary of a session that never was or still is inert.
-tests/wire/test_inert.py runs it in the programs."""
+tests/common/runtime/test_inert.py runs it in the programs."""
 
 from __future__ import annotations
 

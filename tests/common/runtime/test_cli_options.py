@@ -37,7 +37,7 @@ def test_flags_override_config_for_this_side_only():
         "--connect", "tcp/10.0.0.1:7447", "--connect", "tcp/10.0.0.2:7447",
         "--key-prefix", "haptic/lab-3", "--duration", "5", "--json-summary", "out.json",
         "--zenoh-set", "transport/link/tx/lease=2000", "--max-message-age", "0.05",
-        "--insecure",  # LAN addresses without a key (tests/wire/test_protected_mode.py)
+        "--insecure",  # LAN addresses without a key (tests/common/wire/test_protected_mode.py)
     ])
     link = options.link
     assert link.injection.delay_s == 0.02 and link.injection.jitter_s == 0.005

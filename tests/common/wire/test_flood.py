@@ -14,7 +14,7 @@ from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import LinkConfig
 from haptic.common.wire.messages import KIND_TOOL
 from haptic.common.wire.ports import free_port as _free_port
-from tests.wire.attacks import flood, forged_payload
+from tests.helpers.attacks import flood, forged_payload
 
 
 def _pair(max_samples: int):

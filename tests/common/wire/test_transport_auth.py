@@ -25,8 +25,8 @@ from haptic.common.wire.transport_auth import (
     transport_key,
     transport_password,
 )
-from tests.wire.attacks import forged_payload
-from tests.wire.link_helpers import WAIT_S, pair
+from tests.helpers.attacks import forged_payload
+from tests.helpers.link_helpers import WAIT_S, pair
 
 PSK = bytes(range(32))
 

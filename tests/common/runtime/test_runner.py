@@ -14,26 +14,9 @@ import textwrap
 import pytest
 
 from haptic.common.runtime.runner import FreeRunningClock, RealTimeRunner, StopSignals
+from tests.helpers.fake_clock import FakeClock
 
 PERIOD_NS = 540_000
-
-
-class FakeClock:
-    """A clock that moves 1 us per read, by the requested time per sleep (plus ``late_ns``),
-    and by whatever a step charges."""
-
-    def __init__(self, late_ns: int = 0) -> None:
-        self.now = 1_000_000_000
-        self.late_ns = late_ns
-        self.sleeps = 0
-
-    def clock(self) -> int:
-        self.now += 1_000
-        return self.now
-
-    def sleep(self, seconds: float) -> None:
-        self.sleeps += 1
-        self.now += round(seconds * 1e9) + self.late_ns
 
 
 def make(clock: FakeClock, step, duration_s: float, **kwargs) -> RealTimeRunner:

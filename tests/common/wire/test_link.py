@@ -17,36 +17,11 @@ import pytest
 
 from haptic.common.wire.injection import InjectionConfig
 from haptic.common.wire.link import Link
-from haptic.common.wire.link_config import LinkConfig
 from haptic.common.wire.messages import Flags, HandleState, ToolState
 from haptic.common.wire.ports import free_port
+from tests.helpers.link_helpers import configs, wait_for_peers
 
 WAIT_S = 10.0
-
-
-def configs(slave_injection: InjectionConfig | None = None, **common):
-    """A master/slave pair on a fresh port and key prefix. Unless told otherwise the pair
-    blocks instead of dropping on congestion and never drops as stale, so exact counts hold
-    on a loaded machine (the defaults' drop behaviour is the benchmark's business)."""
-    common.setdefault("congestion_control", "block")
-    common.setdefault("stale_after_s", 10.0)
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    prefix = f"test/{uuid.uuid4().hex[:10]}"
-    master = LinkConfig(side="master", key_prefix=prefix, listen=(endpoint,), **common)
-    slave = LinkConfig(
-        side="slave", key_prefix=prefix, connect=(endpoint,),
-        injection=slave_injection or InjectionConfig(), **common,
-    )
-    return master, slave
-
-
-def wait_for_peers(*links: Link) -> None:
-    deadline = time.monotonic() + WAIT_S
-    while not all(link.peer_alive for link in links):
-        for link in links:
-            link.poll()
-        assert time.monotonic() < deadline, "the peers did not see each other"
-        time.sleep(0.001)
 
 
 def drain(link: Link, until_s: float) -> list:

@@ -14,7 +14,7 @@ from haptic.common.runtime.cli_options import add_run_options, run_options_from_
 from haptic.common.runtime.program_harness import ProgramHarness
 from haptic.common.runtime.runner import StopSignals
 from haptic.common.wire.link import Link
-from tests.common.test_link import configs, wait_for_peers
+from tests.helpers.link_helpers import configs, wait_for_peers
 
 PERIOD_S = 0.001
 

@@ -26,8 +26,8 @@ from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import LinkConfig, link_config_from
 from haptic.common.wire.messages import KIND_TOOL, SCHEMA_VERSION, ToolState
 from haptic.common.wire.ports import free_port
-from tests.wire.attacks import forged_payload
-from tests.wire.link_helpers import WAIT_S, pair
+from tests.helpers.attacks import forged_payload
+from tests.helpers.link_helpers import WAIT_S, pair
 
 PSK = bytes(range(32))
 
@@ -35,7 +35,7 @@ PSK = bytes(range(32))
 def _configs(master_key: bytes | None = PSK, slave_key: bytes | None = PSK):
     """Two links with the message layer alone: their Zenoh transports admit anyone
     (``transport_auth`` off, as where a router relays the link), so a stranger's messages
-    reach the message checks (tests/wire/test_transport_auth.py: with it on, they never
+    reach the message checks (tests/common/wire/test_transport_auth.py: with it on, they never
     arrive)."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     prefix = f"test/{uuid.uuid4().hex[:8]}"

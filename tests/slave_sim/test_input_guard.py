@@ -17,7 +17,7 @@ from haptic.common.wire.link_config import LinkConfig
 from haptic.common.wire.messages import Flags, HandleState
 from haptic.common.wire.ports import free_port as _free_port
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
-from tests.wire.attacks import steady_master
+from tests.helpers.attacks import steady_master
 
 TS = 0.00054
 

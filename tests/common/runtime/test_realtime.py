@@ -23,6 +23,7 @@ from haptic.common.runtime.realtime import (
     RealtimeSettings,
 )
 from haptic.common.runtime.runner import RealTimeRunner
+from tests.helpers.fake_clock import FakeClock
 
 SCHED_OTHER = getattr(os, "SCHED_OTHER", 0)
 SCHED_FIFO = getattr(os, "SCHED_FIFO", 1)
@@ -433,20 +434,6 @@ def test_real_cpu_latency_request_holds_during_the_run_only():
 
 
 # --- the runner reports its scheduling ---------------------------------------------------
-
-
-class FakeClock:
-    """Moves 1 us per read and by the requested time per sleep (see test_runner.py)."""
-
-    def __init__(self) -> None:
-        self.now = 1_000_000_000
-
-    def clock(self) -> int:
-        self.now += 1_000
-        return self.now
-
-    def sleep(self, seconds: float) -> None:
-        self.now += round(seconds * 1e9)
 
 
 def run_fake(settings: RealtimeSettings | None) -> Any:

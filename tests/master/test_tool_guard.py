@@ -20,7 +20,7 @@ from haptic.common.wire.messages import Flags, ToolState
 from haptic.common.wire.ports import free_port as _free_port
 from haptic.master.supervisor import MasterSupervisor, Transition
 from haptic.master.tool_guard import ToolGuardSettings, ToolInputGuard
-from tests.wire.attacks import steady_slave
+from tests.helpers.attacks import steady_slave
 
 TS = 0.00054
 
@@ -116,7 +116,7 @@ def test_supervisor_waits_for_the_tool_at_the_handle_after_a_fault() -> None:
 
 @pytest.mark.slow
 def test_a_jumping_tool_never_reaches_the_masters_loop(tmp_path) -> None:
-    """The real haptic-master (model rig) paired with a steady slave (tests/wire/attacks.py)
+    """The real haptic-master (model rig) paired with a steady slave (tests/helpers/attacks.py)
     whose tool, in a burst of 10 messages, jumps 80 mm (a faulty slave, or a forger holding
     the session): the master counts and reports the fault, turns its forces off, never uses
     the jumped position, and runs again once the tool is plausible and at the handle."""

@@ -1,6 +1,6 @@
 """The phase lock at its edges (common/wire/phase_lock.py): its settings' bounds, the
 conversions to ns, the wrap and the deadband at their ties, the smallest correction, the
-limit, and the summary's figures; tests/common/test_phase_lock.py tests it locking."""
+limit, and the summary's figures; tests/common/wire/test_phase_lock.py tests it locking."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """The TDPA port's bookkeeping at its edges (common/model/passivity.py): switching lanes on
 and off, a switched-off lane's account, carrying counters over a node state made afresh, the
 peer's restart, the credit cap at its level, the summary's keys. Exact values throughout;
-tests/common/test_passivity.py tests the controllers' physics."""
+tests/common/model/test_passivity.py tests the controllers' physics."""
 
 from __future__ import annotations
 

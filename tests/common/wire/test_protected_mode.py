@@ -38,7 +38,7 @@ from haptic.common.wire.router import cli as router_cli
 
 #: The real ``zenoh.open``, for the one test that opens a session (on loopback).
 ZENOH_OPEN = zenoh.open
-ZENOH_FILES = Path(__file__).resolve().parents[2] / "deploy" / "zenoh"
+ZENOH_FILES = Path(__file__).resolve().parents[3] / "deploy" / "zenoh"
 LAN = "tcp/192.168.1.20:7447"
 WILDCARD = "tcp/0.0.0.0:7447"
 #: What the refusal names: the key option, mutual TLS and --insecure.

@@ -4,7 +4,7 @@ and how they are paid, the slave's damper and drift spring, and the master's who
 step (``master_step_reference``, the numpy reference of the master's kernel).
 
 Each test puts one case per lane and states the expected value from the rule in the
-docstrings, computed here in scalar Python; tests/common/test_passivity.py tests the physics
+docstrings, computed here in scalar Python; tests/common/model/test_passivity.py tests the physics
 (exactly the excess dissipated, no energy created) over runs."""
 
 from __future__ import annotations
