@@ -57,7 +57,8 @@ def test_no_package_imports_above_its_layer(package: str) -> None:
 #: import cycle (the model is numbers only; the configuration validates against the model;
 #: the records are files; the wire reads its [link] table; the runtime paces and supervises a
 #: program over the wire; the analysis and haptic-analyze use them all; the launcher is last)
-COMMON_LAYERS = ("model", "config", "records", "wire", "ros2", "runtime", "analysis", "launch")
+COMMON_LAYERS = ("model", "control", "config", "records", "wire", "ros2", "runtime", "analysis",
+                 "launch")
 
 
 def _common_imports(path: Path) -> set[tuple[str, int]]:
