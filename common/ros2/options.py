@@ -59,18 +59,19 @@ def start_ros2(config: Mapping[str, Any], side: str, period_s: float, *,
                clay_source: Callable[[], Any] | None = None,
                clay_ranges: tuple[tuple[float, float], tuple[float, float]] | None = None,
                ) -> Any:
-    """The started :class:`~haptic.common.ros2.publisher.Ros2Publisher` of ``side`` paced
-    at the loop's ``period_s`` (s), or None when ``[ros2] enabled`` is false."""
+    """The started :class:`~haptic.common.ros2.bridge_handle.Ros2Bridge` of ``side`` (the
+    ROS 2 session in a process of its own, fed at the loop's ``period_s``, s), or None when
+    ``[ros2] enabled`` is false."""
     if not config["ros2"]["enabled"]:
         return None
-    from haptic.common.ros2.publisher import Ros2Publisher
+    from haptic.common.ros2.bridge_handle import Ros2Bridge
 
     settings = Ros2Settings.from_config(config)
     say(f"ros2: publishing to {settings.endpoint} (domain {settings.domain_id}, namespace "
         f"{settings.namespace})")
-    return Ros2Publisher(settings, side, say=lambda text: say(f"ros2: {text}"),
-                         loop_counts=loop_counts, clay_source=clay_source,
-                         clay_ranges=clay_ranges).pace(period_s).start()
+    return Ros2Bridge(settings, side, period_s, say=lambda text: say(f"ros2: {text}"),
+                      loop_counts=loop_counts, clay_source=clay_source,
+                      clay_ranges=clay_ranges, say_prefix=f"haptic-{side}: ros2: ").start()
 
 
 def forwarded_ros2_args(args: argparse.Namespace) -> list[str]:
