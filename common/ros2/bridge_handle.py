@@ -129,6 +129,9 @@ class Ros2Bridge:
                           f"{STOP_TIMEOUT_S:g} s; killed")
                 process.kill()
                 self.exit_status = process.wait()
+            if self.exit_status not in (0, None):
+                self._say(f"the ROS 2 bridge (PID {process.pid}) ended with status "
+                          f"{self.exit_status}: its topics stopped then")
             self._counters = self.feed.counters()
             self.feed.close()
 
