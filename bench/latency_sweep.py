@@ -23,8 +23,8 @@ Usage: ``python bench/latency_sweep.py [--quick] [--mode linear|clay] [--json] [
 ``sim_per_wall``, ``workers`` (the processes the lanes were split between: ``--workers N``,
 by default one per CPU with at least 100 lanes each);
 ``--check`` exits 1 when any cell disagrees with the analysis further than 10 % from the
-analytic boundary. The speed target (200 simulated s per wall s on the 2-core machine) is
-reported, never enforced: machines differ.
+analytic boundary. The speed target (200 simulated s per wall s on a machine with two CPUs)
+is reported, never enforced: machines differ.
 """
 
 from __future__ import annotations

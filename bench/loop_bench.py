@@ -31,7 +31,7 @@ ping-pong is never pinned: it is Zenoh as it comes.
 Usage::
 
     python bench/loop_bench.py --duration 10            # a table
-    python bench/loop_bench.py --duration 10 --json     # the JSON of issue 5
+    python bench/loop_bench.py --duration 10 --json     # one JSON object
 """
 
 from __future__ import annotations
@@ -300,17 +300,17 @@ def cpu_layout_args(layout: str, cpus: list[int] | None = None) -> list[str]:
 
 #: The free layout's SCHED_FIFO priority of Zenoh's threads, below the loops' 40. Two FIFO loops
 #: that may run on any CPU leave Zenoh's normal threads only their gaps: on 2 CPUs the master's
-#: samples then reached the slave in bunches (at 1852 Hz 519-675 of 14,800 slave ticks waited
-#: for a sample that came late; at 4 kHz half of them), with these 11-36 (2026-12-05, 2-core
-#: Intel Xeon guest; runner.zenoh_thread_priority, docs/link.md section 9).
+#: samples then reached the slave in bunches, a slave tick waiting for a sample that came
+#: late; Zenoh's threads in SCHED_FIFO take their turn (runner.zenoh_thread_priority;
+#: docs/link.md section 9, figures in docs/measurements/loop_bench.md).
 FREE_ZENOH_PRIORITY = 30
 
 #: The slave program's phase margin in the partitioned layout, s: its spin starts this long
 #: after the master's message arrives (the lag is the 20 us spin plus this). Both loops share
 #: one CPU there, so the slave's tick must come after the master's work behind its send (its
-#: telemetry, p99 about 30 us): with the shipped 30 us, a master still running at the slave's
-#: deadline made the slave's period error p99 57-81 us; with 60 us, 34-48 us (2026-12-05,
-#: 2-core Intel Xeon VM, interleaved runs). It costs the slave's age at use 30 us.
+#: telemetry, p99 about 30 us): with the shipped 30 us a master still running at the slave's
+#: deadline widened the slave's period error (docs/measurements/loop_bench.md). It costs the
+#: slave's age at use 30 us.
 PARTITIONED_SLAVE_MARGIN_S = 0.00006
 
 
@@ -432,10 +432,10 @@ def benchmark(
     cpu_layout: str = "partitioned",
     cpu_latency_limit_us: int | None = None,
 ) -> dict[str, Any]:
-    """The whole benchmark; returns the result dict (the ``--json`` shape of issue 5, with
-    per-direction details added). The raw ping-pong runs under the CPU latency request the
-    programs hold (``cpu_latency_limit_us``, us; None: the configured default), so that the
-    ratio compares the link with Zenoh on the same machine state."""
+    """The whole benchmark; returns the result dict (what ``--json`` prints: the link's and the
+    raw ping-pong's figures, with per-direction details). The raw ping-pong runs under the CPU
+    latency request the programs hold (``cpu_latency_limit_us``, us; None: the configured
+    default), so that the ratio compares the link with Zenoh on the same machine state."""
     if cpu_latency_limit_us is None:
         cpu_latency_limit_us = int(load_config()["runner"]["cpu_latency_limit_us"])
     with cpu_latency_request(cpu_latency_limit_us) as (held_us, latency_warning):
@@ -646,9 +646,9 @@ def period_config(folder: Path, period_s: float) -> Path:
 
 def default_cpu_layout(args: argparse.Namespace, ts_s: float) -> str:
     """The layout when ``--cpu-layout`` is not given: ``free`` for the echo nodes and custom
-    commands (no phase lock) and for a period under the configured one (at 0.25 ms the two
-    programs' steps, p50 101 and 147 us, do not fit one CPU's period: 16 and 23 % overruns
-    partitioned, 2026-12-05, 2-core Intel Xeon guest); else ``partitioned``."""
+    commands (no phase lock) and for a period under the configured one (there the two
+    programs' steps do not fit one CPU's period: docs/measurements/loop_bench.md); else
+    ``partitioned``."""
     if args.echo or args.master_cmd or args.slave_cmd:
         return "free"
     from haptic.common.config import load_config

@@ -28,7 +28,7 @@ FULL = dict(gains=(3.0, 13.0, 19.0),
             jitters=(0.0, 0.01, 0.02), losses=(0.0, 0.1, 0.2), duration=8.0)
 QUICK = dict(gains=(13.0,), delays=(0.0, 0.02, 0.2, 1.0), jitters=(0.0, 0.01),
              losses=(0.0, 0.2), duration=6.0)
-#: Issue 16's target for tdpa: every cell bounded and a final gap <= 2 mm up to here.
+#: The target for tdpa: every cell bounded and a final gap <= 2 mm up to here.
 TARGET = dict(round_trip_s=1.0 + 1e-3, jitter_s=0.01, loss=0.2, gap_m=0.002)
 
 

@@ -154,7 +154,7 @@ def constant_rate(model: TeleopModel, operator_spec: str, seed: int, duration_s:
 
 
 def steady_cut_rows(steadiness: Any) -> list[Row]:
-    """The rows of issue 15's steady cut (the paper's Fig. 9 shows a steady 3.6 N at
+    """The rows of the steady cut (the paper's Fig. 9 shows a steady 3.6 N at
     38 mm/s): over the steady part of the cut (common/records/cutting.py) the force ripple (std |ft|
     / mean) at most 10 %, no velocity reversal, mean force 3.6 +- 0.4 N, speed 34-42 mm/s."""
     ripple = steadiness.force_ripple_ratio
@@ -412,7 +412,7 @@ def report_markdown(repro: Reproduction) -> str:
               "predictions. k = 19 grows far faster than the paper's (44 N at 1.3 s): no single "
               "delay reproduces both traces in this model (k = 19 reaches 44 N by 1.3 s near "
               "10.5 ms, where k = 13 is stable; docs/lockstep.md has the scan).",
-              f"- Constant rate: the cut is steady (issue 15): over the steady part "
+              f"- Constant rate: the cut is steady: over the steady part "
               f"(0.3 s after contact to 0.3 s before the contact ends) the force ripple "
               f"(std |ft| / mean) is {repro.notes['cutting_force_ripple_ratio']:.3f} with "
               f"{repro.notes['cutting_velocity_reversals']:.0f} velocity reversals; between "

@@ -228,7 +228,9 @@ def sweep_injection(settings: SweepSettings) -> InjectionConfig | None:
 
 
 def per_cell(result: SweepResult, lockstep: Any) -> list[dict]:
-    """One dict per cell with the evidence figures of issue 16 (units in the names)."""
+    """One dict per cell: its control, delay, jitter and loss, and whether it stayed bounded,
+    with its peak force, force and position errors and final position gap (units in the
+    names)."""
     settings = result.settings
     gains = np.asarray(settings.gains_k, float)
     shape = (gains.size, result.delay_samples.size)
@@ -350,10 +352,9 @@ def lane_parts(lane_gains: np.ndarray, workers: int) -> tuple[tuple[int, int], .
     return tuple(zip(bounds[:-1], bounds[1:], strict=True))
 
 
-#: The fewest lanes worth a process of their own: a tick costs about 90 us whatever the lane
-#: count plus about 0.8 us a lane (2-core AMD EPYC VM), and a forked worker costs about
-#: 0.1 s to start and set up, so fewer lanes per worker gain little (the quick grid's 126
-#: lanes: 303-368 simulated s per wall s in 2 processes, 315-331 in one).
+#: The fewest lanes worth a process of their own: a tick has a fixed cost many times a
+#: lane's, and a forked worker takes a tenth of a second or so to start and set up, so fewer
+#: lanes per worker gain little (docs/measurements/sweep_workers.md).
 MIN_LANES_PER_WORKER = 100
 
 
