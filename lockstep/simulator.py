@@ -39,10 +39,19 @@ from haptic.common.model.synthesis import synthesize
 from haptic.common.model.teleop import TeleopModel
 from haptic.common.model.work_area import shared_work_area, slave_work_area_m
 from haptic.common.wire.injection import InjectionConfig
-from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, HandleState, ToolState
-from haptic.lockstep.delay_line import DelayLine, source_schedule
+from haptic.common.wire.messages import Flags
+from haptic.lockstep.delay_line import source_schedule
 from haptic.lockstep.environments import ENVIRONMENTS
 from haptic.lockstep.governed import GovernedLanes
+from haptic.lockstep.message_lines import (
+    HandleLine,
+    HandleMessages,
+    ToolLine,
+    ToolMessages,
+    handle_line,
+    tool_line,
+)
+from haptic.lockstep.quiet_lanes import MasterQuietLanes, SlaveQuietLanes
 from haptic.lockstep.stacked import StackedLTI
 from haptic.master.margin_governor import MarginGovernor
 from haptic.master.node import MasterNode, master_compensator
@@ -50,14 +59,14 @@ from haptic.master.settings import SafetySettings, with_work_area
 from haptic.master.simulated_rig.operator import OperatorModel
 from haptic.master.simulated_rig.rig_block import RigModel
 from haptic.master.supervisor import MasterSupervisor
-from haptic.master.tick import MasterTick, ToolColumns
+from haptic.master.tick import MasterTick
 from haptic.slave_sim.clay.sim import ClayStepResult
 from haptic.slave_sim.environment import LinearEnvironment, make_environment
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from haptic.slave_sim.node import SlaveNode, slave_compensators
 from haptic.slave_sim.resync import ToolResync
 from haptic.slave_sim.supervisor import SlaveSupervisor
-from haptic.slave_sim.tick import HandleColumns, SlaveTick
+from haptic.slave_sim.tick import SlaveTick
 
 #: Safety settings that never act on a sweep's signals: the lockstep compares the loop with
 #: the analysis, which has no saturation, ramp or trip (docs/lockstep.md).
@@ -289,6 +298,8 @@ class LockstepSimulator:
         self.scenario = scenario
         self.supervision = supervision
         self.last_ticks: tuple[MasterTick, SlaveTick] | None = None
+        #: the last run's quiet-lane filters (None: every lane supervised)
+        self.last_quiet_lanes: tuple[MasterQuietLanes, SlaveQuietLanes] | None = None
 
     def ticks(self, handle_start_m: np.ndarray, tool_start_m: np.ndarray
               ) -> tuple[MasterTick, SlaveTick]:
@@ -329,7 +340,7 @@ class LockstepSimulator:
         both sides; the result's ``governed`` holds the gains used and the events.
         ``every_lane_supervised``: feed every lane's message object to its supervisor and
         guard each tick, as the program does, instead of letting the lanes with nothing to
-        change only store their messages (``supervise_columns``; the same run, bit for bit,
+        change only store their messages (lockstep/quiet_lanes.py; the same run, bit for bit,
         several times slower: tests/lockstep/test_quiet_lanes.py).
         ``schedules``: the handle and tool lines' source schedules (steps, lanes) to use
         instead of drawing them (:func:`line_schedules` of the same arguments gives the ones
@@ -340,154 +351,196 @@ class LockstepSimulator:
         steps = int(round(duration_s / ts))
         lanes = self.lanes
         delays = np.broadcast_to(np.asarray(round_trip_delay_samples, np.int64), (lanes,))
-        line_rngs = np.random.default_rng(seed).spawn(3)
-        to_slave_d = delays // 2
-        to_master_d = delays - to_slave_d
         if schedules is None:
             schedules = line_schedules(steps, ts, delays, to_slave, to_master, seed)
         elif any(np.shape(schedule) != (steps, lanes) for schedule in schedules):
             raise ValueError(f"schedules must be two ({steps}, {lanes}) arrays")
         governed = None if governors is None else GovernedLanes(governors, self.gains_k, steps)
-        tdpa = int(self.passivity is not None)  # the messages carry the cumulative input energy
+        run = self._start_run(delays, schedules, np.random.default_rng(seed).spawn(3)[2],
+                              governed, every_lane_supervised)
+        run.excitation_N = None if excitation_N is None else np.asarray(excitation_N, float)
+        run.tally = _WindowTally(steps, max(1, int(round(window_s / ts))), lanes,
+                                 np.array([a.force_ratio_ah2 for a in self.model.axes]))
+        run.recorded = np.asarray([] if record_lanes is None else record_lanes, int)
+        run.traces = {name: np.empty((steps, run.recorded.size, 2)) for name in TRACE_NAMES} \
+            if run.recorded.size else {}
+        with np.errstate(over="ignore", invalid="ignore"):
+            for k in range(steps):
+                self._master_step(run, k)
+                self._slave_step(run, k)
+        return self._finish_run(run, delays)
+
+    def _start_run(self, delays: np.ndarray, schedules: tuple[np.ndarray, np.ndarray],
+                   rig_rng: np.random.Generator, governed: GovernedLanes | None,
+                   every_lane_supervised: bool) -> _Run:
+        """A run's ticks (in sync), lines (holding the run-up's messages) and rig, lanes
+        at the scenario's start; the quiet-lane filters unless ``every_lane_supervised``."""
+        lanes, ts = self.lanes, self.period_s
+        tdpa = self.passivity is not None  # the messages carry the cumulative input energy
         start = np.broadcast_to(np.asarray(self.scenario.tool.start_position_m, float),
                                 (lanes, 2))
         ratio = np.array([a.position_ratio_ah1 for a in self.model.axes])
         handle_start = start / ratio
-        enabled = float(Flags.FORCES_ENABLED)
-        # the messages before tick 0 (the link runs in sync before the run): no force, the
-        # handle and the tool at their start, forces enabled on both sides
-        # the handle's message: force, position, flags, the force ramp's scale (then the
-        # governed k/k0 and the passivity layer's handed-over energy, J, where they apply);
-        # the tool's: force, position, velocity, flags (then the energy)
-        gain_column = 6 if governed is not None else None
-        handle_columns = 6 + (governed is not None) + tdpa
-        handle_energy_column = handle_columns - 1 if tdpa else None
         master_tick, slave_tick = self.ticks(handle_start, start)
         self.last_ticks = (master_tick, slave_tick)  # the run's ticks, for inspection
-        # each line's receive also gives the arrivals: the run-up's messages were sent the
-        # line's delay (plus its structural sample) before they are read; the columns the
-        # ticks read are the message's first 6 (handle) or 7 (tool), then the send tick
-        handle_line = DelayLine(schedules[0], handle_columns,
-                                np.column_stack((np.zeros((lanes, 2)), handle_start,
-                                                 np.full(lanes, enabled),
-                                                 master_tick.state.force_scale,
-                                                 np.ones((lanes, handle_columns - 6 - tdpa)),
-                                                 np.zeros((lanes, tdpa)))),
-                                period_s=ts, runup_lag=to_slave_d, message_columns=6,
-                                flag_column=4)
-        tool_line = DelayLine(schedules[1], 7 + tdpa,
-                              np.column_stack((np.zeros((lanes, 2)), start,
-                                               np.zeros((lanes, 2)), np.full(lanes, enabled),
-                                               np.zeros((lanes, tdpa)))),
-                              period_s=ts, runup_lag=to_master_d + 1, message_columns=7,
-                              flag_column=6)
-        rig_state = self.rig.initial_state(handle_start, line_rngs[2])
-        master_state = master_tick.state
-        slave_state = slave_tick.state
-        command = master_state.last_command_m.copy()
+        # the messages before tick 0 (the link runs in sync before the run): no force, the
+        # handle and the tool at their start, forces enabled on both sides; each line's
+        # receive also gives the arrivals: the run-up's messages were sent the line's delay
+        # (plus its structural sample) before they are read
+        enabled = float(Flags.FORCES_ENABLED)
+        initial = np.zeros((lanes, HandleMessages.channels(governed is not None, tdpa)))
+        handle_runup = HandleMessages(initial, governed is not None, tdpa)
+        handle_runup.position_m[...] = handle_start
+        handle_runup.flags[...] = enabled
+        handle_runup.force_scale[...] = master_tick.state.force_scale
+        if handle_runup.gain_ratio is not None:
+            handle_runup.gain_ratio[...] = 1.0
+        to_slave_d = delays // 2
+        handles = handle_line(schedules[0], initial, ts, to_slave_d, governed is not None, tdpa)
+        initial = np.zeros((lanes, ToolMessages.channels(tdpa)))
+        tool_runup = ToolMessages(initial, tdpa)
+        tool_runup.position_m[...] = start
+        tool_runup.flags[...] = enabled
+        tools = tool_line(schedules[1], initial, ts, delays - to_slave_d + 1, tdpa)
         if governed is not None:
-            slave_state.gain_ratio = np.ones(lanes)
-        handle_arrivals = _Arrivals(handle_line, ts)
-        tool_arrivals = _Arrivals(tool_line, ts)
+            slave_tick.state.gain_ratio = np.ones(lanes)
+        quiet = None if every_lane_supervised else (MasterQuietLanes(master_tick, tools),
+                                                     SlaveQuietLanes(slave_tick, handles))
+        self.last_quiet_lanes = quiet
+        return _Run(master_tick, slave_tick, handles, tools, quiet,
+                    self.rig.initial_state(handle_start, rig_rng),
+                    master_tick.state.last_command_m.copy(), ratio, governed, tdpa)
 
-        window = max(1, int(round(window_s / ts)))
-        force_ratio = np.array([a.force_ratio_ah2 for a in self.model.axes])
-        tally = _WindowTally(steps, window, lanes, force_ratio)
-        recorded = np.asarray([] if record_lanes is None else record_lanes, int)
-        traces = {name: np.empty((steps, recorded.size, 2)) for name in TRACE_NAMES} \
-            if recorded.size else {}
-        excitation = None if excitation_N is None else np.asarray(excitation_N, float)
+    def _master_step(self, run: _Run, k: int) -> None:
+        """Tick ``k`` of the master: read (the rig at SYNC k) -> poll -> supervise -> node ->
+        write/send (the handle line's message sent at k, written in place)."""
+        now_s = k * self.period_s
+        master_tick = run.master_tick
+        tool = run.tools.receive(k)
+        sample = self.rig.step(run.rig_state, run.command, tool.force_N)
+        fh = sample.handle_force_measured_N
+        if run.excitation_N is not None and k < run.excitation_N.shape[0]:
+            fh = fh + run.excitation_N[k]
+        yh = sample.handle_position_m
+        if run.quiet is None:
+            master_tick.supervise(now_s, run.tools.messages(), yh,
+                                  silence_s=run.tools.silence_s.tolist())
+        else:
+            run.quiet[0].supervise(now_s, yh)
+        sent = run.handles.slot(k)
+        state = master_tick.state
+        governed = run.governed
+        if governed is not None:  # k on the master now, on the slave with the message
+            state.gain_ratio[:] = governed.update(k, self.period_s, run.tools.schedule,
+                                                  run.handles.schedule)
+            sent.gain_ratio[...] = state.gain_ratio
+            if self.passivity_standby and governed.switches:  # the tdpa action
+                for mask, on in ((governed.switch_on, True), (governed.switch_off, False)):
+                    if mask.any():
+                        master_tick.switch_passivity(now_s, mask, on, "governor")
+        if run.tdpa:  # the slave's handed-over energy and its tool, as the link gives them
+            state.peer_energy_J[:] = tool.energy_J
+            state.peer_target_m[:] = tool.position_m / run.ratio
+        used = master_tick.control(fh, yh)
+        # a view the master's next control overwrites: the rig reads it before then
+        run.command = used.command_m
+        sent.force_N[...] = used.handle_force_used_N
+        sent.position_m[...] = yh
+        sent.flags[...] = used.flag_values
+        sent.force_scale[...] = used.force_scale
+        if run.tdpa:
+            sent.energy_J[...] = master_tick.state.passivity.sent_J
+        run.handle_force_N, run.handle_position_m = fh, yh
+        run.rig_sample, run.tool_force_recv_N = sample, tool.force_N
 
-        with np.errstate(over="ignore", invalid="ignore"):
-            for k in range(steps):
-                now_s = k * ts
-                # master: read (the rig at SYNC k) -> poll -> supervise -> node -> write/send
-                tool_rows = tool_line.receive(k)
-                ft_recv = tool_rows[:, :2]
-                sample = self.rig.step(rig_state, command, ft_recv)
-                fh = sample.handle_force_measured_N
-                if excitation is not None and k < excitation.shape[0]:
-                    fh = fh + excitation[k]
-                yh = sample.handle_position_m
-                if every_lane_supervised:
-                    master_tick.supervise(now_s, tool_arrivals.tool_states(k, tool_rows), yh,
-                                          silence_s=tool_arrivals.silence_s.tolist())
-                else:
-                    master_tick.supervise_columns(now_s, tool_arrivals.tool_columns(
-                        k, tool_rows), yh, tool_arrivals.silence_s)
-                # the message sent at k, written in place (every column, every tick)
-                handle_message = handle_line.slot(k)
-                if governed is not None:  # k on the master now, on the slave with the message
-                    master_tick.state.gain_ratio[:] = governed.update(
-                        k, ts, tool_line.schedule, handle_line.schedule)
-                    handle_message[:, gain_column] = master_tick.state.gain_ratio
-                    if self.passivity_standby and governed.switches:  # the tdpa action
-                        for mask, on in ((governed.switch_on, True),
-                                         (governed.switch_off, False)):
-                            if mask.any():
-                                master_tick.switch_passivity(now_s, mask, on, "governor")
-                if tdpa:  # the slave's handed-over energy and its tool, as the link gives them
-                    master_tick.state.peer_energy_J[:] = tool_rows[:, 7]
-                    master_tick.state.peer_target_m[:] = tool_rows[:, 2:4] / ratio
-                used = master_tick.control(fh, yh)
-                # a view the master's next control overwrites: the rig reads it before then
-                command = used.command_m
-                handle_message[:, 0:2] = used.handle_force_used_N
-                handle_message[:, 2:4] = yh
-                handle_message[:, 4] = used.flag_values
-                handle_message[:, 5] = used.force_scale
-                if tdpa:
-                    handle_message[:, handle_energy_column] = master_tick.state.passivity.sent_J
-                # slave: poll -> supervise -> node -> send
-                received = handle_line.receive(k)
-                yt = slave_state.tool[:, 0::2]  # t_k: read into the tally before the step
-                tally.add_tool_position(k, yt)
-                if every_lane_supervised:
-                    slave_tick.supervise(now_s, handle_arrivals.handle_states(k, received),
-                                         silence_s=handle_arrivals.silence_s.tolist())
-                else:
-                    slave_tick.supervise_columns(now_s, handle_arrivals.handle_columns(
-                        k, received), handle_arrivals.silence_s)
-                if governed is not None:
-                    slave_tick.state.gain_ratio = received[:, gain_column].copy()
-                if tdpa:
-                    slave_tick.peer_energy_J = received[:, handle_energy_column]
-                ticked = slave_tick.control()
-                out = ticked.out
-                ft = out.tool_force_N
-                tool_message = tool_line.slot(k)  # written in place: the message sent at k
-                tool_message[:, 0:2] = ft
-                tool_message[:, 2:4] = out.tool_position_m
-                tool_message[:, 4:6] = out.tool_velocity_m_s
-                tool_message[:, 6] = ticked.flag_values
-                if tdpa:
-                    tool_message[:, 7] = slave_tick.state.passivity.sent_J
+    def _slave_step(self, run: _Run, k: int) -> None:
+        """Tick ``k`` of the slave: poll -> supervise -> node -> send (the tool line's message
+        sent at k, written in place); then the tick's statistics and traces."""
+        now_s = k * self.period_s
+        slave_tick = run.slave_tick
+        received = run.handles.receive(k)
+        run.tally.add_tool_position(k, slave_tick.state.tool[:, 0::2])  # t_k, before the step
+        if run.quiet is None:
+            slave_tick.supervise(now_s, run.handles.messages(),
+                                 silence_s=run.handles.silence_s.tolist())
+        else:
+            run.quiet[1].supervise(now_s)
+        if run.governed is not None:
+            slave_tick.state.gain_ratio = received.gain_ratio.copy()
+        if run.tdpa:
+            slave_tick.peer_energy_J = received.energy_J
+        ticked = slave_tick.control()
+        out = ticked.out
+        ft = out.tool_force_N
+        sent = run.tools.slot(k)
+        sent.force_N[...] = ft
+        sent.position_m[...] = out.tool_position_m
+        sent.velocity_m_s[...] = out.tool_velocity_m_s
+        sent.flags[...] = ticked.flag_values
+        if run.tdpa:
+            sent.energy_J[...] = slave_tick.state.passivity.sent_J
+        fh, yh = run.handle_force_N, run.handle_position_m
+        run.tally.add(k, fh, ft, yh)
+        recorded = run.recorded
+        if recorded.size:
+            values = (fh, yh, ft, out.tool_position_m, out.tool_velocity_m_s,
+                      run.tool_force_recv_N, run.command, run.rig_sample.operator_intent_force_N)
+            for name, value in zip(TRACE_NAMES, values, strict=True):
+                run.traces[name][k] = value[recorded]
 
-                tally.add(k, fh, ft, yh)
-                if recorded.size:
-                    values = (fh, yh, ft, out.tool_position_m, out.tool_velocity_m_s, ft_recv,
-                              command, sample.operator_intent_force_N)
-                    for name, value in zip(TRACE_NAMES, values, strict=True):
-                        traces[name][k] = value[recorded]
-        master_tick.sync_supervisors()  # what the quiet lanes took, for their readers
-        slave_tick.sync_supervisors()
-        master_state = master_tick.state
-        self.final_states = (master_state, slave_tick.state)
+    def _finish_run(self, run: _Run, delays: np.ndarray) -> LockstepResult:
+        """The run's result, with every supervisor and guard told what its quiet lanes
+        took."""
+        if run.quiet is not None:
+            for quiet in run.quiet:
+                quiet.sync()
+        master_state, slave_state = run.master_tick.state, run.slave_tick.state
+        self.final_states = (master_state, slave_state)
+        tally = run.tally
         stats = tally.stats
+        steps = tally.steps
         finite = np.isfinite(stats.handle_force_sumsq_N2).all(axis=(0, 2)) & np.isfinite(
             stats.tool_force_sumsq_N2).all(axis=(0, 2))
         return LockstepResult(
-            sample_period_s=ts, steps=steps, gains_k=self.gains_k.copy(),
+            sample_period_s=self.period_s, steps=steps, gains_k=self.gains_k.copy(),
             round_trip_delay_samples=np.array(delays), stats=stats,
             peak_handle_force_N=tally.peak_handle_force_N,
             peak_tool_force_N=tally.peak_tool_force_N,
             position_error_rms_m=np.sqrt(tally.position_error_sumsq_m2 / max(steps, 1)),
-            diverged=~finite | master_state.faulted, recorded_lanes=recorded, traces=traces,
-            safety_events=len(master_tick.take_node_events()), governed=governed,
+            diverged=~finite | master_state.faulted, recorded_lanes=run.recorded,
+            traces=run.traces, safety_events=len(run.master_tick.take_node_events()),
+            governed=run.governed,
             force_error_rms_N=np.sqrt(tally.force_error_sumsq_N2 / max(steps, 1)),
-            final_position_gap_m=(slave_tick.state.tool[:, [0, 2]] - ratio * yh) if steps else
-            np.zeros((lanes, 2)),
+            final_position_gap_m=(slave_state.tool[:, [0, 2]] - run.ratio * run.handle_position_m)
+            if steps else np.zeros((self.lanes, 2)),
         )
+
+
+@dataclass(eq=False)
+class _Run:
+    """What one :meth:`LockstepSimulator.run` steps: the two ticks, the lines, the quiet-lane
+    filters (None: every lane supervised), the rig, and what the master's half of a tick
+    hands the slave's half (the handle's force and position, the rig's sample, the tool force
+    received, the command)."""
+
+    master_tick: MasterTick
+    slave_tick: SlaveTick
+    handles: HandleLine
+    tools: ToolLine
+    quiet: tuple[MasterQuietLanes, SlaveQuietLanes] | None
+    rig_state: Any
+    command: np.ndarray  # (lanes, 2), m: the handle command the rig applies next
+    ratio: np.ndarray  # (2,) Ah1
+    governed: GovernedLanes | None
+    tdpa: bool
+    excitation_N: np.ndarray | None = None
+    tally: _WindowTally | None = None
+    recorded: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    traces: dict[str, np.ndarray] = field(default_factory=dict)
+    handle_force_N: np.ndarray | None = None
+    handle_position_m: np.ndarray | None = None
+    rig_sample: Any = None
+    tool_force_recv_N: np.ndarray | None = None
 
 
 def line_schedules(steps: int, period_s: float, round_trip_delay_samples: np.ndarray,
@@ -577,73 +630,3 @@ class _WindowTally:
         self._running_sum(self.position_error_sumsq_m2, error * error)
         force_error = fh - ft / self.force_ratio
         self._running_sum(self.force_error_sumsq_N2, force_error * force_error)
-
-
-class _Arrivals:
-    """A line's messages at a tick as the program's link would deliver them, from the line's
-    last :meth:`DelayLine.receive` (which of them are fresh, their send ticks and times,
-    their flags; ``silence_s`` is the line's)."""
-
-    def __init__(self, line: DelayLine, period_s: float) -> None:
-        self.line = line
-        self.lanes = line.rows.shape[0]
-        self.period_s = period_s
-        self.silence_s = line.silence_s
-        self._no_epoch = np.zeros(self.lanes, np.int64)
-        # the columns of the line's outputs, made once: the same arrays every tick (updated
-        # in place by each receive), which the quiet-lane kernels then read in place
-        self._tool_columns: tuple[np.ndarray, ToolColumns] | None = None
-        self._handle_columns: tuple[np.ndarray, HandleColumns] | None = None
-
-    def tool_columns(self, tick: int, rows: np.ndarray) -> ToolColumns:
-        """The tick's tool messages as columns (``MasterTick.supervise_columns``); ``rows``:
-        the line's receive at ``tick``."""
-        made = self._tool_columns
-        if made is not None and made[0] is rows:
-            return made[1]
-        line = self.line
-        columns = ToolColumns(line.fresh, rows[:, 0:2], line.flags, line.columns,
-                              self._tool_state)
-        self._tool_columns = (rows, columns)
-        return columns
-
-    def _tool_state(self, lane: int, row: np.ndarray) -> ToolState:
-        """The ``ToolState`` of a ``tool_columns`` row (the tool line's first 7 columns, then
-        the send tick)."""
-        fx, fy, x, y, vx, vy, flags, sent = row.tolist()
-        return ToolState(0, int(sent), int(int(sent) * (self.period_s * 1e9)),
-                         FLAGS_BY_VALUE[int(flags)], (fx, fy), (x, y), (vx, vy), 0.0, 0.0)
-
-    def handle_columns(self, tick: int, rows: np.ndarray) -> HandleColumns:
-        """The tick's handle messages as columns (``SlaveTick.supervise_columns``); ``rows``:
-        the line's receive at ``tick``."""
-        made = self._handle_columns
-        if made is not None and made[0] is rows:
-            return made[1]
-        line = self.line
-        columns = HandleColumns(line.fresh, rows[:, 0:2], rows[:, 2:4], line.flags,
-                                self._no_epoch, line.send_time_ns, rows[:, 5], line.columns,
-                                self._handle_state)
-        self._handle_columns = (rows, columns)
-        return columns
-
-    def _handle_state(self, lane: int, row: np.ndarray) -> HandleState:
-        """The ``HandleState`` of a ``handle_columns`` row (the handle line's first 6
-        columns, then the send tick)."""
-        fx, fy, x, y, flags, scale, sent = row.tolist()
-        return HandleState(0, int(sent), int(int(sent) * (self.period_s * 1e9)),
-                           FLAGS_BY_VALUE[int(flags)], (fx, fy), (x, y), force_scale=scale)
-
-    def tool_states(self, tick: int, rows: np.ndarray) -> list[ToolState | None]:
-        """The fresh ``ToolState`` per lane (None where nothing new came)."""
-        columns = self.tool_columns(tick, rows)
-        return [self._tool_state(lane, row) if fresh else None
-                for lane, (fresh, row) in enumerate(zip(columns.fresh, columns.rows,
-                                                        strict=True))]
-
-    def handle_states(self, tick: int, rows: np.ndarray) -> list[HandleState | None]:
-        """The fresh ``HandleState`` per lane (None where nothing new came)."""
-        columns = self.handle_columns(tick, rows)
-        return [self._handle_state(lane, row) if fresh else None
-                for lane, (fresh, row) in enumerate(zip(columns.fresh, columns.rows,
-                                                        strict=True))]

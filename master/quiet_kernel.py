@@ -1,5 +1,5 @@
 """NVIDIA Warp kernel of the lockstep's quiet lanes on the master side
-(:meth:`~haptic.master.tick.MasterTick.supervise_columns`): for every lane in one launch, the
+(lockstep/quiet_lanes.py, ``MasterQuietLanes``): for every lane in one launch, the
 tick's tool message stored where one came, and whether the lane's supervisor would change
 anything.
 
@@ -79,7 +79,7 @@ def quiet_kernel(columns: int) -> Any:
 
 
 class QuietLanes:
-    """The recorded launch over one :class:`~haptic.master.tick.MasterTick`'s arrays
+    """The recorded launch over the master's quiet-lane filter's arrays
     (``views``: name -> numpy array, see :func:`quiet_kernel`); the tick's message columns
     are copied into buffers of its own, or read in place while a caller hands the very same
     arrays every tick (:class:`~haptic.common.runtime.replayed_launch.InPlaceInputs`)."""
@@ -117,7 +117,7 @@ class QuietLanes:
 
     def run(self, fresh: np.ndarray, flags: np.ndarray, rows: np.ndarray,
             force_N: np.ndarray, silence_s: np.ndarray) -> np.ndarray | None:
-        """One tick's messages (``ToolColumns``' fresh, flags, rows and force) and silences
+        """One tick's messages (the tool line's fresh, flags, rows and force) and silences
         (s): stores the fresh messages and returns the lanes fed to their supervisor
         ((lanes,) bool, valid until the next run), or None when every lane is quiet."""
         if rows.shape != self.rows.shape:

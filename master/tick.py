@@ -16,15 +16,14 @@ used (saturated, scaled by the force ramp), the ramp's scale, and the flags to s
 whose forces are off hold the supervisor's ``hold_m`` and send no force.
 
 The program has one lane; the simulator one lane per cell of a sweep (the node is one Warp
-kernel over every lane; one supervisor per lane). The simulator feeds its messages as
-columns (:meth:`MasterTick.supervise_columns`): a lane in the supervisor's steady state whose
-tick would change nothing (one Warp kernel for all lanes, master/quiet_kernel.py) only stores
-its message, and every other lane goes through its supervisor as the program's does.
+kernel over every lane; one supervisor per lane). :meth:`MasterTick.supervise` is the one way
+in: the simulator's quiet-lane filter (lockstep/quiet_lanes.py) calls it on the lanes whose
+supervisor has something to do, the program on its one lane.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,7 +32,6 @@ import numpy as np
 from haptic.common.wire.lane_flags import lane_flag_values
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, ToolState
 from haptic.master.node import MasterNode, MasterNodeState
-from haptic.master.quiet_kernel import QuietLanes
 from haptic.master.supervisor import MasterSupervisor, Transition
 
 #: Flag values (IntFlag arithmetic costs about 1 us per operation, too much per lane and
@@ -75,20 +73,6 @@ class MasterTickOutput:
         return [FLAGS_BY_VALUE[value] for value in self.flag_values.tolist()]
 
 
-@dataclass
-class ToolColumns:
-    """A tick's tool messages as columns (the lockstep's lanes): ``fresh`` (lanes,) bool
-    where a new message came; each lane's message's ``force_N`` (lanes, 2), N, and ``flags``
-    (lanes,) int (read where fresh); ``rows`` (lanes, C): what ``build(lane, row)`` needs to
-    make that lane's ``ToolState`` for its supervisor."""
-
-    fresh: np.ndarray
-    force_N: np.ndarray
-    flags: np.ndarray
-    rows: np.ndarray
-    build: Callable[[int, np.ndarray], ToolState]
-
-
 class MasterTick:
     """The master's supervise and node stages for ``len(supervisors)`` lanes."""
 
@@ -103,7 +87,7 @@ class MasterTick:
         self.state: MasterNodeState | None = None
         #: :meth:`prepare`'s state, the first activation's to fill in place
         self._prepared: MasterNodeState | None = None
-        #: the tick time (s) at which the node's state was last made for all lanes: its
+        #: the tick time (s) at which the node's state last started afresh in every lane: its
         #: events' times count from here
         self.node_offset_s = 0.0
         lanes = self.lanes
@@ -113,28 +97,12 @@ class MasterTick:
         self._tool_used = np.zeros((lanes, 2))
         self._scale = np.zeros(lanes)
         #: the newest received tool force per lane (zero before the first message), N
-        self._tool_force = np.zeros((lanes, 2))
+        self.tool_force_N = np.zeros((lanes, 2))
         #: each supervisor's ``hold_m`` (lanes, 2), m
         self._hold = np.zeros((lanes, 2))
         self._flag_values = np.zeros(lanes, np.int64)
         self._pending_events: list[tuple[float, Any]] = []
         self._none_switched = np.zeros(lanes, bool)
-        # supervise_columns' view of the supervisors, made afresh after a supervise():
-        # each one's steady(), its newest message's flags and row, and whether the
-        # supervisor's stored message is older than that row (a quiet lane's)
-        self._columns_current = False
-        self._steady = np.zeros(lanes, bool)
-        self._max_age_s = np.array([s.watchdog.max_age_s for s in self.supervisors], float)
-        self._newest_flags = np.zeros(lanes, np.int64)
-        self._newest_rows: np.ndarray | None = None
-        #: the quiet lanes' kernel over these arrays (master/quiet_kernel.py), bound when the
-        #: rows' shape is known
-        self._quiet_lanes: QuietLanes | None = None
-        self._stale = np.zeros(lanes, bool)
-        self._build: Callable[[int, np.ndarray], ToolState] | None = None
-        #: lane-ticks of supervise_columns that went through their supervisor, and all
-        self.lane_ticks_fed = 0
-        self.lane_ticks = 0
         #: (lanes,) where the governor has the standby passivity layer switched on
         self.standby_active = np.zeros(lanes, bool)
         #: the switch's events (``tdpa_on``/``tdpa_off``), for the program's event list
@@ -151,7 +119,6 @@ class MasterTick:
             self._hold[lane] = supervisor.hold_m
             if synced:
                 supervisor.start_synced()
-        self._columns_current = False
         if synced:
             self.state = self.node.initial_state(np.nan_to_num(position))
             self.enabled[:] = True
@@ -169,111 +136,45 @@ class MasterTick:
     def supervise(self, now_s: float, messages: Sequence[ToolState | None],
                   handle_position_m: np.ndarray, faults: Sequence[Sequence[str]] | None = None,
                   cycle: int = 0, silence_s: Sequence[float] | None = None,
-                  peer_alive: Sequence[bool] | None = None) -> list[Transition]:
-        """Feed every lane's supervisor (``messages``: the fresh ``ToolState`` per lane or
-        ``None``; ``handle_position_m`` (lanes, 2), m; ``faults``: the hardware's per lane;
-        ``silence_s``: time since the last fresh message per lane, s; ``peer_alive``: the
-        slave's liveliness per lane). Lanes whose forces come on get a fresh node state at
-        their position (``ACTIVATE``: the node's small-force gate; ``RESUME``: the forces
-        ramp in). Returns each lane's transition."""
+                  peer_alive: Sequence[bool] | None = None,
+                  lanes: Sequence[int] | None = None) -> list[Transition]:
+        """Feed the supervisors of ``lanes`` (default: every lane; the others are left as they
+        are). Per lane: ``messages``, the fresh ``ToolState`` or ``None``;
+        ``handle_position_m`` (lanes, 2), m; ``faults``, the hardware's; ``silence_s``, time
+        since the last fresh message, s; ``peer_alive``, the slave's liveliness. Lanes whose
+        forces come on start the node afresh at their position (``ACTIVATE``: the node's
+        small-force gate; ``RESUME``: the forces ramp in). Returns the transition of each lane
+        fed, in the order of ``lanes``."""
         position = np.asarray(handle_position_m, float)
         rows = position.tolist()  # floats: the supervisors are plain Python
         supervisors = self.supervisors
-        if self._columns_current:
-            self.sync_supervisors()
+        fed = range(self.lanes) if lanes is None else lanes
         transitions = [
-            supervisor.update(now_s, messages[lane], rows[lane],
-                              () if faults is None else faults[lane], cycle,
-                              0.0 if silence_s is None else silence_s[lane],
-                              True if peer_alive is None else peer_alive[lane])
-            for lane, supervisor in enumerate(supervisors)]
+            supervisors[lane].update(now_s, messages[lane], rows[lane],
+                                     () if faults is None else faults[lane], cycle,
+                                     0.0 if silence_s is None else float(silence_s[lane]),
+                                     True if peer_alive is None else peer_alive[lane])
+            for lane in fed]
         enabled = self.enabled
-        for lane, supervisor in enumerate(supervisors):
+        renew = False
+        for lane, transition in zip(fed, transitions, strict=True):
+            supervisor = supervisors[lane]
             enabled[lane] = supervisor.enabled
             tool = supervisor.tool
             if tool is not None:
-                self._tool_force[lane] = tool.tool_force_N
-            if transitions[lane] is Transition.HOLD:
-                self._hold[lane] = supervisor.hold_m
-        self._columns_current = False
-        activate = [t is Transition.ACTIVATE for t in transitions]
-        resume = [t is Transition.RESUME for t in transitions]
-        if any(activate) or any(resume):
-            self._renew(now_s, np.nan_to_num(position), np.array(activate), np.array(resume))
-        return transitions
-
-    def supervise_columns(self, now_s: float, messages: ToolColumns,
-                          handle_position_m: np.ndarray, silence_s: np.ndarray) -> np.ndarray:
-        """:meth:`supervise` for messages given as columns, the slave alive and no hardware
-        fault (the lockstep's lanes; supervisors without a tool guard): a quiet lane
-        (master/quiet_kernel.py) only stores its message; every other lane's
-        supervisor is fed as :meth:`supervise` feeds it, with its stored message brought up
-        to date first. ``silence_s`` (lanes,), s. Returns the lanes fed to their supervisor
-        ((lanes,) bool, valid until the next tick)."""
-        supervisors = self.supervisors
-        if not self._columns_current:
-            if any(supervisor.tool_guard is not None for supervisor in supervisors):
-                raise ValueError("supervise_columns: supervisors with a tool guard take "
-                                 "their messages one by one (supervise)")
-            self._steady[...] = [supervisor.steady() for supervisor in supervisors]
-            self._newest_flags[...] = [0 if supervisor.tool is None
-                                       else int(supervisor.tool.flags)
-                                       for supervisor in supervisors]
-            self._stale[...] = False
-            self._columns_current = True
-        fresh = messages.fresh
-        self._build = messages.build
-        if self._newest_rows is None or self._newest_rows.shape != messages.rows.shape:
-            self._newest_rows = np.zeros_like(messages.rows, dtype=float)
-            self._quiet_lanes = QuietLanes(self.lanes, {
-                "steady": self._steady, "max_age_s": self._max_age_s,
-                "newest_flags": self._newest_flags, "newest_rows": self._newest_rows,
-                "tool_force_N": self._tool_force, "stale": self._stale})
-        assert self._quiet_lanes is not None
-        # one kernel: the fresh messages stored, the quiet lanes' marked stale
-        fed = self._quiet_lanes.run(fresh, messages.flags, messages.rows, messages.force_N,
-                                    silence_s)
-        self.lane_ticks += self.lanes
-        if fed is None:  # every lane quiet: the kernel's own (all False) lanes, no new array
-            return self._quiet_lanes.fed
-        lanes = self.lanes
-        activate = np.zeros(lanes, bool)
-        resume = np.zeros(lanes, bool)
-        position = np.asarray(handle_position_m, float)
-        rows = position.tolist()
-        build = messages.build
-        fed_lanes = np.flatnonzero(fed).tolist()
-        self.lane_ticks_fed += len(fed_lanes)
-        for lane in fed_lanes:
-            supervisor = supervisors[lane]
-            message = None
-            if fresh[lane]:
-                message = build(lane, messages.rows[lane])
-            elif self._stale[lane]:
-                supervisor.tool = build(lane, self._newest_rows[lane])
-            self._stale[lane] = False
-            transition = supervisor.update(now_s, message, rows[lane], (), 0,
-                                           float(silence_s[lane]), True)
-            self.enabled[lane] = supervisor.enabled
-            self._steady[lane] = supervisor.steady()
+                self.tool_force_N[lane] = tool.tool_force_N
             if transition is Transition.HOLD:
                 self._hold[lane] = supervisor.hold_m
-            elif transition is Transition.ACTIVATE:
-                activate[lane] = True
-            elif transition is Transition.RESUME:
-                resume[lane] = True
-        if activate.any() or resume.any():
+            elif transition is Transition.ACTIVATE or transition is Transition.RESUME:
+                renew = True
+        if renew:
+            activate = np.zeros(self.lanes, bool)
+            resume = np.zeros(self.lanes, bool)
+            for lane, transition in zip(fed, transitions, strict=True):
+                activate[lane] = transition is Transition.ACTIVATE
+                resume[lane] = transition is Transition.RESUME
             self._renew(now_s, np.nan_to_num(position), activate, resume)
-        return fed
-
-    def sync_supervisors(self) -> None:
-        """Give every supervisor the newest message its lane took as quiet in
-        :meth:`supervise_columns` (after a run, before the supervisors are read)."""
-        build, rows = self._build, self._newest_rows
-        if build is not None and rows is not None:
-            for lane in np.flatnonzero(self._stale).tolist():
-                self.supervisors[lane].tool = build(lane, rows[lane])
-        self._stale[...] = False
+        return transitions
 
     def _renew(self, now_s: float, position_m: np.ndarray, activate: np.ndarray,
                resume: np.ndarray) -> None:
@@ -318,7 +219,7 @@ class MasterTick:
         state = self.state
         outputs = None
         if tool_force_N is None:
-            tool_force_N = self._tool_force
+            tool_force_N = self.tool_force_N
         if self.lanes == 1:  # the program's lane: Python scalars are cheaper than numpy calls
             any_on = all_on = bool(enabled[0])
         else:
@@ -346,7 +247,6 @@ class MasterTick:
             if faulted[0] if self.lanes == 1 else np.count_nonzero(faulted):
                 for lane in np.flatnonzero(enabled & faulted):
                     self.supervisors[lane].note_node_fault()
-                    self._steady[lane] = False
         else:
             self._handle_used[...] = 0.0
             self._tool_used[...] = 0.0

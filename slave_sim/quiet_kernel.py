@@ -1,5 +1,5 @@
 """NVIDIA Warp kernel of the lockstep's quiet lanes on the slave side
-(:meth:`~haptic.slave_sim.tick.SlaveTick.supervise_columns`): for every lane in one launch,
+(lockstep/quiet_lanes.py, ``SlaveQuietLanes``): for every lane in one launch,
 whether its message needs the lane's guard and supervisor, and where it does not, the
 message's values taken.
 
@@ -194,7 +194,7 @@ def guard_limits(settings: InputGuardSettings, period_s: float) -> Any:
 
 
 class QuietLanes:
-    """The recorded launch over one :class:`~haptic.slave_sim.tick.SlaveTick`'s persistent
+    """The recorded launch over the slave's quiet-lane filter's and tick's persistent
     arrays (``views``: name -> numpy array, see :func:`quiet_kernel`); the tick's message
     columns are copied into buffers of its own, or read in place while a caller hands the
     very same arrays every tick (:class:`~haptic.common.runtime.replayed_launch.
@@ -251,7 +251,7 @@ class QuietLanes:
             flags: np.ndarray, epoch: np.ndarray, send_time_ns: np.ndarray,
             force_scale: np.ndarray, silence_s: np.ndarray) -> list[int]:
         """One tick's loop time (ns, :func:`~haptic.common.wire.send_clock.receive_time_ns`),
-        messages (columns, see ``HandleColumns``) and silences (s): takes the quiet lanes'
+        messages (the handle line's columns) and silences (s): takes the quiet lanes'
         messages into the bound arrays and returns the other lanes, in order."""
         self.now_ns[0] = now_ns
         self.loud_count[0] = 0

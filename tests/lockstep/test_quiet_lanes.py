@@ -1,5 +1,5 @@
-"""The lockstep's quiet lanes (master/tick.py and slave_sim/tick.py ``supervise_columns``): a
-lane whose supervisor and guard have nothing to change only stores its message, every other
+"""The lockstep's quiet lanes (lockstep/quiet_lanes.py, in front of each tick's ``supervise``):
+a lane whose supervisor and guard have nothing to change only stores its message, every other
 lane goes through them as the program's one lane does. A run is the same, bit for bit, as
 one that feeds every lane's message object to its supervisor and guard each tick
 (``every_lane_supervised``): results, node states, the supervisors' and guards' states,
@@ -19,6 +19,7 @@ from haptic.common.config.scenario import load_scenario
 from haptic.common.model.delay_profile import parse_delay_profile
 from haptic.common.model.passivity import PassivitySettings
 from haptic.common.wire.injection import InjectionConfig
+from haptic.lockstep.quiet_lanes import MasterQuietLanes, SlaveQuietLanes
 from haptic.lockstep.simulator import (
     TRANSPARENT_SUPERVISION,
     LockstepResult,
@@ -66,8 +67,9 @@ def _assert_same_runs(pair: list[tuple[LockstepSimulator, LockstepResult]]) -> N
     (master_a, slave_a), (master_b, slave_b) = quick_sim.last_ticks, every_sim.last_ticks
     assert isinstance(master_a, MasterTick) and isinstance(slave_a, SlaveTick)
     # the quiet path read the delay lines' columns in place (the same arrays every tick)
-    for tick in (master_a, slave_a):
-        assert tick._quiet_lanes is not None and tick._quiet_lanes.inputs.in_place
+    assert quick_sim.last_quiet_lanes is not None and every_sim.last_quiet_lanes is None
+    for quiet in quick_sim.last_quiet_lanes:
+        assert quiet.kernel.inputs.in_place
     assert repr(master_a.passivity_events) == repr(master_b.passivity_events)
     for sup_a, sup_b in zip(master_a.supervisors, master_b.supervisors, strict=True):
         for name in ("tool", "enabled", "faulted", "hold_m", "events", "peer_stops",
@@ -118,8 +120,8 @@ def test_sweep_lanes_with_loss_and_diverging_lanes(paper_model) -> None:
     master_tick, slave_tick = pair[0][0].last_ticks
     trips = [s.watchdog.trips for s in master_tick.supervisors]
     assert min(trips) > 0  # every lane lost its slave for a while and resynced
-    for tick in (master_tick, slave_tick):
-        assert 0 < tick.lane_ticks_fed < 0.2 * tick.lane_ticks
+    for quiet in pair[0][0].last_quiet_lanes:
+        assert 0 < quiet.lane_ticks_fed < 0.2 * quiet.lane_ticks
 
 
 def _clay_lanes(paper_config, paper_model, guard: InputGuardSettings | None = None):
@@ -153,9 +155,10 @@ def test_shipped_supervision_cutting_clay_to_the_wall_through_bursts(paper_confi
     held = [event for s in master_tick.supervisors for event in s.events
             if event["kind"] == "handle_held"]
     assert len(held) >= 5 and len(held) == sum(s.peer_stops for s in master_tick.supervisors)
-    assert 0 < master_tick.lane_ticks_fed < 0.5 * master_tick.lane_ticks
+    master_quiet, slave_quiet = pair[0][0].last_quiet_lanes
+    assert 0 < master_quiet.lane_ticks_fed < 0.5 * master_quiet.lane_ticks
     # many lane-ticks were quiet; the guards counted their messages all the same
-    assert 0 < slave_tick.lane_ticks_fed < 0.5 * slave_tick.lane_ticks
+    assert 0 < slave_quiet.lane_ticks_fed < 0.5 * slave_quiet.lane_ticks
     every_tick = pair[1][0].last_ticks[1]
     assert ([g.counters.checked for g in slave_tick.guards]
             == [g.counters.checked for g in every_tick.guards])
@@ -230,9 +233,9 @@ def test_governed_lanes_switching_a_standby_passivity_layer(paper_model, table) 
     assert kinds == ["tdpa_on", "tdpa_off"]
 
 
-def test_columns_refuse_what_they_cannot_mirror(paper_config, paper_model) -> None:
-    """The columns path mirrors one guard setting for every lane, no tool guard and no
-    followed gain: anything else is refused, not silently mis-stepped."""
+def test_quiet_lanes_refuse_what_they_cannot_mirror(paper_config, paper_model) -> None:
+    """The filters mirror one guard setting for every lane, no tool guard and no followed
+    gain: anything else is refused, not silently mis-stepped."""
     from haptic.master.tool_guard import ToolGuardSettings, ToolInputGuard
     from haptic.slave_sim.input_guard import InputGuard
 
@@ -240,15 +243,15 @@ def test_columns_refuse_what_they_cannot_mirror(paper_config, paper_model) -> No
     start = np.zeros((4, 2))
     master, slave = simulator.ticks(start, start)
     ts = paper_model.sample_period_s
+    line = simulator  # never read: the refusal comes first
     slave.guards[1] = InputGuard(InputGuardSettings(force_limit_N=1.0), ts)
-    columns = simulator  # never read: the refusal comes first
     with pytest.raises(ValueError, match="share"):
-        slave.supervise_columns(0.0, columns, np.zeros(4))  # type: ignore[arg-type]
+        SlaveQuietLanes(slave, line)  # type: ignore[arg-type]
     master.supervisors[2].tool_guard = ToolInputGuard(
         ToolGuardSettings.from_config(paper_config), ts)
     with pytest.raises(ValueError, match="tool guard"):
-        master.supervise_columns(0.0, columns, start, np.zeros(4))  # type: ignore[arg-type]
+        MasterQuietLanes(master, line)  # type: ignore[arg-type]
     _, slave = simulator.ticks(start, start)
     slave.follow_gain(3.0, True)
     with pytest.raises(ValueError, match="gain"):
-        slave.supervise_columns(0.0, columns, np.zeros(4))  # type: ignore[arg-type]
+        SlaveQuietLanes(slave, line)  # type: ignore[arg-type]
