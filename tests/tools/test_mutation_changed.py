@@ -1,5 +1,6 @@
-"""The CI mode's selection (``--changed-since``) in a throw-away git repository, and the
-command line's ``--help``."""
+"""The CI mode's selection (``--changed-since``) in a throw-away git repository: the change
+since the last full run, the newest first, and nothing to do when no configured module
+changed; the exit decision; the command line's ``--help``."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tools.mutation import changed, cli
+from tools.mutation import changed, cli, full_run
 from tools.mutation.runner import ModuleResult
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -26,7 +27,7 @@ def git(root: Path, *args: str) -> str:
 @pytest.fixture
 def repo(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """A repository with two configured modules, a test of each (one imports lazily) and
-    two commits; the command line pointed at it."""
+    two commits, no full run recorded; the command line pointed at it."""
     files = {
         "pyproject.toml": '[tool.setuptools.package-dir]\n"haptic.common" = "common"\n',
         "common/__init__.py": "",
@@ -48,7 +49,16 @@ def repo(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.setattr(cli, "ROOT", tmp_path)
     monkeypatch.setattr(cli, "MODULES_FILE", tmp_path / "modules.toml")
     monkeypatch.setattr(cli, "EQUIVALENTS_FILE", tmp_path / "equivalents.toml")
+    monkeypatch.setattr(cli, "FULL_RUN_FILE", tmp_path / "last_full_run.toml")
     return tmp_path
+
+
+def record(root: Path, commit: str, scored: tuple[str, ...] = ("common/a.py", "common/b.py"),
+           ) -> None:
+    """Record a full run at ``commit`` that scored ``scored`` (untracked here, so that
+    writing it is no change of a tracked file)."""
+    (root / "last_full_run.toml").write_text(full_run.render(full_run.FullRun(
+        commit, "2026-12-01", 1.0, dict.fromkeys(scored, 1.0))))
 
 
 def selected(capsys: pytest.CaptureFixture[str], *args: str) -> list[str]:
@@ -77,17 +87,78 @@ def test_a_changed_test_selects_the_module_it_imports_lazily(repo: Path, capsys)
     assert selected(capsys, "--changed-since", base, "--module", "common/b.py") == []
 
 
-def test_the_default_base_is_head_1_without_a_remote_else_the_merge_base(repo: Path,
-                                                                          capsys) -> None:
+def test_the_default_change_is_since_the_last_full_run(repo: Path, capsys) -> None:
     first = git(repo, "rev-parse", "HEAD~1")
-    assert changed.default_base(repo) == first
+    record(repo, first)
+    assert changed.default_base(repo, first) == first
+    assert selected(capsys, "--changed-since") == ["common/b.py"]  # "two" changed it
     (repo / "common/a.py").write_text("A = 5\n")
     git(repo, "commit", "-q", "-am", "three")
-    assert selected(capsys, "--changed-since") == ["common/a.py"]  # HEAD~1: the last commit
-    git(repo, "update-ref", "refs/remotes/origin/main", first)
-    assert changed.default_base(repo) == first  # the branch left main at the first commit
     assert selected(capsys, "--changed-since") == ["common/a.py", "common/b.py"]
     assert changed.changed_files(repo, first) == {"common/a.py", "common/b.py"}
+    record(repo, git(repo, "rev-parse", "HEAD"))  # a full run at HEAD: nothing changed since
+    assert selected(capsys, "--changed-since") == []
+
+
+def test_the_newest_change_runs_first(repo: Path, capsys) -> None:
+    record(repo, git(repo, "rev-parse", "HEAD~1"))
+    (repo / "common/a.py").write_text("A = 5\n")
+    git(repo, "commit", "-q", "-am", "three: a after b")
+    assert selected(capsys, "--changed-since") == ["common/a.py", "common/b.py"]
+    (repo / "common/b.py").write_text("B = 6\n")
+    git(repo, "commit", "-q", "-am", "four: b again")
+    assert selected(capsys, "--changed-since") == ["common/b.py", "common/a.py"]
+    (repo / "tests/test_a.py").write_text("def test_a():\n    from haptic.common.a import A\n")
+    assert selected(capsys, "--changed-since") == ["common/a.py", "common/b.py"]  # uncommitted
+    rank = changed.recency(repo, git(repo, "rev-parse", "HEAD~2"))
+    assert rank == {"tests/test_a.py": 0, "common/b.py": 1, "common/a.py": 2}
+
+
+def test_a_module_no_full_run_scored_counts_as_changed(repo: Path, capsys) -> None:
+    assert selected(capsys, "--changed-since") == ["common/b.py", "common/a.py"]  # no record
+    record(repo, git(repo, "rev-parse", "HEAD"), scored=("common/b.py",))
+    assert selected(capsys, "--changed-since") == ["common/a.py"]
+    assert selected(capsys, "--changed-since", "HEAD") == []  # an explicit REF: the diff only
+
+
+def test_without_the_recorded_commit_the_change_is_the_last_commit(repo: Path,
+                                                                    capsys) -> None:
+    record(repo, "0" * 40)  # a commit this clone lacks
+    assert changed.default_base(repo, "0" * 40) == git(repo, "rev-parse", "HEAD~1")
+    assert selected(capsys, "--changed-since") == ["common/b.py"]
+    git(repo, "checkout", "-q", "-b", "side", "HEAD~1")  # a commit off HEAD's history
+    (repo / "common/a.py").write_text("A = 7\n")
+    git(repo, "commit", "-q", "-am", "side")
+    side = git(repo, "rev-parse", "HEAD")
+    git(repo, "checkout", "-q", "work")
+    record(repo, side)
+    assert changed.default_base(repo, side) == git(repo, "rev-parse", "HEAD~1")
+    assert selected(capsys, "--changed-since") == ["common/b.py"]
+
+
+def test_no_configured_module_changed_exits_0_running_nothing(repo: Path, capsys) -> None:
+    record(repo, git(repo, "rev-parse", "HEAD"))
+    (repo / "README").write_text("not a module\n")
+    git(repo, "add", "README")
+    git(repo, "commit", "-q", "-m", "docs only")
+    assert cli.main(["--changed-since", "--time-budget-s", "300", "--min-score", "0.95"]) == 0
+    err = capsys.readouterr().err
+    assert "1 file(s), 0 configured module(s) touched: none" in err
+    assert "0 module(s), 0 mutants tested" in err
+
+
+def test_record_takes_a_full_untimed_run_on_a_clean_tree(repo: Path, capsys) -> None:
+    for args in (["--module", "common/a.py"], ["--changed-since"], ["--time-budget-s", "60"]):
+        with pytest.raises(SystemExit) as caught:
+            cli.main(["--record", *args])
+        assert caught.value.code == 2
+        assert "--record: a full run records only every configured module" in \
+            capsys.readouterr().err
+    (repo / "common/a.py").write_text("A = 8\n")
+    with pytest.raises(SystemExit) as caught:
+        cli.main(["--record"])
+    assert caught.value.code == 2
+    assert "--record: uncommitted changes (common/a.py)" in capsys.readouterr().err
 
 
 def test_without_a_parent_the_whole_tree_is_the_change(tmp_path: Path) -> None:
@@ -105,12 +176,17 @@ def test_an_unknown_ref_is_a_usage_error(repo: Path, capsys) -> None:
     assert "no-such-ref" in capsys.readouterr().err
 
 
-def test_only_a_completed_run_below_the_minimum_fails() -> None:
+def test_a_completed_run_below_the_minimum_fails_and_a_cut_one_once_it_cannot_reach_it(
+        ) -> None:
     results = {"low.py": ModuleResult(killed=9, survived=1),
                "ok.py": ModuleResult(killed=19, survived=1),
-               "cut.py": ModuleResult(killed=1, survived=1, planned=10, complete=False),
+               "cut.py": ModuleResult(killed=1, survived=1, planned=100, complete=False),
+               "doomed.py": ModuleResult(killed=1, survived=6, planned=100, complete=False),
                "late.py": None}
-    assert cli.below_min_score(results, 0.95) == ["low.py"]
+    assert cli.best_score(results["cut.py"]) == 0.99
+    assert cli.best_score(results["doomed.py"]) == 0.94
+    assert cli.best_score(results["low.py"]) == 0.9
+    assert cli.below_min_score(results, 0.95) == ["low.py", "doomed.py"]
     assert cli.below_min_score(results, 0.9) == []
 
 

@@ -1,14 +1,15 @@
 """The command line: score the configured modules, or those a change touched (CI mode).
 
 Exit status: 0 when every module whose run completed scores at least ``--min-score``; 1 when
-one scores below it; 2 for a usage error or a module whose tests fail unmutated; 130 when
-stopped. A module the time budget did not reach, or did not let finish, is reported as not
-run (or unfinished) and fails nothing.
+one scores below it, or a module the time budget cut short has more survivors already than the
+minimum allows; 2 for a usage error or a module whose tests fail unmutated; 130 when stopped.
+A module the time budget did not reach is reported as not run and fails nothing.
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import shutil
 import signal
@@ -18,15 +19,16 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from . import changed, equivalents, finder, modules, runner
+from . import changed, equivalents, finder, full_run, modules, runner
 from .runner import BaselineError, Job, ModuleResult
 
 ROOT = Path(__file__).resolve().parents[2]
 PROGRAM = "python3 tools/mutation/run.py"
 DEFAULT_MIN_SCORE = 0.95
-#: The data files: the configured modules and the equivalent mutants.
+#: The data files: the configured modules, the equivalent mutants, the last full run.
 MODULES_FILE = modules.DEFAULT_PATH
 EQUIVALENTS_FILE = equivalents.DEFAULT_PATH
+FULL_RUN_FILE = full_run.DEFAULT_PATH
 #: module path -> its test files (the test-finder, memoised).
 TestsOf = Callable[[str], list[str]]
 
@@ -40,14 +42,21 @@ def build_parser() -> argparse.ArgumentParser:
                         help="a configured module to mutate (repeatable; default: all)")
     parser.add_argument("--changed-since", nargs="?", const="", default=None, metavar="REF",
                         help="only the configured modules the change since REF touched (the "
-                        "module or one of its tests); without REF the merge base with "
-                        f"{changed.MAIN_BRANCH}, or HEAD~1 when there is none")
+                        "module or one of its tests), the newest change first; without REF "
+                        "the change since the last full run (tools/mutation/last_full_run.toml"
+                        ") and the modules it did not score, or the last commit when the clone "
+                        "lacks its commit")
     parser.add_argument("--time-budget-s", type=float, default=None, metavar="S",
-                        help="stop after S seconds: modules not reached are reported as not "
-                        "run, a module cut short as unfinished (neither fails)")
+                        help="stop S seconds after the start: modules not reached are reported "
+                        "as not run, a module cut short as unfinished (it fails only when its "
+                        "survivors so far already put it below --min-score)")
     parser.add_argument("--min-score", type=float, default=DEFAULT_MIN_SCORE, metavar="X",
                         help="exit 1 when a module whose run completed scores below X "
                         f"(default {DEFAULT_MIN_SCORE})")
+    parser.add_argument("--record", action="store_true",
+                        help="after a complete run of every configured module on a tree with "
+                        "no uncommitted change, write its commit, date and scores to "
+                        "tools/mutation/last_full_run.toml")
     parser.add_argument("--tests-cap-s", type=float, default=None, metavar="S",
                         help="run a module's tests, the likeliest first, for about S seconds "
                         "in the baseline and use those reached (default: modules.toml's "
@@ -85,20 +94,36 @@ def _tests_of(graph: finder.ImportGraph, depth: dict[str, int]) -> TestsOf:
 
 
 def _select(args: argparse.Namespace, configured: list[str], tests_of: TestsOf) -> list[str]:
-    """The modules to run: ``--module``'s, the touched ones, or all; SystemExit(2) on a
-    usage error."""
+    """The modules to run: ``--module``'s, the touched ones (the newest change first), or
+    all; SystemExit(2) on a usage error."""
     if args.changed_since is None:
         return args.module or configured
+    candidates = args.module or configured
     try:
-        ref = args.changed_since or changed.default_base(ROOT)
+        record = None if args.changed_since else full_run.load(FULL_RUN_FILE)
+        ref = args.changed_since or changed.default_base(
+            ROOT, None if record is None else record.commit)
         files = changed.changed_files(ROOT, ref)
-    except changed.GitError as error:
+        rank = changed.recency(ROOT, ref) if files else {}
+    except (changed.GitError, full_run.FullRunError) as error:
         print(f"mutation: --changed-since: {error}", file=sys.stderr)
         raise SystemExit(2) from None
     any_test = any(f.startswith(finder.TESTS_DIR + "/") for f in files)
-    paths = changed.touched(args.module or configured, files,
-                            tests_of if any_test else lambda _path: ())
-    print(f"mutation: changed since {ref[:12]}: {len(files)} file(s), "
+    tests_if_changed = tests_of if any_test else lambda _path: ()
+    paths = changed.touched(candidates, files, tests_if_changed)
+    since = f"changed since {ref[:12]}"
+    if not args.changed_since:
+        if record is None or ref == record.commit:
+            # modules no full run scored count as changed: none has a score yet
+            unscored = [p for p in candidates if record is None or p not in record.scores]
+            paths += [p for p in unscored if p not in paths]
+            since += (" (no full run recorded" if record is None else
+                      f" (the last full run, {record.date}") + \
+                f"; {len(unscored)} configured module(s) it did not score count as changed)"
+        else:
+            since += " (the last full run's commit is not in this history: the last commit)"
+    paths = changed.newest_first(paths, rank, tests_if_changed)
+    print(f"mutation: {since}: {len(files)} file(s), "
           f"{len(paths)} configured module(s) touched: {', '.join(paths) or 'none'}",
           file=sys.stderr, flush=True)
     return paths
@@ -116,11 +141,10 @@ def _line(path: str, result: ModuleResult) -> str:
 
 
 def _run(args: argparse.Namespace, paths: list[str], configured: dict[str, modules.Configured],
-         tests_of: TestsOf,
-         entries: list[equivalents.Equivalent]) -> dict[str, ModuleResult | None]:
-    """Score each of ``paths`` in turn (None: not reached within the time budget)."""
-    start = time.monotonic()
-    deadline = None if args.time_budget_s is None else start + args.time_budget_s
+         tests_of: TestsOf, entries: list[equivalents.Equivalent],
+         deadline: float | None) -> dict[str, ModuleResult | None]:
+    """Score each of ``paths`` in turn until ``deadline`` (time.monotonic(); None: all), None
+    for one not reached."""
     package_dir = finder.package_dirs(ROOT)
     results: dict[str, ModuleResult | None] = {}
     for path in paths:
@@ -172,11 +196,18 @@ def _report(args: argparse.Namespace, results: dict[str, ModuleResult | None],
                 print(mutant.diff(original), file=sys.stderr)
 
 
+def best_score(result: ModuleResult) -> float:
+    """The highest score ``result`` can end with: its score when complete; for a run cut
+    short, the score it would have if every mutant not tested were killed."""
+    if result.complete or not result.planned:
+        return result.score
+    return (result.planned - result.survived) / result.planned
+
+
 def below_min_score(results: dict[str, ModuleResult | None], min_score: float) -> list[str]:
-    """The modules whose run completed with a score below ``min_score`` (a module not run or
-    cut short by the time budget is none of them)."""
-    return [p for p, r in results.items()
-            if r is not None and r.complete and r.score < min_score]
+    """The modules that score below ``min_score``: a completed run's score, or a run cut
+    short whose survivors so far already keep it below (a module not run is none of them)."""
+    return [p for p, r in results.items() if r is not None and best_score(r) < min_score]
 
 
 def _stop(signum: int, _frame: object) -> None:
@@ -204,8 +235,12 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command line; the exit status (see the module's docstring)."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    started = time.monotonic()
     if args.jobs < 1:
         parser.error("--jobs must be at least 1")
+    if args.record and (args.module or args.changed_since is not None or args.time_budget_s
+                        or args.equivalents or args.count or args.tests):
+        parser.error("--record: a full run records only every configured module, untimed")
     try:
         configured = modules.load(ROOT, MODULES_FILE)
         entries = equivalents.load(EQUIVALENTS_FILE, frozenset(c.path for c in configured))
@@ -215,25 +250,30 @@ def main(argv: list[str] | None = None) -> int:
     for path in args.module or ():
         if path not in by_path:
             parser.error(f"--module {path}: not configured (tools/mutation/modules.toml)")
+    if args.record and (dirty := changed.uncommitted(ROOT)):
+        parser.error(f"--record: uncommitted changes ({', '.join(dirty[:5])}"
+                     f"{', ...' if len(dirty) > 5 else ''}): a record names a commit")
     tests_of = _tests_of(finder.ImportGraph(ROOT), {c.path: c.depth for c in configured})
     paths = _select(args, list(by_path), tests_of)
     if args.equivalents or args.count or args.tests:
         _inspect(args, paths, tests_of, entries)
         return 0
-    return _score(args, paths, by_path, tests_of, entries)
+    deadline = None if args.time_budget_s is None else started + args.time_budget_s
+    return _score(args, paths, by_path, tests_of, entries, deadline)
 
 
 def _score(args: argparse.Namespace, paths: list[str], configured: dict[str, modules.Configured],
-           tests_of: TestsOf,
-           entries: list[equivalents.Equivalent]) -> int:
-    """Preload, score ``paths``, report; the exit status."""
+           tests_of: TestsOf, entries: list[equivalents.Equivalent],
+           deadline: float | None) -> int:
+    """Preload, score ``paths`` until ``deadline``, report (and record a full run with
+    ``--record``); the exit status."""
     start = time.monotonic()
     cache_dir = tempfile.mkdtemp(prefix="mutation-warp-cache-")
     signal.signal(signal.SIGTERM, _stop)
     try:
         if paths:
             runner.preload(cache_dir)
-        results = _run(args, paths, configured, tests_of, entries)
+        results = _run(args, paths, configured, tests_of, entries, deadline)
     except KeyboardInterrupt:
         print("mutation: stopped", file=sys.stderr)
         return 130
@@ -250,6 +290,26 @@ def _score(args: argparse.Namespace, paths: list[str], configured: dict[str, mod
     print(f"mutation: {len(paths)} module(s), {tested} mutants tested in {elapsed_s:.0f} s "
           f"({elapsed_s / 60:.1f} min, --jobs {args.jobs})", file=sys.stderr)
     for path in below:
-        print(f"mutation: {path} scores {results[path].score * 100:.1f} %, below "
-              f"{args.min_score * 100:.1f} %", file=sys.stderr)
+        result = results[path]
+        print(f"mutation: {path} scores {result.score * 100:.1f} %"
+              f"{'' if result.complete else f' so far, at most {best_score(result) * 100:.1f} %'}"
+              f", below {args.min_score * 100:.1f} %", file=sys.stderr)
+    if args.record:
+        _record(results, killed_total=sum(r.killed for r in results.values() if r is not None))
     return 1 if below else 0
+
+
+def _record(results: dict[str, ModuleResult | None], killed_total: int) -> None:
+    """Write the run to :data:`FULL_RUN_FILE` when every module's run completed."""
+    if not results or any(r is None or not r.complete for r in results.values()):
+        print("mutation: --record: not every module's run completed; nothing recorded",
+              file=sys.stderr)
+        return
+    tested = sum(r.killed + r.survived for r in results.values() if r is not None)
+    run = full_run.FullRun(
+        changed.head(ROOT), datetime.datetime.now(datetime.UTC).date().isoformat(),
+        killed_total / tested if tested else 1.0,
+        {path: r.score for path, r in results.items() if r is not None})
+    FULL_RUN_FILE.write_text(full_run.render(run))
+    print(f"mutation: recorded the full run at {run.commit[:12]} in {FULL_RUN_FILE.name}",
+          file=sys.stderr)
