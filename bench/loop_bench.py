@@ -55,6 +55,12 @@ import zenoh
 
 from haptic.common.config import exit_on_config_error, load_config
 from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
+from haptic.common.runtime.cpu_layout import (
+    LOOP_BENCH_LAYOUTS,
+    LOOPS_FIFO_ANYWHERE,
+    LOOPS_SHARING_ONE_CPU,
+    layout_names,
+)
 from haptic.common.runtime.realtime import cpu_latency_request
 from haptic.common.runtime.runner import RealTimeRunner, StopSignals
 from haptic.common.runtime.runner_config import place_other_threads, prioritise_zenoh_threads
@@ -269,8 +275,9 @@ def default_command(side: str, echo: bool = False, rig: str = "model") -> list[s
     return command
 
 
-#: How the benchmark places the two programs' threads on the CPUs.
-CPU_LAYOUTS = ("partitioned", "free")
+#: How the benchmark places the two programs' threads on the CPUs (not haptic-session's
+#: layouts: common/runtime/cpu_layout.py).
+CPU_LAYOUTS = layout_names(LOOP_BENCH_LAYOUTS)
 
 
 def cpu_layout_args(layout: str, cpus: list[int] | None = None) -> list[str]:
@@ -290,7 +297,7 @@ def cpu_layout_args(layout: str, cpus: list[int] | None = None) -> list[str]:
     if cpus is None:
         cpus = (sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
                 else list(range(os.cpu_count() or 1)))
-    if layout == "free":
+    if layout == LOOPS_FIFO_ANYWHERE.name:
         return [*common, "--zenoh-priority", str(FREE_ZENOH_PRIORITY)]
     if len(cpus) < 2:
         return common
@@ -328,7 +335,7 @@ def run_pair(
     duration_s: float,
     extra_args: list[str] | None = None,
     timeout_s: float | None = None,
-    cpu_layout: str = "partitioned",
+    cpu_layout: str = LOOPS_SHARING_ONE_CPU.name,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Run the master and slave commands on loopback for ``duration_s`` and return their JSON
     summaries. Both get ``--duration``, ``--json-summary``, ``--no-status``, a fresh key
@@ -429,7 +436,7 @@ def benchmark(
     ts_s: float = 0.00054,
     echo: bool = False,
     rig: str = "model",
-    cpu_layout: str = "partitioned",
+    cpu_layout: str = LOOPS_SHARING_ONE_CPU.name,
     cpu_latency_limit_us: int | None = None,
 ) -> dict[str, Any]:
     """The whole benchmark; returns the result dict (what ``--json`` prints: the link's and the
@@ -650,10 +657,11 @@ def default_cpu_layout(args: argparse.Namespace, ts_s: float) -> str:
     programs' steps do not fit one CPU's period: docs/measurements/loop_bench.md); else
     ``partitioned``."""
     if args.echo or args.master_cmd or args.slave_cmd:
-        return "free"
+        return LOOPS_FIFO_ANYWHERE.name
     from haptic.common.config import load_config
 
-    return ("free" if ts_s < load_config()["model"]["sample_period_s"] else "partitioned")
+    return (LOOPS_FIFO_ANYWHERE.name if ts_s < load_config()["model"]["sample_period_s"]
+            else LOOPS_SHARING_ONE_CPU.name)
 
 
 def _run(args: argparse.Namespace, extra: list[str], ts_s: float) -> dict[str, Any]:

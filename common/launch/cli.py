@@ -13,11 +13,12 @@ watchdog) and writes a report directory (``--out``, default ``out/session``):
 - ``master_trace.npz``, ``slave_trace.npz``: every 10th tick of each side;
 - ``session.png``: handle and tool force against time, tool velocity against position.
 
-On a machine with two CPUs or more the session splits them (``--cpu-layout split``, the
-default; :func:`session_cpu_args`): the master's loop and its emulated drives on the last CPU,
-the slave's loop under SCHED_FIFO on the first, every other thread (Zenoh's, the displays')
-off the master's CPU. ``--cpu-layout free`` leaves every thread where the kernel puts it and
-the ``[runner]`` table of ``--config`` as it is.
+On a machine with two CPUs or more the session gives each loop a CPU of its own
+(``--cpu-layout split``, the default; :func:`session_cpu_args`): the master's loop and its
+emulated drives on the last CPU, the slave's loop under SCHED_FIFO on the first, every other
+thread (Zenoh's, the displays') off the master's CPU. ``--cpu-layout free`` leaves every
+thread where the kernel puts it and the ``[runner]`` table of ``--config`` as it is. (The
+loop benchmark's layouts are others: common/runtime/cpu_layout.py.)
 
 Children are ended by their own PID (SIGTERM, then SIGKILL after a grace period) on timeout
 or Ctrl-C, and always reaped. Exit status 0 when both programs exited 0 and wrote their
@@ -52,6 +53,12 @@ from haptic.common.launch.guidance import (
 from haptic.common.ros2.options import add_ros2_options, forwarded_ros2_args
 from haptic.common.runtime.cli_options import add_retired_delay_option
 from haptic.common.runtime.console import script_description
+from haptic.common.runtime.cpu_layout import (
+    LOOPS_ON_SEPARATE_CPUS,
+    SESSION_LAYOUTS,
+    SESSION_UNPINNED,
+    layout_names,
+)
 from haptic.common.runtime.machine import usable_cpu_count, usable_cpus
 from haptic.common.runtime.summary import finite_figure, loop_cpu_text
 from haptic.common.wire.auth import write_key_file
@@ -68,10 +75,11 @@ START_ALLOWANCE_S = 40.0
 SLOWDOWN_ALLOWANCE = 8.0
 
 
-#: The largest position gap |yt - Ah1 yh| at the end of a session (issue 16), m.
+#: The largest position gap |yt - Ah1 yh| at the end of a session, m: the handle stops where
+#: the tool does.
 GAP_TARGET_M = 0.001
-#: The session's CPU layouts (:func:`session_cpu_args`).
-CPU_LAYOUTS = ("split", "free")
+#: The session's CPU layouts (:func:`session_cpu_args`; common/runtime/cpu_layout.py).
+CPU_LAYOUTS = layout_names(SESSION_LAYOUTS)
 #: The slave loop's SCHED_FIFO priority in the split layout (refused without CAP_SYS_NICE:
 #: then normal scheduling and a warning).
 SPLIT_SLAVE_PRIORITY = 40
@@ -83,14 +91,13 @@ def session_cpu_args(layout: str, cpus: Sequence[int]) -> tuple[list[str], list[
     its emulated drives follow it (master/simulated_rig/rig_emulator.py: they answer the SYNC while
     its
     loop sleeps); the slave's loop under SCHED_FIFO on the first; every other thread of both
-    programs on the CPUs but the master's (the first alone on two). On a 2-core Intel Xeon
-    guest the README session then met its loop targets in 3 of 6 runs, the slave in all 6,
-    against none with every thread anywhere, and in 6 of 6 once the loops started warm
-    (2026-12-05, docs/programs.md). ``free``, or one CPU: nothing."""
+    programs on the CPUs but the master's (the first alone on two): neither loop then waits
+    for a CPU that another thread holds (what it does for the loop targets on two CPUs:
+    docs/programs.md). ``free``, or one CPU: nothing."""
     if layout not in CPU_LAYOUTS:
         raise ValueError(f"cpu layout must be one of {', '.join(CPU_LAYOUTS)} (got {layout!r})")
     cpus = sorted(set(cpus))
-    if layout == "free" or len(cpus) < 2:
+    if layout == SESSION_UNPINNED.name or len(cpus) < 2:
         return [], []
     master_cpu, slave_cpu = cpus[-1], cpus[0]
     others = ",".join(str(cpu) for cpu in (cpus[1:-1] if len(cpus) > 2 else cpus[:1]))
@@ -122,11 +129,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--governor", action="store_true",
                         help="the master's margin governor (docs/governor.md); delay profiles "
                         "come from --config ([link.<side>.injection] delay_profile)")
-    parser.add_argument("--cpu-layout", choices=CPU_LAYOUTS, default="split",
-                        help="split (default): the master's loop and its emulated drives on "
-                        "the last CPU, the slave's loop (SCHED_FIFO) on the first, the other "
-                        "threads off the master's CPU; free: every thread anywhere, --config's "
-                        "[runner] as it is")
+    parser.add_argument("--cpu-layout", choices=CPU_LAYOUTS,
+                        default=LOOPS_ON_SEPARATE_CPUS.name,
+                        help=f"{LOOPS_ON_SEPARATE_CPUS.help_text()} (default); "
+                        f"{SESSION_UNPINNED.help_text()}")
     parser.add_argument("--master-args", default="", help="extra master arguments (one string)")
     parser.add_argument("--slave-args", default="", help="extra slave arguments (one string)")
     add_ros2_options(parser)
@@ -183,11 +189,9 @@ def _session_key() -> Path:
     return write_key_file(Path(directory) / "session.key")
 
 
-def run_session(args: argparse.Namespace) -> int:
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    prefix = f"haptic/session-{uuid.uuid4().hex[:8]}"
+def _shared_program_args(args: argparse.Namespace, prefix: str) -> list[str]:
+    """The options both programs get: the key prefix, the session key, the peer wait, and the
+    configuration, gain, delay, stability and ROS 2 options the session was given."""
     common = ["--key-prefix", prefix, "--no-status", "--peer-wait", "30",
               "--session-key", str(_session_key())]
     if args.config:
@@ -201,40 +205,42 @@ def run_session(args: argparse.Namespace) -> int:
         common.append("--allow-unstable")
     if args.governor:
         common.append("--governor")
-    common += forwarded_ros2_args(args)
-    files = {"master": out / "master.json", "slave": out / "slave.json"}
-    for path in files.values():
-        path.unlink(missing_ok=True)
-    # The master steps the duration in rig time; the slave's wall-time bound allows a slow
-    # master, and the session stops the slave as soon as the master is done.
-    wall_bound_s = SLOWDOWN_ALLOWANCE * args.duration
-    master_layout, slave_layout = session_cpu_args(args.cpu_layout, usable_cpus())
-    commands = {
+    return common + forwarded_ros2_args(args)
+
+
+def _program_commands(args: argparse.Namespace, common: list[str], endpoint: str,
+                      files: dict[str, Path], wall_bound_s: float,
+                      layouts: tuple[list[str], list[str]]) -> dict[str, list[str]]:
+    """Each program's command line: the slave connects to ``endpoint`` and runs at most
+    ``wall_bound_s`` (s) plus a margin, the master listens and steps the duration in rig
+    time; each writes its summary to its ``files`` entry; ``layouts`` are the master's and
+    the slave's CPU options."""
+    master_layout, slave_layout = layouts
+    return {
         "slave": [sys.executable, "-m", "haptic.slave_sim.cli", *common,
                   "--duration", repr(wall_bound_s + 5.0), "--connect", endpoint,
-                  "--scenario", args.scenario, "--out", str(out),
+                  "--scenario", args.scenario, "--out", str(args.out),
                   "--json-summary", str(files["slave"]), *slave_layout,
                   *shlex.split(args.slave_args)],
         "master": [sys.executable, "-m", "haptic.master.cli", *common,
                    "--rig-time", repr(args.duration), "--listen", endpoint, "--rig", args.rig,
-                   "--operator", args.operator, "--out", str(out),
+                   "--operator", args.operator, "--out", str(args.out),
                    "--json-summary", str(files["master"]), *master_layout,
                    *shlex.split(args.master_args)],
     }
-    print(f"haptic-session: {args.scenario}, rig {args.rig}, operator {args.operator}, "
-          f"{args.duration:g} s, "
-          f"Zenoh on {endpoint}, key prefix {prefix}, CPU layout {args.cpu_layout}"
-          + (f" (master {' '.join(master_layout)}; slave {' '.join(slave_layout)})"
-             if master_layout else ""), flush=True)
-    print(expected_duration_line(args.duration, kernels_cached(warp_kernel_cache_dir())),
-          flush=True)
+
+
+def _run_programs(commands: dict[str, list[str]],
+                  deadline_after_s: float) -> tuple[dict[str, int | None], list[str]] | None:
+    """Start the slave, then the master; wait until one ends or ``deadline_after_s`` (s) pass,
+    then end both (each by its own PID) and reap them. Returns each side's exit status and
+    the sides that ended on their own, first first; None after Ctrl-C (both ended too)."""
     processes: dict[str, subprocess.Popen] = {}
-    statuses: dict[str, int | None] = {}
-    ended: list[str] = []  # the sides that ended on their own, first first
+    ended: list[str] = []
     try:
         for side in ("slave", "master"):
             processes[side] = subprocess.Popen(commands[side])
-        deadline = time.monotonic() + wall_bound_s + START_ALLOWANCE_S
+        deadline = time.monotonic() + deadline_after_s
         while not _note_ended(processes, ended) and time.monotonic() < deadline:
             time.sleep(0.05)
         if ended == ["slave"]:
@@ -245,12 +251,40 @@ def run_session(args: argparse.Namespace) -> int:
         _end(processes["slave"])
     except KeyboardInterrupt:
         print("haptic-session: interrupted; stopping the programs", file=sys.stderr)
-        return 130
+        return None
     finally:
         for process in processes.values():
             _end(process)
-        statuses = {side: p.returncode for side, p in processes.items()}
-    status, lines = session_failure(statuses, ended)
+    return {side: p.returncode for side, p in processes.items()}, ended
+
+
+def run_session(args: argparse.Namespace) -> int:
+    """Run both programs, then print the combined summary and write the report; the exit
+    status as the module says."""
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    prefix = f"haptic/session-{uuid.uuid4().hex[:8]}"
+    files = {"master": out / "master.json", "slave": out / "slave.json"}
+    for path in files.values():
+        path.unlink(missing_ok=True)
+    # The master steps the duration in rig time; the slave's wall-time bound allows a slow
+    # master, and the session stops the slave as soon as the master is done.
+    wall_bound_s = SLOWDOWN_ALLOWANCE * args.duration
+    master_layout, slave_layout = session_cpu_args(args.cpu_layout, usable_cpus())
+    commands = _program_commands(args, _shared_program_args(args, prefix), endpoint, files,
+                                 wall_bound_s, (master_layout, slave_layout))
+    print(f"haptic-session: {args.scenario}, rig {args.rig}, operator {args.operator}, "
+          f"{args.duration:g} s, "
+          f"Zenoh on {endpoint}, key prefix {prefix}, CPU layout {args.cpu_layout}"
+          + (f" (master {' '.join(master_layout)}; slave {' '.join(slave_layout)})"
+             if master_layout else ""), flush=True)
+    print(expected_duration_line(args.duration, kernels_cached(warp_kernel_cache_dir())),
+          flush=True)
+    outcome = _run_programs(commands, wall_bound_s + START_ALLOWANCE_S)
+    if outcome is None:
+        return 130
+    status, lines = session_failure(*outcome)
     if status:
         print("\n".join(lines), file=sys.stderr)
         return status
@@ -394,13 +428,13 @@ def slowest_stage_line(master: dict[str, Any], slave: dict[str, Any],
     return "    slowest stage: " + "; ".join(parts)
 
 
-def combined_summary(master: dict[str, Any], slave: dict[str, Any],
-                     cpus: int | None = None) -> str:
-    """The session's lines: both loops, what they took of the host's CPUs (``cpus``, default
-    this process's usable CPUs), both link directions, forces, the cut, the watchdog."""
+def _loop_lines(master: dict[str, Any], slave: dict[str, Any], cpus: int) -> list[str]:
+    """Both loops: rig time against wall time, steps, rates, period error, overruns, stage
+    times, CPU use of the host's ``cpus`` CPUs, and the real-time verdict with what to do
+    after a miss."""
     from haptic.common.runtime.stage_times import format_stages
 
-    lines = ["session summary"]
+    lines = []
     stepped = master.get("stepped_time_s")
     if stepped is not None and master.get("duration_s"):
         lines.append(f"  rig time {stepped:.2f} s stepped in {master['duration_s']:.2f} s of wall "
@@ -415,7 +449,7 @@ def combined_summary(master: dict[str, Any], slave: dict[str, Any],
         if s.get("stages"):
             lines.append(f"  {name:6s} step p50 {_us(s.get('step_p50_s'))}  p99 "
                          f"{_us(s.get('step_p99_s'))}; " + format_stages(s["stages"]))
-    lines.extend(cpu_use_lines(master, slave, usable_cpu_count() if cpus is None else cpus))
+    lines.extend(cpu_use_lines(master, slave, cpus))
     misses = real_time_misses(master, slave)
     lines.append("  real time: " + ("met (" + REAL_TIME_TARGETS + ")" if not misses
                                     else "MISSED: " + "; ".join(misses)))
@@ -425,42 +459,55 @@ def combined_summary(master: dict[str, Any], slave: dict[str, Any],
     if misses:
         trips = watchdog_trips_split(master, slave)[0] + watchdog_trips_split(slave, master)[0]
         lines.extend(missed_guidance_lines(slave, GAP_TARGET_M, trips))
+    return lines
+
+
+def _link_lines(master: dict[str, Any], slave: dict[str, Any]) -> list[str]:
+    """Each link direction's one-way delay (p50, p99) and loss, as its receiver measured
+    them."""
+    lines = []
     for name, s in (("master -> slave", slave), ("slave -> master", master)):
         loss = s.get("loss_ratio")
         loss_text = "n/a" if loss is None else f"{loss * 100:.3f} %"
         lines.append(f"  link {name}: one-way p50 {_us(s['link_one_way_delay_p50_s'])}  p99 "
                      f"{_us(s['link_one_way_delay_p99_s'])}  loss {loss_text}")
-    lines.append(f"  max |force|: reflected to the operator {master['max_abs_force_N']:.2f} N,"
-                 f" tool on the clay {slave['max_abs_force_N']:.2f} N")
+    return lines
+
+
+def _cut_lines(slave: dict[str, Any]) -> list[str]:
+    """The cut in the clay (forces in N, speeds in mm/s, volume in cm^3): its span, its means
+    against the paper's, and its steady part; one line when the tool cut no clay."""
     cut = slave.get("cut_mean_force_N")
-    if cut is not None:
+    if cut is None:
+        return ["  the tool did not cut clay"]
+    lines = [
+        f"  in the clay ({slave.get('scenario', '?')}"
+        f"{', on ' + slave['clay_device'] if slave.get('clay_device') else ''}): "
+        f"{slave['cutting_time_s']:.2f} s "
+        f"from the first to the last removal, removed "
+        f"{slave.get('removed_volume_m3', 0.0) * 1e6:.2f} cm^3",
+        f"    mean over the cut: tool force |ft| {cut:.2f} N, handle force "
+        f"{slave['cut_mean_handle_force_N']:.2f} N, speed "
+        f"{slave['cut_mean_speed_m_s'] * 1e3:.1f} mm/s (paper, Fig. 9: 3.6 N at 38 mm/s)",
+        f"    while removing clay: |ft| {slave['cutting_mean_force_N']:.2f} N, speed "
+        f"{slave['cutting_mean_speed_m_s'] * 1e3:.1f} mm/s",
+    ]
+    ripple = slave.get("cutting_force_ripple_ratio")
+    if ripple is not None:
         lines.append(
-            f"  in the clay ({slave.get('scenario', '?')}"
-            f"{', on ' + slave['clay_device'] if slave.get('clay_device') else ''}): "
-            f"{slave['cutting_time_s']:.2f} s "
-            f"from the first to the last removal, removed "
-            f"{slave.get('removed_volume_m3', 0.0) * 1e6:.2f} cm^3"
+            f"    steady part ({slave['steady_cut_start_s']:.2f}-"
+            f"{slave['steady_cut_end_s']:.2f} s): |ft| {slave['steady_cut_force_N']:.2f} N, "
+            f"speed {slave['steady_cut_speed_m_s'] * 1e3:.1f} mm/s, force ripple "
+            f"{ripple * 100:.1f} % (std/mean), velocity reversals "
+            f"{slave['cutting_velocity_reversals']}"
         )
-        lines.append(
-            f"    mean over the cut: tool force |ft| {cut:.2f} N, handle force "
-            f"{slave['cut_mean_handle_force_N']:.2f} N, speed "
-            f"{slave['cut_mean_speed_m_s'] * 1e3:.1f} mm/s (paper, Fig. 9: 3.6 N at 38 mm/s)"
-        )
-        lines.append(
-            f"    while removing clay: |ft| {slave['cutting_mean_force_N']:.2f} N, speed "
-            f"{slave['cutting_mean_speed_m_s'] * 1e3:.1f} mm/s"
-        )
-        ripple = slave.get("cutting_force_ripple_ratio")
-        if ripple is not None:
-            lines.append(
-                f"    steady part ({slave['steady_cut_start_s']:.2f}-"
-                f"{slave['steady_cut_end_s']:.2f} s): |ft| {slave['steady_cut_force_N']:.2f} N, "
-                f"speed {slave['steady_cut_speed_m_s'] * 1e3:.1f} mm/s, force ripple "
-                f"{ripple * 100:.1f} % (std/mean), velocity reversals "
-                f"{slave['cutting_velocity_reversals']}"
-            )
-    else:
-        lines.append("  the tool did not cut clay")
+    return lines
+
+
+def _ending_lines(master: dict[str, Any], slave: dict[str, Any]) -> list[str]:
+    """How the session ended: the position gap (mm) against its target, the work area, the
+    watchdog trips during the run and at its end, and the stability analysis."""
+    lines = []
     gap = slave.get("final_position_gap_m")
     if gap is not None:
         lines.append(f"  position gap at the end |yt - Ah1 yh|: x {abs(gap[0]) * 1e3:.2f} mm, "
@@ -482,6 +529,20 @@ def combined_summary(master: dict[str, Any], slave: dict[str, Any],
                      f"{analysis['round_trip_delay_s'] * 1e3:.2f} ms, "
                      f"{'stable' if analysis['stable'] else 'UNSTABLE'}, delay margin "
                      f"{margin_text}")
+    return lines
+
+
+def combined_summary(master: dict[str, Any], slave: dict[str, Any],
+                     cpus: int | None = None) -> str:
+    """The session's lines: both loops, what they took of the host's CPUs (``cpus``, default
+    this process's usable CPUs), both link directions, forces, the cut, the watchdog."""
+    lines = ["session summary"]
+    lines += _loop_lines(master, slave, usable_cpu_count() if cpus is None else cpus)
+    lines += _link_lines(master, slave)
+    lines.append(f"  max |force|: reflected to the operator {master['max_abs_force_N']:.2f} N,"
+                 f" tool on the clay {slave['max_abs_force_N']:.2f} N")
+    lines += _cut_lines(slave)
+    lines += _ending_lines(master, slave)
     return "\n".join(lines)
 
 
