@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import os
 import signal
-import subprocess
-import sys
 import time
 import uuid
 from dataclasses import replace
@@ -19,11 +16,15 @@ from haptic.common.wire.auth import write_key_file
 from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import link_config_from
 from haptic.common.wire.ports import free_port
+from tests.helpers.programs import Program, python_module
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 
 
 SHIPPED_KEY = "/etc/haptic/rig-1.key"
+
+#: How long a started router may take to say it listens, s.
+READY_S = 60.0
 
 
 def with_test_key(path: Path, tmp_path: Path) -> dict:
@@ -58,12 +59,9 @@ def test_router_config(tmp_path):
 
 def test_client_mode_through_the_python_router():
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    router = subprocess.Popen(
-        [sys.executable, "-m", "haptic.common.wire.router.cli", "--listen", endpoint],
-        stderr=subprocess.PIPE, text=True,
-    )
-    try:
-        assert "listening" in router.stderr.readline()
+    with Program(python_module("haptic.common.wire.router.cli", "--listen", endpoint),
+                 stop_signal=signal.SIGTERM) as router:
+        router.wait_for("listening", timeout_s=READY_S)
         config = load_config()
         prefix = f"test/{uuid.uuid4().hex[:10]}"
         links = [
@@ -85,10 +83,4 @@ def test_client_mode_through_the_python_router():
                 assert time.monotonic() < deadline
                 time.sleep(0.001)
             assert got == sent
-        os.kill(router.pid, signal.SIGTERM)
-        assert router.wait(timeout=10) == 0
-    finally:
-        if router.poll() is None:
-            router.kill()
-        router.wait()
-        router.stderr.close()
+        assert router.stop(signal.SIGTERM, grace_s=10.0) == 0, router.output()

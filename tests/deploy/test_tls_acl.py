@@ -20,10 +20,14 @@ from haptic.common.wire.link import Link, zenoh_config
 from haptic.common.wire.link_config import link_config_from
 from haptic.common.wire.ports import free_port
 from haptic.common.wire.router.cli import router_config
+from tests.helpers.programs import Program, python_module
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 ZENOH = DEPLOY / "zenoh"
 PREFIX = "haptic/rig-1"  # the key prefix the access control names
+
+#: How long a started router may take to say it listens, s.
+READY_S = 60.0
 
 
 def test_every_zenoh_config_loads():
@@ -109,15 +113,11 @@ def drain(link: Link, seconds: float) -> list:
 
 def test_router_tls_and_access_control_on_one_host(certs):
     endpoint = f"tls/localhost:{free_port()}"
-    router = subprocess.Popen(
-        [sys.executable, "-m", "haptic.common.wire.router.cli", "--zenoh-config",
-         str(ZENOH / "router.json5"),
-         "--listen", endpoint, *[a for k, v in certs.tls_overrides("router")
-                                 for a in ("--zenoh-set", f"{k}={v}")]],
-        stderr=subprocess.PIPE, text=True,
-    )
-    try:
-        assert "listening" in router.stderr.readline()
+    overrides = [a for k, v in certs.tls_overrides("router") for a in ("--zenoh-set", f"{k}={v}")]
+    with Program(python_module("haptic.common.wire.router.cli", "--zenoh-config",
+                               str(ZENOH / "router.json5"), "--listen", endpoint, *overrides),
+                 stop_signal=signal.SIGTERM) as router:
+        router.wait_for("listening", timeout_s=READY_S)
         master = client_link("master", endpoint, certs.tls_overrides("master"),
                              "client-master.json5")
         slave = client_link("slave", endpoint, certs.tls_overrides("slave"), "client-slave.json5")
@@ -159,15 +159,6 @@ def test_router_tls_and_access_control_on_one_host(certs):
                                       f'"{certs.good / "ca.pem"}"')
                 with pytest.raises(Exception, match="(?i)connect"):
                     zenoh.open(bare).close()
-    finally:
-        if router.poll() is None:
-            os.kill(router.pid, signal.SIGTERM)
-        try:
-            router.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            router.kill()
-            router.wait()
-        router.stderr.close()
 
 
 def peer_link(side: str, endpoint: str, overrides) -> Link:

@@ -22,12 +22,13 @@ import shutil
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+
+from tests.helpers.programs import Program, Programs
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 ZENOH = DEPLOY / "zenoh"
@@ -117,73 +118,51 @@ def network() -> Iterator[None]:
         remove_network()
 
 
-class Processes:
-    """Children started in a namespace, each ended by its own PID and reaped."""
-
-    def __init__(self) -> None:
-        self.started: list[subprocess.Popen] = []
-
-    def start(self, host: str, args: list[str], **kwargs) -> subprocess.Popen:
-        # `ip netns exec` execs the command: the PID is the program's own
-        process = subprocess.Popen(["ip", "netns", "exec", NS[host], sys.executable, *args],
-                                   text=True, **kwargs)
-        self.started.append(process)
-        return process
-
-    def end_all(self) -> None:
-        for process in reversed(self.started):
-            if process.poll() is None:
-                os.kill(process.pid, signal.SIGTERM)
-                try:
-                    process.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    os.kill(process.pid, signal.SIGKILL)
-            process.wait()
-            for stream in (process.stdout, process.stderr):
-                if stream is not None:
-                    stream.close()
+def start_on(programs: Programs, host: str, args: list[str]) -> Program:
+    """Start ``python args`` in ``host``'s namespace; ``ip netns exec`` execs the command, so
+    the PID the launcher ends is the program's own."""
+    return programs.start(["ip", "netns", "exec", NS[host], sys.executable, *args],
+                          stop_signal=signal.SIGTERM)
 
 
 def zenoh_set(overrides) -> list[str]:
     return [arg for key, value in overrides for arg in ("--zenoh-set", f"{key}={value}")]
 
 
-def probe(processes: Processes, tmp_path: Path, role: str, host: str, side: str,
-          overrides, seconds: float, shipped_file: bool = True) -> subprocess.Popen:
+def probe(programs: Programs, tmp_path: Path, role: str, host: str, side: str,
+          overrides, seconds: float, shipped_file: bool = True) -> Program:
     script = tmp_path / "probe.py"
     script.write_text(PROBE)
     zenoh_file = ZENOH / f"client-{side}.json5" if shipped_file else ""
-    return processes.start(
-        host, [str(script), role, side, ROUTER_FOR[host], repr(seconds),
-               json.dumps([list(pair) for pair in overrides]), str(zenoh_file)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-    )
+    return start_on(
+        programs, host, [str(script), role, side, ROUTER_FOR[host], repr(seconds),
+                         json.dumps([list(pair) for pair in overrides]), str(zenoh_file)])
 
 
-def result(process: subprocess.Popen, timeout_s: float = 30.0) -> dict:
-    out, err = process.communicate(timeout=timeout_s)
-    lines = [line for line in out.splitlines() if line.startswith("{")]
-    assert lines, f"probe printed nothing: {err[-2000:]}"
+def result(probed: Program, timeout_s: float = 30.0) -> dict:
+    probed.wait(timeout_s=timeout_s)
+    lines = [line for line in probed.output().splitlines() if line.startswith("{")]
+    assert lines, f"probe printed nothing: {probed.output()[-2000:]}"
     return json.loads(lines[-1])
 
 
-def exchange(processes, tmp_path, sender_host, sender_side, sender_certs, receiver_certs):
+def exchange(programs, tmp_path, sender_host, sender_side, sender_certs, receiver_certs):
     """Messages a receiver (the other side, the deployment's own certificate) in the other
     namespace gets while ``sender_side`` publishes for 2 s with ``sender_certs``."""
     receiver_side = "slave" if sender_side == "master" else "master"
     receiver_host = "remote" if sender_host == "rig" else "rig"
-    receiver = probe(processes, tmp_path, "listen", receiver_host, receiver_side,
+    receiver = probe(programs, tmp_path, "listen", receiver_host, receiver_side,
                      receiver_certs, 5.0)
-    assert json.loads(receiver.stdout.readline())["opened"]
+    assert json.loads(receiver.wait_for(r"^\{.*\}$", timeout_s=30.0).group(0))["opened"]
     time.sleep(0.5)  # the receiver's subscription reaches the router
-    sender = probe(processes, tmp_path, "send", sender_host, sender_side, sender_certs, 2.0)
+    sender = probe(programs, tmp_path, "send", sender_host, sender_side, sender_certs, 2.0)
     sent, received = result(sender), result(receiver)
     assert sent["opened"], sent
     assert sent["sent"] > 100
     return received["received"]
 
 
-def run_session(processes: Processes, certs, out: Path, topology: str) -> float:
+def run_session(programs: Programs, certs, out: Path, topology: str) -> float:
     """Slave on the remote host, master (``--rig model``) on the rig for SESSION_S, over
     ``topology`` (``router``: clients of the router that must already run; ``peers``: direct);
     checks both summaries and returns the session's wall time (start of the slave to the
@@ -199,19 +178,19 @@ def run_session(processes: Processes, certs, out: Path, topology: str) -> float:
         ends = {"master": ["--listen", MASTER_DIRECT], "slave": ["--connect", MASTER_DIRECT]}
         files = {side: ZENOH / f"peer-{side}.json5" for side in summaries}
     started = time.monotonic()
-    slave = processes.start("remote", [
+    slave = start_on(programs, "remote", [
         "-m", "haptic.slave_sim.cli", *common, *ends["slave"],
         "--zenoh-config", str(files["slave"]), *zenoh_set(certs.tls_overrides("slave")),
         "--duration", repr(SESSION_S + 20), "--scenario", "constant-rate", "--out", str(out),
         "--json-summary", str(summaries["slave"])])
-    master = processes.start("rig", [
+    master = start_on(programs, "rig", [
         "-m", "haptic.master.cli", *common, *ends["master"],
         "--zenoh-config", str(files["master"]), *zenoh_set(certs.tls_overrides("master")),
         "--rig", "model", "--duration", repr(SESSION_S),
         "--json-summary", str(summaries["master"])])
-    assert master.wait(timeout=60) == 0
-    os.kill(slave.pid, signal.SIGTERM)  # the session is over: stop the slave
-    assert slave.wait(timeout=20) == 0
+    assert master.wait(timeout_s=60) == 0, master.output()
+    # the session is over: stop the slave
+    assert slave.stop(signal.SIGTERM, grace_s=20) == 0, slave.output()
     elapsed = time.monotonic() - started
     for side, path in summaries.items():
         summary = json.loads(path.read_text())
@@ -229,44 +208,34 @@ def run_session(processes: Processes, certs, out: Path, topology: str) -> float:
 
 
 def test_session_and_access_control_through_the_router(network, certs, tmp_path):
-    processes = Processes()
-    try:
-        router = processes.start(
-            "router",
+    with Programs() as programs:
+        router = start_on(
+            programs, "router",
             ["-m", "haptic.common.wire.router.cli", "--zenoh-config", str(ZENOH / "router.json5"),
              *[arg for host in ("rig", "remote") for arg in ("--listen", ROUTER_FOR[host])],
-             *zenoh_set(certs.tls_overrides("router"))],
-            stderr=subprocess.PIPE,
-        )
-        assert "listening" in router.stderr.readline()
-        # keep its log pipe drained for the rest of the test (it ends at the router's exit)
-        threading.Thread(target=router.stderr.read, daemon=True).start()
-        run_session(processes, certs, tmp_path / "out", "router")
+             *zenoh_set(certs.tls_overrides("router"))])
+        router.wait_for("listening", timeout_s=60.0)
+        run_session(programs, certs, tmp_path / "out", "router")
 
         good = certs.tls_overrides
         # control: the master's own certificate gets handle messages through
-        assert exchange(processes, tmp_path, "rig", "master", good("master"), good("slave")) > 0
+        assert exchange(programs, tmp_path, "rig", "master", good("master"), good("slave")) > 0
         # a valid certificate whose CN the access control does not name: nothing arrives
-        assert exchange(processes, tmp_path, "rig", "master", good("intruder"),
+        assert exchange(programs, tmp_path, "rig", "master", good("intruder"),
                         good("slave")) == 0
-        assert exchange(processes, tmp_path, "remote", "slave", good("intruder"),
+        assert exchange(programs, tmp_path, "remote", "slave", good("intruder"),
                         good("master")) == 0
         # a certificate of another CA: no session at all
-        rogue = result(probe(processes, tmp_path, "send", "rig", "master",
+        rogue = result(probe(programs, tmp_path, "send", "rig", "master",
                              good("master", rogue=True), 1.0))
         assert not rogue["opened"] and "connect" in rogue["error"].lower(), rogue
         # TLS that trusts the CA but presents no certificate of its own: no session either
         ca_only = (("transport/link/tls/root_ca_certificate", f'"{certs.good / "ca.pem"}"'),)
-        anonymous = result(probe(processes, tmp_path, "send", "rig", "master", ca_only, 1.0,
+        anonymous = result(probe(programs, tmp_path, "send", "rig", "master", ca_only, 1.0,
                                  shipped_file=False))
         assert not anonymous["opened"] and "connect" in anonymous["error"].lower(), anonymous
-    finally:
-        processes.end_all()
 
 
 def test_session_between_direct_peers(network, certs, tmp_path):
-    processes = Processes()
-    try:
-        run_session(processes, certs, tmp_path / "out", "peers")
-    finally:
-        processes.end_all()
+    with Programs() as programs:
+        run_session(programs, certs, tmp_path / "out", "peers")

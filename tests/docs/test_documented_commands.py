@@ -30,7 +30,7 @@ from haptic.common.config import load_config, override
 from haptic.common.config.scenario import scenario_from_table
 from haptic.common.wire.auth import write_key_file
 from haptic.common.wire.link_config import link_config_from
-from haptic.common.wire.ports import free_port as _free_port
+from haptic.common.wire.ports import free_port
 from tests.docs.doc_commands import (
     ROOT,
     SHELL_LABELS,
@@ -51,6 +51,7 @@ from tests.docs.doc_commands import (
     rel,
     shell_commands,
 )
+from tests.helpers.programs import Program
 
 #: A foreground command's limit, and how long a background job may take to end by itself, s.
 COMMAND_TIMEOUT_S = 180.0
@@ -205,11 +206,11 @@ class Scratch:
             (bin_dir / name).symlink_to(sys.executable)
         self.env = {**os.environ, "TMPDIR": str(folder),
                     "PATH": f"{bin_dir}:{Path(sys.executable).parent}:{os.environ['PATH']}"}
-        endpoint, prefix = f"tcp/127.0.0.1:{_free_port()}", f"docs/{uuid.uuid4().hex[:8]}"
+        endpoint, prefix = f"tcp/127.0.0.1:{free_port()}", f"docs/{uuid.uuid4().hex[:8]}"
         self.own = {"haptic-master": f"--listen {endpoint} --key-prefix {prefix}",
                     "haptic-slave": f"--connect {endpoint} --key-prefix {prefix}",
                     "haptic-view": f"--connect {endpoint} --key-prefix {prefix} "
-                                   f"--port {_free_port()}"}
+                                   f"--port {free_port()}"}
 
     def shell_text(self, command: Command) -> str:
         """What runs: the shorter variant, with this session's endpoint for a linked program."""
@@ -222,32 +223,26 @@ class Scratch:
 
 @dataclass
 class Job:
-    """A background job: its process (its own PID, ``exec``'d by bash) and its output."""
+    """A background job: its program (its own PID, ``exec``'d by bash) and what it ran."""
 
     command: Command
-    process: subprocess.Popen
-    log: Path
+    program: Program
 
     def output(self) -> str:
-        return self.log.read_text(errors="replace")[-3000:]
+        return self.program.output()[-3000:]
 
 
-def _start(scratch: Scratch, command: Command, number: int) -> Job:
-    log = scratch.folder / f"job-{number}.log"
-    with log.open("w") as out:
-        process = subprocess.Popen(["bash", "-c", "exec " + scratch.shell_text(command)],
-                                   cwd=scratch.folder, env=scratch.env, stdout=out,
-                                   stderr=subprocess.STDOUT, start_new_session=True)
-    return Job(command, process, log)
+def _start(scratch: Scratch, command: Command) -> Job:
+    program = Program(["bash", "-c", "exec " + scratch.shell_text(command)], cwd=scratch.folder,
+                      env=scratch.env, stop_signal=signal.SIGTERM, new_session=True)
+    return Job(command, program)
 
 
 def _ended(job: Job, how: str) -> list[str]:
     """Wait for a job that was told to end (or ends by itself); its exit status must be 0."""
-    try:
-        status = job.process.wait(timeout=JOB_END_S)
-    except subprocess.TimeoutExpired:
-        job.process.send_signal(signal.SIGTERM)
-        status = job.process.wait(timeout=JOB_END_S)
+    status = job.program.ended_within(JOB_END_S)
+    if status is None:
+        status = job.program.stop(signal.SIGTERM, grace_s=JOB_END_S)
         how = "did not end by itself; after SIGTERM"
     if status == 0:
         return []
@@ -281,23 +276,21 @@ def run_block(scratch: Scratch, commands: list[Command], jobs: list[Job] | None 
                 continue
             if command.text.startswith("kill %"):
                 job = jobs[int(command.text.split("%")[1]) - 1]
-                job.process.send_signal(signal.SIGTERM)
+                job.program.send_signal(signal.SIGTERM)
                 problems += _ended(job, "kill %N: SIGTERM")
             elif command.background:
-                jobs.append(_start(scratch, command, len(jobs) + 1))
+                jobs.append(_start(scratch, command))
             else:
                 problems += _foreground(scratch, command)
         for job in jobs:
-            if job.process.returncode is None and "--duration" not in job.command.text:
-                job.process.send_signal(signal.SIGTERM)  # runs until signalled: the view
+            if job.program.returncode is None and "--duration" not in job.command.text:
+                job.program.send_signal(signal.SIGTERM)  # runs until signalled: the view
                 problems += _ended(job, "left running by the docs; SIGTERM at the end")
-            elif job.process.returncode is None:
+            elif job.program.returncode is None:
                 problems += _ended(job, "ends after its --duration")
     finally:
         for job in jobs:
-            if job.process.poll() is None:
-                job.process.kill()
-            job.process.wait()
+            job.program.close()
     return problems
 
 
@@ -416,7 +409,7 @@ def test_scratch_runner_reaps_its_jobs(tmp_path: Path) -> None:
     jobs: list[Job] = []
     problems = run_block(scratch, shell_commands(block), jobs)
     assert len(problems) == 2 and "exited 1" in problems[0] and "SIGTERM" in problems[1]
-    assert [job.process.returncode for job in jobs] == [-signal.SIGTERM]
+    assert [job.program.returncode for job in jobs] == [-signal.SIGTERM]
     quoted = Block("docs/x.md", 1, "console", ("$ echo one; echo two", "two", "$ echo 3", "4"))
     problems = run_block(scratch, shell_commands(quoted))
     assert problems == ["docs/x.md:4 `echo 3` did not print the line the docs quote: '4'"]

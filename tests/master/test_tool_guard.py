@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 import uuid
 
 import numpy as np
@@ -17,10 +15,11 @@ from haptic.common.config import ConfigError, load_config, override
 from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import LinkConfig
 from haptic.common.wire.messages import Flags, ToolState
-from haptic.common.wire.ports import free_port as _free_port
+from haptic.common.wire.ports import free_port
 from haptic.master.supervisor import MasterSupervisor, Transition
 from haptic.master.tool_guard import ToolGuardSettings, ToolInputGuard
 from tests.helpers.attacks import steady_slave
+from tests.helpers.programs import Program, python_module
 
 TS = 0.00054
 
@@ -120,29 +119,22 @@ def test_a_jumping_tool_never_reaches_the_masters_loop(tmp_path) -> None:
     whose tool, in a burst of 10 messages, jumps 80 mm (a faulty slave, or a forger holding
     the session): the master counts and reports the fault, turns its forces off, never uses
     the jumped position, and runs again once the tool is plausible and at the handle."""
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     prefix = f"test/{uuid.uuid4().hex[:8]}"
     summary_path, out = tmp_path / "master.json", tmp_path / "out"
     slave_config = LinkConfig(side="slave", key_prefix=prefix, connect=(endpoint,),
                               stale_after_s=10.0)
-    master = subprocess.Popen(
-        [sys.executable, "-m", "haptic.master.cli", "--rig", "model", "--key-prefix", prefix,
-         "--listen", endpoint, "--no-status", "--peer-wait", "60", "--duration", "4",
-         "--json-summary", str(summary_path), "--out", str(out), "--trace-every", "1",
-         "--max-message-age", "0.5"],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
+    with Program(python_module(
+            "haptic.master.cli", "--rig", "model", "--key-prefix", prefix, "--listen", endpoint,
+            "--no-status", "--peer-wait", "60", "--duration", "4", "--json-summary",
+            str(summary_path), "--out", str(out), "--trace-every", "1", "--max-message-age",
+            "0.5")) as master:
         with Link(slave_config) as link:
             assert link.wait_for_peer(60.0)
             forged = steady_slave(link, 7.0, inject=lambda i: (0.08, 0.0)
                                   if 1500 <= i < 1510 else None)
             assert forged == 10
-            output, _ = master.communicate(timeout=60)
-    finally:
-        if master.poll() is None:
-            master.kill()
-        master.wait(timeout=10)
-    assert master.returncode == 0, output
+            assert master.wait(timeout_s=60) == 0, master.output()
     summary = json.loads(summary_path.read_text())
     guard_figures = summary["tool_input_guard"]
     assert guard_figures["jumps"] >= 1 and guard_figures["faults"] >= 1, guard_figures

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 import uuid
 
 import numpy as np
@@ -15,9 +13,10 @@ from haptic.common.config import ConfigError, load_config, override
 from haptic.common.wire.link import Link
 from haptic.common.wire.link_config import LinkConfig
 from haptic.common.wire.messages import Flags, HandleState
-from haptic.common.wire.ports import free_port as _free_port
+from haptic.common.wire.ports import free_port
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from tests.helpers.attacks import steady_master
+from tests.helpers.programs import Program, python_module
 
 TS = 0.00054
 
@@ -88,7 +87,7 @@ def test_forged_1e9_N_never_moves_the_slave_tool_beyond_the_bound(tmp_path) -> N
     """The real haptic-slave (linear environment) driven by a steady master at 1 N that, in
     a burst, sends 1e9 N (a faulty master or a forger holding the session): the tool stops on
     the fault and never sees more than force_limit_N; it never jumps."""
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     prefix = f"test/{uuid.uuid4().hex[:8]}"
     config = tmp_path / "linear.toml"
     config.write_text('[slave]\nscenario = "constant-rate"\nenvironment = "linear"\n'
@@ -97,23 +96,16 @@ def test_forged_1e9_N_never_moves_the_slave_tool_beyond_the_bound(tmp_path) -> N
     master_config = LinkConfig(side="master", key_prefix=prefix, listen=(endpoint,),
                                stale_after_s=10.0)
     with Link(master_config) as link:
-        slave = subprocess.Popen(
-            [sys.executable, "-m", "haptic.slave_sim.cli", "--config", str(config),
-             "--key-prefix", prefix, "--connect", endpoint, "--no-status", "--peer-wait", "60",
-             "--duration", "3", "--json-summary", str(summary_path), "--out", str(out),
-             "--max-message-age", "0.5"],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        try:
+        with Program(python_module(
+                "haptic.slave_sim.cli", "--config", str(config), "--key-prefix", prefix,
+                "--connect", endpoint, "--no-status", "--peer-wait", "60", "--duration", "3",
+                "--json-summary", str(summary_path), "--out", str(out), "--max-message-age",
+                "0.5")) as slave:
             assert link.wait_for_peer(60.0)
             forged = steady_master(link, 6.0, inject=lambda i: (1e9, 0.0)
                                    if 1500 <= i < 1510 else None)
             assert forged == 10
-            output, _ = slave.communicate(timeout=60)
-        finally:
-            if slave.poll() is None:
-                slave.kill()
-            slave.wait(timeout=10)
-    assert slave.returncode == 0, output
+            assert slave.wait(timeout_s=60) == 0, slave.output()
     summary = json.loads(summary_path.read_text())
     assert summary["input_guard"]["faults"] >= 1, summary["input_guard"]
     assert any(e["kind"] == "input_fault" for e in summary["events"])

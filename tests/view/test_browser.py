@@ -14,8 +14,6 @@ import json
 import os
 import shutil
 import socket
-import subprocess
-import sys
 import time
 import urllib.request
 import uuid
@@ -23,7 +21,8 @@ from pathlib import Path
 
 import pytest
 
-from haptic.common.wire.ports import free_port as _free_port
+from haptic.common.wire.ports import free_port
+from tests.helpers.programs import Programs, python_module
 
 CHROMIUM = os.environ.get("HAPTIC_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
 ARTIFACTS = Path(__file__).resolve().parents[2] / "out" / "test-artifacts"
@@ -70,26 +69,23 @@ def test_page_shows_the_cut_in_chromium(tmp_path: Path) -> None:
     config = tmp_path / "clay.toml"
     config.write_text('[slave]\nscenario = "constant-rate"\nenvironment = "clay"\n'
                       'clay_impl = "numpy"\ndevice = "cpu"\n')
-    master_port = _free_port()
+    master_port = free_port()
     endpoint = f"tcp/127.0.0.1:{master_port}"
     prefix = f"test/{uuid.uuid4().hex[:8]}"
-    port = _free_port()
+    port = free_port()
     common = ["--config", str(config), "--key-prefix", prefix]
     # The master's peer wait covers the view's start, Chromium's launch and first page, and
     # the slave's start (Python, Warp, Zenoh): 20-30 s on a slow, busy machine.
     run = ["--no-status", "--peer-wait", "120", "--duration", "8"]
-    processes = []
-    try:
+    with Programs() as programs:
         # The master first (it listens and waits for the slave), then the view connects to
         # it, the page loads, and only then the slave starts: the page sees the whole cut.
-        processes.append(subprocess.Popen(
-            [sys.executable, "-m", "haptic.master.cli", *common, *run, "--listen", endpoint,
-             "--rig", "model", "--operator", "regulate:fx=3.6,onset=0.1,max=5"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        programs.start(python_module(
+            "haptic.master.cli", *common, *run, "--listen", endpoint, "--rig", "model",
+            "--operator", "regulate:fx=3.6,onset=0.1,max=5"))
         _wait_port(master_port, time.monotonic() + WAIT_S)
-        processes.append(subprocess.Popen(
-            [sys.executable, "-m", "haptic.view.cli", *common, "--connect", endpoint,
-             "--port", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        programs.start(python_module(
+            "haptic.view.cli", *common, "--connect", endpoint, "--port", str(port)))
         url = f"http://127.0.0.1:{port}/"
         _wait_http(url, time.monotonic() + WAIT_S)
         with sync_api.sync_playwright() as playwright:
@@ -98,10 +94,8 @@ def test_page_shows_the_cut_in_chromium(tmp_path: Path) -> None:
             try:
                 page = browser.new_page(viewport={"width": 1300, "height": 700})
                 page.goto(url)
-                processes.append(subprocess.Popen(
-                    [sys.executable, "-m", "haptic.slave_sim.cli", *common, *run,
-                     "--connect", endpoint], stdout=subprocess.DEVNULL,
-                    stderr=subprocess.DEVNULL))
+                programs.start(python_module(
+                    "haptic.slave_sim.cli", *common, *run, "--connect", endpoint))
                 timeout_ms = WAIT_S * 1000
                 page.wait_for_function("window.hapticView && window.hapticView.clayVersion > 0"
                                        " && window.hapticView.layout !== null",
@@ -125,11 +119,6 @@ def test_page_shows_the_cut_in_chromium(tmp_path: Path) -> None:
                 page.screenshot(path=str(ARTIFACTS / "haptic-view.png"), full_page=True)
             finally:
                 browser.close()
-    finally:
-        for process in processes:
-            if process.poll() is None:
-                process.kill()
-            process.wait(timeout=10)
     seen["frames_in_one_second"] = frames_after - frames_before
     (ARTIFACTS / "haptic-view.json").write_text(json.dumps(seen, indent=2))
     assert seen["claySumMm"] < seen["claySumInitialMm"]

@@ -3,25 +3,16 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 from haptic.common.runtime.summary import REQUIRED_SUMMARY_KEYS
+from tests.helpers.programs import Program, python_module
 
 
 def test_session_runs_both_programs_and_writes_the_report(tmp_path) -> None:
     out = tmp_path / "session"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "haptic.common.launch.cli", "--out", str(out)],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )
-    try:
-        log, _ = process.communicate(timeout=150)
-    finally:
-        if process.poll() is None:
-            process.kill()
-        process.wait()
-    assert process.returncode == 0, log
+    with Program(python_module("haptic.common.launch.cli", "--out", str(out))) as session:
+        assert session.wait(timeout_s=150) == 0, session.output()
+        log = session.output()
     assert "session summary" in log and "in the clay" in log and "real time: " in log
     for name in ("report.md", "master.json", "slave.json", "clay.png", "clay.npz",
                  "session.png", "master_trace.npz", "slave_trace.npz"):

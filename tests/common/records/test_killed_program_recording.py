@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import json
 import signal
-import subprocess
-import sys
 import time
 import uuid
 from pathlib import Path
@@ -16,7 +14,8 @@ import pytest
 from mcap.reader import make_reader
 
 from haptic.common.records.recording import read_recording
-from haptic.common.wire.ports import free_port as _free_port
+from haptic.common.wire.ports import free_port
+from tests.helpers.programs import Programs, python_module
 
 WAIT_S = 60.0
 
@@ -26,31 +25,23 @@ def test_sigkilled_master_recording_opens_with_make_reader(tmp_path: Path) -> No
     config = tmp_path / "linear.toml"
     config.write_text('[slave]\nscenario = "constant-rate"\nenvironment = "linear"\n'
                       'clay_impl = "numpy"\ndevice = "cpu"\n')
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     common = ["--config", str(config), "--key-prefix", f"test/{uuid.uuid4().hex[:8]}",
               "--no-status", "--peer-wait", "30"]
     record = tmp_path / "master.mcap"
-    master = subprocess.Popen(
-        [sys.executable, "-m", "haptic.master.cli", *common, "--listen", endpoint, "--rig",
-         "model", "--record", str(record)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    slave = subprocess.Popen(
-        [sys.executable, "-m", "haptic.slave_sim.cli", *common, "--connect", endpoint,
-         "--duration", "30"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
+    with Programs() as programs:
+        master = programs.start(python_module(
+            "haptic.master.cli", *common, "--listen", endpoint, "--rig", "model", "--record",
+            str(record)))
+        slave = programs.start(python_module(
+            "haptic.slave_sim.cli", *common, "--connect", endpoint, "--duration", "30"))
         deadline = time.monotonic() + WAIT_S
         while time.monotonic() < deadline:
             if record.exists() and record.stat().st_size > 60_000:
                 break
-            assert master.poll() is None and slave.poll() is None
+            assert master.running() and slave.running()
             time.sleep(0.1)
-        master.send_signal(signal.SIGKILL)
-        master.wait(timeout=10)
-    finally:
-        for process in (master, slave):
-            if process.poll() is None:
-                process.kill()
-            process.wait(timeout=10)
+        master.stop(signal.SIGKILL)
     with open(record, "rb") as stream:
         messages = [(channel.topic, message) for _, channel, message
                     in make_reader(stream).iter_messages(log_time_order=False)]

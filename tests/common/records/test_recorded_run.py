@@ -8,16 +8,15 @@ from __future__ import annotations
 
 import json
 import signal
-import subprocess
-import sys
 import uuid
 from pathlib import Path
 
 import pytest
 
 from haptic.common.records.recording import read_recording
-from haptic.common.wire.ports import free_port as _free_port
+from haptic.common.wire.ports import free_port
 from haptic.view.replay import cli as replay
+from tests.helpers.programs import Programs, python_module
 
 WAIT_S = 60.0
 
@@ -28,32 +27,23 @@ def recorded_run(tmp_path_factory: pytest.TempPathFactory):
     config = tmp_path / "clay.toml"
     config.write_text('[slave]\nscenario = "constant-rate"\nenvironment = "clay"\n'
                       'clay_impl = "numpy"\ndevice = "cpu"\n')
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     common = ["--config", str(config), "--key-prefix", f"test/{uuid.uuid4().hex[:8]}",
               "--no-status", "--peer-wait", "30"]
     files = {side: tmp_path / f"{side}.mcap" for side in ("master", "slave")}
     summaries = {side: tmp_path / f"{side}.json" for side in ("master", "slave")}
-    master = subprocess.Popen(
-        [sys.executable, "-m", "haptic.master.cli", *common, "--listen", endpoint, "--rig",
-         "model", "--operator", "regulate:fx=3.6,onset=0.1,max=5", "--record",
-         str(files["master"]), "--json-summary", str(summaries["master"])],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    slave = subprocess.Popen(
-        [sys.executable, "-m", "haptic.slave_sim.cli", *common, "--connect", endpoint,
-         "--duration", "2.5", "--record", str(files["slave"]), "--record-every", "2",
-         "--json-summary", str(summaries["slave"])],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        slave_out, _ = slave.communicate(timeout=WAIT_S)
-        assert slave.returncode == 0, slave_out
-        master.send_signal(signal.SIGTERM)  # the master runs until stopped
-        master_out, _ = master.communicate(timeout=WAIT_S)
-        assert master.returncode == 0, master_out
-    finally:
-        for process in (master, slave):
-            if process.poll() is None:
-                process.kill()
-            process.wait(timeout=10)
+    with Programs() as programs:
+        master = programs.start(python_module(
+            "haptic.master.cli", *common, "--listen", endpoint, "--rig", "model", "--operator",
+            "regulate:fx=3.6,onset=0.1,max=5", "--record", str(files["master"]),
+            "--json-summary", str(summaries["master"])))
+        slave = programs.start(python_module(
+            "haptic.slave_sim.cli", *common, "--connect", endpoint, "--duration", "2.5",
+            "--record", str(files["slave"]), "--record-every", "2", "--json-summary",
+            str(summaries["slave"])))
+        assert slave.wait(timeout_s=WAIT_S) == 0, slave.output()
+        # the master runs until stopped
+        assert master.stop(signal.SIGTERM, grace_s=WAIT_S) == 0, master.output()
     return files, {side: json.loads(path.read_text()) for side, path in summaries.items()}
 
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import math
 import signal
-import subprocess
 import sys
 import textwrap
 import time
@@ -15,6 +14,7 @@ from mcap.reader import make_reader
 
 from haptic.common.records.recorder import _WRITER_CHUNK_INDEXES, McapRecorder
 from haptic.common.records.recording import read_recording
+from tests.helpers.programs import Program
 
 
 def test_round_trip_every_channel_and_count(tmp_path: Path) -> None:
@@ -106,18 +106,13 @@ WRITER = textwrap.dedent("""
 
 def test_sigkilled_writer_leaves_a_readable_file(tmp_path: Path) -> None:
     path = tmp_path / "killed.mcap"
-    process = subprocess.Popen([sys.executable, "-c", WRITER, str(path)])
-    try:
+    with Program([sys.executable, "-c", WRITER, str(path)]) as writer:
         deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline:
             if path.exists() and path.stat().st_size > 40_000:
                 break
             time.sleep(0.05)
-        process.send_signal(signal.SIGKILL)
-    finally:
-        if process.poll() is None:
-            process.kill()
-        process.wait(timeout=10)
+        writer.stop(signal.SIGKILL)
     assert path.stat().st_size > 40_000
     recording = read_recording(path)
     assert not recording.complete

@@ -27,6 +27,7 @@ from mcap.reader import make_reader
 
 from haptic.common.records.recorder import McapRecorder
 from haptic.common.records.recording import read_recording
+from tests.helpers.programs import Program
 
 WRITER = textwrap.dedent("""
     import sys, time
@@ -62,10 +63,9 @@ def _live_read(path: Path, torn_reads: list[str]) -> int:
 
 def test_sigkilled_recording_opens_with_make_reader(tmp_path: Path) -> None:
     path = tmp_path / "killed.mcap"
-    process = subprocess.Popen([sys.executable, "-c", WRITER, str(path)])
     live_reads: list[int] = []
     torn_reads: list[str] = []
-    try:
+    with Program([sys.executable, "-c", WRITER, str(path)]) as writer:
         deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline:
             if path.exists() and path.stat().st_size > 2_000:
@@ -73,11 +73,7 @@ def test_sigkilled_recording_opens_with_make_reader(tmp_path: Path) -> None:
             if path.exists() and path.stat().st_size > 40_000:
                 break
             time.sleep(0.05)
-        process.send_signal(signal.SIGKILL)
-    finally:
-        if process.poll() is None:
-            process.kill()
-        process.wait(timeout=10)
+        writer.stop(signal.SIGKILL)
     values = _standard_read(path)
     assert len(values) > 100
     # every message up to the last complete chunk, in order, none missing

@@ -14,6 +14,7 @@ from haptic.common.ros2 import messages
 from haptic.common.ros2.publisher import Ros2Publisher
 from haptic.common.ros2.rmw_format import parse_attachment
 from haptic.common.ros2.settings import Ros2Settings
+from haptic.common.wire.ports import free_port
 from tests.common.ros2.cdr_reader import (
     read_diagnostics,
     read_joint_state,
@@ -22,7 +23,7 @@ from tests.common.ros2.cdr_reader import (
     read_tf,
     read_wrench,
 )
-from tests.common.ros2.zenoh_graph import free_port, ros2_listener, zenoh_router
+from tests.common.ros2.zenoh_graph import ros2_listener, zenoh_router
 
 ALL = frozenset({"wrench", "pose", "joint_states", "tf", "diagnostics", "clay"})
 READERS = {"WrenchStamped_": read_wrench, "PoseStamped_": read_pose,

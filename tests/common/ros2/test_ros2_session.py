@@ -5,12 +5,11 @@ sample with the independent CDR reader, and sees both nodes' tokens come and go.
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from haptic.common.wire.ports import free_port
 from tests.common.ros2.cdr_reader import (
     read_diagnostics,
     read_joint_state,
@@ -19,7 +18,8 @@ from tests.common.ros2.cdr_reader import (
     read_tf,
     read_wrench,
 )
-from tests.common.ros2.zenoh_graph import free_port, ros2_listener, zenoh_router
+from tests.common.ros2.zenoh_graph import ros2_listener, zenoh_router
+from tests.helpers.programs import Program, python_module
 
 READERS = {"WrenchStamped_": read_wrench, "PoseStamped_": read_pose,
            "JointState_": read_joint_state, "TFMessage_": read_tf,
@@ -40,17 +40,10 @@ def _finite(value: object) -> bool:
 def test_a_session_with_ros2_publishes_every_topic(tmp_path: Path) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with zenoh_router(endpoint), ros2_listener(endpoint) as graph:
-        process = subprocess.Popen(
-            [sys.executable, "-m", "haptic.common.launch.cli", "--duration", "1.5",
-             "--out", str(tmp_path), "--cpu-layout", "free", "--ros2", "--ros2-endpoint",
-             endpoint], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        try:
-            output, _ = process.communicate(timeout=400)
-        finally:
-            if process.poll() is None:
-                process.kill()  # by its own PID; reaped below
-            process.wait()
-        assert process.returncode == 0, output[-3000:]
+        with Program(python_module(
+                "haptic.common.launch.cli", "--duration", "1.5", "--out", str(tmp_path),
+                "--cpu-layout", "free", "--ros2", "--ros2-endpoint", endpoint)) as session:
+            assert session.wait(timeout_s=400) == 0, session.output()[-3000:]
         assert graph.wait(lambda g: not g.alive_tokens(), 10.0), "tokens withdrawn at exit"
     assert {"/".join(key.split("/")[1:-2]) for key in graph.samples} == TOPICS
     for key, samples in graph.samples.items():

@@ -14,7 +14,8 @@ from haptic.common.ros2 import messages
 from haptic.common.ros2.publisher import open_client_session
 from haptic.common.ros2.rmw_format import NodeName
 from haptic.common.ros2.subscriber import Ros2Subscription
-from tests.common.ros2.zenoh_graph import free_port, ros2_listener, zenoh_router
+from haptic.common.wire.ports import free_port
+from tests.common.ros2.zenoh_graph import ros2_listener, zenoh_router
 
 WRENCH_KEY = ("0/robot/wrench/geometry_msgs::msg::dds_::WrenchStamped_/"
               "RIHS01_8dc3deaf06b2ab281f9f9a742a8961c328ca7cec16e3fd6586d3a5c83fa78f77")

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import os
-import subprocess
 import sys
-import threading
 import time
 
 import pytest
 
 from haptic.common.runtime.machine import process_cpu_s, usable_cpu_count
+from tests.helpers.programs import Program
 
 
 def test_usable_cpus_are_those_this_process_may_run_on() -> None:
@@ -24,31 +23,19 @@ def test_usable_cpus_are_those_this_process_may_run_on() -> None:
 def test_another_process_cpu_time_grows_while_it_works_and_is_none_once_gone() -> None:
     """A child that burns 0.3 s of its own CPU time shows at least 0.2 s more in /proc (clock-tick
     resolution) than when it started; once reaped, its PID reads as None."""
-    with subprocess.Popen(
-        [sys.executable, "-c",
-         "import sys, time\nprint('go', flush=True)\nsys.stdin.readline()\n"
-         "until = time.process_time() + 0.3\nwhile time.process_time() < until: pass\n"
-         "print('done', flush=True)\nsys.stdin.readline()\n"],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True) as child:
-        stall = threading.Timer(120.0, child.kill)  # a stuck child ends the test, not CI
-        stall.start()
-        try:
-            assert child.stdout.readline().strip() == "go"
-            before = process_cpu_s(child.pid)
-            assert before is not None and before >= 0.0
-            child.stdin.write("\n")
-            child.stdin.flush()
-            assert child.stdout.readline().strip() == "done"
-            after = process_cpu_s(child.pid)
-            assert after is not None and after - before >= 0.2
-            child.stdin.write("\n")
-            child.stdin.flush()
-            child.wait(timeout=30)
-        finally:
-            stall.cancel()
-            if child.poll() is None:
-                child.kill()
-            child.wait()
+    with Program([sys.executable, "-c",
+                  "import sys, time\nprint('go', flush=True)\nsys.stdin.readline()\n"
+                  "until = time.process_time() + 0.3\nwhile time.process_time() < until: pass\n"
+                  "print('done', flush=True)\nsys.stdin.readline()\n"], stdin=True) as child:
+        child.wait_for(r"^go$", timeout_s=120.0)
+        before = process_cpu_s(child.pid)
+        assert before is not None and before >= 0.0
+        child.write_line("")
+        child.wait_for(r"^done$", timeout_s=120.0)
+        after = process_cpu_s(child.pid)
+        assert after is not None and after - before >= 0.2
+        child.write_line("")
+        assert child.wait(timeout_s=30) == 0
     deadline = time.monotonic() + 5.0
     while process_cpu_s(child.pid) is not None and time.monotonic() < deadline:
         time.sleep(0.05)  # the PID is free once reaped (barring reuse, not in 5 s)

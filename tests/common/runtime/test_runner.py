@@ -7,7 +7,6 @@ import json
 import math
 import os
 import signal
-import subprocess
 import sys
 import textwrap
 
@@ -15,8 +14,12 @@ import pytest
 
 from haptic.common.runtime.runner import FreeRunningClock, RealTimeRunner, StopSignals
 from tests.helpers.fake_clock import FakeClock
+from tests.helpers.programs import Program
 
 PERIOD_NS = 540_000
+
+#: How long a child may take to start and say it is ready, s.
+READY_S = 120.0
 
 
 def make(clock: FakeClock, step, duration_s: float, **kwargs) -> RealTimeRunner:
@@ -171,19 +174,10 @@ CHILD = textwrap.dedent(
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
 def test_signal_ends_the_run_cleanly(tmp_path, signum):
     summary = tmp_path / "summary.json"
-    child = subprocess.Popen(
-        [sys.executable, "-c", CHILD, str(summary)], stdout=subprocess.PIPE, text=True,
-        env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    try:
-        assert child.stdout.readline().strip() == "ready"
-        os.kill(child.pid, signum)
-        assert child.wait(timeout=10) == 0
-    finally:
-        if child.poll() is None:
-            child.kill()
-        child.wait()
-        child.stdout.close()
+    with Program([sys.executable, "-c", CHILD, str(summary)],
+                 env={"PYTHONUNBUFFERED": "1"}) as child:
+        child.wait_for(r"^ready$", timeout_s=READY_S)
+        assert child.stop(signum, grace_s=10.0) == 0, child.output()
     result = json.loads(summary.read_text())
     assert result["stop_reason"] == signal.Signals(signum).name
     assert result["steps"] >= 1
@@ -206,18 +200,9 @@ CHILD_WAITING = textwrap.dedent(
 
 def test_signal_before_the_loop_starts_ends_cleanly(tmp_path):
     summary = tmp_path / "summary.json"
-    child = subprocess.Popen(
-        [sys.executable, "-c", CHILD_WAITING, str(summary)], stdout=subprocess.PIPE, text=True,
-    )
-    try:
-        assert child.stdout.readline().strip() == "ready"
-        os.kill(child.pid, signal.SIGINT)
-        assert child.wait(timeout=10) == 0
-    finally:
-        if child.poll() is None:
-            child.kill()
-        child.wait()
-        child.stdout.close()
+    with Program([sys.executable, "-c", CHILD_WAITING, str(summary)]) as child:
+        child.wait_for(r"^ready$", timeout_s=READY_S)
+        assert child.stop(signal.SIGINT, grace_s=10.0) == 0, child.output()
     result = json.loads(summary.read_text())
     assert result["stop_reason"] == "SIGINT" and result["steps"] == 0
 

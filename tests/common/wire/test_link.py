@@ -5,9 +5,7 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import signal
-import subprocess
 import sys
 import textwrap
 import time
@@ -20,6 +18,7 @@ from haptic.common.wire.link import Link
 from haptic.common.wire.messages import Flags, HandleState, ToolState
 from haptic.common.wire.ports import free_port
 from tests.helpers.link_helpers import configs, wait_for_peers
+from tests.helpers.programs import Program
 
 WAIT_S = 10.0
 
@@ -195,20 +194,11 @@ CHILD = textwrap.dedent(
 def test_sigterm_ends_a_linked_node_cleanly(tmp_path):
     out = tmp_path / "summary.json"
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    child = subprocess.Popen(
-        [sys.executable, "-c", CHILD, str(out), f"test/{uuid.uuid4().hex[:10]}", endpoint],
-        stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )
-    try:
-        assert child.stdout.readline().strip() == "ready"
+    with Program([sys.executable, "-c", CHILD, str(out), f"test/{uuid.uuid4().hex[:10]}",
+                  endpoint], env={"PYTHONUNBUFFERED": "1"}) as child:
+        child.wait_for(r"^ready$", timeout_s=120.0)
         time.sleep(0.1)
-        os.kill(child.pid, signal.SIGTERM)
-        assert child.wait(timeout=10) == 0
-    finally:
-        if child.poll() is None:
-            child.kill()
-        child.wait()
-        child.stdout.close()
+        assert child.stop(signal.SIGTERM, grace_s=10.0) == 0, child.output()
     summary = json.loads(out.read_text())
     assert summary["stop_reason"] == "SIGTERM" and summary["closed"]
 
