@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import warp as wp
 
+from haptic.master.node_kernels import clamp_to_box, finite_or_zero, rebase_origin
+
 wp.config.log_level = wp.LOG_WARNING
 
 
@@ -45,6 +47,97 @@ def capped(tank: wp.float64, forgotten: wp.array(dtype=wp.float64), lane: int,
     return tank - excess
 
 
+@wp.func
+def receive_stage(lane: int, account: wp.float64, peer_value: wp.array(dtype=wp.float64),
+                  peer_sent: wp.array(dtype=wp.float64), active: wp.array(dtype=wp.bool),
+                  forgotten: wp.array(dtype=wp.float64), credit_max: wp.float64) -> wp.float64:
+    """``receive``: the account (J) credited with what the newest (largest) cumulative energy
+    the slave handed over adds (where the lane is active); the peer's total is noted."""
+    value = peer_value[lane]
+    credited = account
+    if wp.isfinite(value) and value > peer_sent[lane]:
+        if active[lane]:
+            credited = capped(account + value - peer_sent[lane], forgotten, lane, credit_max)
+        peer_sent[lane] = value
+    return credited
+
+
+@wp.func
+def conductance_stage(lane: int, force: wp.vec2d, moved: wp.vec2d, account: wp.float64,
+                      correction: wp.array(dtype=wp.float64),
+                      active_steps: wp.array(dtype=wp.int64),
+                      dissipated: wp.array(dtype=wp.float64),
+                      limits: PassivityLimits) -> wp.vec2d:
+    """``yield_command``: the conductance's correction (m) along the operator's force (N) by
+    what the account (J) lacks for this step's work on the command's move ``moved`` (m),
+    within the conductance's, speed's and acceleration's limits."""
+    zero = wp.float64(0.0)
+    ts = limits.period_s
+    fx = force[0]
+    fy = force[1]
+    work_out = -(fx * moved[0] + fy * moved[1])
+    excess = wp.max(work_out - account, zero)
+    force2 = fx * fx + fy * fy
+    norm = wp.sqrt(wp.max(force2, wp.float64(1e-300)))
+    size = zero
+    if force2 >= limits.force_floor_N * limits.force_floor_N:
+        size = excess / norm
+    size = wp.min(size, limits.conductance_max_m_per_N_s * wp.sqrt(force2) * ts)
+    size = wp.min(size, wp.min(limits.correction_speed_max_m_per_s * ts,
+                               correction[lane] + limits.correction_accel_max_m_per_s2 * ts * ts))
+    correction[lane] = size
+    if size > zero:
+        active_steps[lane] = active_steps[lane] + wp.int64(1)
+    dissipated[lane] = dissipated[lane] + size * wp.sqrt(force2)
+    return wp.vec2d(size * fx / norm, size * fy / norm)
+
+
+@wp.func
+def drift_stage(force: wp.vec2d, command: wp.vec2d, previous: wp.vec2d, shift: wp.vec2d,
+                target: wp.vec2d, account: wp.float64, limits: PassivityLimits) -> wp.vec2d:
+    """The drift (m): the corrected command ``command + shift`` slowly towards the tool's
+    position in handle coordinates ``target`` (Ah1^-1 yt_recv, m); its work on the operator's
+    force (N) is the operator's input where positive, else paid from what the account (J)
+    holds after this step's other work (``previous``: the command before this step)."""
+    zero = wp.float64(0.0)
+    fx = force[0]
+    fy = force[1]
+    rate = limits.drift_rate_per_s * limits.period_s
+    gx = (target[0] - (command[0] + shift[0])) * rate
+    gy = (target[1] - (command[1] + shift[1])) * rate
+    step = wp.sqrt(gx * gx + gy * gy)
+    most = limits.drift_speed_max_m_per_s * limits.period_s
+    if step > most:
+        gx = gx * most / step
+        gy = gy * most / step
+    drift_work = fx * gx + fy * gy
+    if drift_work < zero:
+        budget = wp.max(account + fx * (command[0] + shift[0] - previous[0])
+                        + fy * (command[1] + shift[1] - previous[1]), zero)
+        if -drift_work > budget:
+            gx = gx * budget / (-drift_work)
+            gy = gy * budget / (-drift_work)
+    return wp.vec2d(gx, gy)
+
+
+@wp.func
+def observe_stage(lane: int, force: wp.vec2d, moved: wp.vec2d, account: wp.float64,
+                  input_energy: wp.array(dtype=wp.float64),
+                  output_energy: wp.array(dtype=wp.float64), sent: wp.array(dtype=wp.float64),
+                  tank: wp.array(dtype=wp.float64), forgotten: wp.array(dtype=wp.float64),
+                  limits: PassivityLimits):
+    """``observe``: the step's work (J) of the operator's force (N) on the command's move
+    ``moved`` (m) into the account; the own input beyond ``keep_J`` is handed to the slave."""
+    zero = wp.float64(0.0)
+    work = force[0] * moved[0] + force[1] * moved[1]
+    input_energy[lane] = input_energy[lane] + wp.max(work, zero)
+    output_energy[lane] = output_energy[lane] + wp.max(-work, zero)
+    total = account + work
+    give = wp.clamp(total - limits.keep_J, zero, wp.max(work, zero))
+    sent[lane] = sent[lane] + give
+    tank[lane] = capped(total - give, forgotten, lane, limits.credit_max_J)
+
+
 @wp.kernel
 def master_passivity_kernel(
     inputs: wp.array2d(dtype=wp.float64),
@@ -71,93 +164,37 @@ def master_passivity_kernel(
     """One period of one lane: receive, yield, observe (common/model/passivity.py); a lane
     switched off only notes the peer's energy and where the command is."""
     lane = wp.tid()
-    zero = wp.float64(0.0)
-    ts = limits.period_s
-    account = tank[lane]
-    # receive: the newest (largest) cumulative energy the slave handed over
-    value = peer_value[lane]
-    if wp.isfinite(value) and value > peer_sent[lane]:
-        if active[lane]:
-            account = capped(account + value - peer_sent[lane], forgotten, lane,
-                             limits.credit_max_J)
-        peer_sent[lane] = value
+    account = receive_stage(lane, tank[lane], peer_value, peer_sent, active, forgotten,
+                            limits.credit_max_J)
+    cmd = wp.vec2d(command[lane, 0], command[lane, 1])
     if not active[lane]:  # switched off (paper mode, the governor's standby)
-        correction[lane] = zero
-        previous[lane, 0] = command[lane, 0]
-        previous[lane, 1] = command[lane, 1]
+        correction[lane] = wp.float64(0.0)
+        previous[lane, 0] = cmd[0]
+        previous[lane, 1] = cmd[1]
         return
     # the operator's force as the node used it (non-finite: 0, saturated)
     limit = limits.force_limit_N
-    fx = inputs[lane, 0]
-    fy = inputs[lane, 1]
-    if not wp.isfinite(fx):
-        fx = zero
-    if not wp.isfinite(fy):
-        fy = zero
-    fx = wp.clamp(fx, -limit, limit)
-    fy = wp.clamp(fy, -limit, limit)
-    # yield: the conductance's correction along fh by what the account lacks
-    cx = command[lane, 0]
-    cy = command[lane, 1]
-    px = previous[lane, 0]
-    py = previous[lane, 1]
-    work_out = -(fx * (cx - px) + fy * (cy - py))
-    excess = wp.max(work_out - account, zero)
-    force2 = fx * fx + fy * fy
-    norm = wp.sqrt(wp.max(force2, wp.float64(1e-300)))
-    size = zero
-    if force2 >= limits.force_floor_N * limits.force_floor_N:
-        size = excess / norm
-    size = wp.min(size, limits.conductance_max_m_per_N_s * wp.sqrt(force2) * ts)
-    size = wp.min(size, wp.min(limits.correction_speed_max_m_per_s * ts,
-                               correction[lane] + limits.correction_accel_max_m_per_s2 * ts * ts))
-    correction[lane] = size
-    if size > zero:
-        active_steps[lane] = active_steps[lane] + wp.int64(1)
-    dissipated[lane] = dissipated[lane] + size * wp.sqrt(force2)
-    dx = size * fx / norm
-    dy = size * fy / norm
+    force = wp.vec2d(wp.clamp(finite_or_zero(inputs[lane, 0]), -limit, limit),
+                     wp.clamp(finite_or_zero(inputs[lane, 1]), -limit, limit))
+    before = wp.vec2d(previous[lane, 0], previous[lane, 1])
+    shift = conductance_stage(lane, force, wp.vec2d(cmd[0] - before[0], cmd[1] - before[1]),
+                              account, correction, active_steps, dissipated, limits)
     if faulted[lane]:
-        dx = zero
-        dy = zero
-    # drift: the command towards the tool's position in handle coordinates (Ah1^-1 yt_recv),
-    # slowly; its work fh . d is the operator's input where positive, else paid from what the
-    # account holds after this step's other work
-    tx = peer_target[lane, 0]
-    ty = peer_target[lane, 1]
-    if (limits.drift_rate_per_s > zero and enabled[lane] and not faulted[lane]
-            and wp.isfinite(tx) and wp.isfinite(ty)):
-        rate = limits.drift_rate_per_s * ts
-        gx = (tx - (cx + dx)) * rate
-        gy = (ty - (cy + dy)) * rate
-        step = wp.sqrt(gx * gx + gy * gy)
-        most = limits.drift_speed_max_m_per_s * ts
-        if step > most:
-            gx = gx * most / step
-            gy = gy * most / step
-        drift_work = fx * gx + fy * gy
-        if drift_work < zero:
-            budget = wp.max(account + fx * (cx + dx - px) + fy * (cy + dy - py), zero)
-            if -drift_work > budget:
-                gx = gx * budget / (-drift_work)
-                gy = gy * budget / (-drift_work)
-        dx = dx + gx
-        dy = dy + gy
-    mx = wp.clamp(cx + dx, limits.workspace_min_x_m, limits.workspace_max_x_m)
-    my = wp.clamp(cy + dy, limits.workspace_min_y_m, limits.workspace_max_y_m)
-    command[lane, 0] = mx
-    command[lane, 1] = my
-    origin[lane, 0] = origin[lane, 0] + (mx - last_command[lane, 0])
-    origin[lane, 1] = origin[lane, 1] + (my - last_command[lane, 1])
-    last_command[lane, 0] = mx
-    last_command[lane, 1] = my
-    # observe: the step's work fh . dcmd, and hand own input beyond keep_J to the slave
-    work = fx * (mx - px) + fy * (my - py)
-    input_energy[lane] = input_energy[lane] + wp.max(work, zero)
-    output_energy[lane] = output_energy[lane] + wp.max(-work, zero)
-    account = account + work
-    give = wp.clamp(account - limits.keep_J, zero, wp.max(work, zero))
-    sent[lane] = sent[lane] + give
-    tank[lane] = capped(account - give, forgotten, lane, limits.credit_max_J)
-    previous[lane, 0] = mx
-    previous[lane, 1] = my
+        shift = wp.vec2d(wp.float64(0.0), wp.float64(0.0))
+    target = wp.vec2d(peer_target[lane, 0], peer_target[lane, 1])
+    if (limits.drift_rate_per_s > wp.float64(0.0) and enabled[lane] and not faulted[lane]
+            and wp.isfinite(target[0]) and wp.isfinite(target[1])):
+        drift = drift_stage(force, cmd, before, shift, target, account, limits)
+        shift = wp.vec2d(shift[0] + drift[0], shift[1] + drift[1])
+    sent_cmd = clamp_to_box(wp.vec2d(cmd[0] + shift[0], cmd[1] + shift[1]),
+                            limits.workspace_min_x_m, limits.workspace_min_y_m,
+                            limits.workspace_max_x_m, limits.workspace_max_y_m)
+    command[lane, 0] = sent_cmd[0]
+    command[lane, 1] = sent_cmd[1]
+    rebase_origin(origin, lane, sent_cmd, wp.vec2d(last_command[lane, 0], last_command[lane, 1]))
+    last_command[lane, 0] = sent_cmd[0]
+    last_command[lane, 1] = sent_cmd[1]
+    observe_stage(lane, force, wp.vec2d(sent_cmd[0] - before[0], sent_cmd[1] - before[1]),
+                  account, input_energy, output_energy, sent, tank, forgotten, limits)
+    previous[lane, 0] = sent_cmd[0]
+    previous[lane, 1] = sent_cmd[1]

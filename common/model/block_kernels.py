@@ -3,7 +3,8 @@ layout (common/model/block_layout.py): y = C x + D u, and x' = A x + B u where t
 says the state advances, block by block with every loop of constant length (unrolled).
 
 The master's kernel (master/node_kernels.py: Ch1/Ct1, frozen in a faulted lane) and the
-slave's (slave_sim/node_kernels.py: Ch2/Ct2) call it with their own four inputs.
+slave's (slave_sim/node_kernels.py: Ch2/Ct2) call it with their own four inputs, both scaled
+by the margin governor's gain ratio through :func:`governed_inputs`.
 """
 
 from __future__ import annotations
@@ -17,6 +18,13 @@ from haptic.common.model.block_layout import CompensatorLayout
 
 # The programs print JSON on stdout: Warp must not announce itself there.
 wp.config.log_level = wp.LOG_WARNING
+
+
+@wp.func
+def governed_inputs(u: wp.vec4d, gain_ratio: wp.float64) -> wp.vec4d:
+    """The compensator's inputs ``u`` (N) scaled by the margin governor's gain ratio k/k0:
+    the design is linear in k (common/analysis/margin_table.py)."""
+    return gain_ratio * u
 
 
 @functools.cache
@@ -64,4 +72,4 @@ def block_step(layout: CompensatorLayout) -> Any:
     return compensator_step
 
 
-__all__ = ["block_step"]
+__all__ = ["block_step", "governed_inputs"]
