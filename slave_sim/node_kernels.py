@@ -28,7 +28,7 @@ from typing import Any
 
 import warp as wp
 
-from haptic.common.model.block_kernels import block_step
+from haptic.common.model.block_kernels import block_step, governed_inputs
 from haptic.common.model.block_layout import CompensatorLayout
 
 # The programs print JSON on stdout: Warp must not announce itself there.
@@ -101,6 +101,31 @@ def drift_force(lane: int, inputs: wp.array2d(dtype=wp.float64),
 
 
 @wp.func
+def compensator_inputs(lane: int, inputs: wp.array2d(dtype=wp.float64)) -> wp.vec4d:
+    """The compensators' inputs (fh, ft; N): ft scaled by the master's force ramp, both
+    governed (the gain ratio k/k0)."""
+    scale = inputs[lane, 6]
+    return governed_inputs(wp.vec4d(inputs[lane, 0], inputs[lane, 1], inputs[lane, 4] * scale,
+                                    inputs[lane, 5] * scale), inputs[lane, 7])
+
+
+@wp.func
+def store_actuator(lane: int, out: wp.vec2d, inputs: wp.array2d(dtype=wp.float64),
+                   tool: wp.array2d(dtype=wp.float64), drift: wp.array2d(dtype=wp.float64),
+                   actuator: wp.array2d(dtype=wp.float64), constants: SlaveConstants):
+    """The actuator force (N): the compensators' output ``out`` plus, where it is on, the
+    drift coupling."""
+    out_x = out[0]
+    out_y = out[1]
+    if constants.drift_on != 0:
+        coupling = drift_force(lane, inputs, tool, drift, constants)
+        out_x += coupling[0]
+        out_y += coupling[1]
+    actuator[lane, 0] = out_x
+    actuator[lane, 1] = out_y
+
+
+@wp.func
 def motion_lane(
     lane: int,
     plant_a: wp.array2d(dtype=wp.float64),
@@ -156,14 +181,19 @@ def motion_lane(
                        - constants.stiffness_y_N_per_m * s2) * constants.inv_mass_y_per_kg
 
 
-@functools.cache
-def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any, Any]:
-    """The kernels compiled for ``layout``: (both stages, stage 1 alone, stage 2 alone), in
-    one Warp module of their own (one compile per layout, cached on disk)."""
-    compensator_step = block_step(layout)
-    module = f"{__name__}.layout_{layout.blocks}x{layout.block_states}"
+def _layout_module(layout: CompensatorLayout) -> str:
+    """The Warp module of the kernels compiled for ``layout`` (one compile per layout)."""
+    return f"{__name__}.layout_{layout.blocks}x{layout.block_states}"
 
-    @wp.func(module=module)
+
+@functools.cache
+def compensate_stage(layout: CompensatorLayout) -> Any:
+    """Stage 1 of one lane compiled for ``layout``, in the layout's Warp module: the
+    compensators' vt (and the drift coupling) into ``actuator`` (common/model/block_kernels.py:
+    y = C x + D u, x' = A x + B u)."""
+    compensator_step = block_step(layout)
+
+    @wp.func(module=_layout_module(layout))
     def compensate(
         lane: int,
         inputs: wp.array2d(dtype=wp.float64),
@@ -178,22 +208,43 @@ def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any, Any]:
         actuator: wp.array2d(dtype=wp.float64),
         constants: SlaveConstants,
     ):
-        """Stage 1 of one lane: the compensators' vt (and the drift coupling) into
-        ``actuator`` (common/model/block_kernels.py: y = C x + D u, x' = A x + B u)."""
-        scale = inputs[lane, 6]
-        gain = inputs[lane, 7]
-        u = wp.vec4d(inputs[lane, 0] * gain, inputs[lane, 1] * gain,
-                     (inputs[lane, 4] * scale) * gain, (inputs[lane, 5] * scale) * gain)
-        out = compensator_step(lane, u, comp_a, comp_b, comp_c, comp_d,
-                               lane * per_lane_matrices, compensator, True)
-        out_x = out[0]
-        out_y = out[1]
-        if constants.drift_on != 0:
-            coupling = drift_force(lane, inputs, tool, drift, constants)
-            out_x += coupling[0]
-            out_y += coupling[1]
-        actuator[lane, 0] = out_x
-        actuator[lane, 1] = out_y
+        """Stage 1 of one lane."""
+        out = compensator_step(lane, compensator_inputs(lane, inputs), comp_a, comp_b, comp_c,
+                               comp_d, lane * per_lane_matrices, compensator, True)
+        store_actuator(lane, out, inputs, tool, drift, actuator, constants)
+
+    return compensate
+
+
+@functools.cache
+def motion_kernel(layout: CompensatorLayout) -> Any:
+    """Stage 2 for every lane (after the TDPA layer acted on ``actuator`` and ``tool``), in
+    the layout's Warp module so that loading that module loads every stage."""
+
+    @wp.kernel(module=_layout_module(layout))
+    def slave_motion_kernel(
+        plant_a: wp.array2d(dtype=wp.float64),
+        plant_b: wp.array2d(dtype=wp.float64),
+        tool: wp.array2d(dtype=wp.float64),
+        halted: wp.array(dtype=wp.bool),
+        halted_count: wp.array(dtype=wp.int32),
+        actuator: wp.array2d(dtype=wp.float64),
+        motion: wp.array2d(dtype=wp.float64),
+        constants: SlaveConstants,
+    ):
+        """Stage 2 of one lane."""
+        motion_lane(wp.tid(), plant_a, plant_b, tool, halted, halted_count, actuator, motion,
+                    constants)
+
+    return slave_motion_kernel
+
+
+@functools.cache
+def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any, Any]:
+    """The kernels compiled for ``layout``: (both stages, stage 1 alone, stage 2 alone), in
+    one Warp module of their own (one compile per layout, cached on disk)."""
+    compensate = compensate_stage(layout)
+    module = _layout_module(layout)
 
     @wp.kernel(module=module)
     def slave_step_kernel(
@@ -239,19 +290,4 @@ def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any, Any]:
         compensate(wp.tid(), inputs, comp_a, comp_b, comp_c, comp_d, per_lane_matrices,
                    compensator, tool, drift, actuator, constants)
 
-    @wp.kernel(module=module)
-    def slave_motion_kernel(
-        plant_a: wp.array2d(dtype=wp.float64),
-        plant_b: wp.array2d(dtype=wp.float64),
-        tool: wp.array2d(dtype=wp.float64),
-        halted: wp.array(dtype=wp.bool),
-        halted_count: wp.array(dtype=wp.int32),
-        actuator: wp.array2d(dtype=wp.float64),
-        motion: wp.array2d(dtype=wp.float64),
-        constants: SlaveConstants,
-    ):
-        """Stage 2 for every lane (after the TDPA layer acted on ``actuator`` and ``tool``)."""
-        motion_lane(wp.tid(), plant_a, plant_b, tool, halted, halted_count, actuator, motion,
-                    constants)
-
-    return slave_step_kernel, slave_actuator_kernel, slave_motion_kernel
+    return slave_step_kernel, slave_actuator_kernel, motion_kernel(layout)
