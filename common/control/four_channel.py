@@ -38,7 +38,8 @@ Arrays are (lanes, 2): x and y.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -163,9 +164,8 @@ class SideState:
     peer_position_m: np.ndarray
     peer_velocity_m_per_s: np.ndarray
     peer_force_N: np.ndarray
-    names: tuple[str, ...] = field(default=("position_m", "velocity_m_per_s", "peer_position_m",
-                                            "peer_velocity_m_per_s", "peer_force_N"),
-                                   repr=False)
+    names: ClassVar[tuple[str, ...]] = ("position_m", "velocity_m_per_s", "peer_position_m",
+                                        "peer_velocity_m_per_s", "peer_force_N")
 
     @classmethod
     def create(cls, start_m: np.ndarray) -> SideState:

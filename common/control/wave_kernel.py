@@ -102,7 +102,8 @@ class WavePortKernel:
     """One side's wave port over ``lanes`` lanes on the Warp kernel; :attr:`state` is a
     :class:`WavePortState` of numpy views of the kernel's buffers."""
 
-    _STATE = ("filtered", "reserve_J", "used_integral", "received_integral", "sent_integral")
+    #: the :class:`WavePortState` fields, in the kernel's argument order
+    STATE_FIELDS = ("filtered", "reserve_J", "used_integral", "received_integral", "sent_integral")
 
     def __init__(self, settings: WaveSettings, lanes: int, sign: float) -> None:
         wp = warp()
@@ -120,11 +121,11 @@ class WavePortKernel:
         self._limits = limits
         zeros = np.zeros((lanes, 2))
         self.buffers = LaneBuffers()
-        for name in ("force", "received_wave", "received_integral_in", *self._STATE,
+        for name in ("force", "received_wave", "received_integral_in", *self.STATE_FIELDS,
                      "velocity", "sent"):
             self.buffers.add(name, zeros)
         self.buffers.add("fresh", np.zeros(lanes, bool), wp.bool)
-        self.state = WavePortState(*(self.buffers.view[name] for name in self._STATE))
+        self.state = WavePortState(*(self.buffers.view[name] for name in self.STATE_FIELDS))
 
     def step(self, force_N: np.ndarray, received_wave: np.ndarray,
              received_integral: np.ndarray, fresh: np.ndarray
@@ -139,7 +140,7 @@ class WavePortKernel:
         arrays = self.buffers.arrays
         warp().launch(wave_port_kernel, dim=self.lanes, device=DEVICE, inputs=[
             arrays["force"], arrays["received_wave"], arrays["received_integral_in"],
-            arrays["fresh"], *(arrays[name] for name in self._STATE), arrays["velocity"],
+            arrays["fresh"], *(arrays[name] for name in self.STATE_FIELDS), arrays["velocity"],
             arrays["sent"], self._limits])
         return view["velocity"], view["sent"], view["sent_integral"]
 

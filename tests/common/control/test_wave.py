@@ -162,7 +162,7 @@ def test_the_kernel_equals_the_reference_on_random_inputs() -> None:
             for name, a, b in zip(("velocity", "sent", "integral"), got, expected, strict=True):
                 assert np.all(np.isfinite(a)), name
                 np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-12, err_msg=name)
-        for name in WavePortKernel._STATE:
+        for name in WavePortKernel.STATE_FIELDS:
             np.testing.assert_allclose(getattr(kernel.state, name), getattr(reference, name),
                                        rtol=1e-12, atol=1e-12, err_msg=name)
         assert np.any(kernel.state.reserve_J > 0.0)
