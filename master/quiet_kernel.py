@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from haptic.common.runtime.quiet_rules import flags_quiet, watchdog_stays_ok
+from haptic.common.runtime.quiet_rules import count_loud, flags_quiet, watchdog_stays_ok
 from haptic.common.runtime.replayed_launch import InPlaceInputs, ReplayedLaunch, host_array
 from haptic.common.wire.messages import Flags
 
@@ -72,8 +72,7 @@ def quiet_kernel(columns: int) -> Any:
         if came and quiet:
             stale[lane] = True
         fed[lane] = not quiet
-        if not quiet:
-            wp.atomic_add(loud_count, 0, 1)
+        count_loud(quiet, loud_count)
 
     return quiet
 

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from haptic.common.runtime.quiet_rules import flags_quiet, watchdog_stays_ok
+from haptic.common.runtime.quiet_rules import count_loud, flags_quiet, watchdog_stays_ok
 from haptic.common.runtime.replayed_launch import InPlaceInputs, ReplayedLaunch, host_array
 from haptic.common.wire.messages import Flags
 from haptic.common.wire.send_clock import LEAD_RISE_DIVISOR
@@ -88,6 +88,77 @@ def plain_axis(force: wp.float64, position: wp.float64, last_force: wp.float64,
     return force >= lowest and force <= highest
 
 
+@wp.func
+def guard_takes_plain(lane: int, now: wp.int64, force: wp.array2d(dtype=wp.float64),
+                      position: wp.array2d(dtype=wp.float64), send_ns: wp.array(dtype=wp.int64),
+                      handle_force: wp.array2d(dtype=wp.float64),
+                      handle_position: wp.array2d(dtype=wp.float64),
+                      guard_credited_ns: wp.array(dtype=wp.int64),
+                      guard_lead_ns: wp.array(dtype=wp.int64), limits: GuardLimits):
+    """:meth:`InputGuard.admit`'s plain path for a fresh message of the guard's epoch, ``now``
+    the loop time (ns): whether the guard takes it as it is, and its send time as
+    :meth:`SendClock.credit` credits it (ns)."""
+    # SendClock.credit and span_s
+    credited_ns = wp.min(send_ns[lane], now + guard_lead_ns[lane] + limits.jitter_allowance_ns)
+    dt_s = wp.max(wp.float64(credited_ns - guard_credited_ns[lane]) * limits.ns_to_s,
+                  limits.period_s)
+    allowed_m = limits.velocity_trip_m_per_s * dt_s
+    allowed_m = allowed_m + limits.jump_margin_m
+    jump_x = wp.abs(position[lane, 0] - handle_position[lane, 0])
+    jump_y = wp.abs(position[lane, 1] - handle_position[lane, 1])
+    step = limits.force_rate_limit_N_per_s * dt_s
+    plain = (plain_axis(force[lane, 0], position[lane, 0], handle_force[lane, 0], step,
+                        limits.position_min_x_m, limits.position_max_x_m, limits)
+             and plain_axis(force[lane, 1], position[lane, 1], handle_force[lane, 1], step,
+                            limits.position_min_y_m, limits.position_max_y_m, limits)
+             and not (wp.max(jump_x, jump_y) > allowed_m))
+    return plain, credited_ns
+
+
+@wp.func
+def tool_inside(lane: int, tool: wp.array2d(dtype=wp.float64),
+                work_area_m: wp.array2d(dtype=wp.float64)) -> bool:
+    """The tool's position (m) inside the lane's work area (x low, x high, y low, y high; m),
+    edges included: the supervisor's work-area stop does not act."""
+    x = tool[lane, 0]
+    y = tool[lane, 2]
+    return (work_area_m[lane, 0] <= x and x <= work_area_m[lane, 1]
+            and work_area_m[lane, 2] <= y and y <= work_area_m[lane, 3])
+
+
+@wp.func
+def take_message(lane: int, now: wp.int64, credited_ns: wp.int64,
+                 force: wp.array2d(dtype=wp.float64), position: wp.array2d(dtype=wp.float64),
+                 epoch: wp.array(dtype=wp.int64), send_ns: wp.array(dtype=wp.int64),
+                 scale: wp.array(dtype=wp.float64),
+                 handle_force: wp.array2d(dtype=wp.float64),
+                 handle_position: wp.array2d(dtype=wp.float64),
+                 guard_epoch: wp.array(dtype=wp.int64),
+                 guard_credited_ns: wp.array(dtype=wp.int64),
+                 guard_received_ns: wp.array(dtype=wp.int64),
+                 guard_lead_ns: wp.array(dtype=wp.int64), echo_send_ns: wp.array(dtype=wp.int64),
+                 force_scale: wp.array(dtype=wp.float64), unseen: wp.array(dtype=wp.int64),
+                 limits: GuardLimits):
+    """A quiet lane's fresh message taken as the guard and :meth:`SendClock.accept` (the same
+    epoch) take it, ``now`` and ``credited_ns`` the loop time and the credited send time
+    (ns)."""
+    handle_force[lane, 0] = force[lane, 0]
+    handle_force[lane, 1] = force[lane, 1]
+    handle_position[lane, 0] = position[lane, 0]
+    handle_position[lane, 1] = position[lane, 1]
+    guard_epoch[lane] = epoch[lane]
+    guard_credited_ns[lane] = credited_ns
+    # (an integer division truncates here and floors in Python: they differ only for a time
+    # going back, where both keep the lead)
+    lead_ns = guard_lead_ns[lane]
+    risen_ns = lead_ns + (now - guard_received_ns[lane]) / limits.lead_rise_divisor
+    guard_lead_ns[lane] = wp.max(lead_ns, wp.min(send_ns[lane] - now, risen_ns))
+    guard_received_ns[lane] = now
+    echo_send_ns[lane] = send_ns[lane]
+    force_scale[lane] = scale[lane]
+    unseen[lane] = unseen[lane] + wp.int64(1)
+
+
 @wp.kernel
 def quiet_kernel(
     fresh: wp.array(dtype=wp.bool),
@@ -122,56 +193,27 @@ def quiet_kernel(
     lane = wp.tid()
     came = fresh[lane]
     now = now_ns[0]
-    # the guard takes the message as it is (InputGuard.admit, its plain path)
     plain = False
     credited_ns = wp.int64(0)
     if came and (not guard_faulted[lane]) and guard_has_last[lane] and (
             epoch[lane] == guard_epoch[lane]):
-        # SendClock.credit and span_s
-        credited_ns = wp.min(send_ns[lane], now + guard_lead_ns[lane]
-                             + limits.jitter_allowance_ns)
-        dt_s = wp.max(wp.float64(credited_ns - guard_credited_ns[lane]) * limits.ns_to_s,
-                      limits.period_s)
-        allowed_m = limits.velocity_trip_m_per_s * dt_s
-        allowed_m = allowed_m + limits.jump_margin_m
-        jump_x = wp.abs(position[lane, 0] - handle_position[lane, 0])
-        jump_y = wp.abs(position[lane, 1] - handle_position[lane, 1])
-        step = limits.force_rate_limit_N_per_s * dt_s
-        plain = (plain_axis(force[lane, 0], position[lane, 0], handle_force[lane, 0], step,
-                            limits.position_min_x_m, limits.position_max_x_m, limits)
-                 and plain_axis(force[lane, 1], position[lane, 1], handle_force[lane, 1], step,
-                                limits.position_min_y_m, limits.position_max_y_m, limits)
-                 and not (wp.max(jump_x, jump_y) > allowed_m))
+        plain, credited_ns = guard_takes_plain(lane, now, force, position, send_ns,
+                                               handle_force, handle_position,
+                                               guard_credited_ns, guard_lead_ns, limits)
     enabled = flags_quiet(flags[lane], limits.quiet_mask, limits.quiet_value)
     # the supervisor changes nothing (SlaveSupervisor.update returns NONE)
-    x = tool[lane, 0]
-    y = tool[lane, 2]
-    inside = (work_area_m[lane, 0] <= x and x <= work_area_m[lane, 1]
-              and work_area_m[lane, 2] <= y and y <= work_area_m[lane, 3])
-    still = watchdog_stays_ok(steady[lane], silence_s[lane], max_age_s[lane]) and inside
+    still = (watchdog_stays_ok(steady[lane], silence_s[lane], max_age_s[lane])
+             and tool_inside(lane, tool, work_area_m))
     is_quiet = still and ((not came) or (plain and enabled))
     quiet[lane] = is_quiet
     taken = is_quiet and came
     admitted[lane] = taken
     if taken:
-        handle_force[lane, 0] = force[lane, 0]
-        handle_force[lane, 1] = force[lane, 1]
-        handle_position[lane, 0] = position[lane, 0]
-        handle_position[lane, 1] = position[lane, 1]
-        guard_epoch[lane] = epoch[lane]
-        # SendClock.accept (the same epoch)
-        guard_credited_ns[lane] = credited_ns
-        # (an integer division truncates here and floors in Python: they differ only for
-        # a time going back, where both keep the lead)
-        lead_ns = guard_lead_ns[lane]
-        risen_ns = lead_ns + (now - guard_received_ns[lane]) / limits.lead_rise_divisor
-        guard_lead_ns[lane] = wp.max(lead_ns, wp.min(send_ns[lane] - now, risen_ns))
-        guard_received_ns[lane] = now
-        echo_send_ns[lane] = send_ns[lane]
-        force_scale[lane] = scale[lane]
-        unseen[lane] = unseen[lane] + wp.int64(1)
-    if not is_quiet:
-        wp.atomic_add(loud_count, 0, 1)
+        take_message(lane, now, credited_ns, force, position, epoch, send_ns, scale,
+                     handle_force, handle_position, guard_epoch, guard_credited_ns,
+                     guard_received_ns, guard_lead_ns, echo_send_ns, force_scale, unseen,
+                     limits)
+    count_loud(is_quiet, loud_count)
 
 
 def guard_limits(settings: InputGuardSettings, period_s: float) -> Any:

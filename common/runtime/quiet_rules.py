@@ -10,6 +10,9 @@ are the same on both sides (common/runtime/supervision.py):
 - :func:`flags_quiet`: the peer's newest flags, masked, equal the quiet value (the peer's
   forces enabled and no ``STOPPING``, plus each side's own bits).
 
+Both kernels report their loud lanes alike (:func:`count_loud`), so that the caller reads one
+integer a tick and looks at the lanes only when it is not zero.
+
 Comparisons are written as the supervisors' Python is, so a NaN fails them alike and the
 kernels agree with the objects bit for bit.
 """
@@ -35,4 +38,11 @@ def flags_quiet(flags: wp.int64, mask: wp.int64, value: wp.int64) -> bool:
     return (flags & mask) == value
 
 
-__all__ = ["flags_quiet", "watchdog_stays_ok"]
+@wp.func
+def count_loud(quiet: bool, loud_count: wp.array(dtype=wp.int32)):
+    """Adds one to ``loud_count[0]`` for a lane that is not quiet."""
+    if not quiet:
+        wp.atomic_add(loud_count, 0, 1)
+
+
+__all__ = ["count_loud", "flags_quiet", "watchdog_stays_ok"]
