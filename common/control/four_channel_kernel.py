@@ -120,7 +120,6 @@ class FourChannelSideKernel:
         gains.force_limit_N = law.force_limit_N
         gains.speed_limit_m_per_s = law.speed_limit_m_per_s
         gains.position_limit_m = law.position_limit_m
-        self._gains = gains
         start = SideState.create(start_m)
         self.lanes = start.position_m.shape[0]
         self.buffers = LaneBuffers()
@@ -130,6 +129,11 @@ class FourChannelSideKernel:
             self.buffers.add(name, getattr(start, name))
         self.buffers.add("fresh", np.zeros(self.lanes, bool), wp.bool)
         self.state = SideState(*(self.buffers.view[name] for name in start.names))
+        arrays = self.buffers.arrays
+        #: the launch, recorded once over the persistent buffers (a node may replay it)
+        self.command = wp.launch(four_channel_side_kernel, dim=self.lanes, device=DEVICE, inputs=[
+            *(arrays[name] for name in self._INPUTS), arrays["fresh"],
+            *(arrays[name] for name in start.names), gains], record_cmd=True)
 
     def step(self, own_force_N: np.ndarray, peer_position_m: np.ndarray,
              peer_velocity_m_per_s: np.ndarray, peer_force_N: np.ndarray, fresh: np.ndarray
@@ -141,10 +145,7 @@ class FourChannelSideKernel:
                                               peer_velocity_m_per_s, peer_force_N), strict=True):
             view[name][...] = value
         view["fresh"][...] = fresh
-        arrays = self.buffers.arrays
-        warp().launch(four_channel_side_kernel, dim=self.lanes, device=DEVICE, inputs=[
-            *(arrays[name] for name in self._INPUTS), arrays["fresh"],
-            *(arrays[name] for name in self.state.names), self._gains])
+        self.command.launch()
         return view["position_m"], view["velocity_m_per_s"]
 
 

@@ -279,7 +279,6 @@ class EstimatorKernel:
                      "tracking_gain_per_s", "force_limit_N", "speed_limit_m_per_s"):
             setattr(limits, name, float(getattr(settings, name)))
         limits.initial_covariance = wp.vec3d(*settings.initial_covariance)
-        self._limits = limits
         start = EstimatorState.create(start_m)
         self.lanes = start.anchor_m.shape[0]
         self.buffers = LaneBuffers()
@@ -291,6 +290,11 @@ class EstimatorKernel:
         self.buffers.add("command", np.zeros((self.lanes, 2)))
         self.buffers.add("model", np.zeros((4, self.lanes, 2)))
         self.state = EstimatorState(*(self.buffers.view[name] for name in self._STATE))
+        arrays = self.buffers.arrays
+        #: the launch, recorded once over the persistent buffers (a node may replay it)
+        self.command = wp.launch(mmt_estimator_kernel, dim=self.lanes, device=DEVICE, inputs=[
+            *(arrays[name] for name in (*self._INPUTS, "fresh", *self._STATE)),
+            arrays["command"], arrays["model"], limits], record_cmd=True)
 
     def step(self, tool_position_m: np.ndarray, tool_velocity_m_per_s: np.ndarray,
              tool_force_N: np.ndarray, handle_position_m: np.ndarray,
@@ -303,10 +307,7 @@ class EstimatorKernel:
                                               handle_velocity_m_per_s), strict=True):
             view[name][...] = value
         view["fresh"][...] = fresh
-        arrays = self.buffers.arrays
-        warp().launch(mmt_estimator_kernel, dim=self.lanes, device=DEVICE, inputs=[
-            *(arrays[name] for name in (*self._INPUTS, "fresh", *self._STATE)),
-            arrays["command"], arrays["model"], self._limits])
+        self.command.launch()
         return view["command"], EnvironmentModel(*view["model"])
 
 
@@ -321,7 +322,6 @@ class RendererKernel:
                      "force_limit_N", "stiffness_max_N_per_m", "damping_max_N_s_per_m",
                      "position_limit_m"):
             setattr(limits, name, float(getattr(settings, name)))
-        self._limits = limits
         start = RendererState.create(start_m)
         self.lanes = start.position_m.shape[0]
         self.buffers = LaneBuffers()
@@ -334,6 +334,11 @@ class RendererKernel:
         self.buffers.add("on_handle", np.zeros((self.lanes, 2)))
         view = self.buffers.view
         self.state = RendererState(view["position"], view["velocity"], *view["model"])
+        arrays = self.buffers.arrays
+        #: the launch, recorded once over the persistent buffers (a node may replay it)
+        self.command = wp.launch(mmt_renderer_kernel, dim=self.lanes, device=DEVICE, inputs=[
+            arrays["handle_force"], arrays["model_in"], arrays["fresh"], arrays["position"],
+            arrays["velocity"], arrays["model"], arrays["on_handle"], limits], record_cmd=True)
 
     def step(self, handle_force_N: np.ndarray, model: EnvironmentModel, fresh: np.ndarray
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -343,10 +348,7 @@ class RendererKernel:
         for field, value in enumerate(model):
             view["model_in"][field] = value
         view["fresh"][...] = fresh
-        arrays = self.buffers.arrays
-        warp().launch(mmt_renderer_kernel, dim=self.lanes, device=DEVICE, inputs=[
-            arrays["handle_force"], arrays["model_in"], arrays["fresh"], arrays["position"],
-            arrays["velocity"], arrays["model"], arrays["on_handle"], self._limits])
+        self.command.launch()
         return view["position"], view["velocity"], view["on_handle"]
 
 

@@ -118,7 +118,6 @@ class WavePortKernel:
         limits.force_limit_N = settings.force_limit_N
         limits.wave_limit = settings.wave_limit
         limits.sign = float(sign)
-        self._limits = limits
         zeros = np.zeros((lanes, 2))
         self.buffers = LaneBuffers()
         for name in ("force", "received_wave", "received_integral_in", *self.STATE_FIELDS,
@@ -126,6 +125,12 @@ class WavePortKernel:
             self.buffers.add(name, zeros)
         self.buffers.add("fresh", np.zeros(lanes, bool), wp.bool)
         self.state = WavePortState(*(self.buffers.view[name] for name in self.STATE_FIELDS))
+        arrays = self.buffers.arrays
+        #: the launch, recorded once over the persistent buffers (a node may replay it)
+        self.command = wp.launch(wave_port_kernel, dim=lanes, device=DEVICE, inputs=[
+            arrays["force"], arrays["received_wave"], arrays["received_integral_in"],
+            arrays["fresh"], *(arrays[name] for name in self.STATE_FIELDS), arrays["velocity"],
+            arrays["sent"], limits], record_cmd=True)
 
     def step(self, force_N: np.ndarray, received_wave: np.ndarray,
              received_integral: np.ndarray, fresh: np.ndarray
@@ -137,11 +142,7 @@ class WavePortKernel:
         view["received_wave"][...] = received_wave
         view["received_integral_in"][...] = received_integral
         view["fresh"][...] = fresh
-        arrays = self.buffers.arrays
-        warp().launch(wave_port_kernel, dim=self.lanes, device=DEVICE, inputs=[
-            arrays["force"], arrays["received_wave"], arrays["received_integral_in"],
-            arrays["fresh"], *(arrays[name] for name in self.STATE_FIELDS), arrays["velocity"],
-            arrays["sent"], self._limits])
+        self.command.launch()
         return view["velocity"], view["sent"], view["sent_integral"]
 
 
