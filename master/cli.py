@@ -125,7 +125,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.rig_time is not None:
             options = replace(options, max_steps=rig_time_steps(args.rig_time, settings.rig,
                                                                  model.sample_period_s))
-        # the handle stops where the slave's tool does (issue 16): the slave's scenario grid
+        # the handle stops where the slave's tool does: the slave's scenario grid
         # bounds the handle's workspace too, through Ah1
         scenario = load_scenario(options.config["slave"]["scenario"])
         area = work_area_from_config(options.config, scenario.grid.x_range_m,
