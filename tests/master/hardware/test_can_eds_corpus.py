@@ -19,7 +19,7 @@ from haptic.master.hardware.interface import HardwareError, LifecycleState
 from tests.master.hardware.can_driver_helpers import inactive_rig
 
 CORPUS = Path(__file__).parent / "eds_corpus"
-DOCS = Path(__file__).parents[2] / "docs" / "master.md"
+DOCS = Path(__file__).parents[3] / "docs" / "master.md"
 DRIVER_LOG = "haptic.master.hardware.can_driver"
 DEADLINE = "no RPDO deadline (0x1400:05): the drive does not watch the targets' arrival"
 #: The files that run, and the fallbacks each drive takes.
