@@ -27,6 +27,7 @@ TPDO1_BASE = 0x180
 RPDO1_BASE = 0x200
 SDO_TX_BASE = 0x580  # server (drive) -> client (master)
 SDO_RX_BASE = 0x600  # client (master) -> server (drive)
+HEARTBEAT_BASE = 0x700  # NMT error control: heartbeats, node guarding
 
 # NMT command specifiers (CiA 301).
 NMT_START = 0x01

@@ -26,6 +26,9 @@ from typing import Any
 
 import numpy as np
 
+#: The handle's axes, in the order of every per-axis value (readings, commands, drives).
+AXES = ("x", "y")
+
 
 class LifecycleState(Enum):
     """ros2_control-style lifecycle states of a hardware component."""

@@ -64,7 +64,7 @@ def bare_driver() -> tuple[CanHandleDriver, str]:
     channel = f"test-{uuid.uuid4().hex}"
     driver = CanHandleDriver(settings.can, {"interface": "virtual", "channel": channel},
                              0.01, 0.00054)
-    driver._bus = can.Bus(interface="virtual", channel=channel)
+    driver.frames.bus = can.Bus(interface="virtual", channel=channel)
     return driver, channel
 
 

@@ -257,19 +257,19 @@ def test_a_master_waiting_configured_keeps_its_heartbeat_and_activates_cleanly()
         assert [d.error_code for d in hardware.rig.drives] == [0, 0]
         hardware.activate()
         assert hardware.driver.lifecycle_state is LifecycleState.ACTIVE
-        assert hardware.driver._idle_heartbeat is None
+        assert hardware.driver.heartbeats.idle_task is None
         hardware.deactivate()
-        assert hardware.driver._idle_heartbeat is not None
+        assert hardware.driver.heartbeats.idle_task is not None
     finally:
         hardware.cleanup()
-    assert hardware.driver._idle_heartbeat is None
+    assert hardware.driver.heartbeats.idle_task is None
 
 
 def test_a_silent_drive_is_reported_by_the_masters_heartbeat_consumer_and_stopped() -> None:
     hardware = _active(_config())
     try:
         driver, rig = hardware.driver, hardware.rig
-        driver._sdo_write(1, rig.devices[0].dictionary[0x1017], 0, "x drive")  # x goes quiet
+        driver.sdo.write(1, rig.devices[0].dictionary[0x1017], 0, "x drive")  # x goes quiet
         deadline = time.monotonic() + 2.0
         faults: list[str] = []
         while time.monotonic() < deadline:
@@ -328,7 +328,7 @@ def test_sdo_replies_are_matched_to_their_object_and_emcys_meanwhile_are_kept() 
             other.send(can.Message(arbitration_id=0x081, is_extended_id=False,
                                    data=cia402.emcy_frame(0x5530)))
             dictionary = hardware.rig.devices[0].dictionary
-            assert driver._sdo_read(1, dictionary[0x1018][2], "x drive") == 0x4C02
+            assert driver.sdo.read(1, dictionary[0x1018][2], "x drive") == 0x4C02
         reading = hardware.read()
         assert any("0x5530" in f for f in reading.faults)
         assert ("x", 0x5530) in driver.emcy_log
@@ -361,7 +361,7 @@ def test_the_bus_load_budget_refuses_classical_can_at_the_papers_rate() -> None:
     for option in ("bus load 122% of Ts", "SYNC 65.0 us", "longer Ts", "sensor on its own bus",
                    "CAN FD"):
         assert option in message
-    assert driver._bus is None
+    assert driver.frames.bus is None
     slow = CanHandleDriver(settings.can, {"interface": "virtual", "channel": "unused"},
                            0.05, 0.001)
     assert slow.check_bus_load().ok  # 661 us of 1 ms: 66 %
@@ -511,9 +511,9 @@ def test_the_sync_counter_is_configured_from_the_eds_and_followed_by_the_drives(
             hardware.write(start)
             reading = hardware.read()
             assert not reading.faults, reading.faults
-        assert rig.sync_counter_seen == [driver._sync_counter] * 2
+        assert rig.sync_counter_seen == [driver.pdos.sync_counter] * 2
         assert rig.sync_counter_jumps == [0, 0]
-        driver._sync_counter += 1  # one SYNC lost on the bus: the drives see the jump
+        driver.pdos.sync_counter += 1  # one SYNC lost on the bus: the drives see the jump
         hardware.read()
         assert rig.sync_counter_jumps == [1, 1]
 

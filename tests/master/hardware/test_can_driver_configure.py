@@ -15,11 +15,11 @@ import can
 import pytest
 
 from haptic.common.config import load_config, override
-from haptic.master.hardware import can_driver, cia402
+from haptic.master.hardware import cia402, drive_commissioning
 from haptic.master.hardware.bus_load import bus_load, cycle_frames
 from haptic.master.hardware.can_driver import CanHandleDriver
 from haptic.master.hardware.cia402 import DriveState
-from haptic.master.hardware.drive_device import packaged_eds_path
+from haptic.master.hardware.drive_device import load_drive_dictionary, packaged_eds_path
 from haptic.master.hardware.interface import HardwareError, LifecycleState, create_hardware
 from haptic.master.settings import master_settings
 from haptic.master.simulated_rig.can_devices import NMT_PRE_OPERATIONAL_STATE, SimulatedRigHardware
@@ -185,7 +185,7 @@ def test_no_position_after_start_is_a_hardware_error_and_leaves_the_drives_pre_o
                            r"missing TPDO1 from the x drive \(node 1\)"):
             hardware.configure()
         assert hardware.lifecycle_state is LifecycleState.UNCONFIGURED
-        assert hardware.driver._bus is None
+        assert hardware.driver.frames.bus is None
         assert _nmt_states(hardware, NMT_PRE_OPERATIONAL_STATE) == [
             NMT_PRE_OPERATIONAL_STATE] * 2
 
@@ -205,7 +205,7 @@ def test_a_bus_gone_while_configure_fails_keeps_the_first_error(monkeypatch, kin
     try:
         with pytest.raises(kind, match="^first$"):
             driver.configure()
-        assert driver._bus is None
+        assert driver.frames.bus is None
         assert driver.lifecycle_state is LifecycleState.UNCONFIGURED
     finally:
         hardware.cleanup()
@@ -261,12 +261,12 @@ def test_each_way_an_eds_fails_to_load_is_one_hardware_error(monkeypatch, error)
     def broken(_eds: str, _node: int):
         raise error
 
-    monkeypatch.setattr(can_driver, "load_drive_dictionary", broken)
+    monkeypatch.setattr(drive_commissioning, "load_drive_dictionary", broken)
     driver = CanHandleDriver(master_settings(load_config()).can,
                              {"interface": "virtual", "channel": "unused"}, 0.01, 0.00054)
     with pytest.raises(HardwareError, match=r"^cannot read the x drive's EDS \(packaged\): "):
         driver.configure()
-    assert driver._bus is None
+    assert driver.frames.bus is None
 
 
 def test_a_configured_dbc_sets_the_sensor_frame(tmp_path) -> None:
@@ -395,7 +395,7 @@ def test_activate_without_positions_is_refused_and_the_idle_heartbeat_goes_on() 
                            r"TPDO1 from the y drive \(node 2\)"):
             hardware.activate()
         assert hardware.lifecycle_state is LifecycleState.INACTIVE
-        assert hardware.driver._idle_heartbeat is not None
+        assert hardware.driver.heartbeats.idle_task is not None
 
 
 def test_a_drive_faulted_once_is_reset_once_and_one_faulting_again_stops_activation() -> None:
@@ -416,7 +416,7 @@ def test_a_drive_faulted_once_is_reset_once_and_one_faulting_again_stops_activat
                            r"EMCY x 0x7305\)$"):
             hardware.activate()
         assert hardware.lifecycle_state is LifecycleState.INACTIVE
-        assert hardware.driver._idle_heartbeat is not None
+        assert hardware.driver.heartbeats.idle_task is not None
 
 
 @pytest.mark.parametrize("axis", [0, 1])
@@ -468,7 +468,7 @@ def test_an_unexpected_transition_during_the_enable_sequence_stops_it(
         if y_faulted_first:
             hardware.rig.inject_drive_fault(1, 0x2310)
             hardware.read()
-        send_rpdo = driver._send_rpdo
+        send_rpdo = driver.pdos.send_rpdo
         sent: list[tuple[int, int]] = []
 
         def fault_y_at_a_step(axis: int, controlword: int) -> None:
@@ -477,7 +477,7 @@ def test_an_unexpected_transition_during_the_enable_sequence_stops_it(
             if sum(a == 1 for a, _ in sent) == fault_after:
                 hardware.rig.inject_drive_fault(1, 0x5530)
 
-        monkeypatch.setattr(driver, "_send_rpdo", fault_y_at_a_step)
+        monkeypatch.setattr(driver.pdos, "send_rpdo", fault_y_at_a_step)
         with pytest.raises(HardwareError, match=rf"^activation stopped: y drive went from "
                            rf"{named} \("):
             hardware.activate()
@@ -512,7 +512,7 @@ def test_deactivate_disables_then_shuts_down_and_the_idle_heartbeat_resumes(trip
         for node in (1, 2):
             assert rpdo_controlwords(heard, node) == [first, cia402.CW_SHUTDOWN]
         assert hardware.lifecycle_state is LifecycleState.INACTIVE
-        assert hardware.driver._idle_heartbeat is not None
+        assert hardware.driver.heartbeats.idle_task is not None
         assert hardware.driver.drive_states == (DriveState.READY_TO_SWITCH_ON,) * 2
 
 
@@ -546,12 +546,12 @@ def test_a_bus_gone_under_the_idle_heartbeat_stops_it_with_one_error() -> None:
     driver = hardware.driver
     try:
         hardware.configure()
-        driver._bus.shutdown()
+        driver.frames.bus.shutdown()
         time.sleep(0.35)
         assert len(driver.idle_heartbeat_errors) == 1, driver.idle_heartbeat_errors
     finally:
-        driver._bus = None
-        driver._idle_heartbeat = None
+        driver.frames.bus = None
+        driver.heartbeats.idle_task = None
         hardware.cleanup()
 
 
@@ -575,7 +575,7 @@ def test_cleanup_deactivates_puts_the_drives_pre_operational_and_closes(active: 
         nmt = [tuple(m.data) for m in heard if m.arbitration_id == cia402.NMT_COB_ID]
         assert nmt == [(cia402.NMT_PRE_OPERATIONAL, 1), (cia402.NMT_PRE_OPERATIONAL, 2)]
         assert hardware.lifecycle_state is LifecycleState.UNCONFIGURED
-        assert hardware.driver._bus is None
+        assert hardware.driver.frames.bus is None
         assert _nmt_states(hardware, NMT_PRE_OPERATIONAL_STATE) == [
             NMT_PRE_OPERATIONAL_STATE] * 2
 
@@ -592,7 +592,7 @@ def test_cleanup_closes_the_bus_even_when_the_drives_cannot_be_told(monkeypatch,
         monkeypatch.setattr(hardware.driver, "deactivate", failing)
         hardware.cleanup()
         assert hardware.lifecycle_state is LifecycleState.UNCONFIGURED
-        assert hardware.driver._bus is None
+        assert hardware.driver.frames.bus is None
 
 
 def test_a_driver_not_configured_refuses_to_sync_or_read() -> None:
@@ -619,7 +619,7 @@ def test_a_plain_variable_exists_at_sub_index_0_only() -> None:
     request for it would be aborted 0x06090011 by a drive); a record's sub-indices do."""
     from haptic.master.hardware.canopen_setup import PlanError, variable
 
-    dictionary = can_driver.load_drive_dictionary("", 1)
+    dictionary = load_drive_dictionary("", 1)
     assert variable(dictionary, 0x1000, 0, "x").index == 0x1000
     assert variable(dictionary, 0x1018, 2, "x").subindex == 2
     with pytest.raises(PlanError, match=r"^x has no object 0x1000:01$"):

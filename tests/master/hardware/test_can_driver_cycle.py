@@ -117,7 +117,7 @@ def test_the_sync_counter_runs_1_to_overflow_and_wraps() -> None:
     driver = create_hardware("sim-inproc", config).driver
     driver._plans()  # reads the EDS only: the counter is on when every drive has 0x1019
     assert (driver.sync_counter_overflow, driver.sync_counter_note) == (240, "SYNC counter 1..240")
-    counts = [driver._next_sync().data[0] for _ in range(481)]
+    counts = [driver.pdos.next_sync().data[0] for _ in range(481)]
     assert counts == [*range(1, 241), *range(1, 241), 1]
 
 
@@ -480,13 +480,13 @@ def test_a_lost_heartbeat_is_reported_once_per_loss() -> None:
         driver, device = hardware.driver, hardware.rig.devices[1]
 
         def lost_after_silence() -> list[str]:
-            driver._sdo_write(2, device.dictionary[0x1017], 0, "y drive")  # y goes quiet
+            driver.sdo.write(2, device.dictionary[0x1017], 0, "y drive")  # y goes quiet
             found: list[str] = []
             deadline = time.monotonic() + 1.5
             while time.monotonic() < deadline:
                 found += [f for f in hardware.read().faults if "heartbeat" in f]
                 time.sleep(0.01)
-            driver._sdo_write(2, device.dictionary[0x1017], 50, "y drive")  # and back
+            driver.sdo.write(2, device.dictionary[0x1017], 50, "y drive")  # and back
             time.sleep(0.15)
             hardware.read()
             return found
@@ -503,7 +503,7 @@ def test_a_lost_heartbeat_while_active_quick_stops_both() -> None:
     with active_rig(**{"master.can.heartbeat_timeout_s": 0.3}) as hardware:
         driver, device = hardware.driver, hardware.rig.devices[0]
         hardware.read()
-        driver._sdo_write(1, device.dictionary[0x1017], 0, "x drive")  # x goes quiet
+        driver.sdo.write(1, device.dictionary[0x1017], 0, "x drive")  # x goes quiet
         deadline = time.monotonic() + 2.0
         while time.monotonic() < deadline:
             hardware.write(np.zeros(2))
@@ -644,7 +644,8 @@ def test_sensor_counts_that_scale_beyond_a_float_are_a_fault_and_nan(axis: int) 
         hardware.read()
         offset = [0.0, 0.0]
         offset[axis] = -1.7e308
-        hardware.driver.codec = ForceSensorCodec((10.0, 10.0), tuple(offset), load_database())
+        hardware.driver.sensor.codec = ForceSensorCodec((10.0, 10.0), tuple(offset),
+                                                        load_database())
         reading = hardware.read()
         assert len(reading.faults) == 1 and re.fullmatch(
             r"force sensor counts \(-?\d+, -?\d+\) are not finite in N: see \[master.can\] "

@@ -10,10 +10,12 @@ import can
 import pytest
 
 from haptic.common.config import load_config
-from haptic.master.hardware import can_driver, cia402
-from haptic.master.hardware.can_driver import CanHandleDriver, _abort_text
+from haptic.master.hardware import cia402, sdo_client
+from haptic.master.hardware.can_driver import CanHandleDriver
 from haptic.master.hardware.cia402 import DriveState
+from haptic.master.hardware.drive_device import load_drive_dictionary
 from haptic.master.hardware.interface import HardwareError
+from haptic.master.hardware.sdo_client import abort_text
 from haptic.master.settings import master_settings
 from tests.master.hardware.can_driver_helpers import (
     HEARTBEAT_BASE,
@@ -38,7 +40,7 @@ ABORT_MEANINGS = {
                                                (0x06090031, "see CiA 301")])
 def test_the_sdo_abort_texts(code: int, meaning: str) -> None:
     """Known CiA 301 abort codes get their meaning, any other the pointer to the standard."""
-    assert _abort_text(code) == meaning
+    assert abort_text(code) == meaning
 
 
 # --- SDO exchanges against a scripted peer -----------------------------------------------
@@ -69,7 +71,8 @@ class _SdoPeer:
 
 def _sdo_driver(pdo_timeout_s: float = 0.01) -> tuple[CanHandleDriver, str]:
     driver, channel = bare_driver()
-    driver.pdo_timeout_s = pdo_timeout_s  # the SDO deadline is 200 of these
+    # the SDO deadline is enable_timeout_cycles (200) PDO timeouts
+    driver.sdo.deadline_s = pdo_timeout_s * driver.settings.enable_timeout_cycles
     return driver, channel
 
 
@@ -81,7 +84,7 @@ def _exchange(answer, action, pdo_timeout_s: float = 0.01):
     result (or the HardwareError), the driver and the requests the peer saw."""
     driver, channel = _sdo_driver(pdo_timeout_s)
     peer = _SdoPeer(channel, answer)
-    dictionary = can_driver.load_drive_dictionary("", 1)
+    dictionary = load_drive_dictionary("", 1)
     try:
         try:
             result = action(driver, dictionary)
@@ -100,9 +103,9 @@ def test_a_lost_sdo_request_is_sent_again_and_counted() -> None:
             return []
         return [(_TX, cia402.sdo_upload_response(dictionary_1017, 250))]
 
-    dictionary_1017 = can_driver.load_drive_dictionary("", 1)[0x1017]
+    dictionary_1017 = load_drive_dictionary("", 1)[0x1017]
     result, driver, requests = _exchange(
-        second_only, lambda d, od: d._sdo_read(1, od[0x1017], "x drive"))
+        second_only, lambda d, od: d.sdo.read(1, od[0x1017], "x drive"))
     assert result == 250
     assert len(requests) >= 2 and set(requests) == {requests[0]}
     assert driver.sdo_resends == len(requests) - 1
@@ -113,7 +116,7 @@ def test_no_sdo_reply_by_the_deadline_is_one_hardware_error() -> None:
     (``pdo_timeout_s`` x ``enable_timeout_cycles``: 0.4 s here, so once), then an error
     naming the node and the object."""
     result, driver, requests = _exchange(
-        lambda n, r: [], lambda d, od: d._sdo_read(1, od[0x1017], "x drive"),
+        lambda n, r: [], lambda d, od: d.sdo.read(1, od[0x1017], "x drive"),
         pdo_timeout_s=0.002)
     assert str(result) == ("x drive read: no SDO reply from node 1 for 0x1017:00 (Producer "
                            "heartbeat time)")
@@ -131,7 +134,7 @@ def test_an_sdo_exchange_skips_what_is_not_its_reply() -> None:
                 (_TX, bytes([0x43, 0x17, 0x10, 0, 0x34, 0x12, 0xFF, 0xFF]))]
 
     result, driver, requests = _exchange(
-        noisy, lambda d, od: d._sdo_read(1, od[0x1017], "x drive"))
+        noisy, lambda d, od: d.sdo.read(1, od[0x1017], "x drive"))
     assert result == 0x1234 and len(requests) == 1 and driver.late_frames == 0
 
 
@@ -139,7 +142,7 @@ def test_an_sdo_abort_names_the_object_and_its_code() -> None:
     def abort(number: int, request: bytes):
         return [(_TX, cia402.sdo_abort(0x1017, 0, 0x06090030))]
 
-    result, _, _ = _exchange(abort, lambda d, od: d._sdo_write(1, od[0x1017], 9, "x drive"))
+    result, _, _ = _exchange(abort, lambda d, od: d.sdo.write(1, od[0x1017], 9, "x drive"))
     assert str(result) == ("x drive write: SDO abort 0x06090030 (value out of range) on "
                            "0x1017:00 (Producer heartbeat time)")
 
@@ -152,7 +155,7 @@ def test_an_sdo_read_takes_only_an_expedited_upload(command: int, named: str | N
     def reply(number: int, request: bytes):
         return [(_TX, bytes([command, 0x17, 0x10, 0, 0x64, 0, 0, 0]))]
 
-    result, _, _ = _exchange(reply, lambda d, od: d._sdo_read(1, od[0x1017], "x drive"))
+    result, _, _ = _exchange(reply, lambda d, od: d.sdo.read(1, od[0x1017], "x drive"))
     if named is None:
         assert result == 100
     else:
@@ -165,14 +168,14 @@ def test_an_sdo_write_takes_only_a_download_reply(command: int) -> None:
     def reply(number: int, request: bytes):
         return [(_TX, bytes([command, 0x17, 0x10, 0, 0, 0, 0, 0]))]
 
-    result, _, _ = _exchange(reply, lambda d, od: d._sdo_write(1, od[0x1017], 9, "x drive"))
+    result, _, _ = _exchange(reply, lambda d, od: d.sdo.write(1, od[0x1017], 9, "x drive"))
     assert str(result) == (f"x drive: unexpected SDO reply 0x{command:02X} to the write of "
                            "0x1017:00")
     result, _, requests = _exchange(
         lambda n, r: [(_TX, cia402.sdo_download_response(0x1017, 0))],
-        lambda d, od: d._sdo_write(1, od[0x1017], 9, "x drive"))
+        lambda d, od: d.sdo.write(1, od[0x1017], 9, "x drive"))
     assert result is None and requests == [cia402.sdo_download_request(
-        can_driver.load_drive_dictionary("", 1)[0x1017], 9)]
+        load_drive_dictionary("", 1)[0x1017], 9)]
 
 
 def test_supervision_frames_during_an_sdo_exchange_are_kept_for_the_next_read() -> None:
@@ -182,14 +185,14 @@ def test_supervision_frames_during_an_sdo_exchange_are_kept_for_the_next_read() 
         return [(cia402.EMCY_BASE + 1, cia402.emcy_frame(0x5530)),
                 (HEARTBEAT_BASE + 2, b"\x7f"),
                 (_TX, cia402.sdo_upload_response(
-                    can_driver.load_drive_dictionary("", 1)[0x1017], 5))]
+                    load_drive_dictionary("", 1)[0x1017], 5))]
 
     before = time.monotonic()
-    result, driver, _ = _exchange(with_emcy, lambda d, od: d._sdo_read(1, od[0x1017], "x"))
+    result, driver, _ = _exchange(with_emcy, lambda d, od: d.sdo.read(1, od[0x1017], "x"))
     assert result == 5
     assert driver.emcy_log == [("x", 0x5530)]
     assert driver._pending_faults == ["x drive EMCY error code 0x5530 (register 0x01)"]
-    assert driver._heartbeat_seen_s[1] >= before and driver._heartbeat_seen_s[0] == 0.0
+    assert driver.heartbeats.seen_s[1] >= before and driver.heartbeats.seen_s[0] == 0.0
 
 
 def test_a_drive_that_faults_silently_once_enabled_is_reset_directly(monkeypatch) -> None:
@@ -201,7 +204,7 @@ def test_a_drive_that_faults_silently_once_enabled_is_reset_directly(monkeypatch
         hardware.rig.inject_drive_fault(1, 0x2310)  # the y drive one step behind
         hardware.read()
         driver = hardware.driver
-        send_rpdo = driver._send_rpdo
+        send_rpdo = driver.pdos.send_rpdo
         x_words: list[int] = []
 
         def fault_x_when_enabled(axis: int, controlword: int) -> None:
@@ -212,7 +215,7 @@ def test_a_drive_that_faults_silently_once_enabled_is_reset_directly(monkeypatch
                     with hardware.rig._lock:
                         hardware.rig.drives[0].state = DriveState.FAULT  # no EMCY
 
-        monkeypatch.setattr(driver, "_send_rpdo", fault_x_when_enabled)
+        monkeypatch.setattr(driver.pdos, "send_rpdo", fault_x_when_enabled)
         hardware.activate()
         assert driver.drive_states == (DriveState.OPERATION_ENABLED,) * 2
         assert x_words == [cia402.CW_SHUTDOWN, cia402.CW_SWITCH_ON, cia402.CW_ENABLE_OPERATION,
@@ -249,15 +252,15 @@ def test_an_sdo_exchange_waits_no_longer_than_its_deadline(monkeypatch, deadline
     it (not until a resend due later), sending the request again every SDO_RESEND_S (0.25 s)
     before it."""
     bus = _SilentBus()
-    monkeypatch.setattr(can_driver, "time", bus)  # the driver's clock is the bus's
+    monkeypatch.setattr(sdo_client, "time", bus)  # the SDO client's clock is the bus's
     driver = CanHandleDriver(master_settings(load_config()).can,
                              {"interface": "virtual", "channel": "unused"},
                              deadline_s / 200, 0.00054)  # enable_timeout_cycles = 200
-    driver._bus = bus
-    dictionary = can_driver.load_drive_dictionary("", 1)
+    driver.frames.bus = bus
+    dictionary = load_drive_dictionary("", 1)
     start = bus.now_s
     with pytest.raises(HardwareError, match=r"^x: no SDO reply from node 1 for 0x1017:00"):
-        driver._sdo_exchange(1, cia402.sdo_upload_request(dictionary[0x1017]),
+        driver.sdo.exchange(1, cia402.sdo_upload_request(dictionary[0x1017]),
                              dictionary[0x1017], "x")
     assert bus.now_s - start == pytest.approx(deadline_s, abs=1e-9)
     assert len(bus.sent) == requests and driver.sdo_resends == requests - 1

@@ -84,7 +84,7 @@ def test_a_static_mapping_in_another_pdo_and_order_is_used(tmp_path: Path) -> No
         device = hardware.rig.devices[0]
         assert sorted(device.rpdos_by_id) == [0x301]
         assert [p.cob_id for p in device.tpdos] == [0x381]
-        assert hardware.driver._rpdo_frame(0, 0x0F, 7).data == bytes(
+        assert hardware.driver.pdos.rpdo_frame(0, 0x0F, 7).data == bytes(
             [7, 0, 0, 0, 0x0F, 0])  # target first
         moves_towards_an_offset(hardware, 60)
 
