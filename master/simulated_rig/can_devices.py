@@ -1,18 +1,23 @@
 """The simulated rig: two CiA 402 drives and the force sensor as CAN frame logic.
 
-:class:`SimulatedCanRig` runs the pure :class:`~haptic.master.simulated_rig.rig_block.RigModel` and
-speaks
-the real frames (NMT, SDO, RPDO1/TPDO1, SYNC, EMCY, heartbeat, the sensor's DBC frame), so the
-CAN driver (:class:`~haptic.master.hardware.can_driver.CanHandleDriver`) runs unchanged against it.
-Each drive is a conformant CiA 301/402 device (:mod:`haptic.master.hardware.drive_device`: canopen's
-``LocalNode`` with the object dictionary of its EDS, PDOs as configured by SDO, heartbeat
-producer and consumer, RPDO deadline, following error window, quick stop); the driver
-configures it from scratch as it would a real drive. The
-devices are stepped by the driver's SYNC frames, one model step per SYNC, so a run is
-deterministic whatever the thread or process timing: RPDOs are synchronous (transmission
-type 1), a controlword or target received in cycle k is applied at SYNC k+1, then the model
-advances, then each drive answers with TPDO1 and the sensor with its frame sampled at that
-SYNC.
+:class:`SimulatedCanRig` runs the pure :class:`~haptic.master.simulated_rig.rig_block.RigModel`
+and speaks the real frames (NMT, SDO, RPDO1/TPDO1, SYNC, EMCY, heartbeat, the sensor's DBC
+frame), so the CAN driver (:class:`~haptic.master.hardware.can_driver.CanHandleDriver`) runs
+unchanged against it. Each drive is a conformant CiA 301/402 device
+(:mod:`haptic.master.hardware.drive_device`: canopen's ``LocalNode`` with the object
+dictionary of its EDS, PDOs as configured by SDO, heartbeat producer and consumer, RPDO
+deadline, following error window, quick stop); the driver configures it from scratch as it
+would a real drive. The devices are stepped by the driver's SYNC frames, one model step per
+SYNC, so a run is deterministic whatever the thread or process timing: RPDOs are synchronous
+(transmission type 1), a controlword or target received in cycle k is applied at SYNC k+1,
+then the model advances, then each drive answers with TPDO1 and the sensor with its frame
+sampled at that SYNC.
+
+The rig composes its parts, one job each: the drives as network nodes (NMT, heartbeats, node
+and life guarding; :mod:`~haptic.master.simulated_rig.device_network`), the devices' answer
+to one SYNC (:mod:`~haptic.master.simulated_rig.sync_answer`) and the emulator-only operator
+frames (:mod:`~haptic.master.simulated_rig.operator_frames`). Here: who feeds the frames, which
+frame goes where, the SYNC answer prepared ahead or taken back, and fault injection.
 
 The frame logic does not care who feeds it frames. :meth:`SimulatedCanRig.start` serves
 python-can's ``virtual`` bus from a background thread of this process (backend
@@ -36,11 +41,9 @@ frames, an invalid or overloaded sensor sample.
 
 from __future__ import annotations
 
-import struct
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
 from typing import Any
 
 import can
@@ -50,16 +53,7 @@ from haptic.common.model.teleop import model_from_config
 from haptic.master.hardware import cia402
 from haptic.master.hardware.can_driver import CanHandleDriver
 from haptic.master.hardware.cia402 import DriveState
-from haptic.master.hardware.drive_device import (
-    EMCY_FOLLOWING_ERROR,
-    EMCY_HEARTBEAT,
-    EMCY_RPDO_TIMEOUT,
-    EMCY_SYNC_LENGTH,
-    SW_FOLLOWING_ERROR,
-    SW_WARNING,
-    DriveObjects,
-    DriveRuntime,
-)
+from haptic.master.hardware.drive_device import DriveObjects, DriveRuntime
 from haptic.master.hardware.force_sensor import (
     STATUS_OK,
     STATUS_OVERLOAD,
@@ -72,7 +66,6 @@ from haptic.master.hardware.interface import (
     LifecycleState,
 )
 from haptic.master.hardware.unix_can import (
-    BRS_FLAG,
     EXTENDED_FLAG,
     FD_FLAG,
     RawFrame,
@@ -80,63 +73,34 @@ from haptic.master.hardware.unix_can import (
     wire_flags,
 )
 from haptic.master.settings import CanSettings, master_settings
-from haptic.master.simulated_rig.rig_block import RigModel, RigSample, RigState
+from haptic.master.simulated_rig.device_network import (
+    NMT_OPERATIONAL_STATE,
+    NMT_PRE_OPERATIONAL_STATE,
+    NMT_STOPPED_STATE,
+    DeviceNetwork,
+)
+from haptic.master.simulated_rig.operator_frames import (
+    OPERATOR_DISPLAY_ID,
+    OPERATOR_READY_ID,
+    decode_operator_display,
+    encode_operator_display,
+)
+from haptic.master.simulated_rig.rig_block import RigModel, RigSample
+from haptic.master.simulated_rig.sync_answer import (
+    SyncAnswer,
+    apply_latched,
+    check_following_error,
+    check_sync,
+    raw_frames,
+    state_arrays,
+    tpdo_frames,
+)
 
-#: COB-ID of the emulator-only operator display frame: the tool force (N) the master reflects,
-#: for the simulated operator. A 29-bit (extended) identifier, outside CANopen's 11-bit
-#: COB-IDs, so no CiA 301/402 device sends, answers or filters for it; only the simulated
-#: rigs read it, and the ``can`` backend never sends it. Payload: 8 bytes, x then y as
-#: little-endian IEEE float32, N.
-OPERATOR_DISPLAY_ID = 0x1FFFF000
-_DISPLAY_PAYLOAD = struct.Struct("<ff")
-#: COB-ID of the emulator-only ready-lamp frame (29-bit, like the display frame): one byte,
-#: 1 when the master's forces are enabled. The simulated operator grasps the handle, and the
-#: clock of its script starts, at the first 1 (a real operator waits for the lamp too).
-OPERATOR_READY_ID = 0x1FFFF001
-
-
-def encode_operator_display(tool_force_N: np.ndarray) -> bytes:
-    """The operator display frame's payload for a tool force (N, x and y)."""
-    force = np.asarray(tool_force_N, float).reshape(2)
-    return _DISPLAY_PAYLOAD.pack(float(force[0]), float(force[1]))
-
-
-def decode_operator_display(data: bytes) -> np.ndarray:
-    """The tool force (N, x and y) of an operator display payload; ``ValueError`` on a
-    payload that is not 8 bytes."""
-    if len(data) != _DISPLAY_PAYLOAD.size:
-        raise ValueError(f"operator display payload of {len(data)} bytes, expected "
-                         f"{_DISPLAY_PAYLOAD.size}")
-    return np.array(_DISPLAY_PAYLOAD.unpack(data), float)
-
-
-NMT_PRE_OPERATIONAL_STATE = "pre-operational"
-NMT_OPERATIONAL_STATE = "operational"
-NMT_STOPPED_STATE = "stopped"
-
-
-@dataclass
-class _SyncAnswer:
-    """What the devices do at one SYNC: the drives after it, the sample, the frames to send
-    (raw: id, wire flags, data) and the sensor's counters. The model has already stepped;
-    ``undo`` holds the rig state's arrays (and ``rng_undo`` the noise generator's state) from
-    before the step, so a prepared answer can be taken back (both empty for an answer
-    committed at once)."""
-
-    drives: list[DriveRuntime]
-    sample: RigSample
-    frames: list[RawFrame]
-    sensor_counter: int
-    drop_sensor: int
-    sensor_status_cycles: int
-    undo: list[tuple[Any, str, np.ndarray]] = field(default_factory=list)
-    rng_undo: dict[str, Any] | None = None
-
-
-def _state_arrays(state: RigState) -> list[tuple[Any, str]]:
-    """(holder, attribute) of every array of the rig state and its operator state."""
-    return [(holder, item.name) for holder in (state, state.operator)
-            for item in fields(holder) if isinstance(getattr(holder, item.name), np.ndarray)]
+__all__ = [
+    "NMT_OPERATIONAL_STATE", "NMT_PRE_OPERATIONAL_STATE", "NMT_STOPPED_STATE",
+    "OPERATOR_DISPLAY_ID", "OPERATOR_READY_ID", "SimulatedCanRig", "SimulatedRigHardware",
+    "decode_operator_display", "encode_operator_display", "simulated_rig_hardware",
+]
 
 
 def _receive(bus: can.BusABC, timeout_s: float) -> list[RawFrame]:
@@ -179,7 +143,7 @@ class SimulatedCanRig:
                                       settings.force_offset_count,
                                       load_database(settings.dbc_file or None))
         self.state = model.initial_state(np.asarray([initial_position_m], float), rng)
-        self._state_arrays = _state_arrays(self.state)
+        self._state_arrays = state_arrays(self.state)
         self.tool_force_N = np.zeros((1, 2))
         #: whether the operator has grasped the handle (the ready lamp has been on)
         self.operator_grasped = False
@@ -194,21 +158,15 @@ class SimulatedCanRig:
                                                           self.drives, strict=True))]
         for axis, drive in enumerate(self.drives):
             drive.position_counts = self._position_counts(axis)
-        #: When each drive last heard the heartbeat it consumes (monotonic s; None: not yet).
-        self._heartbeat_heard: list[float | None] = [None, None]
-        #: When each drive last got a node guarding request (monotonic s; None: not yet) and
-        #: the toggle bit of its next answer.
-        self._guarded_at: list[float | None] = [None, None]
-        self._guard_toggle = [0, 0]
-        self._heartbeat_due = [0.0, 0.0]
-        #: When the serving loop next looks at the heartbeat timers (0: at once), s.
-        self._timers_due_s = 0.0
         #: SYNCs received as CAN FD frames: the cyclic answers go out as FD frames too.
         self._sync_fd = False
         self.sync_count = 0
         #: Each drive's last SYNC counter (0: none yet) and the counter jumps it saw.
         self.sync_counter_seen = [0, 0]
         self.sync_counter_jumps = [0, 0]
+        #: The drives as network nodes: NMT, heartbeats, node and life guarding.
+        self.network = DeviceNetwork(self.drives, self.devices, self._send,
+                                     self._connection_lost, self.sync_counter_seen)
         #: SYNCs answered with an answer prepared ahead (:meth:`prepare_ahead`).
         self.prepared_syncs = 0
         self.errors: list[str] = []
@@ -216,7 +174,7 @@ class SimulatedCanRig:
         self._sensor_status_override: int | None = None
         self._sensor_status_cycles = 0
         self._drop_sensor = 0
-        self._prepared: _SyncAnswer | None = None
+        self._prepared: SyncAnswer | None = None
         #: The display frame came since the last SYNC: its answer may be prepared ahead.
         self._answer_wanted = False
         self._lock = threading.Lock()
@@ -268,8 +226,7 @@ class SimulatedCanRig:
         """Speak on ``bus`` (opened by the caller, who also shuts it down) from now on, and
         send the drives' boot-ups."""
         self._bus = bus
-        for drive in self.drives:
-            self._send(0x700 + drive.node_id, b"\x00")  # boot-up
+        self.network.boot_up()
 
     def serve(self, should_stop: Callable[[], bool], poll_s: float = 0.05,
               on_error: Callable[[str], None] | None = None) -> None:
@@ -285,21 +242,22 @@ class SimulatedCanRig:
         time (no python-can message objects: about a sixth of the emulator's CPU a cycle).
         A frame that raises is recorded in :attr:`errors` (and passed to ``on_error``) and
         serving goes on."""
+        network = self.network
         while not should_stop():
             bus = self._bus
             if bus is None:
                 return
             now_s = time.monotonic()
-            if now_s >= self._timers_due_s:  # only when a heartbeat or a check is due
+            if now_s >= network.timers_due_s:  # only when a heartbeat or a check is due
                 self._handle_queued(bus, on_error)
                 now_s = time.monotonic()
-                self._timers_due_s = now_s + max(0.0, self.poll_timers(now_s))
+                network.timers_due_s = now_s + max(0.0, self.poll_timers(now_s))
             frames = _receive(bus, 0.0)  # the frames already here come first
             if not frames:
                 if self._answer_wanted:  # idle: prepare the next SYNC's answer meanwhile
                     self.prepare_ahead()
                     now_s = time.monotonic()
-                frames = _receive(bus, min(poll_s, max(0.0, self._timers_due_s - now_s)))
+                frames = _receive(bus, min(poll_s, max(0.0, network.timers_due_s - now_s)))
             self._handle_frames(frames, on_error)
 
     def _handle_queued(self, bus: can.BusABC, on_error: Callable[[str], None] | None,
@@ -360,42 +318,10 @@ class SimulatedCanRig:
 
     def poll_timers(self, now_s: float) -> float:
         """Send the drives' heartbeats that are due and trip a drive whose heartbeat consumer
-        timed out (EMCY 0x8130, then its 0x6007 reaction); returns the time to the next
-        heartbeat, s (thread-safe)."""
-        next_s = 1.0
+        or life guarding timed out (EMCY 0x8130, then its 0x6007 reaction); returns the time
+        to the next heartbeat, s (thread-safe)."""
         with self._lock:
-            for axis, (drive, device) in enumerate(zip(self.drives, self.devices, strict=True)):
-                period_s = device.heartbeat_producer_ms * 1e-3
-                if period_s > 0.0:
-                    if now_s >= self._heartbeat_due[axis]:
-                        self._send(0x700 + drive.node_id, device.heartbeat_payload())
-                        self._heartbeat_due[axis] = max(self._heartbeat_due[axis] + period_s,
-                                                        now_s)
-                    next_s = min(next_s, self._heartbeat_due[axis] - now_s)
-                heard = self._heartbeat_heard[axis]
-                timeout_s = device.heartbeat_consumer_ms * 1e-3
-                if heard is not None and timeout_s > 0.0:
-                    if now_s - heard > timeout_s:
-                        self._heartbeat_heard[axis] = None  # one trip per loss
-                        self._connection_lost(axis, EMCY_HEARTBEAT)
-                    else:
-                        next_s = min(next_s, heard + timeout_s - now_s)
-                next_s = min(next_s, self._life_guard(axis, device, now_s))
-        return next_s
-
-    def _life_guard(self, axis: int, device: DriveObjects, now_s: float) -> float:
-        """Life guarding (CiA 301): once guarded, a drive whose next request is later than
-        guard time x life time factor has lost its master (EMCY 0x8130, then its 0x6007
-        reaction); returns the time to look again, s (under the lock)."""
-        guarded = self._guarded_at[axis]
-        lifetime_s = device.guard_time_ms * device.life_time_factor * 1e-3
-        if guarded is None or lifetime_s <= 0.0:
-            return 1.0
-        if now_s - guarded > lifetime_s:
-            self._guarded_at[axis] = None  # one trip per loss
-            self._connection_lost(axis, EMCY_HEARTBEAT)
-            return 1.0
-        return guarded + lifetime_s - now_s
+            return self.network.poll(now_s)
 
     def _connection_lost(self, axis: int, emcy_code: int) -> None:
         """The drive lost its master (heartbeat or RPDO deadline): EMCY, then the abort
@@ -482,7 +408,8 @@ class SimulatedCanRig:
             if fd != self._sync_fd:
                 self._discard_prepared()
                 self._sync_fd = fd
-            refused = self._check_sync(data)
+            refused = check_sync(self.devices, data, self.sync_counter_seen,
+                                 self.sync_counter_jumps, self._send)
             if refused:
                 self._discard_prepared()
             answer, self._prepared = self._prepared, None
@@ -495,16 +422,14 @@ class SimulatedCanRig:
             return
         if frame_id == cia402.NMT_COB_ID and len(data) >= 2:
             self._discard_prepared()
-            self._on_nmt(data[0], data[1])
+            self.network.on_nmt(data[0], data[1])
             return
         for axis, (drive, device) in enumerate(zip(self.drives, self.devices, strict=True)):
             if 0x700 <= frame_id <= 0x77F and frame_id == 0x700 + device.heartbeat_consumer_node:
-                if self._heartbeat_heard[axis] is None:
-                    self._timers_due_s = 0.0  # its consumer starts now
-                self._heartbeat_heard[axis] = time.monotonic()  # changes no input
+                self.network.heard(axis)  # changes no input
                 continue
             if frame_id == 0x700 + drive.node_id and not data:
-                self._answer_guarding(axis)  # a node guarding request (a remote frame)
+                self.network.answer_guarding(axis)  # a node guarding request (a remote frame)
                 return
             rpdo = device.rpdos_by_id.get(frame_id)
             if rpdo is not None:
@@ -524,50 +449,9 @@ class SimulatedCanRig:
                     self._discard_prepared()
                     device.on_sdo_request(data)
                     if device.refresh_if_changed():
-                        self._timers_due_s = 0.0  # a heartbeat time may have changed
+                        self.network.timers_due_s = 0.0  # a heartbeat time may have changed
                 return
         # Anything else (another node's frames, this bus's own frames coming back) is not ours.
-
-    def _answer_guarding(self, axis: int) -> None:
-        """A node guarding request to ``axis``'s drive: the answer (toggle bit 7 and the NMT
-        state) and, with a guard time and life time factor set, life guarding from now on
-        (under the lock; changes no input)."""
-        drive, device = self.drives[axis], self.devices[axis]
-        toggle = self._guard_toggle[axis]
-        self._guard_toggle[axis] ^= 0x80
-        self._send(0x700 + drive.node_id, bytes([toggle | device.heartbeat_payload()[0]]))
-        if self._guarded_at[axis] is None:
-            self._timers_due_s = 0.0  # its life guarding starts now
-        self._guarded_at[axis] = time.monotonic()
-
-    def _on_nmt(self, command: int, node: int) -> None:
-        for drive in self.drives:
-            if node not in (0, drive.node_id):
-                continue
-            if command == cia402.NMT_START:
-                drive.nmt_state = NMT_OPERATIONAL_STATE
-            elif command == cia402.NMT_STOP:
-                drive.nmt_state = NMT_STOPPED_STATE
-            elif command == cia402.NMT_PRE_OPERATIONAL:
-                drive.nmt_state = NMT_PRE_OPERATIONAL_STATE
-            elif command in (cia402.NMT_RESET_NODE, cia402.NMT_RESET_COMMUNICATION):
-                # Back to the power-on values: the communication objects (0x1000-0x1FFF),
-                # and on a node reset the application's too.
-                device = self.devices[self.drives.index(drive)]
-                store = device.node.data_store
-                for index in list(store):
-                    if command == cia402.NMT_RESET_NODE or index < 0x2000:
-                        del store[index]
-                device.refresh()
-                if command == cia402.NMT_RESET_NODE:
-                    drive.state, drive.mode, drive.error_code = (
-                        DriveState.SWITCH_ON_DISABLED, 0, 0)
-                drive.nmt_state = NMT_PRE_OPERATIONAL_STATE
-                self._heartbeat_heard[self.drives.index(drive)] = None
-                self._guarded_at[self.drives.index(drive)] = None
-                self._guard_toggle[self.drives.index(drive)] = 0
-                self.sync_counter_seen[self.drives.index(drive)] = 0
-                self._send(0x700 + drive.node_id, b"\x00")
 
     def _position_counts(self, axis: int, sample: RigSample | None = None) -> int:
         """Encoder counts of ``axis`` in ``sample`` (default: the last SYNC's)."""
@@ -576,85 +460,18 @@ class SimulatedCanRig:
             self.state.plant[0] @ self.model.position_C[axis])
         return self.settings.count_from_metres(position)
 
-    def _check_sync(self, data: bytes) -> frozenset[int]:
-        """Each drive checks a SYNC against its 0x1019 (CiA 301): without a counter it must
-        carry no data; with one, one byte. A drive refuses a SYNC of another length (EMCY
-        0x8240; it does not act on that SYNC, as CANopen stacks do); a counter that is not
-        the last one plus 1 (wrapping to 1 after the overflow value) means SYNCs lost on the
-        bus (counted in :attr:`sync_counter_jumps`). Returns the axes that refused it."""
-        refused = set()
-        for axis, device in enumerate(self.devices):
-            overflow = device.sync_counter_overflow
-            if len(data) != (1 if overflow else 0):
-                refused.add(axis)
-                self._send(cia402.EMCY_BASE + device.node_id,
-                           cia402.emcy_frame(EMCY_SYNC_LENGTH))
-                continue
-            if overflow:
-                last = self.sync_counter_seen[axis]
-                if last and data[0] != last % overflow + 1:
-                    self.sync_counter_jumps[axis] += 1
-                self.sync_counter_seen[axis] = data[0]
-        return frozenset(refused)
-
     def _prepare_sync(self, undoable: bool, refused: frozenset[int] = frozenset()
-                      ) -> _SyncAnswer:
+                      ) -> SyncAnswer:
         """The devices' answer to the next SYNC: each drive applies the controlword and
-        target it latched (a pending fault first, with its EMCY; CiA 402 transitions, quick
-        stop holding the position), the model advances one period with the enabled drives'
-        targets, the drives check their following error window and RPDO deadline, then each
-        operational drive sends TPDO1 as mapped (per its transmission type) and the sensor
-        its frame sampled at this SYNC. Only the model's state changes here (``undoable``:
-        keep what :meth:`_discard_prepared` needs to restore it); the rest at the commit."""
+        target it latched (:func:`~haptic.master.simulated_rig.sync_answer.apply_latched`),
+        the model advances one period with the enabled drives' targets, the drives check
+        their following error window, then each operational drive sends its TPDOs as mapped
+        and the sensor its frame sampled at this SYNC. Only the model's state changes here
+        (``undoable``: keep what :meth:`_discard_prepared` needs to restore it); the rest at
+        the commit."""
         drives = [drive.copy() for drive in self.drives]
         frames: list[tuple[int, bytes]] = []
-        targets = np.full((1, 2), np.nan)
-        for axis, (drive, device) in enumerate(zip(drives, self.devices, strict=True)):
-            if device.sync_cob_id != cia402.SYNC_COB_ID or axis in refused:
-                continue  # this drive listens for SYNC elsewhere, or refused this one
-            if drive.persistent_fault_code and drive.state is not DriveState.FAULT:
-                drive.pending_fault_code = drive.persistent_fault_code
-            if drive.pending_fault_code:
-                drive.state, drive.error_code = DriveState.FAULT, drive.pending_fault_code
-                frames.append((cia402.EMCY_BASE + drive.node_id,
-                               cia402.emcy_frame(drive.pending_fault_code)))
-                drive.pending_fault_code = 0
-            if drive.state is DriveState.QUICK_STOP_ACTIVE and device.quick_stop_option <= 4:
-                drive.state = DriveState.SWITCH_ON_DISABLED  # stopped: the power goes off
-            received_rpdo = drive.received_controlword is not None or (
-                drive.received_target is not None)
-            if drive.received_controlword is not None:
-                previous = drive.controlword
-                drive.controlword = drive.received_controlword
-                before = drive.state
-                if drive.mode == cia402.MODE_CYCLIC_SYNC_POSITION:  # no mode: no power
-                    drive.state = cia402.next_drive_state(drive.state, drive.controlword,
-                                                          previous)
-                if drive.state is DriveState.SWITCH_ON_DISABLED and before is not drive.state:
-                    drive.error_code, drive.status_extra = 0, 0
-                if drive.state is DriveState.QUICK_STOP_ACTIVE and (
-                        before is not DriveState.QUICK_STOP_ACTIVE):
-                    drive.target_counts = drive.position_counts  # stop where it is
-            enabled = drive.state is DriveState.OPERATION_ENABLED and (
-                drive.mode == cia402.MODE_CYCLIC_SYNC_POSITION)
-            if drive.received_target is not None and enabled:
-                drive.target_counts = drive.received_target
-            drive.received_controlword = drive.received_target = None
-            if enabled or drive.state is DriveState.QUICK_STOP_ACTIVE:
-                targets[0, axis] = self.settings.metres_from_count(drive.target_counts)
-            # RPDO deadline (0x1400:05) in SYNC time (interpolation periods).
-            timer_s = device.rpdo_deadline_ms * 1e-3
-            if enabled and timer_s > 0.0 and not received_rpdo:
-                drive.syncs_without_rpdo += 1
-                if drive.syncs_without_rpdo * device.interpolation_period_s > timer_s:
-                    drive.syncs_without_rpdo = 0
-                    frames.append((cia402.EMCY_BASE + drive.node_id,
-                                   cia402.emcy_frame(EMCY_RPDO_TIMEOUT)))
-                    drive.state, drive.error_code = DriveState.FAULT, EMCY_RPDO_TIMEOUT
-                    drive.target_counts = drive.position_counts
-                    targets[0, axis] = self.settings.metres_from_count(drive.position_counts)
-            elif received_rpdo:
-                drive.syncs_without_rpdo = 0
+        targets = apply_latched(drives, self.devices, refused, self.settings, frames)
         undo: list[tuple[Any, str, np.ndarray]] = []
         rng_undo = None
         if undoable:
@@ -672,7 +489,7 @@ class SimulatedCanRig:
     def _step_and_answer(self, drives: list[DriveRuntime], frames: list[tuple[int, bytes]],
                          targets: np.ndarray, refused: frozenset[int],
                          undo: list[tuple[Any, str, np.ndarray]], rng_undo: Any
-                         ) -> _SyncAnswer:
+                         ) -> SyncAnswer:
         """:meth:`_prepare_sync` from the model's step on: the step, the drives' checks and
         their frames, the sensor's."""
         if not self.operator_grasped:
@@ -687,14 +504,14 @@ class SimulatedCanRig:
             if axis in refused:
                 continue
             drive.sync_count += 1
-            self._check_following_error(drive, device, frames)
+            check_following_error(drive, device, frames)
             if drive.nmt_state != NMT_OPERATIONAL_STATE or not device.tpdos or (
                     device.sync_cob_id != cia402.SYNC_COB_ID):
                 continue
             if drive.drop_tpdo > 0:
                 drive.drop_tpdo -= 1
                 continue
-            self._tpdos(drive, device, frames)
+            tpdo_frames(drive, device, frames)
         counter = self._sensor_counter
         drop_sensor, status_cycles = self._drop_sensor, self._sensor_status_cycles
         if drop_sensor > 0:
@@ -707,55 +524,8 @@ class SimulatedCanRig:
                 status_cycles -= 1
             frames.append((self.codec.frame_id,
                            self.codec.encode_counts(raw_x, raw_y, counter, status)))
-        fd = self._sync_fd
-        emcy_ids = {cia402.EMCY_BASE + drive.node_id for drive in drives}
-        fd_flags = FD_FLAG | BRS_FLAG
-        raw = [(frame_id, fd_flags if (fd or len(data) > 8) and frame_id not in emcy_ids
-                else 0, data) for frame_id, data in frames]
-        return _SyncAnswer(drives, sample, raw, (counter + 1) % 256, drop_sensor,
-                           status_cycles, undo, rng_undo)
-
-    @staticmethod
-    def _tpdos(drive: DriveRuntime, device: DriveObjects,
-               frames: list[tuple[int, bytes]]) -> None:
-        """The drive's enabled TPDOs due at this SYNC, as mapped, into ``frames``: every
-        n-th SYNC for transmission type n (1-240), on a change of the payload for the others
-        (0 acyclic synchronous, 254/255 event-driven)."""
-        sent = []
-        for number, tpdo in enumerate(device.tpdos):
-            payload = device.encode_tpdo(drive, drive.position_counts, tpdo)
-            kind = tpdo.transmission_type
-            last = drive.last_tpdos[number] if number < len(drive.last_tpdos) else b""
-            if 1 <= kind <= 240:
-                due = drive.sync_count % kind == 0
-            else:
-                due = payload != last
-            sent.append(payload if due else last)
-            if due:
-                frames.append((tpdo.cob_id, payload))
-        drive.last_tpdos = tuple(sent)
-
-    def _check_following_error(self, drive: DriveRuntime, device: DriveObjects,
-                               frames: list[tuple[int, bytes]]) -> None:
-        """Following error (0x6065 window, 0x6066 time out): statusword bit 7 (warning) while
-        beyond the window, then bit 13, Fault and EMCY 0x8611 once it lasted the time out."""
-        if drive.state is not DriveState.OPERATION_ENABLED:
-            drive.following_error_syncs = 0
-            drive.status_extra &= ~SW_WARNING
-            return
-        error = abs(drive.target_counts - drive.position_counts)
-        if error <= device.following_error_window_counts:
-            drive.following_error_syncs = 0
-            drive.status_extra &= ~(SW_WARNING | SW_FOLLOWING_ERROR)
-            return
-        drive.following_error_syncs += 1
-        drive.status_extra |= SW_WARNING
-        if drive.following_error_syncs * device.interpolation_period_s > (
-                device.following_error_timeout_s):
-            drive.status_extra |= SW_FOLLOWING_ERROR
-            drive.state, drive.error_code = DriveState.FAULT, EMCY_FOLLOWING_ERROR
-            frames.append((cia402.EMCY_BASE + drive.node_id,
-                           cia402.emcy_frame(EMCY_FOLLOWING_ERROR)))
+        return SyncAnswer(drives, sample, raw_frames(frames, drives, self._sync_fd),
+                          (counter + 1) % 256, drop_sensor, status_cycles, undo, rng_undo)
 
     def _discard_prepared(self) -> None:
         """Take back a prepared answer (an input changed after it): the model's state as it
@@ -771,7 +541,7 @@ class SimulatedCanRig:
         if rng_undo is not None:
             self.state.rng.bit_generator.state = rng_undo
 
-    def _commit_sync(self, answer: _SyncAnswer) -> None:
+    def _commit_sync(self, answer: SyncAnswer) -> None:
         """Make ``answer`` the devices' state, then send its frames (in that order, so whoever
         has received them sees the devices' new state)."""
         for drive, after in zip(self.drives, answer.drives, strict=True):

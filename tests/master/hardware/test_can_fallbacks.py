@@ -153,7 +153,7 @@ def test_life_guarding_watches_the_master_where_the_drive_has_no_heartbeat_consu
         assert hardware.summary()["can_drives"]["x"]["watchdogs"] == [
             "life guarding (0x100C/0x100D)", "RPDO deadline (0x1400:05)"]
         time.sleep(0.5)  # idle: the idle task's requests keep it guarded
-        assert hardware.rig._guarded_at[0] is not None
+        assert hardware.rig.network.guarded_at[0] is not None
         reading = hardware.read()
         assert reading.ok, reading.faults  # its answers count as its heartbeat
         hardware.activate()
