@@ -247,8 +247,8 @@ class MasterNode:
                  lanes: np.ndarray | None = None, continue_run: bool = False) -> None:
         """Start ``lanes`` of ``state`` afresh, in place, at ``position_m`` (lanes, 2), m: the
         command holds that position, the compensator is zero, forces are not yet enabled; a
-        lane whose position is not finite is tripped. Nothing is allocated (the real-time
-        loop's activation).
+        lane whose position is not finite is tripped. No Warp buffer is allocated and no
+        launch recorded (the real-time loop's activation: the state's own are reused).
 
         ``lanes`` None: the whole state, its step count and events included, and its
         passivity port (whose monotone counters and switch carry on with ``continue_run``: a
