@@ -95,8 +95,8 @@ class ForceSensorCodec:
         self.offset_count = np.asarray(offset_count, float)
         self._scale = tuple(float(v) for v in self.scale_N_per_count)
         self._offset = tuple(float(v) for v in self.offset_count)
-        # struct packs the frame at each SYNC on both sides (a few us instead of cantools'
-        # 20-30); cantools does what struct cannot: another layout, a bad value or payload
+        # struct packs the frame at each SYNC on both sides (several times cheaper than
+        # cantools); cantools does what struct cannot: another layout, a bad value or payload
         layout = packed_layout(self.message)
         self._layout = layout if layout is not None and set(layout.names) == {
             "ForceX", "ForceY", "Counter", "Status"} else None

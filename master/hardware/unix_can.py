@@ -6,11 +6,11 @@ not its own (a real CAN controller's default). Registered with python-can throug
 ``can.interface`` entry point of this package, so any program that opens a python-can bus by
 name can use it (``haptic-master --rig can --can-interface unix_datagram --can-channel DIR``).
 
-Why not ``udp_multicast``: on a VM a multicast datagram also leaves by the network device (a
-VM exit per frame) and comes back to its own sender; measured on a 2-core AMD EPYC VM, a SYNC
-answered by three frames between two processes took p50 ~70 us / p99 ~135 us with raw
-multicast sockets and p50 ~31 us / p99 ~50-75 us with Unix datagram sockets, before any
-python-can or rig code (docs/master.md).
+Why not ``udp_multicast``: on a virtual machine a multicast datagram also leaves by the
+network device (a VM exit per frame) and comes back to its own sender, so a SYNC answered by
+three frames between two processes takes about twice as long over multicast sockets as over
+Unix datagram sockets, before any python-can or rig code (docs/measurements/can_stack.md has
+the figures).
 
 Membership: each bus binds ``DIRECTORY/<pid>-<n>.sock`` and sends each frame to every other
 socket in the directory: before each send it looks at the directory's modification time (one
@@ -36,10 +36,9 @@ than the largest burst (16 frames of 64 bytes) is dropped whole (each counted in
 ``malformed_datagrams``).
 
 Bursts: :meth:`UnixDatagramBus.send_burst` sends frames that go out back to back (a drive's
-answers to one SYNC, the master's RPDOs) as one datagram. On a VM each datagram that wakes a
-sleeping receiver costs a cross-CPU interrupt (tens of us on the project's 2-core VMs), so a
-burst of three frames costs one wake-up instead of three; the receiver still gets the frames
-one by one, in order.
+answers to one SYNC, the master's RPDOs) as one datagram. On a virtual machine each datagram
+that wakes a sleeping receiver costs a cross-CPU interrupt, so a burst of three frames costs
+one wake-up instead of three; the receiver still gets the frames one by one, in order.
 """
 
 from __future__ import annotations
@@ -320,8 +319,8 @@ class UnixDatagramBus(can.BusABC):
     def recv_frames(self, timeout: float | None = None) -> list[RawFrame]:
         """The frames of the next datagram with any (or those a :meth:`recv` left of the last
         one), in order, as raw frames (id, flags, data), without python-can's message objects
-        (the rig emulator's serving loop: about 30 us less a cycle of four frames than one
-        ``recv`` each on the project's 2-core VM); [] when none came within ``timeout`` s
+        (the rig emulator's serving loop: one call a datagram instead of one ``recv`` and one
+        message object a frame); [] when none came within ``timeout`` s
         (0: only what is here; None: wait for ever). The bus's filters are not applied."""
         if self._received:
             messages, self._received = self._received, deque()

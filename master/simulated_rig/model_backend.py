@@ -1,12 +1,10 @@
 """The ``model`` backend: the rig block stepped directly behind the hardware interface.
 
-Where ``sim`` (:mod:`haptic.master.simulated_rig.can_devices`) runs the rig model behind emulated
-CiA 402 drives
-and the force sensor on python-can's virtual bus (the real driver's code path, a thread and
-about 170 us of frame traffic per cycle), ``model`` steps the same
+Where ``sim`` (:mod:`haptic.master.simulated_rig.can_devices`) runs the rig model behind
+emulated CiA 402 drives and the force sensor on python-can's virtual bus (the real driver's
+code path, a thread and the frame traffic of every cycle), ``model`` steps the same
 :class:`~haptic.master.simulated_rig.rig_block.RigModel` kernel inside ``read()``: no bus, no
-thread, a few
-us.
+thread, only the model's step.
 It keeps the timing contract (a command written in cycle k is applied at SYNC k+1) and the
 sensor's quantisation (encoder counts and force counts from ``[master.can]``), so the loop
 sees the same signals; it cannot inject bus faults. Use it where the loop, not the drives, is

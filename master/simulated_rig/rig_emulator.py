@@ -13,12 +13,12 @@ always reaped) by ``cleanup()``.
 
 The bus (``[master.sim.emulator]``): ``unix_datagram`` (:mod:`haptic.master.hardware.unix_can`, a
 temporary directory per run; the default) or python-can's ``udp_multicast`` (a free UDP port
-per run). Both cross processes; on a 2-core VM the Unix datagrams cost about half as much per
-frame (docs/master.md has the figures).
+per run). Both cross processes; the Unix datagrams cost less per frame, as they pass no
+network device (docs/measurements/can_stack.md has the figures).
 
 The simulated operator feels the tool force the master reflects: ``present_tool_force`` sends
 it to the emulator as the operator display frame
-(:data:`~haptic.master.simulated_rig.can_devices.OPERATOR_DISPLAY_ID`, emulator-only) after the
+(:data:`~haptic.master.simulated_rig.operator_frames.OPERATOR_DISPLAY_ID`, emulator-only) after the
 cycle's RPDOs,
 all of them in the next SYNC's datagram (one wake-up of the emulator a cycle); where the display
 frame comes before its SYNC, the emulator prepares its answer while it waits
@@ -27,11 +27,12 @@ frame comes before its SYNC, the emulator prepares its answer while it waits
 Where the master's loop has CPUs of its own (``[runner] loop_cpus``), the emulator runs on
 them too (:attr:`EmulatedRigHardware.emulator_cpus`), under normal scheduling: it answers the
 SYNC the master sends before its tick while the master's loop sleeps, on the same CPU, as a
-rig's drives answer while the master waits. Left to run anywhere on 2 CPUs it waited behind
-the slave's loop, and the master's read stage reached p99 160-290 us in ``haptic-session``;
-on the loop's CPU under SCHED_BATCH (which has no wake-up preemption) it still did in 1 run
-of 5, and under normal scheduling in none (docs/programs.md). Elsewhere it runs under
-SCHED_BATCH, so its wake-ups never cut into a loop's tick.
+rig's drives answer while the master waits. Left to run anywhere on a machine with few CPUs
+it waits behind the slave's loop, and the master's read stage grows a long tail in
+``haptic-session``; on the loop's CPU under SCHED_BATCH (which has no wake-up preemption) it
+still does at times, under normal scheduling not (docs/programs.md;
+docs/measurements/can_stack.md has the figures). Elsewhere it runs under SCHED_BATCH, so its
+wake-ups never cut into a loop's tick.
 """
 
 from __future__ import annotations
@@ -64,10 +65,10 @@ from haptic.master.hardware.interface import (
 )
 from haptic.master.hardware.unix_can import INTERFACE as UNIX_INTERFACE
 from haptic.master.settings import master_settings
-from haptic.master.simulated_rig.can_devices import (
+from haptic.master.simulated_rig.can_devices import SimulatedCanRig
+from haptic.master.simulated_rig.operator_frames import (
     OPERATOR_DISPLAY_ID,
     OPERATOR_READY_ID,
-    SimulatedCanRig,
     encode_operator_display,
 )
 
@@ -161,8 +162,8 @@ def use_fifo_scheduling(priority: int) -> str | None:
     """Put this thread (the emulator's serving loop; threads it starts later inherit it)
     under SCHED_FIFO at ``priority`` (1-99; needs the privilege to). Where the master's loop
     runs in SCHED_FIFO on the same CPU, the drives are above it: they answer as soon as the
-    SYNC comes, and a kernel thread of normal scheduling that holds the CPU (DAMON's
-    ``kdamond`` on a VM: 0.8-1.6 ms every 0.5 s) gives it up at its next preemption point
+    SYNC comes, and a kernel thread of normal scheduling that holds the CPU for a long time
+    (DAMON's ``kdamond``, for instance) gives it up at its next preemption point
     instead of at its end. Returns a warning when refused, else ``None`` (the emulator then
     runs under normal scheduling)."""
     return _use_policy("SCHED_FIFO", priority)
@@ -340,9 +341,9 @@ class EmulatedRigHardware(HandleHardware):
             try:
                 # Its own process group: a terminal's Ctrl-C reaches the master, which ends
                 # it. Not its own session: with the kernel's autogroup (one scheduling group
-                # per session), a group of one mostly sleeping process was left unscheduled
-                # for 0.2-0.8 s beside two CPU hogs, SYNCs waiting in its queue (docs/master.md)
-                # - in the session's group it answered within 14 ms.
+                # per session), a group of one mostly sleeping process is left unscheduled for
+                # long stretches beside CPU hogs, SYNCs waiting in its queue; in the session's
+                # group it answers in time (docs/measurements/can_stack.md).
                 self.process = subprocess.Popen(
                     command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                     stderr=subprocess.STDOUT, text=True, errors="replace",
