@@ -16,18 +16,19 @@ Llewellyn: a two-port is absolutely stable (stable against every passive operato
 environment) iff ``h11`` and ``h22`` have no poles in the right half plane and, at every
 frequency, ``Re h11 >= 0``, ``Re h22 >= 0`` and
 ``eta = 2 Re h11 Re h22 - Re(h12 h21) - |h12 h21| >= 0``. :func:`llewellyn` checks the three
-inequalities over a frequency grid (the pole condition holds for the manipulators and local
-controllers this module builds: ``h11`` and ``h22``'s denominators are those of passive
-mechanical impedances; a caller with other blocks checks it separately).
+inequalities over a frequency grid; :func:`absolute_stability` adds the pole condition where
+``H`` is rational (no delay): the poles of ``h11`` and ``h22`` are among the zeros of
+``s D(s)``, ``D = (1 + C6) Zcs - C3 C4``, and of ``s Zcs(s)``, both quadratics. With delay the
+denominators are quasi-polynomials and the poles are not checked (``rhp_poles`` None).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from haptic.common.control.four_channel import FourChannelGains
+from haptic.common.control.four_channel import FourChannelGains, Impedance
 
 
 def hybrid_matrix(gains: FourChannelGains, frequencies_rad_s: np.ndarray,
@@ -68,13 +69,15 @@ def transmitted_impedance(h: np.ndarray, environment: np.ndarray) -> np.ndarray:
 class LlewellynVerdict:
     """The criterion over the grid: ``absolutely_stable``, and the worst values found (the
     least ``Re h11``, ``Re h22`` and ``eta``, and the frequency of the least ``eta``,
-    rad/s)."""
+    rad/s); ``rhp_poles``: whether ``h11`` or ``h22`` has a right-half-plane pole (None: not
+    checked)."""
 
     absolutely_stable: bool
     min_re_h11: float
     min_re_h22: float
     min_eta: float
     worst_frequency_rad_s: float
+    rhp_poles: bool | None = None
 
 
 def llewellyn(h: np.ndarray, frequencies_rad_s: np.ndarray, tolerance: float = 1e-9
@@ -95,4 +98,36 @@ def llewellyn(h: np.ndarray, frequencies_rad_s: np.ndarray, tolerance: float = 1
                             float(np.asarray(frequencies_rad_s)[worst]))
 
 
-__all__ = ["LlewellynVerdict", "hybrid_matrix", "llewellyn", "transmitted_impedance"]
+def _times_s(impedance: Impedance) -> np.ndarray:
+    """``s Z(s)`` as polynomial coefficients, highest power first."""
+    return np.array([impedance.mass_kg, impedance.damping_N_s_per_m,
+                     impedance.stiffness_N_per_m])
+
+
+def has_rhp_poles(gains: FourChannelGains, tolerance: float = 1e-9) -> bool:
+    """Whether ``h11`` or ``h22`` of the undelayed two-port may have a pole with a real part
+    above ``tolerance`` (rad/s): a zero of ``s D(s)`` or ``s Zcs(s)`` there."""
+    zcs = _times_s(gains.slave + gains.slave_local)
+    denominator = (1.0 + gains.c6) * zcs - gains.c3 * _times_s(gains.c4)
+    for polynomial in (denominator, zcs):
+        trimmed = np.trim_zeros(polynomial, "f")
+        if trimmed.size > 1 and np.any(np.roots(trimmed).real > tolerance):
+            return True
+    return False
+
+
+def absolute_stability(gains: FourChannelGains, frequencies_rad_s: np.ndarray,
+                       one_way_delay_s: float = 0.0) -> LlewellynVerdict:
+    """Llewellyn's verdict on the four-channel two-port at ``one_way_delay_s``: the
+    inequalities over ``frequencies_rad_s`` and, without delay, the pole condition."""
+    verdict = llewellyn(hybrid_matrix(gains, frequencies_rad_s, one_way_delay_s),
+                        frequencies_rad_s)
+    if one_way_delay_s != 0.0:
+        return verdict
+    poles = has_rhp_poles(gains)
+    return replace(verdict, absolutely_stable=verdict.absolutely_stable and not poles,
+                   rhp_poles=poles)
+
+
+__all__ = ["LlewellynVerdict", "absolute_stability", "has_rhp_poles", "hybrid_matrix",
+           "llewellyn", "transmitted_impedance"]

@@ -15,7 +15,12 @@ from haptic.common.control.four_channel import (
     side_step_reference,
 )
 from haptic.common.control.four_channel_kernel import FourChannelSideKernel
-from haptic.common.control.two_port import hybrid_matrix, llewellyn, transmitted_impedance
+from haptic.common.control.two_port import (
+    absolute_stability,
+    hybrid_matrix,
+    llewellyn,
+    transmitted_impedance,
+)
 
 PERIOD_S = 0.001
 HANDLE = Impedance(mass_kg=0.1, damping_N_s_per_m=1.0)
@@ -113,6 +118,21 @@ def test_llewellyn_on_known_cases() -> None:
     delayed = llewellyn(hybrid_matrix(transparent, BAND_RAD_S, 0.005), BAND_RAD_S)
     assert not delayed.absolutely_stable and delayed.min_eta < 0.0
     assert llewellyn(hybrid_matrix(pp, BAND_RAD_S, 0.005), BAND_RAD_S).absolutely_stable
+
+
+def test_the_pole_condition_rejects_a_hidden_unstable_controller() -> None:
+    """Transparent channels around a slave controller with negative damping cancel it out of
+    H exactly (the inequalities hold, on the boundary), but D = Zcs + Zcm keeps its
+    right-half-plane zeros: h11's poles. Only the pole check sees them."""
+    unstable = Impedance(damping_N_s_per_m=-60.0, stiffness_N_per_m=500.0)
+    gains = FourChannelGains.transparent(HANDLE, TOOL, LOCAL, unstable)
+    assert llewellyn(hybrid_matrix(gains, BAND_RAD_S), BAND_RAD_S).absolutely_stable
+    verdict = absolute_stability(gains, BAND_RAD_S)
+    assert verdict.rhp_poles and not verdict.absolutely_stable
+    healthy = absolute_stability(FourChannelGains.transparent(HANDLE, TOOL, LOCAL, LOCAL),
+                                 BAND_RAD_S)
+    assert healthy.absolutely_stable and healthy.rhp_poles is False
+    assert absolute_stability(gains, BAND_RAD_S, 0.005).rhp_poles is None  # not checked
 
 
 def test_the_kernel_equals_the_reference_on_random_inputs() -> None:
