@@ -162,7 +162,7 @@ def _lockstep_closed_loop_error(model, divisor: int) -> float:
     node = MasterNode.from_model(model, safety)
     rig = _rig(model, "constant:fx=0.6,fy=0,onset=0.05,rise=0.05")
     rig_state = rig.initial_state(np.zeros((1, 2)), np.random.default_rng(0))
-    node_state = node.activate(np.zeros((1, 2)))
+    node_state = node.initial_state(np.zeros((1, 2)))
     command = np.zeros((1, 2))
     ts = model.sample_period_s
     steps = round(0.6 / ts)
