@@ -92,7 +92,7 @@ class CanHandleDriver(HandleHardware):
         Keyword arguments of ``can.Bus`` (interface, channel, bitrate, ...).
     pdo_timeout_s:
         How long :meth:`read` waits for the frames of its SYNC, s; an SDO exchange waits
-        ``enable_timeout_cycles`` of these.
+        ``enable_timeout_cycles`` of these (:attr:`sdo`'s ``deadline_s``, set here).
     sample_period_s:
         Ts, s: the drives' interpolation period (0x60C2) and the bus-load budget.
     """
