@@ -50,9 +50,9 @@ from haptic.common.runtime.runner_config import runner_settings_from
 from haptic.master.hardware.interface import HandleHardware, create_hardware
 from haptic.master.node import MasterNode
 from haptic.master.program import device_process_cpu
-from haptic.master.runner import early_sync
 from haptic.master.settings import master_settings
 from haptic.master.simulated_rig.rig_block import RigModel
+from haptic.master.standalone import early_sync
 
 #: The simulated rigs: name -> (backend, configuration overrides).
 RIGS: dict[str, tuple[str, dict[str, object]]] = {

@@ -106,9 +106,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.no_link:
         return _main_alone(args)
     from haptic.common.model.teleop import model_from_config
-    from haptic.master.governor_setup import start_governor, tdpa_standby
     from haptic.master.node import MasterNode
     from haptic.master.program import MasterLoopOptions, run_linked_master
+    from haptic.master.program_governor import start_governor, tdpa_standby
 
     init_warp()  # the node's kernels run on Warp's CPU device
     zenoh.init_log_from_env_or("error")
@@ -176,7 +176,7 @@ def rig_time_steps(rig_time_s: float, rig: str, period_s: float) -> int:
 def _main_alone(args: argparse.Namespace) -> int:
     from haptic.common.model.teleop import model_from_config
     from haptic.master.node import MasterNode
-    from haptic.master.runner import run_master
+    from haptic.master.standalone import run_master
 
     init_warp()
     duration = NO_LINK_DEFAULT_DURATION_S if args.duration is None else args.duration

@@ -19,19 +19,30 @@ The program has one lane; the simulator one lane per cell of a sweep (the node i
 kernel over every lane; one supervisor per lane). :meth:`MasterTick.supervise` is the one way
 in: the simulator's quiet-lane filter (lockstep/quiet_lanes.py) calls it on the lanes whose
 supervisor has something to do, the program on its one lane.
+
+One lane's whole tick is one call, :meth:`MasterTick.step_lane` (the programs and the
+real-link cells, on the one tick driver: common/runtime/tick_driver.py): its inputs
+(:class:`MasterLaneInputs`: the reading, the delivered message, the link's times) in, its
+outputs (:class:`MasterLaneOutputs`: what the node used, k, the flags and the energy to send)
+out, with the governor, the passivity layer's account of the slave's energy, the drift
+correction's target and the flags inside it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from haptic.common.wire.lane_flags import lane_flag_values
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, ToolState
+from haptic.common.wire.passivity_link import PassivityLink
+from haptic.master.margin_governor import MarginGovernor
 from haptic.master.node import MasterNode, MasterNodeState
+from haptic.master.program_governor import governor_step
 from haptic.master.supervisor import MasterSupervisor, Transition
 
 #: Flag values (IntFlag arithmetic costs about 1 us per operation, too much per lane and
@@ -107,6 +118,9 @@ class MasterTick:
         self.standby_active = np.zeros(lanes, bool)
         #: the switch's events (``tdpa_on``/``tdpa_off``), for the program's event list
         self.passivity_events: list[dict[str, Any]] = []
+
+    #: the one lane's whole-tick setup (:meth:`configure_lane`), None before
+    _lane: _LaneSetup | None = None
 
     def start(self, position_m: Any, synced: bool = False) -> None:
         """Hold each lane where its handle is ((lanes, 2) or (2,), m). With ``synced`` the
@@ -308,3 +322,145 @@ class MasterTick:
             taken.extend((self.node_offset_s + event.time_s, event) for event in state.events)
             state.events.clear()
         return taken
+
+    def configure_lane(self, nominal_k: float, governor: MarginGovernor | None = None,
+                       allow_unstable: bool = False) -> MasterLaneOutputs:
+        """Set up :meth:`step_lane` for a tick of one lane (a program's, a real-link cell's):
+        ``nominal_k`` the Ch1 gain the compensators were made for; ``governor`` the margin
+        governor (None: k stays nominal); ``allow_unstable``: a round trip beyond the margin
+        of every k does not trip the node. Returns the outputs record each step refills."""
+        if self.lanes != 1:
+            raise ValueError("step_lane runs one lane (the lockstep's lanes: supervise, control)")
+        node = self.node
+        link = PassivityLink(node.passivity is not None and not node.passivity_standby)
+        outputs = MasterLaneOutputs(gain_k=float(nominal_k), flags=FLAGS_BY_VALUE[0])
+        self._lane = _LaneSetup(float(nominal_k), governor, allow_unstable, link,
+                                int(link.flags), outputs)
+        return outputs
+
+    def step_lane(self, inputs: MasterLaneInputs,
+                  clock_ns: Callable[[], int] | None = None) -> MasterLaneOutputs:
+        """One whole tick of the one lane (:meth:`configure_lane`): the peer's control mode
+        checked, the supervisor, the governor (k, the passivity layer's switch, its trip), the
+        slave's handed-over energy and the drift correction's target, then the node. Returns
+        the outputs record, refilled (``supervised_ns``: ``clock_ns()`` at the end of the
+        supervise part, 0 without a clock). Raises ``LinkOpenError`` for a slave in the other
+        ``[control]`` mode."""
+        lane = self._lane
+        if lane is None:
+            raise RuntimeError("configure_lane before step_lane")
+        outputs = lane.outputs
+        message = inputs.message
+        if message is not None:  # a peer in the other [control] mode: refused
+            lane.passivity.check(message)
+        now_s = inputs.now_s
+        position = inputs.handle_position_m
+        outputs.transition = self.supervise(
+            now_s, (message,), position, (inputs.faults,), inputs.cycle, (inputs.silence_s,),
+            (inputs.peer_alive,))[0]
+        supervisor = self.supervisors[0]
+        outputs.enabled = enabled = supervisor.enabled
+        outputs.gain_k = lane.nominal_k if lane.governor is None else self._govern(
+            lane, inputs, enabled)
+        outputs.supervised_ns = clock_ns() if clock_ns is not None else 0
+        state = self.state
+        tool = outputs.tool = supervisor.tool
+        if state is not None and state.passivity is not None and tool is not None:
+            # the slave's handed-over energy, and the drift correction's target: the tool in
+            # handle coordinates
+            state.peer_energy_J[0] = lane.passivity.peer_energy(state.passivity, tool)
+            state.peer_target_m[0, 0] = tool.tool_position_m[0] / supervisor.ratio_x
+            state.peer_target_m[0, 1] = tool.tool_position_m[1] / supervisor.ratio_y
+        # the node reports what it used: the slave's Ch2 integrates exactly the handle force
+        # Ch1 used; the operator feels the tool force it used
+        used = outputs.used = self.control(inputs.handle_force_N, position)
+        outputs.flags = FLAGS_BY_VALUE[int(used.flag_values[0]) | lane.flag_value]
+        outputs.energy_J = lane.passivity.sent_J(self.state)
+        return outputs
+
+    def _govern(self, lane: _LaneSetup, inputs: MasterLaneInputs, enabled: bool) -> float:
+        """The governor's tick (master/program_governor.py): k from the echoed round trip,
+        the standby passivity layer switched as it asks, and a trip beyond every margin.
+        Returns k."""
+        governor = lane.governor
+        assert governor is not None
+        now_s = inputs.now_s
+        decision = governor_step(governor, inputs.latest, inputs.first_sent_ns,
+                                 inputs.last_sent_ns, inputs.poll_ns, now_s)
+        gain_k = decision.gain_k
+        if decision.mode_request is not None and self.node.passivity_standby:
+            # the passivity layer on or off; the slave follows the flag
+            self.switch_passivity(now_s, _ONE_LANE, decision.mode_request == "tdpa",
+                                  governor.events[-1]["reason"] if governor.events
+                                  else "governor")
+        if enabled:
+            state = self.state
+            state.gain_ratio[0] = gain_k / lane.nominal_k
+            if decision.beyond_margin and not lane.allow_unstable:
+                self.node.trip(state, [0], "governor: round trip beyond the delay margin "
+                               "of every k")
+        return gain_k
+
+
+#: one lane, as a mask (MasterTick.switch_passivity)
+_ONE_LANE = np.ones(1, bool)
+
+
+@dataclass(slots=True)
+class MasterLaneInputs:
+    """One tick's inputs of one lane (:meth:`MasterTick.step_lane`), refilled in place by the
+    read and poll stages. ``now_s``: the tick's time, s; ``handle_force_N`` and
+    ``handle_position_m`` (1, 2): the handle's reading, N and m; ``faults``: the hardware's;
+    ``cycle``: the reading's cycle; ``message``: the fresh ``ToolState`` or None; ``latest``:
+    the newest delivered so far (its echo feeds the governor); ``silence_s``: time since the
+    last fresh message, s; ``peer_alive``: the slave's liveliness; ``first_sent_ns``,
+    ``last_sent_ns``: this side's first and newest handle message's send time, and
+    ``poll_ns``: the poll's time (CLOCK_REALTIME ns)."""
+
+    now_s: float = 0.0
+    handle_force_N: np.ndarray = field(default_factory=lambda: np.zeros((1, 2)))
+    handle_position_m: np.ndarray = field(default_factory=lambda: np.zeros((1, 2)))
+    faults: Sequence[str] = ()
+    cycle: int = 0
+    message: ToolState | None = None
+    latest: ToolState | None = None
+    silence_s: float = math.inf
+    peer_alive: bool = True
+    first_sent_ns: int = 0
+    last_sent_ns: int = 0
+    poll_ns: int = 0
+
+
+@dataclass(slots=True)
+class MasterLaneOutputs:
+    """One tick's outputs of one lane (:meth:`MasterTick.step_lane`), refilled in place:
+    ``transition``: the supervisor's; ``used``: what the node used (command, forces, scale;
+    None before the first tick); ``gain_k``: the Ch1 gain k of this tick; ``flags``: the
+    message's to the slave (the mode's TDPA flag included); ``energy_J``: this side's
+    handed-over energy to send, J; ``tool``: the supervisor's newest ``ToolState``;
+    ``enabled``: the supervisor's forces on after its update (before a trip in the node
+    part); ``supervised_ns``: the clock at the end of the supervise part, ns (0: not
+    taken)."""
+
+    transition: Transition = Transition.NONE
+    enabled: bool = False
+    used: MasterTickOutput | None = None
+    gain_k: float = 0.0
+    flags: Flags = Flags(0)
+    energy_J: float = 0.0
+    tool: ToolState | None = None
+    supervised_ns: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class _LaneSetup:
+    """:meth:`MasterTick.configure_lane`'s: the nominal k, the governor and its trip, the
+    passivity layer's wire side (its mode's flag as an int: or'ed, one lookup a tick) and
+    the outputs record."""
+
+    nominal_k: float
+    governor: MarginGovernor | None
+    allow_unstable: bool
+    passivity: PassivityLink
+    flag_value: int
+    outputs: MasterLaneOutputs

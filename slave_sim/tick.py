@@ -21,11 +21,19 @@ outputs with the flags to send.
 :meth:`SlaveTick.supervise` is the one way in: the simulator's quiet-lane filter
 (lockstep/quiet_lanes.py) calls it on the lanes whose guard or supervisor has something to
 do, the program on its one lane.
+
+One lane's whole tick is one call, :meth:`SlaveTick.step_lane` (the program and the real-link
+cells, on the one tick driver: common/runtime/tick_driver.py): its inputs
+(:class:`SlaveLaneInputs`: the delivered messages, the link's silence) in, its outputs
+(:class:`SlaveLaneOutputs`: the node's outputs, the flags, the echo and the energy to send)
+out, with the pacing (one node step per master sample), the passivity layer's account of the
+master's energy and the flags inside it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,9 +42,10 @@ import numpy as np
 from haptic.common.analysis.margin_table import follow_gain
 from haptic.common.wire.lane_flags import lane_flag_values
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, HandleState
+from haptic.common.wire.passivity_link import PassivityLink
 from haptic.slave_sim.input_guard import InputGuard
 from haptic.slave_sim.node import SlaveNode, SlaveOutputs, SlaveState
-from haptic.slave_sim.pacing import Sample, Step
+from haptic.slave_sim.pacing import MasterSamplePacing, Sample, Step
 from haptic.slave_sim.resync import ToolResync
 from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
 
@@ -119,6 +128,9 @@ class SlaveTick:
         self._outside = np.zeros(lanes, bool)
         self._flag_values = np.zeros(lanes, np.int64)
         self._none_switched = np.zeros(lanes, bool)
+
+    #: the one lane's whole-tick setup (:meth:`configure_lane`), None before
+    _lane: _LaneSetup | None = None
 
     def follow_gain(self, nominal_k: float, scalable: bool) -> None:
         """Follow the master's governed k (``HandleState.gain_k``, never above
@@ -294,3 +306,113 @@ class SlaveTick:
                                                    (_WORK_AREA_STOP, self._outside),
                                                    (_TDPA_SWITCHED, switched)))
         return SlaveTickOutput(out, running, values)
+
+    def configure_lane(self, pacing: MasterSamplePacing | None = None) -> SlaveLaneOutputs:
+        """Set up :meth:`step_lane` for a tick of one lane (a program's, a real-link cell's):
+        ``pacing``: one node step per master sample (slave_sim/pacing.py; None: one step
+        every tick with the tick's own input). Returns the outputs record each step
+        refills."""
+        if self.lanes != 1:
+            raise ValueError("step_lane runs one lane (the lockstep's lanes: supervise, control)")
+        node = self.node
+        link = PassivityLink(node.passivity is not None and not node.passivity_standby)
+        outputs = SlaveLaneOutputs(flags=FLAGS_BY_VALUE[0])
+        self._lane = _LaneSetup(pacing, link, int(link.flags), outputs)
+        return outputs
+
+    def first_output(self) -> SlaveLaneOutputs:
+        """The node's output before the first tick (one step: the tool at rest, waiting for
+        the master), which the first ticks send while no master sample has come."""
+        lane = self._lane
+        if lane is None:
+            raise RuntimeError("configure_lane before first_output")
+        self._node_part(lane, ())
+        return lane.outputs
+
+    def step_lane(self, inputs: SlaveLaneInputs,
+                  clock_ns: Callable[[], int] | None = None) -> SlaveLaneOutputs:
+        """One whole tick of the one lane (:meth:`configure_lane`): the peer's control mode
+        checked, the guard and the supervisor (every message delivered with the newest is a
+        sample of its own), the master's handed-over energy, then the node: once per master
+        sample while the tool runs (none while the master's next sample has not come, more
+        after a gap; the last outputs stay), or once a tick without pacing. Returns the
+        outputs record, refilled (``supervised_ns``: ``clock_ns()`` at the end of the
+        supervise part, 0 without a clock). Raises ``LinkOpenError`` for a master in the
+        other ``[control]`` mode."""
+        lane = self._lane
+        if lane is None:
+            raise RuntimeError("configure_lane before step_lane")
+        outputs = lane.outputs
+        message = inputs.message
+        if message is not None:  # a peer in the other [control] mode: refused
+            lane.passivity.check(message)
+        fresh = outputs.fresh = bool(self.supervise(
+            inputs.now_s, (message,), (inputs.silence_s,), (inputs.peer_alive,),
+            None if lane.pacing is None else (inputs.earlier,))[0])
+        state = self.state
+        if fresh and state.passivity is not None:  # the master's handed-over energy
+            lane.passivity.receive(state.passivity, message)
+        outputs.supervised_ns = clock_ns() if clock_ns is not None else 0
+        pacing = lane.pacing
+        if pacing is None:
+            self._node_part(lane, ())
+        else:
+            plan = pacing.plan(bool(self.running[0]), self.samples[0])
+            if plan or outputs.ticked is None:  # each step with its own sample's force
+                self._node_part(lane, plan)
+        return outputs
+
+    def _node_part(self, lane: _LaneSetup, plan: Sequence[Step]) -> None:
+        """The node stage over ``plan`` (at least one step) into the outputs record, with the
+        virtual world's time (node steps x Ts) and the message fields to send."""
+        outputs = lane.outputs
+        ticked = outputs.ticked = self.control_samples(plan)
+        outputs.sample_time_s += max(len(plan), 1) * self.node.sample_period_s
+        outputs.flags = FLAGS_BY_VALUE[int(ticked.flag_values[0]) | lane.flag_value]
+        outputs.echo_send_time_ns = int(self.echo_send_time_ns[0])
+        outputs.energy_J = lane.passivity.sent_J(self.state)
+
+
+@dataclass(slots=True)
+class SlaveLaneInputs:
+    """One tick's inputs of one lane (:meth:`SlaveTick.step_lane`), refilled in place by the
+    poll stage: ``now_s``: the tick's time, s; ``message``: the fresh ``HandleState`` or
+    None; ``earlier``: the older messages delivered with it, in order; ``silence_s``: time
+    since the last fresh message, s; ``peer_alive``: the master's liveliness."""
+
+    now_s: float = 0.0
+    message: HandleState | None = None
+    earlier: Sequence[HandleState] = ()
+    silence_s: float = math.inf
+    peer_alive: bool = True
+
+
+@dataclass(slots=True)
+class SlaveLaneOutputs:
+    """One tick's outputs of one lane (:meth:`SlaveTick.step_lane`), refilled in place:
+    ``fresh``: the message was an input; ``ticked``: the node's last outputs (the tool's
+    force, position, velocity; None before the first step), sent again while the master's
+    next sample has not come; ``sample_time_s``: the virtual world's time, s (node steps x
+    Ts); ``flags``: the message's to the master (the mode's TDPA flag included);
+    ``echo_send_time_ns``: the newest admitted handle message's send time, ns (0: none);
+    ``energy_J``: this side's handed-over energy to send, J; ``supervised_ns``: the clock at
+    the end of the supervise part, ns (0: not taken)."""
+
+    fresh: bool = False
+    ticked: SlaveTickOutput | None = None
+    sample_time_s: float = 0.0
+    flags: Flags = Flags(0)
+    echo_send_time_ns: int = 0
+    energy_J: float = 0.0
+    supervised_ns: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class _LaneSetup:
+    """:meth:`SlaveTick.configure_lane`'s: the pacing, the passivity layer's wire side (its
+    mode's flag as an int: or'ed, one lookup a tick) and the outputs record."""
+
+    pacing: MasterSamplePacing | None
+    passivity: PassivityLink
+    flag_value: int
+    outputs: SlaveLaneOutputs

@@ -1,7 +1,8 @@
 """What ``haptic-master`` and ``haptic-slave`` share around their tick: waiting for the peer,
 the real-time runner, the recording's start and status, the display feed's pacing, the live
 status line and the run's summary. Each program keeps only its own tick (master/tick.py,
-slave_sim/tick.py) and its own telemetry columns (docs/architecture.md, "one tick").
+slave_sim/tick.py), its stages on the one tick driver (common/runtime/tick_driver.py) and its
+own telemetry columns (docs/architecture.md, "one tick").
 
 One run, in order::
 
@@ -9,7 +10,7 @@ One run, in order::
     status = harness.wait_for_peer(peer_wait_s, signals)   # None: the peer came
     harness.start()                                         # the run's time origin
     harness.attach_display(display)                         # optional
-    run = harness.run(step, status_text, signals, on_stop)  # step(tick, now_ns)
+    run = harness.run(driver, status_text, signals, on_stop)  # the one tick driver
     summary = harness.summary(run, watchdog, max_force_N, event_lists, **extra)
     harness.finish(summary)                                 # recording, JSON, stderr
 
@@ -32,15 +33,10 @@ from haptic.common.config import ConfigError
 from haptic.common.records.run_recording import RunRecording
 from haptic.common.runtime.display import DisplayPublisher, EventCursor
 from haptic.common.runtime.display_backoff import DisplayBackoff
-from haptic.common.runtime.runner import (
-    LeadFunction,
-    RealTimeRunner,
-    RunStats,
-    StepFunction,
-    StopSignals,
-)
+from haptic.common.runtime.runner import LeadFunction, RealTimeRunner, RunStats, StopSignals
 from haptic.common.runtime.runner_config import prioritise_zenoh_threads
 from haptic.common.runtime.summary import format_summary, make_summary, write_json_summary
+from haptic.common.runtime.tick_driver import TickDriver
 from haptic.common.runtime.watchdog import PeerWatchdog
 from haptic.common.wire.link import Link
 
@@ -172,11 +168,12 @@ class ProgramHarness:
                 + f"link p50 {stats.one_way_delay_p50_s * 1e3:.3f} ms  loss "
                 f"{stats.loss_ratio * 100:.2f} %  {watchdog.state.value}  {text}")
 
-    def run(self, step: StepFunction, status_text: Callable[[], str], signals: StopSignals,
+    def run(self, driver: TickDriver, status_text: Callable[[], str], signals: StopSignals,
             on_stop: Callable[[], None], lead: LeadFunction | None = None,
             lead_s: float = 0.0, before_loop: Callable[[], None] | None = None) -> RunStats:
-        """The real-time runner over ``step`` for the run's duration (or until stopped);
-        :attr:`runner` is the runner while it runs (a step may shift its schedule). On every
+        """The real-time runner over ``driver``'s ticks for the run's duration (or until
+        stopped); :attr:`runner` is the runner while it runs, and the schedule shifts the
+        driver's sides ask for go to it (``TickDriver.follow``). On every
         way out ``on_stop()`` puts the side in its safe state and tells the peer, then the
         link's figures are kept (:meth:`collect_link`). ``status_text()``: this side's part
         of the live status line; ``lead``/``lead_s``: the runner's call ``lead_s`` (s) before
@@ -193,10 +190,11 @@ class ProgramHarness:
             link.discard_received()
 
         self.runner = RealTimeRunner(
-            self.period_s, step, duration_s=options.duration_s, max_steps=options.max_steps,
+            self.period_s, driver.step, duration_s=options.duration_s, max_steps=options.max_steps,
             spin_s=options.runner.spin_s, freeze_heap=True, prepare=prepare,
             realtime=options.runner.realtime, status=status_text,
             show_status=options.show_status, stop_signals=signals, lead=lead, lead_s=lead_s)
+        driver.follow(self.runner.shift_schedule)
         try:
             return self.runner.run()
         finally:

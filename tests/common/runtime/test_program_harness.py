@@ -13,6 +13,7 @@ import time
 from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
 from haptic.common.runtime.program_harness import ProgramHarness
 from haptic.common.runtime.runner import StopSignals
+from haptic.common.runtime.tick_driver import TickDriver
 from haptic.common.wire.link import Link
 from tests.helpers.link_helpers import configs, wait_for_peers
 
@@ -24,6 +25,23 @@ def _options():
     add_run_options(parser)
     options = run_options_from_args(parser.parse_args([]), "master")
     return dataclasses.replace(options, max_steps=5)
+
+
+class _PollingSide:
+    """A side of one stage: it polls the link and keeps (tick, thread, message)."""
+
+    stage_names = ("poll",)
+    schedule_shift_ns = 0
+
+    def __init__(self, link: Link, ticks: list[tuple[int, int, object]]) -> None:
+        self.link = link
+        self.ticks = ticks
+
+    def stages(self) -> tuple:
+        return (self.poll,)
+
+    def poll(self, tick: int, _now_ns: int) -> None:
+        self.ticks.append((tick, threading.get_ident(), self.link.poll()))
 
 
 def test_before_loop_runs_once_on_the_loop_thread_after_the_freeze_before_the_backlog_goes():
@@ -44,12 +62,9 @@ def test_before_loop_runs_once_on_the_loop_thread_after_the_freeze_before_the_ba
             seen["ticks_before"] = len(ticks)
             seen["discarded_before"] = master.discarded_before_start
 
-        def step(tick: int, now_ns: int) -> None:
-            ticks.append((tick, threading.get_ident(), master.poll()))
-
         with StopSignals() as signals:
-            run = harness.run(step, lambda: "", signals, lambda: None,
-                              before_loop=before_loop)
+            run = harness.run(TickDriver([_PollingSide(master, ticks)]), lambda: "", signals,
+                              lambda: None, before_loop=before_loop)
     assert run.steps == 5
     assert seen["calls"] == 1 and seen["ticks_before"] == 0
     assert seen["thread"] == ticks[0][1]  # the loop's thread

@@ -22,7 +22,6 @@ from haptic.master.hardware.interface import (
     hardware_names,
 )
 from haptic.master.node import MasterNode
-from haptic.master.runner import run_master
 from haptic.master.settings import master_settings
 from haptic.master.simulated_rig.can_devices import (
     NMT_OPERATIONAL_STATE,
@@ -30,6 +29,7 @@ from haptic.master.simulated_rig.can_devices import (
     SimulatedRigHardware,
 )
 from haptic.master.simulated_rig.rig_block import RigModel
+from haptic.master.standalone import run_master
 
 
 def _config(operator: str = "constant:fx=0,fy=0", **overrides):

@@ -11,8 +11,8 @@ from haptic.common.config import load_config, override
 from haptic.common.model.teleop import model_from_config
 from haptic.master.hardware.interface import HardwareError, LifecycleState, create_hardware
 from haptic.master.node import MasterNode
-from haptic.master.runner import run_master
 from haptic.master.settings import master_settings
+from haptic.master.standalone import run_master
 
 
 def _config() -> dict:

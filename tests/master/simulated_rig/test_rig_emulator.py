@@ -29,7 +29,6 @@ from haptic.master.hardware.cia402 import DriveState
 from haptic.master.hardware.drive_device import load_drive_dictionary
 from haptic.master.hardware.interface import HardwareError, LifecycleState, create_hardware
 from haptic.master.node import MasterNode
-from haptic.master.runner import run_master
 from haptic.master.settings import master_settings
 from haptic.master.simulated_rig.can_devices import (
     OPERATOR_DISPLAY_ID,
@@ -39,6 +38,7 @@ from haptic.master.simulated_rig.can_devices import (
 )
 from haptic.master.simulated_rig.cli import main as rig_sim_main
 from haptic.master.simulated_rig.rig_emulator import READY_PREFIX, EmulatedRigHardware
+from haptic.master.standalone import run_master
 
 #: Cap on waiting for anything a child does, s.
 WAIT_S = 40.0

@@ -13,7 +13,7 @@ import pytest
 from haptic.common.analysis.preflight import EXIT_UNSTABLE, round_trip_delay_s
 from haptic.common.config import ConfigError, override
 from haptic.common.model.teleop import model_from_config
-from haptic.master.governor_setup import start_governor
+from haptic.master.program_governor import start_governor
 
 
 def _args(**values) -> argparse.Namespace:
@@ -63,8 +63,8 @@ def test_an_echo_of_no_handle_message_sent_is_counted_and_never_a_round_trip() -
     from types import SimpleNamespace
 
     from haptic.common.config import load_config
-    from haptic.master.governor_setup import governor_step
     from haptic.master.margin_governor import governor_for
+    from haptic.master.program_governor import governor_step
 
     config = override(load_config(), "governor.enabled", True)
     governor = governor_for(model_from_config(config), config)
@@ -74,10 +74,12 @@ def test_an_echo_of_no_handle_message_sent_is_counted_and_never_a_round_trip() -
     for echo_ns in (t0 + 10**12, 1, t0 - 1):
         link.latest = SimpleNamespace(echo_send_time_ns=echo_ns)
         for tick in range(3):  # the same message on every tick: counted once
-            governor_step(governor, link, tick * 1e-3)
+            governor_step(governor, link.latest, link.first_sent_ns, link.last_sent_ns,
+                          link.last_poll_ns, tick * 1e-3)
         assert math.isnan(governor.rtt_s) and governor.max_rtt_s == 0.0  # no round trip yet
     assert governor.invalid_echoes == 3
     link.latest = SimpleNamespace(echo_send_time_ns=t0 + 4_000_000)  # sent: 8 ms ago
-    governor_step(governor, link, 0.01)
+    governor_step(governor, link.latest, link.first_sent_ns, link.last_sent_ns,
+                  link.last_poll_ns, 0.01)
     assert governor.rtt_s == pytest.approx(0.008)
     assert governor.invalid_echoes == 3 and governor.summary()["governor_invalid_echoes"] == 3

@@ -1,9 +1,10 @@
-"""The margin governor in ``haptic-master``: built at start, stepped once per tick.
+"""The margin governor as ``haptic-master`` runs it: built and checked at start, fed the
+link's echo once per tick.
 
-Kept apart from the loop (master/program.py calls three functions): :func:`start_governor`
-builds the tau*(k) table, prints it, and refuses a run whose delay profile reaches beyond the
-margin of every gain (exit 3, unless ``--allow-unstable``); :func:`governor_step` feeds the
-governor the echo of the newest tool message.
+:func:`start_governor` builds the tau*(k) table, prints it, and refuses a run whose delay
+profile reaches beyond the margin of every gain (exit 3, unless ``--allow-unstable``);
+:func:`governor_step` feeds the governor the echo of the newest tool message (the master's
+whole tick calls it, master/tick.py ``MasterTick.step_lane``).
 """
 
 from __future__ import annotations
@@ -19,7 +20,6 @@ from haptic.common.analysis.preflight import (
     round_trip_delay_s,
 )
 from haptic.common.model.teleop import TeleopModel
-from haptic.common.wire.link import Link
 from haptic.master.margin_governor import GovernorDecision, MarginGovernor, governor_for
 
 
@@ -69,18 +69,19 @@ def start_governor(config: dict[str, Any], args: argparse.Namespace, model: Tele
     return None, EXIT_UNSTABLE
 
 
-def governor_step(governor: MarginGovernor, link: Link, now_s: float) -> GovernorDecision:
-    """One tick: the echo age of the newest tool message (the link's poll time minus the
-    echoed handle send time, both CLOCK_REALTIME on this host) into the governor. An echo
-    of no handle message this master sent (before its first, after its newest: a faulty or
-    forged slave's) is no round trip: it is counted once per message and not used, so it can
-    neither hide the delay (a future echo read as zero round trip) nor invent one."""
-    latest = link.latest
+def governor_step(governor: MarginGovernor, latest: object | None, first_sent_ns: int,
+                  last_sent_ns: int, poll_ns: int, now_s: float) -> GovernorDecision:
+    """One tick: the echo age of ``latest`` (the newest tool message) into the governor: the
+    poll time ``poll_ns`` minus the echoed handle send time, both CLOCK_REALTIME ns on this
+    host. An echo of no handle message this master sent (before ``first_sent_ns``, after
+    ``last_sent_ns``: a faulty or forged slave's) is no round trip: it is counted once per
+    message and not used, so it can neither hide the delay (a future echo read as zero round
+    trip) nor invent one. ``now_s``: the tick's time, s."""
     echo_ns = getattr(latest, "echo_send_time_ns", 0) if latest is not None else 0
-    if echo_ns > 0 and not link.first_sent_ns <= echo_ns <= link.last_sent_ns:
+    if echo_ns > 0 and not first_sent_ns <= echo_ns <= last_sent_ns:
         if latest is not governor.last_invalid_echo:
             governor.last_invalid_echo = latest
             governor.invalid_echoes += 1
         echo_ns = 0
-    age_s = (link.last_poll_ns - echo_ns) * 1e-9 if echo_ns > 0 else None
+    age_s = (poll_ns - echo_ns) * 1e-9 if echo_ns > 0 else None
     return governor.update(now_s, age_s)
