@@ -102,6 +102,13 @@ def test_the_tests_named_for_a_module_come_first_then_the_narrowest(tmp_path: Pa
         "tests/test_config_limits.py", "tests/test_lazy.py", "tests/test_wide.py"]
     assert finder.ordered("common/guard.py", tests, graph) == [
         "tests/test_config_limits.py", "tests/test_lazy.py", "tests/test_wide.py"]
+    # the test named exactly for the module first, however much more it imports
+    write(tmp_path, {"tests/test_guard.py": "import haptic.master.node, haptic.common.guard\n",
+                     "tests/test_guard_limits.py": "import haptic.common.guard\n"})
+    graph = finder.ImportGraph(tmp_path)
+    assert finder.ordered("common/guard.py", [*tests, "tests/test_guard_limits.py",
+                                              "tests/test_guard.py"], graph)[:2] == [
+        "tests/test_guard.py", "tests/test_guard_limits.py"]
 
 
 def test_imports_are_read_wherever_they_are() -> None:

@@ -192,14 +192,18 @@ def _first_token(stem: str) -> str:
 
 def ordered(path: str, tests: Iterable[str], graph: ImportGraph) -> list[str]:
     """``tests`` of module file ``path``, the likeliest to catch its mutants soonest first:
-    those named for it (the first word of the test file's name is the first word of the
-    module's name or its folder's: ``test_config_limits.py`` for ``config/loader.py``), then
-    by how few project modules each imports (the unit tests before the integration tests)."""
+    the one named exactly for it (``test_passivity.py`` for ``passivity.py``: a time cap on
+    the tests must never leave it out), then those named for it (the first word of the test
+    file's name is the first word of the module's name or its folder's:
+    ``test_config_limits.py`` for ``config/loader.py``), then by how few project modules each
+    imports (the unit tests before the integration tests)."""
     folder, _, name = path.rpartition("/")
-    words = {_first_token(name.removesuffix(".py")), folder.rpartition("/")[2]}
+    stem = name.removesuffix(".py")
+    words = {_first_token(stem), folder.rpartition("/")[2]}
 
-    def key(test: str) -> tuple[bool, int, str]:
-        stem = test.rpartition("/")[2].removesuffix(".py")
-        return (_first_token(stem) not in words, len(graph.test_imports(test)), test)
+    def key(test: str) -> tuple[bool, bool, int, str]:
+        test_stem = test.rpartition("/")[2].removesuffix(".py")
+        return (test_stem != f"test_{stem}", _first_token(test_stem) not in words,
+                len(graph.test_imports(test)), test)
 
     return sorted(tests, key=key)
