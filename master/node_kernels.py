@@ -277,17 +277,26 @@ def output_stage(lane: int, cmd: wp.vec2d, u: wp.vec4d, fault: bool, code: wp.in
     (the peer must integrate none either); the events, counted for the caller."""
     cmd_x = cmd[0]
     cmd_y = cmd[1]
-    forces = u
+    zero = wp.float64(0.0)
+    u0 = u[0]
+    u1 = u[1]
+    u2 = u[2]
+    u3 = u[3]
     if fault:
         cmd_x = hold[lane, 0]
         cmd_y = hold[lane, 1]
-        forces = wp.vec4d(wp.float64(0.0), wp.float64(0.0), wp.float64(0.0), wp.float64(0.0))
+        u0 = zero
+        u1 = zero
+        u2 = zero
+        u3 = zero
     last_command[lane, 0] = cmd_x
     last_command[lane, 1] = cmd_y
     command[lane, 0] = cmd_x
     command[lane, 1] = cmd_y
-    for column in range(4):
-        used[lane, column] = forces[column]
+    used[lane, 0] = u0
+    used[lane, 1] = u1
+    used[lane, 2] = u2
+    used[lane, 3] = u3
     trip_code[lane] = code
     event_bits[lane] = bits
     if code >= 0 or bits != 0:
