@@ -1,0 +1,29 @@
+"""The files ``haptic-sim compare --out DIR`` writes: the whole result as compare.json and
+one row per cell as cells.csv (the same keys; empty where a figure does not exist)."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+CELL_COLUMNS = ("control", "task", "round_trip_s", "loss", "loss_model", "jitter_s", "bounded",
+                "predicted_bounded", "peak_force_N", "impact_overshoot_ratio",
+                "rms_position_error_m", "rms_force_error_N", "final_position_gap_m",
+                "perceived_stiffness_ratio")
+
+
+def write_compare_files(data: dict[str, Any], out: Path) -> None:
+    """Write ``data`` (:meth:`CompareResult.to_json`) into ``out`` (created if missing)."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "compare.json").write_text(json.dumps(data, indent=1))
+    with (out / "cells.csv").open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=CELL_COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        for cell in data["cells"]:
+            writer.writerow({key: "" if cell.get(key) is None else cell[key]
+                             for key in CELL_COLUMNS})
+
+
+__all__ = ["CELL_COLUMNS", "write_compare_files"]

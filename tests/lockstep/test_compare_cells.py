@@ -1,0 +1,56 @@
+"""Cells of the comparison on cases whose outcome is known (short runs of small grids)."""
+
+from __future__ import annotations
+
+import pytest
+
+from haptic.common.config import load_config
+from haptic.common.model.teleop import model_from_config
+from haptic.lockstep.compare import run_compare
+from haptic.lockstep.compare_grid import CompareGrid, TaskSettings
+
+CELL_KEYS = {"control", "task", "round_trip_s", "loss", "loss_model", "jitter_s", "bounded",
+             "peak_force_N", "impact_overshoot_ratio", "rms_position_error_m",
+             "rms_force_error_N", "final_position_gap_m", "perceived_stiffness_ratio"}
+
+
+def _wall_grid(controls: tuple[str, ...], stiffness_N_per_m: float,
+               round_trips_s: tuple[float, ...]) -> CompareGrid:
+    return CompareGrid(controls, ("wall",), round_trips_s, (0.0,), ("independent",), (0.0,),
+                       (stiffness_N_per_m,),
+                       TaskSettings(wall_stiffness_N_per_m=stiffness_N_per_m, settle_s=3.0))
+
+
+def test_a_soft_wall_without_delay_feels_like_itself_through_wave_and_four_channel() -> None:
+    result = run_compare(_wall_grid(("wave", "four-channel"), 300.0, (0.0,)))
+    assert len(result.cells) == 2
+    for cell in result.cells:
+        assert set(cell) >= CELL_KEYS
+        assert cell["bounded"], cell
+        assert cell["perceived_stiffness_ratio"] == pytest.approx(1.0, abs=0.2), cell
+        assert cell["final_position_gap_m"] < 1e-3
+        assert cell["predicted_bounded"] is True
+    assert [row["z_width_N_per_m"] for row in result.z_width] == [300.0, 300.0]
+    assert result.theory()["checked"] == 2 and result.theory()["disagreements"] == 0
+
+
+def test_free_motion_has_no_contact_figures() -> None:
+    grid = CompareGrid(("mmt",), ("free-sine",), (0.05,), (0.0,), ("independent",), (0.0,),
+                       (300.0,), TaskSettings(settle_s=2.0))
+    (cell,) = run_compare(grid).cells
+    assert cell["bounded"]
+    assert cell["impact_overshoot_ratio"] is None and cell["perceived_stiffness_ratio"] is None
+    assert 0.0 < cell["rms_position_error_m"] < 0.01
+    assert "predicted_bounded" not in cell  # no theory for model-mediated control
+
+
+def test_the_paper_scheme_beyond_its_delay_margin_is_reported_unbounded() -> None:
+    # a 500 N/m spring leaves the paper's loop a round-trip margin of about 81 ms
+    model = model_from_config(load_config(None))
+    result = run_compare(_wall_grid(("paper",), 500.0, (0.04, 0.16)), model)
+    below, beyond = result.cells
+    assert below["bounded"] and below["predicted_bounded"] is True
+    assert not beyond["bounded"] and beyond["predicted_bounded"] is False
+    margins = {item["margin_s"] for item in result.theory()["predictions"]}
+    assert len(margins) == 1 and 0.04 < margins.pop() < 0.16
+    assert result.theory()["checked"] == 2 and result.theory()["disagreements"] == 0

@@ -1,0 +1,80 @@
+"""The comparison's grid, cell records and summaries, without simulating."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from haptic.lockstep.compare import CompareResult, z_width_rows
+from haptic.lockstep.compare_grid import BoundSettings, CompareGrid, Lane, Network
+from haptic.lockstep.compare_records import LaneRecords, bounded_lanes
+
+
+def test_full_grid_has_every_network_once_per_task() -> None:
+    grid = CompareGrid()
+    networks = grid.networks()
+    # a zero loss has one model; 5, 20, 50 % have two
+    assert len(networks) == 9 * 2 * (1 + 3 * 2)
+    assert len(set(networks)) == len(networks)
+    assert len(grid.cell_lanes()) == 2 * len(networks)
+    assert grid.duration_s == pytest.approx(3.0 + grid.task.settle_s)
+
+
+def test_quick_grid_is_three_delays_two_losses_one_jitter_two_tasks() -> None:
+    grid = CompareGrid.quick()
+    assert len(grid.cell_lanes()) == 3 * 2 * 1 * 2
+    ladder = grid.ladder_lanes()
+    assert all(lane.ladder and lane.network.constant_delay for lane in ladder)
+    assert len(ladder) == 3 * len(grid.stiffness_ladder_N_per_m)
+
+
+def test_bursty_loss_keeps_the_mean_rate() -> None:
+    injection = Network(0.1, 0.2, "bursty", 0.0).injection()
+    assert injection is not None and injection.loss_probability == 0.0
+    enter, leave = injection.burst_enter_probability, injection.burst_exit_probability
+    assert enter / (enter + leave) == pytest.approx(0.2)
+    assert Network(0.1, 0.0, "independent", 0.0).injection() is None
+    assert Network(0.1, 0.05, "independent", 0.01).injection().loss_probability == 0.05
+
+
+def test_unknown_control_is_refused() -> None:
+    with pytest.raises(ValueError, match="controls"):
+        CompareGrid(controls=("paper", "wave-ish"))
+
+
+def _records(forces: list[float], moving: bool = False) -> LaneRecords:
+    records = LaneRecords.create(0.001, 100, len(forces), stride=1)
+    for k in range(100):
+        position = np.full(len(forces), 0.01 * np.sin(k) if moving else 0.0)
+        records.add(k, position, position, np.asarray(forces, float), np.zeros(len(forces)))
+    return records
+
+
+def test_bounds_catch_a_large_force_a_non_finite_sample_and_a_fast_oscillation() -> None:
+    bounds = BoundSettings(force_bound_N=20.0)
+    assert bounded_lanes(_records([1.0, 25.0, np.nan]), bounds).tolist() == [True, False, False]
+    assert not bounded_lanes(_records([1.0], moving=True), bounds)[0]
+
+
+def test_z_width_is_the_last_rung_before_the_first_unbounded_one() -> None:
+    grid = CompareGrid(controls=("wave",), round_trips_s=(0.0, 0.1),
+                       stiffness_ladder_N_per_m=(100.0, 1e3, 1e4, 1e5))
+    lanes = grid.ladder_lanes()
+    verdicts = {(0.0, 100.0): True, (0.0, 1e3): True, (0.0, 1e4): False, (0.0, 1e5): True,
+                (0.1, 100.0): False, (0.1, 1e3): True, (0.1, 1e4): True, (0.1, 1e5): True}
+    bounded = np.array([verdicts[(lane.network.round_trip_s, lane.wall_stiffness_N_per_m)]
+                        for lane in lanes])
+    rows = z_width_rows("wave", grid, lanes + [Lane("wall", lanes[0].network, 1e6)],
+                        np.append(bounded, True))
+    assert [row["z_width_N_per_m"] for row in rows] == [1e3, None]
+    assert rows[0]["ladder_bounded"] == [True, True, False, True]
+
+
+def test_theory_counts_checked_predictions_and_disagreements() -> None:
+    result = CompareResult(CompareGrid.quick())
+    result.predictions = [
+        {"control": "paper", "agree": True}, {"control": "paper", "agree": False},
+        {"control": "wave", "agree": True}]
+    theory = result.theory()
+    assert theory["checked"] == 3 and theory["disagreements"] == 1
+    assert theory["per_control"]["paper"] == {"checked": 2, "disagreements": 1}
