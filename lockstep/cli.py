@@ -3,7 +3,9 @@
 - ``haptic-sim run``: one run of a scenario (traces saved as .npz and plotted);
 - ``haptic-sim repro --out DIR``: the paper's section 4, report.md with figures and table;
 - ``haptic-sim sweep``: the latency sweep (CSV, heat map, ``--json``), exit status 1 with
-  ``--check`` when a cell disagrees with the analysis outside the band.
+  ``--check`` when a cell disagrees with the analysis outside the band;
+- ``haptic-sim compare``: every control architecture on the same tasks, network grid and
+  metrics (docs/architectures.md), ``--quick`` for CI.
 """
 
 from __future__ import annotations
@@ -131,7 +133,25 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--json", action="store_true")
     sweep.add_argument("--check", action="store_true",
                        help="exit 1 when a cell disagrees outside the band")
+
+    compare = sub.add_parser("compare", help="every control on the same tasks, network grid "
+                             "and metrics (docs/architectures.md)", allow_abbrev=False)
+    compare.add_argument("--quick", action="store_true",
+                         help="the CI grid: 0, 50, 200 ms x no loss and 20 %% bursty loss x "
+                         "no jitter x both tasks")
+    compare.add_argument("--controls", type=_names, default=None, metavar="LIST",
+                         help="comma-separated controls (default: paper,tdpa,wave,"
+                         "four-channel,mmt)")
+    compare.add_argument("--seed", type=int, default=0)
+    compare.add_argument("--out", type=Path, default=None,
+                         help="write compare.json and cells.csv here")
+    compare.add_argument("--json", action="store_true", help="print the result as JSON")
     return parser
+
+
+def _names(text: str) -> tuple[str, ...]:
+    """``"a,b"`` -> ("a", "b")."""
+    return tuple(part.strip() for part in text.split(",") if part.strip())
 
 
 def _check_seconds(name: str, value: float) -> None:
@@ -347,6 +367,8 @@ def main(argv: list[str] | None = None) -> int:
                           f" {verdict} ({row.tolerance}) [{row.basis}]")
                 print(f"wrote {args.out / 'report.md'}", file=sys.stderr)
             return 0
+        if args.command == "compare":
+            return command_compare(args, config)
         return command_sweep(args, config)
 
 
@@ -412,6 +434,33 @@ def command_sweep(args: argparse.Namespace, config: dict[str, Any]) -> int:
         print("sweep check failed: cells disagree with the analysis outside the band",
               file=sys.stderr)
         return 1
+    return 0
+
+
+def command_compare(args: argparse.Namespace, config: dict[str, Any]) -> int:
+    """Run the comparison, write its files, print its summary or its JSON."""
+    from dataclasses import replace
+
+    from haptic.common.model.teleop import model_from_config
+    from haptic.lockstep.compare import run_compare, summary_text
+    from haptic.lockstep.compare_grid import CONTROLS, CompareGrid
+    from haptic.lockstep.compare_paper import PAPER_CONTROLS
+
+    controls = args.controls or CONTROLS
+    unknown = [name for name in controls if name not in CONTROLS]
+    if unknown:
+        raise ConfigError("--controls", f"unknown {', '.join(unknown)}; expected some of "
+                          f"{', '.join(CONTROLS)}")
+    grid = CompareGrid.quick(controls) if args.quick else CompareGrid(controls)
+    grid = replace(grid, seed=args.seed)
+    model = model_from_config(config) if set(controls) & set(PAPER_CONTROLS) else None
+    result = run_compare(grid, model)
+    data = result.to_json()
+    if args.out is not None:
+        from haptic.lockstep.compare_files import write_compare_files
+
+        write_compare_files(data, args.out)
+    print(json.dumps(data) if args.json else summary_text(result))
     return 0
 
 
