@@ -62,6 +62,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--config", type=Path, help="TOML configuration (default: the paper's)")
     sub = parser.add_subparsers(dest="command", required=True)
 
+    _add_run_parser(sub)
+    _add_repro_parser(sub)
+    _add_sweep_parser(sub)
+    _add_compare_parser(sub)
+    return parser
+
+
+def _add_run_parser(sub: argparse._SubParsersAction) -> None:
+    """``haptic-sim run``'s options: the scenario, gain, delays, injection, governor, safety
+    and control of one run."""
     run = sub.add_parser("run", help="one lockstep run: traces saved and plotted",
                          allow_abbrev=False)
     run.add_argument("--scenario", default=None, help="scenario name or .toml (default: config)")
@@ -93,10 +103,17 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", type=Path, default=Path("haptic-sim-run"))
     run.add_argument("--json", action="store_true", help="print a JSON summary")
 
+
+def _add_repro_parser(sub: argparse._SubParsersAction) -> None:
+    """``haptic-sim repro``'s options."""
     repro = sub.add_parser("repro", help="reproduce the paper's section 4", allow_abbrev=False)
     repro.add_argument("--out", type=Path, default=Path("haptic-sim-repro"))
     repro.add_argument("--json", action="store_true", help="print the table as JSON")
 
+
+def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
+    """``haptic-sim sweep``'s options: the grid (gains, delays, jitter, loss), the control, the
+    workers and device, the outputs."""
     sweep = sub.add_parser("sweep", help="latency sweep against the analysis",
                            allow_abbrev=False)
     sweep.add_argument("--mode", choices=("linear", "clay"), default="linear")
@@ -134,6 +151,9 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--check", action="store_true",
                        help="exit 1 when a cell disagrees outside the band")
 
+
+def _add_compare_parser(sub: argparse._SubParsersAction) -> None:
+    """``haptic-sim compare``'s options."""
     compare = sub.add_parser("compare", help="every control on the same tasks, network grid "
                              "and metrics (docs/architectures.md)", allow_abbrev=False)
     compare.add_argument("--quick", action="store_true",
@@ -146,7 +166,6 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--out", type=Path, default=None,
                          help="write compare.json and cells.csv here")
     compare.add_argument("--json", action="store_true", help="print the result as JSON")
-    return parser
 
 
 def _names(text: str) -> tuple[str, ...]:
