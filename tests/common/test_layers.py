@@ -6,8 +6,11 @@ configuration loads no CAN stack and no package above ``common``."""
 from __future__ import annotations
 
 import ast
+import io
+import re
 import subprocess
 import sys
+import tokenize
 from pathlib import Path
 
 import pytest
@@ -235,3 +238,167 @@ def test_every_program_is_a_cli_module_with_main() -> None:
         parameters = list(inspect.signature(main).parameters)
         assert parameters == ["argv"], f"{program}: main{parameters}"
         assert inspect.signature(main).return_annotation in (int, "int"), program
+
+
+#: The folders whose Python the size and prose checks below read.
+SOURCE_FOLDERS = ("common", "master", "slave_sim", "lockstep", "view", "bench", "tools")
+
+#: The most lines (``def`` to its last line) a function or method may span: longer ones do
+#: more than one job and belong in functions of one job each.
+LONGEST_FUNCTION_LINES = 80
+
+#: The most lines a function nested in a program module's function may span: a long closure
+#: hides a program's steps from its tests.
+LONGEST_NESTED_FUNCTION_LINES = 30
+
+#: The program modules (patterns under the repository root): the nested-function check reads
+#: these.
+PROGRAM_MODULES = ("master/program*.py", "master/standalone.py", "slave_sim/program*.py",
+                   "common/launch/*.py", "lockstep/real_link.py")
+
+#: (path, qualified name) -> why it is still longer than LONGEST_FUNCTION_LINES. Only
+#: functions being split now; an entry leaves once its function is short (a test says so).
+LONG_FUNCTIONS_BEING_SPLIT: dict[tuple[str, str], str] = {}
+
+#: (path, qualified name) -> why a program module's nested function is still longer than
+#: LONGEST_NESTED_FUNCTION_LINES; shrinks like LONG_FUNCTIONS_BEING_SPLIT.
+LONG_NESTED_FUNCTIONS_BEING_SPLIT: dict[tuple[str, str], str] = {}
+
+
+def _source_files(root: Path = ROOT) -> list[Path]:
+    """Every Python file of the source folders."""
+    return sorted(path for folder in SOURCE_FOLDERS for path in (root / folder).rglob("*.py"))
+
+
+def function_spans(path: Path) -> list[tuple[str, int, int]]:
+    """(qualified name, nesting depth, lines from ``def`` to the last line) of every function
+    and method in a module; depth 0 for a module's functions and a class's methods, 1 and more
+    for a function defined in a function."""
+    spans: list[tuple[str, int, int]] = []
+
+    def visit(node: ast.AST, prefix: str, depth: int) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                name = prefix + child.name
+                spans.append((name, depth, child.end_lineno - child.lineno + 1))
+                visit(child, name + ".", depth + 1)
+            elif isinstance(child, ast.ClassDef):
+                visit(child, prefix + child.name + ".", depth)
+            else:
+                visit(child, prefix, depth)
+
+    visit(ast.parse(path.read_text(), str(path)), "", 0)
+    return spans
+
+
+def _long_functions(paths: list[Path], most_lines: int, nested_only: bool,
+                    root: Path = ROOT) -> dict[tuple[str, str], int]:
+    """(path, qualified name) -> lines of each function longer than ``most_lines``."""
+    return {(path.relative_to(root).as_posix(), name): lines
+            for path in paths for name, depth, lines in function_spans(path)
+            if lines > most_lines and (depth > 0 or not nested_only)}
+
+
+def _program_modules(root: Path = ROOT) -> list[Path]:
+    """The files PROGRAM_MODULES names that exist."""
+    return sorted({path for pattern in PROGRAM_MODULES for path in root.glob(pattern)})
+
+
+def test_no_function_is_longer_than_the_limit() -> None:
+    long = _long_functions(_source_files(), LONGEST_FUNCTION_LINES, nested_only=False)
+    offences = [f"{path}: {name} spans {lines} lines (at most {LONGEST_FUNCTION_LINES})"
+                for (path, name), lines in sorted(long.items())
+                if (path, name) not in LONG_FUNCTIONS_BEING_SPLIT]
+    assert not offences, "\n".join(offences)
+
+
+def test_no_program_module_nests_a_long_function() -> None:
+    long = _long_functions(_program_modules(), LONGEST_NESTED_FUNCTION_LINES, nested_only=True)
+    offences = [f"{path}: nested {name} spans {lines} lines "
+                f"(at most {LONGEST_NESTED_FUNCTION_LINES})"
+                for (path, name), lines in sorted(long.items())
+                if (path, name) not in LONG_NESTED_FUNCTIONS_BEING_SPLIT]
+    assert not offences, "\n".join(offences)
+
+
+def test_the_long_function_allowlists_hold_only_long_functions() -> None:
+    """An entry whose function is now short (or gone) leaves its allowlist, so the lists
+    shrink to empty."""
+    long = _long_functions(_source_files(), LONGEST_FUNCTION_LINES, nested_only=False)
+    nested = _long_functions(_program_modules(), LONGEST_NESTED_FUNCTION_LINES,
+                             nested_only=True)
+    stale = [f"LONG_FUNCTIONS_BEING_SPLIT{key}" for key in LONG_FUNCTIONS_BEING_SPLIT
+             if key not in long]
+    stale += [f"LONG_NESTED_FUNCTIONS_BEING_SPLIT{key}"
+              for key in LONG_NESTED_FUNCTIONS_BEING_SPLIT if key not in nested]
+    assert not stale, "short now (or gone), remove from the allowlist:\n" + "\n".join(stale)
+
+
+def test_the_size_checker_sees_a_long_method_and_a_long_nested_function(tmp_path: Path) -> None:
+    module = tmp_path / "m.py"
+    body = "".join(f"        x{i} = {i}\n" for i in range(31))
+    module.write_text("class C:\n    def outer(self):\n        def inner():\n"
+                      + body.replace("        ", "            ") + "        return inner\n")
+    long = _long_functions([module], 30, nested_only=False, root=tmp_path)
+    assert long == {("m.py", "C.outer"): 34, ("m.py", "C.outer.inner"): 32}
+    assert set(_long_functions([module], 30, nested_only=True, root=tmp_path)) == {
+        ("m.py", "C.outer.inner")}
+
+
+#: What no source docstring or comment says: a date, a machine's name or size, an issue's
+#: number. Measured figures with their machine and date live in docs/measurements/; the
+#: reasons for the code stay in the code.
+DATED_OR_MACHINE_PROSE = re.compile(
+    r"\b20\d\d-\d\d-\d\d\b|\bissues? #?\d+|(?<![\w#&])#\d+\b|\bXeon\b|\bEPYC\b"
+    r"|\bdevelopment VM\b|\b\d+-core\b", re.IGNORECASE)
+
+#: path -> why its docstrings or comments still hold such prose: only files being cleaned
+#: now; an entry leaves once its file is clean (a test says so).
+PROSE_BEING_CLEANED: dict[str, str] = {}
+
+
+def dated_or_machine_prose(path: Path) -> list[tuple[int, str]]:
+    """(line, matched text) of every date, machine name or issue number in a module's comments
+    and docstrings (every string that stands alone as a statement: module, class, function
+    and attribute docstrings)."""
+    text = path.read_text()
+    found = [(token.start[0], match.group())
+             for token in tokenize.generate_tokens(io.StringIO(text).readline)
+             if token.type == tokenize.COMMENT
+             for match in DATED_OR_MACHINE_PROSE.finditer(token.string)]
+    found += [(node.lineno, match.group())
+              for node in ast.walk(ast.parse(text, str(path)))
+              if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)
+              and isinstance(node.value.value, str)
+              for match in DATED_OR_MACHINE_PROSE.finditer(node.value.value)]
+    return sorted(found)
+
+
+def _files_with_dated_or_machine_prose() -> dict[str, list[tuple[int, str]]]:
+    """path -> its findings, for each source file with any."""
+    found = {path.relative_to(ROOT).as_posix(): dated_or_machine_prose(path)
+             for path in _source_files()}
+    return {path: hits for path, hits in found.items() if hits}
+
+
+def test_no_docstring_or_comment_holds_a_date_a_machine_or_an_issue_number() -> None:
+    offences = [f"{path}:{line}: {text!r}"
+                for path, hits in sorted(_files_with_dated_or_machine_prose().items())
+                if path not in PROSE_BEING_CLEANED for line, text in hits]
+    assert not offences, ("dates, machines and issue numbers belong in docs/measurements/ or "
+                          "the commit message:\n" + "\n".join(offences))
+
+
+def test_the_prose_allowlist_holds_only_files_with_such_prose() -> None:
+    found = _files_with_dated_or_machine_prose()
+    stale = [path for path in PROSE_BEING_CLEANED if path not in found]
+    assert not stale, "clean now (or gone), remove from PROSE_BEING_CLEANED: " + ", ".join(stale)
+
+
+def test_the_prose_checker_sees_a_date_a_machine_and_an_issue(tmp_path: Path) -> None:
+    module = tmp_path / "m.py"
+    module.write_text('"""Fast on a 2-core Xeon."""\n\n\ndef f():\n    """See issue 16."""\n'
+                      "    return 1  # measured 2026-12-05, #12\n\n\n"
+                      'LABEL = "issue 3 in a string is data"\n')
+    assert dated_or_machine_prose(module) == [(1, "2-core"), (1, "Xeon"), (5, "issue 16"),
+                                              (6, "#12"), (6, "2026-12-05")]
