@@ -1,7 +1,9 @@
 """The package layers (docs/architecture.md): ``haptic.common`` is the bottom layer and
 imports nothing above it; ``master`` and ``slave_sim`` are peers that never import each
 other; ``lockstep`` composes both; ``view`` reads what the programs publish. Reading a
-configuration loads no CAN stack and no package above ``common``."""
+configuration loads no CAN stack and no package above ``common``. Every function does one job
+(at most 80 lines; a program module's nested functions at most 30), and no docstring or comment
+holds a date, a machine or an issue number."""
 
 from __future__ import annotations
 
