@@ -105,6 +105,10 @@ class LinkedMasterStages:
         #: the handle force sent in the last tick, N
         self.sent = [0.0, 0.0]
         self._max_age_s = link.config.max_message_age_s
+        watchdog = self.supervisor.watchdog
+        self._event_lists: tuple[list[Any], ...] = (
+            watchdog.events, self.supervisor.events, events,
+            governor.events if governor is not None else [])
         safety = tick.node.safety
         self._gate_reason = (f"the start-up gate waits for |fh| < "
                              f"{safety.ramp_small_force_N:g} N "
@@ -141,12 +145,13 @@ class LinkedMasterStages:
         link = self.link
         inputs = self.inputs
         inputs.message = link.poll()
-        inputs.latest = link.latest
         inputs.silence_s = link.silence_s()
         inputs.peer_alive = link.peer_alive
-        inputs.first_sent_ns = link.first_sent_ns
-        inputs.last_sent_ns = link.last_sent_ns
-        inputs.poll_ns = link.last_poll_ns
+        if self.governor is not None:  # the echo's round trip
+            inputs.latest = link.latest
+            inputs.first_sent_ns = link.first_sent_ns
+            inputs.last_sent_ns = link.last_sent_ns
+            inputs.poll_ns = link.last_poll_ns
 
     def step_tick(self, tick: int, now_ns: int) -> int:
         """The whole tick (master/tick.py); returns the clock at its supervise | node
@@ -194,16 +199,24 @@ class LinkedMasterStages:
 
     def telemetry(self, tick: int, now_ns: int) -> None:
         """Events, the inert monitor, the summary's figures, trace, recording, display,
-        status and ROS 2 (each at its own rate)."""
+        status and ROS 2 (each at its own rate). One call a tick: its parts are inline, as
+        the hand-written ticks had them (a Python call costs a fraction of a microsecond)."""
         reading = self.reading
-        now_s = self.inputs.now_s
+        inputs = self.inputs
+        now_s = inputs.now_s
         if reading.events:  # e.g. a drive's statusword warning bits
             self.events.extend({"time_s": now_s, "kind": "hardware_event", "reason": text}
                                for text in reading.events)
         self.take_events()
         used = self.outputs.used
         enabled = bool(used.enabled[0])
-        self._update_inert(now_s, enabled)
+        supervisor = self.supervisor
+        self.inert.update(
+            now_s, inputs.peer_alive and inputs.silence_s < self._max_age_s,
+            enabled and bool(self.tick.state.forces_enabled[0]),
+            self._gate_reason if enabled else "node faulted" if supervisor.faulted
+            else supervisor.stop_reason() if (supervisor.input_faulted or supervisor.peer_held)
+            else f"watchdog {supervisor.watchdog.state.value}: the resync does not complete")
         fhx, fhy = reading.force_N.tolist()
         yhx, yhy = reading.position_m.tolist()
         felt = used.tool_force_used_N[0].tolist()
@@ -232,36 +245,21 @@ class LinkedMasterStages:
             "handle_force_N": [fhx, fhy], "handle_position_m": [yhx, yhy],
             "felt_force_N": [felt[0], felt[1]], "forces_enabled": enabled,
             "safe_state": not enabled})
-        self._status(tick, now_ns, enabled)
+        governor = self.governor
+        if governor is None:
+            self.harness.status(tick, now_ns, supervisor.watchdog, self._event_lists,
+                                forces_enabled=enabled)
+        else:
+            self.harness.status(tick, now_ns, supervisor.watchdog, self._event_lists,
+                                forces_enabled=enabled, governor_k=governor.gain_k,
+                                governor_round_trip_s=governor.rtt_s)
         if self.ros2 is not None:
             self._offer_ros2(tick, now_s, (fhx, fhy), (yhx, yhy), felt, enabled)
 
-    def _update_inert(self, now_s: float, enabled: bool) -> None:
-        """The monitor of forces that stay off, with why they are off."""
-        supervisor = self.supervisor
-        state = self.tick.state
-        self.inert.update(
-            now_s, self.inputs.peer_alive and self.inputs.silence_s < self._max_age_s,
-            enabled and bool(state.forces_enabled[0]),
-            self._gate_reason if enabled else "node faulted" if supervisor.faulted
-            else supervisor.stop_reason() if (supervisor.input_faulted or supervisor.peer_held)
-            else f"watchdog {supervisor.watchdog.state.value}: the resync does not complete")
-
-    def _status(self, tick: int, now_ns: int, enabled: bool) -> None:
-        """The status figures at their rate (common/runtime/program_harness.py)."""
-        governor = self.governor
-        watchdog = self.supervisor.watchdog
-        governed = ({} if governor is None else {
-            "governor_k": governor.gain_k, "governor_round_trip_s": governor.rtt_s})
-        self.harness.status(tick, now_ns, watchdog, self.event_lists(),
-                            forces_enabled=enabled, **governed)
-
     def event_lists(self) -> tuple[list[Any], ...]:
         """The run's event lists: the watchdog's, the supervisor's, the node's and hardware's,
-        the governor's."""
-        supervisor = self.supervisor
-        return (supervisor.watchdog.events, supervisor.events, self.events,
-                self.governor.events if self.governor is not None else [])
+        the governor's (the lists themselves: they grow in place)."""
+        return self._event_lists
 
     def _offer_ros2(self, tick: int, now_s: float, force_N: tuple[float, float],
                     position_m: tuple[float, float], felt: list[float], enabled: bool) -> None:

@@ -102,6 +102,10 @@ class SlaveStages:
         #: yt - Ah1 yh at the last tick the tool ran, m (None: it never ran)
         self.running_gap_m: np.ndarray | None = None
         self._max_age_s = link.config.max_message_age_s
+        self._event_lists = (self.supervisor.watchdog.events, self.supervisor.events)
+        #: the newest bounded handle force and position, (1, 2) N and m (updated in place)
+        self.fh = tick.handle_force_N
+        self.yh = tick.handle_position_m
 
     def stages(self) -> tuple[Stage, ...]:
         """poll, the whole tick (supervise | node), send, telemetry."""
@@ -159,7 +163,8 @@ class SlaveStages:
 
     def telemetry(self, tick: int, now_ns: int) -> None:
         """The inert monitor, the summary's figures, tool path, trace, recording, display,
-        status and ROS 2 (each at its own rate)."""
+        status and ROS 2 (each at its own rate). One call a tick: its parts are inline, as
+        the hand-written tick had them (a Python call costs a fraction of a microsecond)."""
         supervisor = self.supervisor
         inputs, outputs = self.inputs, self.outputs
         now_s = inputs.now_s
@@ -171,40 +176,21 @@ class SlaveStages:
             self.running_gap_m = out.tracking_error_m[0]
         ft = out.tool_force_N[0]
         position = out.tool_position_m[0]
+        velocity = out.tool_velocity_m_s[0]
         engagement = self.engagement = float(out.engagement[0])
+        removed = self.removed_m3
         magnitude = math.hypot(ft[0], ft[1])
         if magnitude > self.max_force_N:
             self.max_force_N = magnitude
         self.tool_force_N = ft
         if tick % self.path_every == 0:
             self.tool_path.add(float(position[0]), float(position[1]))
-        self._trace_and_record(tick, now_ns, out, running)
-        ready = supervisor.ready
-        self.harness.offer_state(tick, lambda: {
-            "tool_force_N": [float(ft[0]), float(ft[1])],
-            "tool_position_m": [float(position[0]), float(position[1])],
-            "tool_velocity_m_s": [float(out.tool_velocity_m_s[0, 0]),
-                                  float(out.tool_velocity_m_s[0, 1])],
-            "clay_engagement": engagement, "removed_volume_m3": self.removed_m3,
-            "in_contact": bool(out.cutting[0]), "forces_enabled": ready, "safe_state": not ready})
-        watchdog = supervisor.watchdog
-        self.harness.status(tick, now_ns, watchdog, (watchdog.events, supervisor.events),
-                            running=running)
-        if self.ros2 is not None:
-            self._offer_ros2(tick, now_s, out, running, ready)
-
-    def _trace_and_record(self, tick: int, now_ns: int, out: Any, running: bool) -> None:
-        """The trace's row (every N ticks) and the recording's (``/slave/state``)."""
-        fh, yh = self.tick.handle_force_N, self.tick.handle_position_m
-        ft, position, velocity = out.tool_force_N[0], out.tool_position_m[0], \
-            out.tool_velocity_m_s[0]
-        now_s = self.inputs.now_s
-        sample_time_s = self.outputs.sample_time_s
+        fh, yh = self.fh, self.yh
+        sample_time_s = outputs.sample_time_s
         if self.trace.due():
             self.trace.record((now_s, fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], position[0],
-                               position[1], velocity[0], velocity[1], ft[0], ft[1],
-                               self.engagement, float(out.cutting[0]), float(running),
-                               sample_time_s))
+                               position[1], velocity[0], velocity[1], ft[0], ft[1], engagement,
+                               float(out.cutting[0]), float(running), sample_time_s))
         else:
             self.trace.skip()
         if self.recording is not None:
@@ -213,8 +199,18 @@ class SlaveStages:
                 now_s, float(fh[0, 0]), float(fh[0, 1]), float(yh[0, 0]), float(yh[0, 1]),
                 float(position[0]), float(position[1]), float(velocity[0]),
                 float(velocity[1]), float(ft[0]), float(ft[1]), float(vt[0]), float(vt[1]),
-                self.engagement, float(out.cutting[0]), self.removed_m3, float(running),
-                sample_time_s))
+                engagement, float(out.cutting[0]), removed, float(running), sample_time_s))
+        ready = supervisor.ready
+        self.harness.offer_state(tick, lambda: {
+            "tool_force_N": [float(ft[0]), float(ft[1])],
+            "tool_position_m": [float(position[0]), float(position[1])],
+            "tool_velocity_m_s": [float(velocity[0]), float(velocity[1])],
+            "clay_engagement": engagement, "removed_volume_m3": removed,
+            "in_contact": bool(out.cutting[0]), "forces_enabled": ready, "safe_state": not ready})
+        self.harness.status(tick, now_ns, supervisor.watchdog, self._event_lists,
+                            running=running)
+        if self.ros2 is not None:
+            self._offer_ros2(tick, now_s, out, running, ready)
 
     def _offer_ros2(self, tick: int, now_s: float, out: Any, running: bool,
                     ready: bool) -> None:
