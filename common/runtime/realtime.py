@@ -22,7 +22,8 @@ long it must spin is set by how late a sleep wakes up, and that is set by the OS
   display's: they inherit the main thread's CPUs when they start) on other CPUs, so that
   neither waits for the other: on 2 CPUs, both programs' loops on one (kept apart in time by
   the slave's phase lock, common/wire/phase_lock.py) and everything else on the other cut the
-  link's one-way delay, its p99 most (bench/loop_bench.py; docs/link.md section 9).
+  link's one-way delay, its p99 most (bench/loop_bench.py; the layouts in docs/link.md section 9,
+  the runs in docs/measurements/loop_bench.md).
 - :attr:`RealtimeSettings.gil_switch_interval_s` shortens Python's GIL switch interval
   (5 ms by default) while the loop runs: a loop that wants the GIL back from another thread
   of the process (the display's JSON encoding) then waits at most about this long. 0 leaves
@@ -34,10 +35,10 @@ long it must spin is set by how late a sleep wakes up, and that is set by the OS
   wakes a process on another CPU, and waking a halted CPU is what costs most on a virtual
   machine (haltpoll idle with ``guest_halt_poll_ns=0``): there the request cuts a cross-CPU
   wake-up roughly tenfold (``bench/wakeup_bench.py``) and the loops' overruns with it
-  (``bench/loop_bench.py``; docs/link.md 6.2). The request is system-wide and
-  ends when the file is closed (on exit, also a crash). It needs write access to the device
-  (root, or a udev rule as in deploy/README.md); refused, the run goes on with the idle
-  states as they are and the refusal is reported. -1 makes no request.
+  (``bench/loop_bench.py``; docs/link.md 6.2, figures in docs/measurements/link.md). The
+  request is system-wide and ends when the file is closed (on exit, also a crash). It needs
+  write access to the device (root, or a udev rule as in deploy/README.md); refused, the run
+  goes on with the idle states as they are and the refusal is reported. -1 makes no request.
 
 Everything but the CPU latency request applies to the *calling thread* only (on Linux, pid 0
 means the calling thread for these calls), so the Zenoh and CAN threads a program started
@@ -418,7 +419,7 @@ def batch_threads(
     and the emulated drives mid-tick, and every preemption of another CPU is an
     inter-processor interrupt, which a virtual CPU pays as an exit to the hypervisor. With
     batch Zenoh threads ``haptic-session``'s loops overrun less at the cost of a slightly
-    longer median link delay (docs/link.md 6.3 has the interleaved runs)."""
+    longer median link delay (docs/measurements/link.md has the interleaved runs)."""
     calls = os_calls if os_calls is not None else OsScheduling()
     if not hasattr(os, "SCHED_BATCH"):
         return 0, ["SCHED_BATCH is not available on this platform"]
