@@ -38,16 +38,21 @@ class CompareResult:
     control_wall_seconds: dict[str, float] = field(default_factory=dict)
 
     def theory(self) -> dict[str, Any]:
-        """The predictions, how many were checked and how many the measurement contradicts,
-        in all and per control."""
+        """The cells' predictions, how many were checked and how many the measurement
+        contradicts, in all and per control; and the Z-widths a theory predicts whole, how
+        many, and how many differ from the measured ones."""
         per_control: dict[str, dict[str, int]] = {}
         for item in self.predictions:
             counts = per_control.setdefault(item["control"], {"checked": 0, "disagreements": 0})
             counts["checked"] += 1
             counts["disagreements"] += int(not item["agree"])
+        widths = [row for row in self.z_width if "predicted_z_width_N_per_m" in row]
         return {"checked": len(self.predictions),
                 "disagreements": sum(not item["agree"] for item in self.predictions),
-                "per_control": per_control, "predictions": self.predictions}
+                "per_control": per_control, "predictions": self.predictions,
+                "z_width_checked": len(widths),
+                "z_width_disagreements": sum(row["predicted_z_width_N_per_m"]
+                                             != row["z_width_N_per_m"] for row in widths)}
 
     def to_json(self) -> dict[str, Any]:
         """controls, grid, cells, z_width, theory, simulated_seconds, wall_seconds."""
@@ -79,24 +84,40 @@ def _simulate(control: str, lanes: list[Lane], grid: CompareGrid,
     return simulate_lanes(control, lanes, grid)
 
 
-def z_width_rows(control: str, grid: CompareGrid, lanes: list[Lane], bounded: np.ndarray
-                 ) -> list[dict[str, Any]]:
+def _width(rungs: list[tuple[float, bool | None]]) -> float | None:
+    """The largest stiffness below which every rung is bounded (rungs sorted)."""
+    width = None
+    for stiffness, ok in rungs:
+        if not ok:
+            break
+        width = stiffness
+    return width
+
+
+def z_width_rows(control: str, grid: CompareGrid, lanes: list[Lane], bounded: np.ndarray,
+                 theory: Theory | None = None) -> list[dict[str, Any]]:
     """Per delay, the largest ladder stiffness below which every rung stayed bounded (None:
-    not even the softest), with the ladder's verdicts."""
+    not even the softest), with the ladder's verdicts; with ``theory``, the Z-width its
+    predictions give (``predicted_z_width_N_per_m``, only where it predicts every rung)."""
     rows = []
     for round_trip in grid.round_trips_s:
-        rungs = [(lane.wall_stiffness_N_per_m, bool(bounded[i])) for i, lane in enumerate(lanes)
-                 if lane.ladder and lane.network.round_trip_s == round_trip]
-        rungs.sort()
-        width = None
-        for stiffness, ok in rungs:
-            if not ok:
-                break
-            width = stiffness
-        rows.append({"control": control, "round_trip_s": round_trip,
-                     "z_width_N_per_m": width,
-                     "ladder_N_per_m": [stiffness for stiffness, _ in rungs],
-                     "ladder_bounded": [ok for _, ok in rungs]})
+        rungs = sorted((lane.wall_stiffness_N_per_m, bool(bounded[i]))
+                       for i, lane in enumerate(lanes)
+                       if lane.ladder and lane.network.round_trip_s == round_trip)
+        row: dict[str, Any] = {"control": control, "round_trip_s": round_trip,
+                               "z_width_N_per_m": _width(rungs),
+                               "ladder_N_per_m": [stiffness for stiffness, _ in rungs],
+                               "ladder_bounded": [ok for _, ok in rungs]}
+        if theory is not None:
+            predicted = [theory.predict(control, "wall", round_trip, True, stiffness)
+                         for stiffness, _ in rungs]
+            complete = bool(predicted) and all(p is not None and p.bounded is not None
+                                               for p in predicted)
+            if complete:
+                row["predicted_z_width_N_per_m"] = _width(
+                    [(stiffness, p.bounded) for (stiffness, _), p in zip(rungs, predicted,
+                                                                         strict=True)])
+        rows.append(row)
     return rows
 
 
@@ -133,13 +154,17 @@ def run_compare(grid: CompareGrid, model: TeleopModel | None = None) -> CompareR
                         "measured_bounded": cell["bounded"],
                         "agree": prediction.bounded == cell["bounded"],
                         "margin_s": prediction.margin_s})
-        result.z_width.extend(z_width_rows(control, grid, lanes, bounded))
+        result.z_width.extend(z_width_rows(control, grid, lanes, bounded, theory))
         period = model.sample_period_s if control in PAPER_CONTROLS and model else PERIOD_S
         steps = int(round(grid.duration_s / period))
         result.simulated_seconds += steps * period * len(lanes)
         result.control_wall_seconds[control] = time.perf_counter() - control_started
     result.wall_seconds = time.perf_counter() - started
     return result
+
+
+def _stiffness(value: float | None) -> str:
+    return "-" if value is None else format(value, "g")
 
 
 def summary_text(result: CompareResult) -> str:
@@ -152,14 +177,16 @@ def summary_text(result: CompareResult) -> str:
         bounded = sum(c["bounded"] for c in cells)
         counts = theory.get(control, {"checked": 0, "disagreements": 0})
         widths = ", ".join(
-            f"{row['round_trip_s'] * 1e3:g} ms: "
-            f"{'-' if row['z_width_N_per_m'] is None else format(row['z_width_N_per_m'], 'g')}"
+            f"{row['round_trip_s'] * 1e3:g} ms: {_stiffness(row['z_width_N_per_m'])}"
+            + (f" ({_stiffness(row['predicted_z_width_N_per_m'])})"
+               if "predicted_z_width_N_per_m" in row else "")
             for row in data["z_width"] if row["control"] == control)
         lines.append(f"{control:13s} bounded {bounded}/{len(cells)}  theory "
                      f"{counts['checked'] - counts['disagreements']}/{counts['checked']} agree"
-                     f"  Z-width N/m [{widths}]")
+                     f"  Z-width N/m (theory) [{widths}]")
     lines.append(f"simulated {data['simulated_seconds']:.0f} s in {data['wall_seconds']:.1f} s "
-                 f"wall; disagreements with theory: {data['theory']['disagreements']}")
+                 f"wall; disagreements with theory: {data['theory']['disagreements']} cells, "
+                 f"{data['theory']['z_width_disagreements']} Z-widths")
     return "\n".join(lines)
 
 

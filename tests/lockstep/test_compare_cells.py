@@ -31,6 +31,8 @@ def test_a_soft_wall_without_delay_feels_like_itself_through_wave_and_four_chann
         assert cell["final_position_gap_m"] < 1e-3
         assert cell["predicted_bounded"] is True
     assert [row["z_width_N_per_m"] for row in result.z_width] == [300.0, 300.0]
+    # passivity (wave) and Llewellyn without delay (four-channel) predict the rung bounded
+    assert [row["predicted_z_width_N_per_m"] for row in result.z_width] == [300.0, 300.0]
     assert result.theory()["checked"] == 2 and result.theory()["disagreements"] == 0
 
 
@@ -54,3 +56,9 @@ def test_the_paper_scheme_beyond_its_delay_margin_is_reported_unbounded() -> Non
     margins = {item["margin_s"] for item in result.theory()["predictions"]}
     assert len(margins) == 1 and 0.04 < margins.pop() < 0.16
     assert result.theory()["checked"] == 2 and result.theory()["disagreements"] == 0
+    # the ladder's one rung: the Nyquist margin's Z-width, kept below it, none beyond it
+    widths = [(row["z_width_N_per_m"], row["predicted_z_width_N_per_m"])
+              for row in result.z_width]
+    assert widths == [(500.0, 500.0), (None, None)]
+    assert result.theory()["z_width_checked"] == 2
+    assert result.theory()["z_width_disagreements"] == 0

@@ -1,0 +1,49 @@
+"""``haptic-sim compare`` end to end: the quick grid in a child process, its JSON's shape and
+the theory's agreements counted; a bad control list refused."""
+
+from __future__ import annotations
+
+import json
+
+from haptic.lockstep.cli import main
+from haptic.lockstep.compare_grid import CONTROLS
+from tests.helpers.programs import Program, python_module
+
+#: The quick grid's budget in CI on a loaded 2-core machine, s (it runs in well under it).
+QUICK_TIMEOUT_S = 240.0
+CELL_KEYS = {"control", "task", "round_trip_s", "loss", "loss_model", "jitter_s", "bounded",
+             "peak_force_N", "impact_overshoot_ratio", "rms_position_error_m",
+             "rms_force_error_N", "final_position_gap_m", "perceived_stiffness_ratio"}
+
+
+def test_quick_compare_prints_every_cell_z_width_and_theory_as_json(tmp_path) -> None:
+    with Program(python_module("haptic.lockstep.cli", "compare", "--quick", "--json",
+                               "--out", str(tmp_path))) as program:
+        assert program.wait(QUICK_TIMEOUT_S) == 0, program.output()
+        line = next(text for text in reversed(program.output().splitlines())
+                    if text.startswith("{"))
+    data = json.loads(line)
+    assert set(data) >= {"controls", "cells", "z_width", "theory", "simulated_seconds",
+                         "wall_seconds"}
+    assert data["controls"] == list(CONTROLS)
+    # 5 controls x 2 tasks x 3 delays x (no loss, 20 % bursty) x no jitter
+    assert len(data["cells"]) == 5 * 2 * 3 * 2
+    assert all(set(cell) >= CELL_KEYS for cell in data["cells"])
+    assert {cell["loss_model"] for cell in data["cells"] if cell["loss"] > 0} == {"bursty"}
+    assert len(data["z_width"]) == 5 * 3
+    theory = data["theory"]
+    # paper, tdpa, wave: every constant-delay cell; four-channel: where Llewellyn holds
+    assert theory["checked"] >= 3 * 2 * 3
+    assert theory["disagreements"] == sum(not p["agree"] for p in theory["predictions"])
+    assert 0 < data["wall_seconds"] < data["simulated_seconds"]
+    assert json.loads((tmp_path / "compare.json").read_text())["cells"] == data["cells"]
+    assert len((tmp_path / "cells.csv").read_text().splitlines()) == 1 + len(data["cells"])
+
+
+def test_an_unknown_control_is_a_config_error(capsys) -> None:
+    try:
+        status = main(["compare", "--quick", "--controls", "wave,teleport"])
+    except SystemExit as stop:
+        status = stop.code
+    assert status == 2
+    assert "teleport" in capsys.readouterr().err
