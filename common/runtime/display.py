@@ -30,8 +30,8 @@ ctypes call) the thread keeps it for as long as it runs. On 2 CPUs with both loo
 SCHED_FIFO a display thread woken in the middle of the slave's tick was preempted by the
 master's loop while it held the slave's GIL: at 4 kHz (Ts = 0.25 ms) a thread waking 200
 times a second more than doubled the slave's node stage p99 and multiplied its overruns
-tenfold against one waking about 9 times a second with no viewer (docs/programs.md has the
-figures).
+tenfold against one waking about 9 times a second with no viewer (the runs:
+docs/measurements/programs_loops.md).
 
 The thread measures its own cost (:attr:`figures`): publications made and the mean and
 largest time one took, s, and the publications skipped because nobody watched.

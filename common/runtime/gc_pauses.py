@@ -11,8 +11,8 @@ how many there were and the longest.
 :func:`frozen_heap` collects once and freezes what is left before the loop (``gc.freeze``):
 the start-up's objects are never scanned again, so a collection during the run looks at the
 run's own young objects only. In ``haptic-session`` the one collection each loop met took
-238-517 us before (the start-up's last objects still young); docs/programs.md has the
-figures since.
+238-517 us before (the start-up's last objects still young; the runs since:
+docs/measurements/programs_loops.md).
 """
 
 from __future__ import annotations
