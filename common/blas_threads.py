@@ -5,8 +5,8 @@ BLAS thread pool never speeds a product up; it costs CPU instead. OpenBLAS's wor
 spin for a while after each call they took part in: during the synthesis and the margin
 analysis (python-control and scipy) one worker kept a whole CPU busy beside the main thread.
 On a machine with two CPUs that is half of them, taken from a latency sweep's other
-process (its speed with and without the pool: docs/lockstep.md) and from a real-time loop
-beside it.
+process (its speed with and without the pool: docs/measurements/latency_sweep.md) and from a
+real-time loop beside it.
 
 :func:`one_blas_thread` sets the BLAS libraries' thread variables to 1 unless they are set
 already (a user's own setting wins). The package's top-level modules call it on import,
