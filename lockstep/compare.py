@@ -18,7 +18,12 @@ from typing import Any
 import numpy as np
 
 from haptic.common.model.teleop import TeleopModel
-from haptic.lockstep.compare_grid import CompareGrid, Lane
+from haptic.lockstep.compare_grid import (
+    PAPER_CUT_FORCE_N,
+    PAPER_CUT_SPEED_M_PER_S,
+    CompareGrid,
+    Lane,
+)
 from haptic.lockstep.compare_lanes import PERIOD_S, simulate_lanes
 from haptic.lockstep.compare_paper import PAPER_CONTROLS, simulate_paper_lanes
 from haptic.lockstep.compare_records import LaneRecords, bounded_lanes, cell_figures
@@ -64,6 +69,8 @@ class CompareResult:
                      "jitters_s": list(grid.jitters_s),
                      "stiffness_ladder_N_per_m": list(grid.stiffness_ladder_N_per_m),
                      "duration_s": grid.duration_s, "task": asdict(grid.task),
+                     "paper_cut": {"force_N": PAPER_CUT_FORCE_N,
+                                   "speed_m_per_s": PAPER_CUT_SPEED_M_PER_S},
                      "bounds": asdict(grid.bounds), "seed": grid.seed},
             "cells": self.cells,
             "z_width": self.z_width,
@@ -126,12 +133,13 @@ def run_compare(grid: CompareGrid, model: TeleopModel | None = None) -> CompareR
     result = CompareResult(grid)
     theory = Theory(model)
     started = time.perf_counter()
-    lanes = grid.cell_lanes() + grid.ladder_lanes()
     for control in grid.controls:
         control_started = time.perf_counter()
+        lanes = grid.cell_lanes(control) + grid.ladder_lanes()
         records = _simulate(control, lanes, grid, model)
         bounded = bounded_lanes(records, grid.bounds)
         surface = 0.0 if control in PAPER_CONTROLS else grid.task.wall_surface_m
+        period = model.sample_period_s if control in PAPER_CONTROLS and model else PERIOD_S
         for index, lane in enumerate(lanes):
             if lane.ladder:
                 continue
@@ -155,7 +163,6 @@ def run_compare(grid: CompareGrid, model: TeleopModel | None = None) -> CompareR
                         "agree": prediction.bounded == cell["bounded"],
                         "margin_s": prediction.margin_s})
         result.z_width.extend(z_width_rows(control, grid, lanes, bounded, theory))
-        period = model.sample_period_s if control in PAPER_CONTROLS and model else PERIOD_S
         steps = int(round(grid.duration_s / period))
         result.simulated_seconds += steps * period * len(lanes)
         result.control_wall_seconds[control] = time.perf_counter() - control_started

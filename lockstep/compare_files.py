@@ -11,7 +11,7 @@ from typing import Any
 CELL_COLUMNS = ("control", "task", "round_trip_s", "loss", "loss_model", "jitter_s", "bounded",
                 "predicted_bounded", "peak_force_N", "impact_overshoot_ratio",
                 "rms_position_error_m", "rms_force_error_N", "final_position_gap_m",
-                "perceived_stiffness_ratio")
+                "perceived_stiffness_ratio", "cut_force_N", "cut_speed_m_per_s")
 
 
 def write_compare_files(data: dict[str, Any], out: Path) -> None:

@@ -13,7 +13,12 @@ from dataclasses import dataclass
 from haptic.common.wire.injection import InjectionConfig
 
 CONTROLS = ("paper", "tdpa", "wave", "four-channel", "mmt")
-TASKS = ("free-sine", "wall")
+TASKS = ("free-sine", "wall", "clay-cut")
+#: The clay cut runs the lockstep's clay, which only the programs' own controls drive yet.
+CLAY_CONTROLS = ("paper", "tdpa")
+#: The paper's constant-rate cut (section 4.1): its force, N, and speed, m/s.
+PAPER_CUT_FORCE_N = 3.6
+PAPER_CUT_SPEED_M_PER_S = 0.038
 #: Round-trip delays of the full grid, s.
 ROUND_TRIPS_S = (0.0, 0.010, 0.050, 0.100, 0.200, 0.400, 0.800, 1.500, 3.000)
 LOSSES = (0.0, 0.05, 0.20, 0.50)
@@ -35,6 +40,8 @@ QUICK_STIFFNESS_LADDER_N_PER_M = (300.0, 3e3, 3e4)
 class TaskSettings:
     """The two tasks along x (SI units in the names).
 
+    clay-cut (paper and tdpa only): the paper's constant-rate cut in the lockstep's clay
+    (lockstep/compare_paper.py);
     free-sine: the hand tracks a sine of ``sine_amplitude_m`` at ``sine_frequency_hz`` through
     a spring and damper (``track_*``, the simulated rig's tracking operator's gains);
     wall: the hand pushes with an intent force ramped from 0 to ``push_force_N`` over the first
@@ -135,7 +142,7 @@ class CompareGrid:
 
     @classmethod
     def quick(cls, controls: tuple[str, ...] = CONTROLS) -> CompareGrid:
-        """The CI grid: 3 delays x 2 losses x 1 jitter x 2 tasks."""
+        """The CI grid: 3 delays x 2 losses x 1 jitter x the tasks."""
         return cls(controls, TASKS, QUICK_ROUND_TRIPS_S, QUICK_LOSSES, QUICK_LOSS_MODELS,
                    QUICK_JITTERS_S, QUICK_STIFFNESS_LADDER_N_PER_M, TaskSettings(settle_s=3.0))
 
@@ -154,10 +161,13 @@ class CompareGrid:
                     networks.extend(Network(round_trip, loss, model, jitter) for model in models)
         return networks
 
-    def cell_lanes(self) -> list[Lane]:
-        """The cells of one control, task by task."""
+    def cell_lanes(self, control: str | None = None) -> list[Lane]:
+        """The cells of one control (None: of any), task by task; the clay cut only for
+        :data:`CLAY_CONTROLS`."""
         wall = self.task.wall_stiffness_N_per_m
-        return [Lane(task, network, wall) for task in self.tasks for network in self.networks()]
+        tasks = [task for task in self.tasks
+                 if task != "clay-cut" or control is None or control in CLAY_CONTROLS]
+        return [Lane(task, network, wall) for task in tasks for network in self.networks()]
 
     def ladder_lanes(self) -> list[Lane]:
         """The Z-width lanes of one control: the wall task at each delay and ladder stiffness,
@@ -167,5 +177,6 @@ class CompareGrid:
                 for stiffness in self.stiffness_ladder_N_per_m]
 
 
-__all__ = ["CONTROLS", "LOSS_MODELS", "TASKS", "BoundSettings", "CompareGrid", "Lane",
+__all__ = ["CLAY_CONTROLS", "CONTROLS", "LOSS_MODELS", "PAPER_CUT_FORCE_N",
+           "PAPER_CUT_SPEED_M_PER_S", "TASKS", "BoundSettings", "CompareGrid", "Lane",
            "Network", "TaskSettings"]

@@ -13,9 +13,13 @@ as a two-port: what is compared is what the programs run. Its environment is the
   the rig's constant operator ramping the same intent force through the model's operator
   impedance ``Th`` (the paper's, also the lane simulator's hand).
 
-The loop is then linear and exactly the one the paper's sampled Nyquist analysis
-(common/analysis, lockstep/sweep.py's ``analytic_margin_s``) judges, which the report sets
-beside the measurement. Every lane records the task axis into the comparison's
+- clay-cut: the paper's constant-rate cut (the constant-rate scenario's Warp clay, a 10 cm
+  block at 100 N s/m), the operator the clay sweep's steady 3.6 N push brought in over 1 s
+  (lockstep/sweep.py), the paper's 3.6 N at 38 mm/s beside it.
+
+For free-sine and the wall the loop is then linear and exactly the one the paper's sampled
+Nyquist analysis (common/analysis, lockstep/sweep.py's ``analytic_margin_s``) judges, which the
+report sets beside the measurement. Every lane records the task axis into the comparison's
 :class:`~haptic.lockstep.compare_records.LaneRecords`; the lines carry the same schedules as
 the lane simulator's (lockstep/compare_links.py, the same timing).
 """
@@ -31,6 +35,7 @@ from haptic.lockstep.compare_grid import CompareGrid, Lane
 from haptic.lockstep.compare_links import lane_schedules, round_trip_samples
 from haptic.lockstep.compare_records import RECORD_STRIDE, LaneRecords
 from haptic.lockstep.simulator import LockstepSimulator
+from haptic.lockstep.sweep import CLAY_OPERATOR
 from haptic.master.simulated_rig.operator import parse_operator_spec
 
 PAPER_CONTROLS = ("paper", "tdpa")
@@ -40,7 +45,10 @@ PART_LANES = 64
 
 
 def task_model(model: TeleopModel, task: str, stiffness_N_per_m: float) -> TeleopModel:
-    """The model with the task's environment: ``Tt = 0`` (free-sine) or ``Tt = k`` (wall)."""
+    """The model with the task's environment: ``Tt = 0`` (free-sine) or ``Tt = k`` (wall);
+    the clay cut's is the clay's, the model as configured."""
+    if task == "clay-cut":
+        return model
     tt = np.array([stiffness_N_per_m if task == "wall" else 0.0])
     axes = tuple(axis.with_environment(tt) for axis in model.axes)
     return TeleopModel(model.sample_period_s, model.ch1_gain_k, model.ch1_num, model.ch1_den,
@@ -50,6 +58,8 @@ def task_model(model: TeleopModel, task: str, stiffness_N_per_m: float) -> Teleo
 def operator_spec(grid: CompareGrid, task: str) -> str:
     """The rig's operator for the task (see the module's docstring)."""
     settings = grid.task
+    if task == "clay-cut":
+        return CLAY_OPERATOR
     if task == "wall":
         return (f"constant:fx={settings.push_force_N},fy=0,onset=0,"
                 f"rise={0.5 * grid.duration_s}")
@@ -93,11 +103,12 @@ def simulate_paper_lanes(control: str, lanes: list[Lane], grid: CompareGrid,
         groups.setdefault((lane.task, lane.wall_stiffness_N_per_m), []).append(index)
     for (task, stiffness), members in groups.items():
         operator = parse_operator_spec(operator_spec(grid, task))
+        environment = "clay" if task == "clay-cut" else "linear"
         modelled = task_model(model, task, stiffness)
         for first in range(0, len(members), PART_LANES):
             columns = np.asarray(members[first:first + PART_LANES])
             simulator = LockstepSimulator(modelled, scenario, operator,
-                                          np.full(columns.size, model.ch1_gain_k), "linear",
+                                          np.full(columns.size, model.ch1_gain_k), environment,
                                           device="cpu", passivity=passivity)
             result = simulator.run(grid.duration_s, delays[columns],
                                    record_lanes=np.arange(columns.size),

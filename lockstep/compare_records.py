@@ -27,6 +27,11 @@ from haptic.lockstep.compare_grid import BoundSettings, Lane
 RECORD_STRIDE = 4
 #: The final gap is the mean over this share of the run's end.
 FINAL_SHARE = 0.1
+#: The clay cut's force is the mean over the tool's positions in the first range, its speed
+#: the mean over the second (m, the constant-rate block spans 2 to 12 cm), as the paper's
+#: reproduction measures them (docs/lockstep.md).
+CUT_FORCE_RANGE_M = (0.04, 0.10)
+CUT_SPEED_RANGE_M = (0.02, 0.12)
 
 
 @dataclass(eq=False)
@@ -101,13 +106,33 @@ def _number(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
+def _in_range(position_m: np.ndarray, bounds_m: tuple[float, float]) -> np.ndarray:
+    with np.errstate(invalid="ignore"):
+        return (position_m >= bounds_m[0]) & (position_m <= bounds_m[1])
+
+
+def _cut_figures(records: LaneRecords, tool_m: np.ndarray, force_N: np.ndarray
+                 ) -> dict[str, float | None]:
+    """The clay cut's mean force (N) and speed (m/s) over the tool's ranges (None: the tool
+    never got there)."""
+    figures: dict[str, float | None] = {"cut_force_N": None, "cut_speed_m_per_s": None}
+    in_force = _in_range(tool_m, CUT_FORCE_RANGE_M)
+    if in_force.any():
+        figures["cut_force_N"] = _number(np.mean(force_N[in_force]))
+    speed = np.diff(tool_m) / records.record_period_s
+    in_speed = _in_range(tool_m[:-1], CUT_SPEED_RANGE_M)
+    if in_speed.any():
+        figures["cut_speed_m_per_s"] = _number(np.mean(speed[in_speed]))
+    return figures
+
+
 def cell_figures(records: LaneRecords, lane_index: int, lane: Lane, wall_surface_m: float
                  ) -> dict[str, float | None]:
     """The cell's figures from its lane's records (docs/architectures.md): the force and
     position errors and the final gap over the whole run; for the wall task the impact
     overshoot of the environment force from the first contact and the stiffness the operator
-    feels over the contact samples. None where a figure does not exist (free motion has no
-    contact; a diverged lane has no finite figure)."""
+    feels over the contact samples; for the clay cut its force and speed. None where a figure
+    does not exist (free motion has no contact; a diverged lane has no finite figure)."""
     handle = records.handle_position_m[:, lane_index]
     tool = records.tool_position_m[:, lane_index]
     fh = records.handle_force_N[:, lane_index]
@@ -120,7 +145,11 @@ def cell_figures(records: LaneRecords, lane_index: int, lane: Lane, wall_surface
         "final_position_gap_m": _number(final_position_gap_m(handle, tool, final)),
         "impact_overshoot_ratio": None,
         "perceived_stiffness_ratio": None,
+        "cut_force_N": None,
+        "cut_speed_m_per_s": None,
     }
+    if lane.task == "clay-cut":
+        figures.update(_cut_figures(records, tool, fe))
     if lane.task != "wall":
         return figures
     contact = np.isfinite(tool) & (tool > wall_surface_m)

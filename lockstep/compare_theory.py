@@ -8,7 +8,8 @@
 - four-channel: Llewellyn's absolute stability of the two-port at the cell's one-way delay
   (common/control/two_port.py): bounded where it holds (sufficient); where it fails the
   theory guarantees nothing, so no verdict is predicted.
-- mmt: no theory here.
+- mmt: no theory here; nor for the clay cut (its linearisation about steady cutting is the
+  clay sweep's, judged by decay, not by these bounds).
 
 Only constant-delay cells (no loss, no jitter) are predicted: none of these theories covers a
 lossy or jittery link as the comparison injects it. A disagreement is a predicted verdict the
@@ -72,7 +73,7 @@ class Theory:
     def predict(self, control: str, task: str, round_trip_s: float, constant_delay: bool,
                 stiffness_N_per_m: float) -> Prediction | None:
         """The prediction for a cell, or None where no theory applies."""
-        if control not in THEORIES or not constant_delay:
+        if control not in THEORIES or not constant_delay or task == "clay-cut":
             return None
         name = THEORIES[control]
         if control == "paper":

@@ -13,7 +13,8 @@ from tests.helpers.programs import Program, python_module
 QUICK_TIMEOUT_S = 240.0
 CELL_KEYS = {"control", "task", "round_trip_s", "loss", "loss_model", "jitter_s", "bounded",
              "peak_force_N", "impact_overshoot_ratio", "rms_position_error_m",
-             "rms_force_error_N", "final_position_gap_m", "perceived_stiffness_ratio"}
+             "rms_force_error_N", "final_position_gap_m", "perceived_stiffness_ratio",
+             "cut_force_N", "cut_speed_m_per_s"}
 
 
 def test_quick_compare_prints_every_cell_z_width_and_theory_as_json(tmp_path) -> None:
@@ -26,8 +27,16 @@ def test_quick_compare_prints_every_cell_z_width_and_theory_as_json(tmp_path) ->
     assert set(data) >= {"controls", "cells", "z_width", "theory", "simulated_seconds",
                          "wall_seconds"}
     assert data["controls"] == list(CONTROLS)
-    # 5 controls x 2 tasks x 3 delays x (no loss, 20 % bursty) x no jitter
-    assert len(data["cells"]) == 5 * 2 * 3 * 2
+    # 5 controls x 2 tasks x 3 delays x (no loss, 20 % bursty) x no jitter, and the clay cut
+    # for paper and tdpa
+    assert len(data["cells"]) == 5 * 2 * 3 * 2 + 2 * 3 * 2
+    cuts = [cell for cell in data["cells"] if cell["task"] == "clay-cut"]
+    assert {cell["control"] for cell in cuts} == {"paper", "tdpa"}
+    # without delay the paper's scheme cuts steadily, near the paper's 3.6 N at 38 mm/s
+    paper_cut = next(cell for cell in cuts if cell["control"] == "paper"
+                     and cell["round_trip_s"] == 0.0 and cell["loss"] == 0.0)
+    assert paper_cut["bounded"] and 2.0 < paper_cut["cut_force_N"] < 4.0
+    assert 0.02 < paper_cut["cut_speed_m_per_s"] < 0.045
     assert all(set(cell) >= CELL_KEYS for cell in data["cells"])
     assert {cell["loss_model"] for cell in data["cells"] if cell["loss"] > 0} == {"bursty"}
     assert len(data["z_width"]) == 5 * 3

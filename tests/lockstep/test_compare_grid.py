@@ -7,7 +7,7 @@ import pytest
 
 from haptic.lockstep.compare import CompareResult, z_width_rows
 from haptic.lockstep.compare_grid import BoundSettings, CompareGrid, Lane, Network
-from haptic.lockstep.compare_records import LaneRecords, bounded_lanes
+from haptic.lockstep.compare_records import LaneRecords, bounded_lanes, cell_figures
 
 
 def test_full_grid_has_every_network_once_per_task() -> None:
@@ -16,13 +16,16 @@ def test_full_grid_has_every_network_once_per_task() -> None:
     # a zero loss has one model; 5, 20, 50 % have two
     assert len(networks) == 9 * 2 * (1 + 3 * 2)
     assert len(set(networks)) == len(networks)
-    assert len(grid.cell_lanes()) == 2 * len(networks)
+    assert len(grid.cell_lanes("wave")) == 2 * len(networks)
+    # the clay cut only for the controls the lockstep's clay runs
+    assert len(grid.cell_lanes("paper")) == len(grid.cell_lanes("tdpa")) == 3 * len(networks)
     assert grid.duration_s == pytest.approx(3.0 + grid.task.settle_s)
 
 
-def test_quick_grid_is_three_delays_two_losses_one_jitter_two_tasks() -> None:
+def test_quick_grid_is_three_delays_two_losses_one_jitter_and_the_tasks() -> None:
     grid = CompareGrid.quick()
-    assert len(grid.cell_lanes()) == 3 * 2 * 1 * 2
+    assert len(grid.cell_lanes("mmt")) == 3 * 2 * 1 * 2
+    assert len(grid.cell_lanes("paper")) == 3 * 2 * 1 * 3
     ladder = grid.ladder_lanes()
     assert all(lane.ladder and lane.network.constant_delay for lane in ladder)
     assert len(ladder) == 3 * len(grid.stiffness_ladder_N_per_m)
@@ -78,3 +81,16 @@ def test_theory_counts_checked_predictions_and_disagreements() -> None:
     theory = result.theory()
     assert theory["checked"] == 3 and theory["disagreements"] == 1
     assert theory["per_control"]["paper"] == {"checked": 2, "disagreements": 1}
+
+
+def test_the_cut_figures_are_the_means_over_the_tool_ranges() -> None:
+    records = LaneRecords.create(0.001, 2000, 1, stride=1)
+    for k in range(2000):
+        tool = np.array([0.0001 * k])  # 0.1 m/s, 0 to 0.2 m
+        force = np.array([3.0 if 0.04 <= tool[0] <= 0.10 else 9.0])
+        records.add(k, tool, tool, force, force)
+    figures = cell_figures(records, 0, Lane("clay-cut", Network(0.0, 0.0, "independent", 0.0),
+                                            2000.0), 0.0)
+    assert figures["cut_force_N"] == pytest.approx(3.0)
+    assert figures["cut_speed_m_per_s"] == pytest.approx(0.1)
+    assert figures["perceived_stiffness_ratio"] is None
