@@ -4,16 +4,16 @@ The lines are lockstep/delay_line.py's: exact whole-sample delays with the link'
 jitter draws. A round trip of ``n`` samples is split ``d1 = n // 2`` on the handle line and
 ``d2 = n - d1`` on the tool line; the tool line has one structural sample more, because in a
 tick the master steps before the slave has sent (the lockstep simulator's timing,
-docs/lockstep.md). Lanes with the same injection draw their schedules together from a
-generator seeded by the run's seed and the injection's place in the run, so a run is
-reproducible bit for bit.
+docs/lockstep.md). The lanes of a task with the same injection draw their schedules together
+from a generator seeded by the run's seed, the task and the injection (:func:`draw_key`), so a
+run is reproducible bit for bit and every control meets the same losses and jitter.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from haptic.lockstep.compare_grid import Lane
+from haptic.lockstep.compare_grid import LOSS_MODELS, TASKS, Lane
 from haptic.lockstep.delay_line import DelayLine, source_schedule
 
 #: The handle line's and the tool line's structural samples.
@@ -27,6 +27,16 @@ def round_trip_samples(lanes: list[Lane], period_s: float) -> np.ndarray:
                     np.int64)
 
 
+def draw_key(lane: Lane) -> tuple[int, ...]:
+    """What a lane's draws depend on besides the seed: its task, loss, loss model, jitter and
+    whether it is a ladder rung (not its delay, nor which other lanes run beside it), so a
+    cell's network gets the same draws under every control."""
+    network = lane.network
+    return (TASKS.index(lane.task), int(round(network.loss * 1e6)),
+            LOSS_MODELS.index(network.loss_model), int(round(network.jitter_s * 1e9)),
+            int(lane.ladder))
+
+
 def lane_schedules(lanes: list[Lane], steps: int, period_s: float, seed: int
                    ) -> tuple[np.ndarray, np.ndarray]:
     """The handle line's and the tool line's source schedules (steps, lanes)."""
@@ -35,12 +45,13 @@ def lane_schedules(lanes: list[Lane], steps: int, period_s: float, seed: int
     to_master = samples - to_slave
     handle = np.empty((steps, len(lanes)), np.int64)
     tool = np.empty((steps, len(lanes)), np.int64)
-    groups: dict[object, list[int]] = {}
+    groups: dict[tuple[int, ...], list[int]] = {}
     for index, lane in enumerate(lanes):
-        groups.setdefault(lane.network.injection(), []).append(index)
-    for group, (injection, members) in enumerate(groups.items()):
+        groups.setdefault(draw_key(lane), []).append(index)
+    for key, members in groups.items():
         columns = np.asarray(members)
-        rng_handle, rng_tool = np.random.default_rng([seed, group]).spawn(2)
+        injection = lanes[members[0]].network.injection()
+        rng_handle, rng_tool = np.random.default_rng([seed, *key]).spawn(2)
         handle[:, columns] = source_schedule(steps, to_slave[columns], HANDLE_OFFSET_SAMPLES,
                                              period_s, injection, rng_handle)
         tool[:, columns] = source_schedule(steps, to_master[columns], TOOL_OFFSET_SAMPLES,
@@ -58,4 +69,4 @@ def lane_lines(lanes: list[Lane], steps: int, period_s: float, seed: int,
             DelayLine(tool, tool_initial.shape[1], tool_initial, period_s=period_s))
 
 
-__all__ = ["lane_lines", "lane_schedules", "round_trip_samples"]
+__all__ = ["draw_key", "lane_lines", "lane_schedules", "round_trip_samples"]

@@ -7,6 +7,7 @@ import pytest
 
 from haptic.lockstep.compare import CompareResult, z_width_rows
 from haptic.lockstep.compare_grid import BoundSettings, CompareGrid, Lane, Network
+from haptic.lockstep.compare_links import lane_schedules
 from haptic.lockstep.compare_records import LaneRecords, bounded_lanes, cell_figures
 
 
@@ -94,3 +95,18 @@ def test_the_cut_figures_are_the_means_over_the_tool_ranges() -> None:
     assert figures["cut_force_N"] == pytest.approx(3.0)
     assert figures["cut_speed_m_per_s"] == pytest.approx(0.1)
     assert figures["perceived_stiffness_ratio"] is None
+
+
+def test_every_control_meets_the_same_losses_on_a_cell() -> None:
+    grid = CompareGrid.quick()
+    steps, period = 2000, 0.00054
+    wave = grid.cell_lanes("wave")
+    paper = grid.cell_lanes("paper")  # the clay cut's lanes beside them
+    wave_schedules = lane_schedules(wave, steps, period, grid.seed)
+    paper_schedules = lane_schedules(paper, steps, period, grid.seed)
+    lossy = [i for i, lane in enumerate(wave) if lane.network.loss > 0]
+    assert lossy
+    for ours, theirs in zip(wave_schedules, paper_schedules, strict=True):
+        assert (ours == theirs[:, :len(wave)]).all()
+    # a lossy line skips messages: the newest receivable one repeats
+    assert (np.diff(wave_schedules[0][:, lossy], axis=0) == 0).any()
