@@ -132,7 +132,7 @@ class SlaveStages:
         inputs.peer_alive = link.peer_alive
         if inputs.message is not None and self.phase_lock is not None:
             self.delivery_measured = link.last_delivery_measured
-            self.last_delivery_ns = link.receive.last_delivery_ns
+            self.last_delivery_ns = link.last_delivery_ns
             self.poll_ns = link.last_poll_ns
 
     def step_tick(self, tick: int, now_ns: int) -> int:

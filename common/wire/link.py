@@ -503,6 +503,12 @@ class Link:
             raise LinkOpenError(self.peer_mismatch)
 
     @property
+    def last_delivery_ns(self) -> int | None:
+        """When the newest delivered message came (``time.perf_counter_ns``; None before
+        the first): what the slave's phase lock measures against its poll."""
+        return self.receive.last_delivery_ns
+
+    @property
     def last_delivery_measured(self) -> bool:
         """Whether the newest delivered message's delivery time is a measurement: Zenoh's
         arrival stamp or an injected delivery time. Without a stamp (a peer without timestamp
