@@ -44,6 +44,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from haptic.common.model.block_kernels import compensator_arrays
 from haptic.common.model.block_layout import CompensatorLayout
 from haptic.common.model.lti import DiscreteLTI, Path, combine, discretize
 from haptic.common.model.passivity import PassivityPort, PassivitySettings
@@ -310,8 +311,9 @@ class MasterNode:
                    gain_ratio, faulted, limiting, command, used, trip_code, event_bits,
                    event_count)
         launch = wp.launch(kernels.step_kernel(self._layout), dim=lanes, device=DEVICE,
-                           inputs=[inputs, *matrices, per_lane, compensator, origin,
-                                   last_command, last_position, hold, small_count, enabled,
+                           inputs=[inputs, compensator_arrays(matrices, per_lane, compensator),
+                                   origin, last_command, last_position, hold, small_count,
+                                   enabled,
                                    ramp_elapsed, force_scale, gain_ratio, faulted, limiting,
                                    command, used,
                                    trip_code, event_bits, event_count, limits],

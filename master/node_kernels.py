@@ -22,7 +22,7 @@ from typing import Any
 
 import warp as wp
 
-from haptic.common.model.block_kernels import block_step, governed_inputs
+from haptic.common.model.block_kernels import CompensatorArrays, block_step, governed_inputs
 from haptic.common.model.block_layout import CompensatorLayout
 
 # The programs print JSON on stdout: Warp must not announce itself there (its struct
@@ -315,12 +315,7 @@ def step_kernel(layout: CompensatorLayout) -> Any:
     @wp.kernel(module="unique")
     def master_step_kernel(
         inputs: wp.array2d(dtype=wp.float64),
-        comp_a: wp.array4d(dtype=wp.float64),
-        comp_b: wp.array4d(dtype=wp.float64),
-        comp_c: wp.array4d(dtype=wp.float64),
-        comp_d: wp.array3d(dtype=wp.float64),
-        per_lane_matrices: wp.int32,
-        compensator: wp.array2d(dtype=wp.float64),
+        compensator: CompensatorArrays,
         origin: wp.array2d(dtype=wp.float64),
         last_command: wp.array2d(dtype=wp.float64),
         last_position: wp.array2d(dtype=wp.float64),
@@ -349,8 +344,7 @@ def step_kernel(layout: CompensatorLayout) -> Any:
         # The compensator: y = C x + D u, x' = A x + B u (frozen in faulted lanes), its inputs
         # governed; ``used`` reports the forces before the governor's scale.
         u = scale * forces
-        out = compensator_step(lane, governed_inputs(u, gain_ratio[lane]), comp_a, comp_b,
-                               comp_c, comp_d, lane * per_lane_matrices, compensator, healthy)
+        out = compensator_step(lane, governed_inputs(u, gain_ratio[lane]), compensator, healthy)
         raw = wp.vec2d(origin[lane, 0] + out[0], origin[lane, 1] + out[1])
         cmd, limit_bits = command_limit_stage(lane, raw, healthy, last_command, limiting,
                                               limits)

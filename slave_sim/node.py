@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from haptic.common.config.scenario import Scenario, load_scenario
+from haptic.common.model.block_kernels import compensator_arrays
 from haptic.common.model.block_layout import CompensatorLayout
 from haptic.common.model.drift import DriftCoupling
 from haptic.common.model.lti import DiscreteLTI, Path, combine, discretize
@@ -449,8 +450,8 @@ class _NodeKernels:
         halted_count = wp.zeros(1, dtype=wp.int32, device=DEVICE)
         motion = wp.zeros((lanes, len(kernels.MOTION_COLUMNS)), dtype=f64, device=DEVICE)
         constants = node._constants
-        actuate_args = [inputs, *compensator_matrices, per_lane, compensator, tool, drift,
-                        actuator]
+        actuate_args = [inputs, compensator_arrays(compensator_matrices, per_lane, compensator),
+                        tool, drift, actuator]
         self.step = ReplayedLaunch(wp.launch(step_kernel, dim=lanes, device=DEVICE,
                               inputs=[*actuate_args, plant_a, plant_b, halted, halted_count,
                                       motion, constants], record_cmd=True))

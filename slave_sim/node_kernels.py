@@ -28,7 +28,7 @@ from typing import Any
 
 import warp as wp
 
-from haptic.common.model.block_kernels import block_step, governed_inputs
+from haptic.common.model.block_kernels import CompensatorArrays, block_step, governed_inputs
 from haptic.common.model.block_layout import CompensatorLayout
 
 # The programs print JSON on stdout: Warp must not announce itself there.
@@ -197,20 +197,14 @@ def compensate_stage(layout: CompensatorLayout) -> Any:
     def compensate(
         lane: int,
         inputs: wp.array2d(dtype=wp.float64),
-        comp_a: wp.array4d(dtype=wp.float64),
-        comp_b: wp.array4d(dtype=wp.float64),
-        comp_c: wp.array4d(dtype=wp.float64),
-        comp_d: wp.array3d(dtype=wp.float64),
-        per_lane_matrices: wp.int32,
-        compensator: wp.array2d(dtype=wp.float64),
+        compensator: CompensatorArrays,
         tool: wp.array2d(dtype=wp.float64),
         drift: wp.array2d(dtype=wp.float64),
         actuator: wp.array2d(dtype=wp.float64),
         constants: SlaveConstants,
     ):
         """Stage 1 of one lane."""
-        out = compensator_step(lane, compensator_inputs(lane, inputs), comp_a, comp_b, comp_c,
-                               comp_d, lane * per_lane_matrices, compensator, True)
+        out = compensator_step(lane, compensator_inputs(lane, inputs), compensator, True)
         store_actuator(lane, out, inputs, tool, drift, actuator, constants)
 
     return compensate
@@ -249,12 +243,7 @@ def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any, Any]:
     @wp.kernel(module=module)
     def slave_step_kernel(
         inputs: wp.array2d(dtype=wp.float64),
-        comp_a: wp.array4d(dtype=wp.float64),
-        comp_b: wp.array4d(dtype=wp.float64),
-        comp_c: wp.array4d(dtype=wp.float64),
-        comp_d: wp.array3d(dtype=wp.float64),
-        per_lane_matrices: wp.int32,
-        compensator: wp.array2d(dtype=wp.float64),
+        compensator: CompensatorArrays,
         tool: wp.array2d(dtype=wp.float64),
         drift: wp.array2d(dtype=wp.float64),
         actuator: wp.array2d(dtype=wp.float64),
@@ -267,27 +256,20 @@ def step_kernels(layout: CompensatorLayout) -> tuple[Any, Any, Any]:
     ):
         """Both stages for every lane (no active TDPA layer between them)."""
         lane = wp.tid()
-        compensate(lane, inputs, comp_a, comp_b, comp_c, comp_d, per_lane_matrices,
-                   compensator, tool, drift, actuator, constants)
+        compensate(lane, inputs, compensator, tool, drift, actuator, constants)
         motion_lane(lane, plant_a, plant_b, tool, halted, halted_count, actuator, motion,
                     constants)
 
     @wp.kernel(module=module)
     def slave_actuator_kernel(
         inputs: wp.array2d(dtype=wp.float64),
-        comp_a: wp.array4d(dtype=wp.float64),
-        comp_b: wp.array4d(dtype=wp.float64),
-        comp_c: wp.array4d(dtype=wp.float64),
-        comp_d: wp.array3d(dtype=wp.float64),
-        per_lane_matrices: wp.int32,
-        compensator: wp.array2d(dtype=wp.float64),
+        compensator: CompensatorArrays,
         tool: wp.array2d(dtype=wp.float64),
         drift: wp.array2d(dtype=wp.float64),
         actuator: wp.array2d(dtype=wp.float64),
         constants: SlaveConstants,
     ):
         """Stage 1 for every lane (the TDPA layer then acts on ``actuator`` and ``tool``)."""
-        compensate(wp.tid(), inputs, comp_a, comp_b, comp_c, comp_d, per_lane_matrices,
-                   compensator, tool, drift, actuator, constants)
+        compensate(wp.tid(), inputs, compensator, tool, drift, actuator, constants)
 
     return slave_step_kernel, slave_actuator_kernel, motion_kernel(layout)

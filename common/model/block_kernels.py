@@ -4,12 +4,15 @@ says the state advances, block by block with every loop of constant length (unro
 
 The master's kernel (master/node_kernels.py: Ch1/Ct1, frozen in a faulted lane) and the
 slave's (slave_sim/node_kernels.py: Ch2/Ct2) call it with their own four inputs, both scaled
-by the margin governor's gain ratio through :func:`governed_inputs`.
+by the margin governor's gain ratio through :func:`governed_inputs`. Both take the
+compensator's matrices and state as one :class:`CompensatorArrays` argument (built by
+:func:`compensator_arrays`), so a kernel names them in one parameter.
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from typing import Any
 
 import warp as wp
@@ -18,6 +21,32 @@ from haptic.common.model.block_layout import CompensatorLayout
 
 # The programs print JSON on stdout: Warp must not announce itself there.
 wp.config.log_level = wp.LOG_WARNING
+
+
+@wp.struct
+class CompensatorArrays:
+    """One node's compensator as its kernels read it: the packed matrices ``a`` (L, P, Q, Q),
+    ``b`` (L, P, Q, 4), ``c`` (L, P, 2, Q), ``d`` (L, 2, 4) of its block layout (P blocks of
+    Q states), whether lane ``l`` steps matrix set ``l`` (``per_lane_matrices`` 1; 0: every
+    lane set 0, L = 1) and the lanes' ``state`` (lanes, P * Q). The struct holds references
+    to the arrays: the kernels write ``state`` in place."""
+
+    a: wp.array4d(dtype=wp.float64)
+    b: wp.array4d(dtype=wp.float64)
+    c: wp.array4d(dtype=wp.float64)
+    d: wp.array3d(dtype=wp.float64)
+    per_lane_matrices: wp.int32
+    state: wp.array2d(dtype=wp.float64)
+
+
+def compensator_arrays(matrices: Sequence[Any], per_lane: int, state: Any) -> Any:
+    """The :class:`CompensatorArrays` of the packed Warp ``matrices`` (a, b, c, d),
+    ``per_lane`` (1: one matrix set per lane) and the state array ``state``."""
+    arrays = CompensatorArrays()
+    arrays.a, arrays.b, arrays.c, arrays.d = matrices
+    arrays.per_lane_matrices = int(per_lane)
+    arrays.state = state
+    return arrays
 
 
 @wp.func
@@ -29,11 +58,10 @@ def governed_inputs(u: wp.vec4d, gain_ratio: wp.float64) -> wp.vec4d:
 
 @functools.cache
 def block_step(layout: CompensatorLayout) -> Any:
-    """``compensator_step(lane, u, comp_a, comp_b, comp_c, comp_d, m, compensator, advance)
-    -> vec2d``: the two outputs for the inputs ``u`` (vec4d), from lane ``lane``'s state
-    (``compensator`` (lanes, blocks * block_states)) and matrix set ``m`` (the packed
-    ``a`` (L, P, Q, Q), ``b`` (L, P, Q, 4), ``c`` (L, P, 2, Q), ``d`` (L, 2, 4)); the state
-    advances when ``advance``. One Warp module per layout."""
+    """``compensator_step(lane, u, compensator, advance) -> vec2d``: the two outputs for the
+    inputs ``u`` (vec4d), from lane ``lane``'s state and matrix set in ``compensator``
+    (:class:`CompensatorArrays`); the state advances when ``advance``. One Warp module per
+    layout."""
     blocks, q = layout.blocks, layout.block_states
     block_vector = wp.types.vector(length=q, dtype=wp.float64)
 
@@ -41,14 +69,15 @@ def block_step(layout: CompensatorLayout) -> Any:
     def compensator_step(
         lane: int,
         u: wp.vec4d,
-        comp_a: wp.array4d(dtype=wp.float64),
-        comp_b: wp.array4d(dtype=wp.float64),
-        comp_c: wp.array4d(dtype=wp.float64),
-        comp_d: wp.array3d(dtype=wp.float64),
-        m: int,
-        compensator: wp.array2d(dtype=wp.float64),
+        compensator: CompensatorArrays,
         advance: bool,
     ) -> wp.vec2d:
+        m = lane * compensator.per_lane_matrices
+        comp_a = compensator.a
+        comp_b = compensator.b
+        comp_c = compensator.c
+        comp_d = compensator.d
+        state = compensator.state
         out_x = comp_d[m, 0, 0] * u[0] + comp_d[m, 0, 1] * u[1] + comp_d[m, 0, 2] * u[2] + (
             comp_d[m, 0, 3] * u[3])
         out_y = comp_d[m, 1, 0] * u[0] + comp_d[m, 1, 1] * u[1] + comp_d[m, 1, 2] * u[2] + (
@@ -56,7 +85,7 @@ def block_step(layout: CompensatorLayout) -> Any:
         for block in range(blocks):
             x = block_vector()
             for j in range(q):
-                x[j] = compensator[lane, block * q + j]
+                x[j] = state[lane, block * q + j]
             for j in range(q):
                 out_x += comp_c[m, block, 0, j] * x[j]
                 out_y += comp_c[m, block, 1, j] * x[j]
@@ -66,10 +95,10 @@ def block_step(layout: CompensatorLayout) -> Any:
                         comp_b[m, block, i, 2] * u[2]) + comp_b[m, block, i, 3] * u[3]
                     for j in range(q):
                         acc += comp_a[m, block, i, j] * x[j]
-                    compensator[lane, block * q + i] = acc
+                    state[lane, block * q + i] = acc
         return wp.vec2d(out_x, out_y)
 
     return compensator_step
 
 
-__all__ = ["block_step", "governed_inputs"]
+__all__ = ["CompensatorArrays", "block_step", "compensator_arrays", "governed_inputs"]
