@@ -11,6 +11,7 @@ import pytest
 from haptic.common.runtime.watchdog import WatchdogState
 from haptic.common.wire.messages import Flags, ToolState
 from haptic.master.supervisor import MasterSupervisor, Transition
+from tests.helpers.steady import assert_steady_needs_each
 
 PERIOD_S = 0.00054
 MAX_AGE_S = 0.03
@@ -342,18 +343,11 @@ def test_steady_is_forces_on_with_nothing_latched_awaited_or_guarded() -> None:
     def steady_supervisor() -> MasterSupervisor:
         supervisor = make()
         assert run_in_sync(supervisor, RESYNC)[-1] is Transition.ACTIVATE
-        assert supervisor.steady()
         return supervisor
 
-    for name, value in (("enabled", False), ("faulted", True), ("_await_sync", True),
-                        ("_await_peer", True), ("tool_guard", object())):
-        supervisor = steady_supervisor()
-        setattr(supervisor, name, value)
-        assert not supervisor.steady(), name
-    for state in WatchdogState:
-        supervisor = steady_supervisor()
-        supervisor.watchdog.state = state
-        assert supervisor.steady() is (state is WatchdogState.OK), state
+    assert_steady_needs_each(steady_supervisor, (
+        ("enabled", False), ("faulted", True), ("_await_sync", True), ("_await_peer", True),
+        ("tool_guard", object())))
 
 
 def test_the_slaves_last_message_holds_the_handle_without_a_trip() -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 from haptic.common.runtime.watchdog import WatchdogState
 from haptic.common.wire.messages import Flags, HandleState
 from haptic.slave_sim.supervisor import SlaveSupervisor, Transition
+from tests.helpers.steady import assert_steady_needs_each
 
 PERIOD_S = 0.00054
 MAX_AGE_S = 0.03
@@ -207,18 +208,11 @@ def test_steady_is_running_with_nothing_stopped_rejoining_or_faulted() -> None:
     def steady_supervisor() -> SlaveSupervisor:
         supervisor = make()
         assert start(supervisor)[-1] is Transition.RESUME
-        assert supervisor.steady()
         return supervisor
 
-    for name, value in (("running", False), ("master_enabled", False), ("outside", True),
-                        ("rejoining", True), ("input_fault", True)):
-        supervisor = steady_supervisor()
-        setattr(supervisor, name, value)
-        assert not supervisor.steady(), name
-    for state in WatchdogState:
-        supervisor = steady_supervisor()
-        supervisor.watchdog.state = state
-        assert supervisor.steady() is (state is WatchdogState.OK), state
+    assert_steady_needs_each(steady_supervisor, (
+        ("running", False), ("master_enabled", False), ("outside", True), ("rejoining", True),
+        ("input_fault", True)))
 
 
 def test_the_masters_last_message_stops_the_tool_without_a_trip() -> None:
