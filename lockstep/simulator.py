@@ -403,7 +403,7 @@ class LockstepSimulator:
         tool_runup.flags[...] = enabled
         tools = tool_line(schedules[1], initial, ts, delays - to_slave_d + 1, tdpa)
         if governed is not None:
-            slave_tick.state.gain_ratio = np.ones(lanes)
+            slave_tick.follow_gain_ratio(handle_runup.gain_ratio)
         quiet = None if every_lane_supervised else (MasterQuietLanes(master_tick, tools),
                                                      SlaveQuietLanes(slave_tick, handles))
         self.last_quiet_lanes = quiet
@@ -428,20 +428,19 @@ class LockstepSimulator:
         else:
             run.quiet[0].supervise(now_s, yh)
         sent = run.handles.slot(k)
-        state = master_tick.state
         governed = run.governed
+        gain_ratio = None
         if governed is not None:  # k on the master now, on the slave with the message
-            state.gain_ratio[:] = governed.update(k, self.period_s, run.tools.schedule,
-                                                  run.handles.schedule)
-            sent.gain_ratio[...] = state.gain_ratio
+            gain_ratio = governed.update(k, self.period_s, run.tools.schedule,
+                                         run.handles.schedule)
+            sent.gain_ratio[...] = gain_ratio
             if self.passivity_standby and governed.switches:  # the tdpa action
                 for mask, on in ((governed.switch_on, True), (governed.switch_off, False)):
                     if mask.any():
                         master_tick.switch_passivity(now_s, mask, on, "governor")
-        if run.tdpa:  # the slave's handed-over energy and its tool, as the link gives them
-            state.peer_energy_J[:] = tool.energy_J
-            state.peer_target_m[:] = tool.position_m / run.ratio
-        used = master_tick.control(fh, yh)
+        # the node's inputs from the slave (its energy and tool: the line's newest message,
+        # None in the paper's mode) and the governor, as the program's lane gives them
+        used = master_tick.control(fh, yh, None, tool.energy_J, tool.position_m, gain_ratio)
         # a view the master's next control overwrites: the rig reads it before then
         run.command = used.command_m
         sent.force_N[...] = used.handle_force_used_N
@@ -466,9 +465,9 @@ class LockstepSimulator:
         else:
             run.quiet[1].supervise(now_s)
         if run.governed is not None:
-            slave_tick.state.gain_ratio = received.gain_ratio.copy()
-        if run.tdpa:
-            slave_tick.peer_energy_J = received.energy_J
+            slave_tick.follow_gain_ratio(received.gain_ratio)
+        if run.tdpa:  # the master's handed-over energy, as the program's lane takes it
+            slave_tick.receive_peer_energy(received.energy_J)
         ticked = slave_tick.control()
         out = ticked.out
         ft = out.tool_force_N

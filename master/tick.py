@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.runtime.lane_tick import UNCONFIGURED_LANE, TickFlags, one_lane_passivity
 from haptic.common.wire.lane_flags import lane_flag_values
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, ToolState
 from haptic.common.wire.passivity_link import PassivityLink
@@ -62,7 +63,7 @@ def _flag_value(enabled: Any, switched: Any) -> Any:
 
 
 @dataclass
-class MasterTickOutput:
+class MasterTickOutput(TickFlags):
     """What one tick decided, per lane (arrays have the lanes first; views the next tick
     overwrites). ``command_m`` (lanes, 2): the handle command, m; ``handle_force_used_N`` and
     ``tool_force_used_N`` (lanes, 2): the forces the compensator used, N (zero where forces
@@ -77,11 +78,6 @@ class MasterTickOutput:
     force_scale: np.ndarray
     enabled: np.ndarray
     flag_values: np.ndarray
-
-    @property
-    def flags(self) -> list[Flags]:
-        """Per lane, the flags of the message to the slave."""
-        return [FLAGS_BY_VALUE[value] for value in self.flag_values.tolist()]
 
 
 class MasterTick:
@@ -118,9 +114,13 @@ class MasterTick:
         self.standby_active = np.zeros(lanes, bool)
         #: the switch's events (``tdpa_on``/``tdpa_off``), for the program's event list
         self.passivity_events: list[dict[str, Any]] = []
+        #: Ah1 per lane and axis (lanes, 2): the drift correction's target is the tool's
+        #: position over it (the tool in handle coordinates); the program's lane reads its
+        #: supervisor's ``ratio_x``/``ratio_y``, the same numbers
+        self._position_ratio = np.array([(s.ratio_x, s.ratio_y) for s in self.supervisors])
 
-    #: the one lane's whole-tick setup (:meth:`configure_lane`), None before
-    _lane: _LaneSetup | None = None
+    #: the one lane's whole-tick setup (:meth:`configure_lane`)
+    _lane: _LaneSetup = UNCONFIGURED_LANE
 
     def start(self, position_m: Any, synced: bool = False) -> None:
         """Hold each lane where its handle is ((lanes, 2) or (2,), m). With ``synced`` the
@@ -224,11 +224,21 @@ class MasterTick:
             node.resume(state, position_m, resume)
 
     def control(self, handle_force_N: np.ndarray, handle_position_m: np.ndarray,
-                tool_force_N: np.ndarray | None = None) -> MasterTickOutput:
+                tool_force_N: np.ndarray | None = None, tool_energy_J: Any = None,
+                tool_position_m: Any = None, gain_ratio: Any = None) -> MasterTickOutput:
         """The node stage: vh = Ch1 fh - Ct1 ft behind the safety layer for the lanes whose
         forces are on (``tool_force_N`` (lanes, 2), N: the received tool force, by default
         the supervisors' newest ``ToolState``'s); the others hold ``hold_m``. A trip of the
-        node's safety layer latches that lane's supervisor. Returns what the node used."""
+        node's safety layer latches that lane's supervisor. Returns what the node used.
+
+        The node's inputs from the peer and the governor, the same for the program's lane and
+        the lockstep's lanes: ``tool_energy_J``, the slave's cumulative handed-over energy, J
+        (the passivity layer's account; a node with the layer), with ``tool_position_m``, the
+        received tool position, m, whose image in handle coordinates (over Ah1) is the drift
+        correction's target; ``gain_ratio``, the governed k/k0. Each is (lanes,) or
+        (lanes, 2) arrays, or for a one-lane tick a float and an (x, y) pair; None leaves the
+        node's value as it is. Written only where a lane's forces are on (a lane coming on
+        starts them afresh)."""
         enabled = self.enabled
         state = self.state
         outputs = None
@@ -240,6 +250,17 @@ class MasterTick:
             on = np.count_nonzero(enabled)  # one cheap call instead of any() and all()
             any_on, all_on = on > 0, on == self.lanes
         if state is not None and any_on:
+            if gain_ratio is not None:  # k on the master now (the slave's with the message)
+                state.gain_ratio[...] = gain_ratio
+            if tool_energy_J is not None:
+                state.peer_energy_J[...] = tool_energy_J
+                target = state.peer_target_m
+                if isinstance(tool_position_m, np.ndarray):
+                    np.divide(tool_position_m, self._position_ratio, out=target)
+                else:  # the program's lane, Python floats
+                    supervisor = self.supervisors[0]
+                    target[0, 0] = tool_position_m[0] / supervisor.ratio_x
+                    target[0, 1] = tool_position_m[1] / supervisor.ratio_y
             inputs = state.inputs
             inputs[:, 0:2] = handle_force_N
             inputs[:, 2:4] = handle_position_m
@@ -329,10 +350,7 @@ class MasterTick:
         ``nominal_k`` the Ch1 gain the compensators were made for; ``governor`` the margin
         governor (None: k stays nominal); ``allow_unstable``: a round trip beyond the margin
         of every k does not trip the node. Returns the outputs record each step refills."""
-        if self.lanes != 1:
-            raise ValueError("step_lane runs one lane (the lockstep's lanes: supervise, control)")
-        node = self.node
-        link = PassivityLink(node.passivity is not None and not node.passivity_standby)
+        link = one_lane_passivity(self.lanes, self.node)
         outputs = MasterLaneOutputs(gain_k=float(nominal_k), flags=FLAGS_BY_VALUE[0])
         self._lane = _LaneSetup(float(nominal_k), governor, allow_unstable, link,
                                 int(link.flags), outputs)
@@ -347,8 +365,6 @@ class MasterTick:
         supervise part, 0 without a clock). Raises ``LinkOpenError`` for a slave in the other
         ``[control]`` mode."""
         lane = self._lane
-        if lane is None:
-            raise RuntimeError("configure_lane before step_lane")
         outputs = lane.outputs
         message = inputs.message
         if message is not None:  # a peer in the other [control] mode: refused
@@ -360,20 +376,23 @@ class MasterTick:
             (inputs.peer_alive,))[0]
         supervisor = self.supervisors[0]
         outputs.enabled = enabled = supervisor.enabled
-        outputs.gain_k = lane.nominal_k if lane.governor is None else self._govern(
-            lane, inputs, enabled)
+        if lane.governor is None:
+            outputs.gain_k, gain_ratio = lane.nominal_k, None
+        else:
+            gain_k = outputs.gain_k = self._govern(lane, inputs, enabled)
+            gain_ratio = gain_k / lane.nominal_k
         outputs.supervised_ns = clock_ns() if clock_ns is not None else 0
         state = self.state
         tool = outputs.tool = supervisor.tool
+        energy_J = tool_position = None
         if state is not None and state.passivity is not None and tool is not None:
-            # the slave's handed-over energy, and the drift correction's target: the tool in
-            # handle coordinates
-            state.peer_energy_J[0] = lane.passivity.peer_energy(state.passivity, tool)
-            state.peer_target_m[0, 0] = tool.tool_position_m[0] / supervisor.ratio_x
-            state.peer_target_m[0, 1] = tool.tool_position_m[1] / supervisor.ratio_y
+            # the slave's handed-over energy and its tool, which the node takes as the lockstep's
+            energy_J = lane.passivity.peer_energy(state.passivity, tool)
+            tool_position = tool.tool_position_m
         # the node reports what it used: the slave's Ch2 integrates exactly the handle force
         # Ch1 used; the operator feels the tool force it used
-        used = outputs.used = self.control(inputs.handle_force_N, position)
+        used = outputs.used = self.control(inputs.handle_force_N, position, None, energy_J,
+                                           tool_position, gain_ratio)
         outputs.flags = FLAGS_BY_VALUE[int(used.flag_values[0]) | lane.flag_value]
         outputs.energy_J = lane.passivity.sent_J(self.state)
         return outputs
@@ -381,7 +400,7 @@ class MasterTick:
     def _govern(self, lane: _LaneSetup, inputs: MasterLaneInputs, enabled: bool) -> float:
         """The governor's tick (master/program_governor.py): k from the echoed round trip,
         the standby passivity layer switched as it asks, and a trip beyond every margin.
-        Returns k."""
+        Returns k (the node takes k/k0 in :meth:`control`)."""
         governor = lane.governor
         assert governor is not None
         now_s = inputs.now_s
@@ -393,12 +412,9 @@ class MasterTick:
             self.switch_passivity(now_s, _ONE_LANE, decision.mode_request == "tdpa",
                                   governor.events[-1]["reason"] if governor.events
                                   else "governor")
-        if enabled:
-            state = self.state
-            state.gain_ratio[0] = gain_k / lane.nominal_k
-            if decision.beyond_margin and not lane.allow_unstable:
-                self.node.trip(state, [0], "governor: round trip beyond the delay margin "
-                               "of every k")
+        if enabled and decision.beyond_margin and not lane.allow_unstable:
+            self.node.trip(self.state, [0], "governor: round trip beyond the delay margin of "
+                           "every k")
         return gain_k
 
 

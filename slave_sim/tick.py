@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from haptic.common.analysis.margin_table import follow_gain
+from haptic.common.runtime.lane_tick import UNCONFIGURED_LANE, TickFlags, one_lane_passivity
 from haptic.common.wire.lane_flags import lane_flag_values
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, HandleState
 from haptic.common.wire.passivity_link import PassivityLink
@@ -66,7 +67,7 @@ def _flag_value(ready: Any, cutting: Any, outside: Any, switched: Any) -> Any:
 
 
 @dataclass
-class SlaveTickOutput:
+class SlaveTickOutput(TickFlags):
     """What one tick produced: the node's outputs (``out``), which lanes ran (``running``,
     (lanes,) bool), and per lane the flags of the message to the master (``flag_values``
     (lanes,) int, :attr:`flags` as ``Flags``: FORCES_ENABLED when this side is ready,
@@ -75,11 +76,6 @@ class SlaveTickOutput:
     out: SlaveOutputs
     running: np.ndarray
     flag_values: np.ndarray
-
-    @property
-    def flags(self) -> list[Flags]:
-        """Per lane, the flags of the message to the master."""
-        return [FLAGS_BY_VALUE[value] for value in self.flag_values.tolist()]
 
 
 class SlaveTick:
@@ -119,9 +115,8 @@ class SlaveTick:
         #: per lane, the send time of the newest admitted handle message (ns, 0: none yet),
         #: echoed to the master for its round-trip estimate (master/margin_governor.py)
         self.echo_send_time_ns = np.zeros(lanes, np.int64)
-        #: (lanes,) the master's cumulative handed-over energy, J, as last received (the
-        #: passivity layer, ``tdpa`` mode; None otherwise)
-        self.peer_energy_J: np.ndarray | None = None
+        #: the one lane's received energy as an array (:meth:`receive_peer_energy`), J
+        self._peer_energy_J = np.zeros(1)
         self._gain: tuple[float, bool] | None = None
         #: each supervisor's ``ready`` and ``outside`` (the flags of :meth:`control`)
         self._ready = np.zeros(lanes, bool)
@@ -129,8 +124,8 @@ class SlaveTick:
         self._flag_values = np.zeros(lanes, np.int64)
         self._none_switched = np.zeros(lanes, bool)
 
-    #: the one lane's whole-tick setup (:meth:`configure_lane`), None before
-    _lane: _LaneSetup | None = None
+    #: the one lane's whole-tick setup (:meth:`configure_lane`)
+    _lane: _LaneSetup = UNCONFIGURED_LANE
 
     def follow_gain(self, nominal_k: float, scalable: bool) -> None:
         """Follow the master's governed k (``HandleState.gain_k``, never above
@@ -233,6 +228,35 @@ class SlaveTick:
             self.node.safe_stop(state, None if all(stop) else np.array(stop))
         return fresh
 
+    def receive_peer_energy(self, energy_J: Any) -> None:
+        """The master's cumulative handed-over energy, J, into the passivity layer (a node
+        with the layer), the same for the program's lane and the lockstep's lanes: (lanes,)
+        (the lockstep's newest handle messages, every tick) or, for a one-lane tick, a fresh
+        message's float (``PassivityLink.peer_energy``, which minds the master's restarts).
+        An older or non-finite value changes nothing; a lane on standby notes it without
+        crediting it (``PassivityPort.receive``)."""
+        port = self.state.passivity
+        if isinstance(energy_J, np.ndarray):
+            port.receive(energy_J)
+            return
+        if not port.active[0]:  # on standby: the newest value noted, without the numpy calls
+            if energy_J > port.peer_sent_J[0]:  # NaN compares False: nothing noted
+                port.peer_sent_J[0] = energy_J
+            return
+        value = self._peer_energy_J
+        value[0] = energy_J
+        port.receive(value)
+
+    def follow_gain_ratio(self, gain_ratio: np.ndarray) -> None:
+        """The master's governed k/k0 per lane ((lanes,)), as the lockstep's handle line
+        carries it: the node's inputs are scaled by it from the next step (the program's
+        lane follows ``HandleState.gain_k`` in :meth:`supervise` instead, :meth:`follow_gain`)."""
+        state = self.state
+        if state.gain_ratio is None:
+            state.gain_ratio = np.array(gain_ratio, float)  # once: later ticks write in place
+        else:
+            state.gain_ratio[...] = gain_ratio
+
     def follow_switch(self, now_s: float, lanes: Sequence[int],
                       flag_values: Sequence[int]) -> None:
         """A standby passivity layer (``paper`` mode) follows the master's
@@ -293,7 +317,7 @@ class SlaveTick:
             force = self._zero_force
         else:
             force = np.where(running[:, None], self.handle_force_N, 0.0)
-        out = self.node.step(self.state, force, self.handle_position_m, self.peer_energy_J)
+        out = self.node.step(self.state, force, self.handle_position_m)
         port = self.state.passivity
         switched = (port.active if port is not None and self.node.passivity_standby
                     else self._none_switched)
@@ -312,10 +336,7 @@ class SlaveTick:
         ``pacing``: one node step per master sample (slave_sim/pacing.py; None: one step
         every tick with the tick's own input). Returns the outputs record each step
         refills."""
-        if self.lanes != 1:
-            raise ValueError("step_lane runs one lane (the lockstep's lanes: supervise, control)")
-        node = self.node
-        link = PassivityLink(node.passivity is not None and not node.passivity_standby)
+        link = one_lane_passivity(self.lanes, self.node)
         outputs = SlaveLaneOutputs(flags=FLAGS_BY_VALUE[0])
         self._lane = _LaneSetup(pacing, link, int(link.flags), outputs)
         return outputs
@@ -324,8 +345,6 @@ class SlaveTick:
         """The node's output before the first tick (one step: the tool at rest, waiting for
         the master), which the first ticks send while no master sample has come."""
         lane = self._lane
-        if lane is None:
-            raise RuntimeError("configure_lane before first_output")
         self._node_part(lane, ())
         return lane.outputs
 
@@ -340,8 +359,6 @@ class SlaveTick:
         supervise part, 0 without a clock). Raises ``LinkOpenError`` for a master in the
         other ``[control]`` mode."""
         lane = self._lane
-        if lane is None:
-            raise RuntimeError("configure_lane before step_lane")
         outputs = lane.outputs
         message = inputs.message
         if message is not None:  # a peer in the other [control] mode: refused
@@ -351,7 +368,7 @@ class SlaveTick:
             None if lane.pacing is None else (inputs.earlier,))[0])
         state = self.state
         if fresh and state.passivity is not None:  # the master's handed-over energy
-            lane.passivity.receive(state.passivity, message)
+            self.receive_peer_energy(lane.passivity.peer_energy(state.passivity, message))
         outputs.supervised_ns = clock_ns() if clock_ns is not None else 0
         pacing = lane.pacing
         if pacing is None:

@@ -5,21 +5,24 @@ from __future__ import annotations
 
 import numpy as np
 
+from haptic.common.analysis.margin_table import MarginEntry, MarginTable
 from haptic.common.config.scenario import load_scenario
+from haptic.common.model.passivity import PassivitySettings
 from haptic.common.runtime.watchdog import WatchdogState
 from haptic.common.wire.injection import InjectionConfig
 from haptic.common.wire.messages import Flags, HandleState, ToolState
 from haptic.lockstep.simulator import LockstepSimulator, LockstepSupervision
+from haptic.master.margin_governor import GovernorSettings, MarginGovernor
 from haptic.master.node import MasterNode
 from haptic.master.settings import master_settings
 from haptic.master.simulated_rig.operator import parse_operator_spec
 from haptic.master.simulated_rig.rig_block import RigModel
 from haptic.master.supervisor import MasterSupervisor
-from haptic.master.tick import MasterTick
+from haptic.master.tick import MasterLaneInputs, MasterTick
 from haptic.slave_sim.input_guard import InputGuard, InputGuardSettings
 from haptic.slave_sim.node import SlaveNode
 from haptic.slave_sim.supervisor import SlaveSupervisor
-from haptic.slave_sim.tick import SlaveTick
+from haptic.slave_sim.tick import SlaveLaneInputs, SlaveTick
 
 OPERATOR = "regulate:fx=3.6,onset=0.05"
 
@@ -264,3 +267,94 @@ def test_every_message_delivered_in_a_tick_passes_the_guard_and_is_a_sample(
     slave.samples[0].clear()
     slave.supervise(2 * ts, [handle(7, 0.3)])
     assert slave.samples[0] == []
+
+
+def test_the_lockstep_lane_is_the_programs_step_lane_with_a_governor_and_tdpa(
+        paper_config, paper_model) -> None:
+    """The glue around supervise and the node (the governed k on both sides, the passivity
+    layer's energies, the drift correction's target) is the ticks' own: the simulator's lane
+    and the programs' ticks built by ``LockstepSimulator.ticks``, stepped one lane at a time
+    through ``step_lane`` with the messages as the link delivers them, give the same forces,
+    commands, gains and energies, bit for bit, while the governor lowers k and the passivity
+    layer runs (a one-sample round trip: d1 = 0 to the slave, d2 = 1 back)."""
+    scenario = load_scenario("constant-rate")
+    ts = paper_model.sample_period_s
+    k0 = float(paper_config["model"]["ch1"]["gain_k"])
+    # the round trip the echo shows (2 samples) is beyond this k's margin, inside the lower's
+    table = MarginTable((MarginEntry(k0, 2.5 * ts), MarginEntry(0.6 * k0, None)), 0.1, ts)
+
+    def governor() -> MarginGovernor:
+        return MarginGovernor(GovernorSettings(enabled=True, recover_after_s=0.0), table)
+
+    simulator = LockstepSimulator(paper_model, scenario, parse_operator_spec(OPERATOR),
+                                  np.array([k0]), "linear", device="cpu",
+                                  passivity=PassivitySettings())
+    result = simulator.run(0.3, 1, record_lanes=[0], governors=[governor()])
+    tool_start = np.asarray(scenario.tool.start_position_m, float)[None, :]
+    handle_start = tool_start / np.array([a.position_ratio_ah1 for a in paper_model.axes])
+    master, slave = simulator.ticks(handle_start, tool_start)  # the programs' ticks
+    master_out = master.configure_lane(k0, governor(), allow_unstable=True)
+    slave.follow_gain(k0, True)
+    slave_out = slave.configure_lane()
+    rig = simulator.rig
+    rig_state = rig.initial_state(handle_start, np.random.default_rng(0).spawn(3)[2])
+    period_ns = round(ts * 1e9)
+    start_ns = 1000 * period_ns  # every send time > 0: an echo of tick 0 is a round trip
+
+    def sent_ns(tick: int) -> int:
+        return start_ns + tick * period_ns
+
+    mode = Flags.FORCES_ENABLED | Flags.TDPA  # the run-up's messages, as the link's
+    to_master = ToolState(0, -2, sent_ns(-2), mode, (0.0, 0.0), tuple(tool_start[0]),
+                          (0.0, 0.0), 0.0, 0.0)
+    to_master_next = to_master
+    command = master.state.last_command_m.copy()
+    master_in, slave_in = MasterLaneInputs(), SlaveLaneInputs()
+    traces: dict[str, list] = {"fh": [], "command": [], "ft": [], "gain": [], "energy": []}
+    for k in range(result.steps):
+        now_s = k * ts
+        sample = rig.step(rig_state, command, np.array([to_master.tool_force_N]))
+        master_in.now_s, master_in.message = now_s, to_master
+        master_in.handle_force_N = sample.handle_force_measured_N
+        master_in.handle_position_m = yh = sample.handle_position_m
+        master_in.latest, master_in.silence_s = to_master, 0.0
+        master_in.first_sent_ns, master_in.last_sent_ns = sent_ns(0), sent_ns(k - 1)
+        master_in.poll_ns = sent_ns(k)
+        master.step_lane(master_in)
+        used = master_out.used
+        command = used.command_m.copy()
+        to_slave = HandleState(0, k, sent_ns(k), master_out.flags,
+                               tuple(used.handle_force_used_N[0].tolist()),
+                               tuple(yh[0].tolist()), gain_k=master_out.gain_k,
+                               energy_J=master_out.energy_J,
+                               force_scale=float(used.force_scale[0]))
+        slave_in.now_s, slave_in.message, slave_in.silence_s = now_s, to_slave, 0.0
+        slave.step_lane(slave_in)  # d1 = 0: the message of this tick
+        out = slave_out.ticked.out
+        to_master = to_master_next  # d2 = 1, and the tool force of tick k - 1 describes t_k
+        to_master_next = ToolState(
+            0, k, sent_ns(k), slave_out.flags, tuple(out.tool_force_N[0].tolist()),
+            tuple(out.tool_position_m[0].tolist()), tuple(out.tool_velocity_m_s[0].tolist()),
+            0.0, 0.0, echo_send_time_ns=slave_out.echo_send_time_ns,
+            energy_J=slave_out.energy_J)
+        for name, value in (("fh", sample.handle_force_measured_N[0]), ("command", command[0]),
+                            ("ft", out.tool_force_N[0]), ("gain", master_out.gain_k),
+                            ("energy", (master_out.energy_J, slave_out.energy_J))):
+            traces[name].append(np.copy(value))
+    np.testing.assert_array_equal(result.traces["handle_force_N"][:, 0], np.array(traces["fh"]))
+    np.testing.assert_array_equal(result.traces["handle_command_m"][:, 0],
+                                  np.array(traces["command"]))
+    np.testing.assert_array_equal(result.traces["tool_force_N"][:, 0], np.array(traces["ft"]))
+    gains = result.governed.gains_k[:, 0]
+    np.testing.assert_array_equal(gains, np.array(traces["gain"]))
+    ended = simulator.final_states  # the lockstep's, and the step_lane ticks' below
+    for lockstep, programs in zip(ended, (master.state, slave.state), strict=True):
+        for name in ("sent_J", "peer_sent_J", "tank_J"):  # the passivity layer's account
+            np.testing.assert_array_equal(getattr(programs.passivity, name),
+                                          getattr(lockstep.passivity, name))
+    np.testing.assert_array_equal(master.state.peer_target_m, ended[0].peer_target_m)
+    # not a comparison of idle sides: the governor lowered k, the master handed energy over
+    # and the slave took it, and the drift correction had the tool as its target
+    assert gains[0] == k0 and gains[-1] < k0
+    assert traces["energy"][-1][0] > 0.0 and slave.state.passivity.peer_sent_J[0] > 0.0
+    assert np.all(np.isfinite(master.state.peer_target_m))
