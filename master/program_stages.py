@@ -29,6 +29,7 @@ from haptic.common.model.passivity import passivity_summary
 from haptic.common.records.run_recording import RunRecording
 from haptic.common.records.trace import TraceRecorder
 from haptic.common.runtime.inert import InertMonitor
+from haptic.common.runtime.linked_side import LinkedSide
 from haptic.common.runtime.program_harness import ProgramHarness
 from haptic.common.runtime.tick_driver import Stage
 from haptic.common.wire.link import Link
@@ -62,8 +63,9 @@ def position_for_the_wire(position_m: tuple[float, float],
     return last_m
 
 
-class LinkedMasterStages:
-    """The networked master's side of the tick driver (see the module docstring).
+class LinkedMasterStages(LinkedSide):
+    """The networked master's side of the tick driver (see the module docstring; what both
+    sides hold: common/runtime/linked_side.py).
 
     ``tick``: the master's tick (its lane is configured here: ``nominal_k`` the Ch1 gain,
     ``governor`` the margin governor it steps, None: none, ``allow_unstable``: no trip
@@ -75,28 +77,21 @@ class LinkedMasterStages:
 
     stage_names = TICK_STAGES
     schedule_shift_ns = 0  # the master follows no peer's phase
+    tick: MasterTick
+    supervisor: MasterSupervisor
 
     def __init__(self, hardware: HandleHardware, link: Link, tick: MasterTick,
                  harness: ProgramHarness, nominal_k: float, governor: MarginGovernor | None,
                  allow_unstable: bool, trace: TraceRecorder, recording: RunRecording | None,
                  inert: InertMonitor, events: list[dict[str, Any]], ros2: Any | None,
                  clock_ns: Callable[[], int] = time.perf_counter_ns) -> None:
+        super().__init__(link, tick, harness, trace, recording, inert, ros2, clock_ns)
         self.hardware = hardware
-        self.link = link
-        self.tick = tick
-        self.supervisor: MasterSupervisor = tick.supervisors[0]
-        self.harness = harness
         self.governor = governor
-        self.trace = trace
-        self.recording = recording
-        self.inert = inert
         self.events = events
-        self.ros2 = ros2
-        self.clock_ns = clock_ns
         self.inputs = MasterLaneInputs()
         self.outputs = tick.configure_lane(nominal_k, governor, allow_unstable)
         self.reading: HandleReading | None = None
-        self.max_force_N = 0.0
         self.last_fh = (0.0, 0.0)
         self.last_ft = (0.0, 0.0)
         #: the last handle position measured on both axes, m (what the wire carries while a
@@ -104,7 +99,6 @@ class LinkedMasterStages:
         self.last_yh = (0.0, 0.0)
         #: the handle force sent in the last tick, N
         self.sent = [0.0, 0.0]
-        self._max_age_s = link.config.max_message_age_s
         watchdog = self.supervisor.watchdog
         self._event_lists: tuple[list[Any], ...] = (
             watchdog.events, self.supervisor.events, events,
@@ -264,13 +258,11 @@ class LinkedMasterStages:
     def _offer_ros2(self, tick: int, now_s: float, force_N: tuple[float, float],
                     position_m: tuple[float, float], felt: list[float], enabled: bool) -> None:
         """Off the loop: two reference swaps at their rates."""
-        link, supervisor, tick_state = self.link, self.supervisor, self.tick.state
-        watchdog = supervisor.watchdog
+        supervisor, tick_state = self.supervisor, self.tick.state
         self.ros2.offer(tick, lambda: {
             "time_s": now_s, "force_N": force_N, "position_m": position_m,
             "effort_N": (felt[0], felt[1])}, lambda: {
-            **link.summary(), "watchdog_state": watchdog.state.value,
-            "watchdog_trips": watchdog.trips, "forces_enabled": enabled,
+            **self.link_status(), "forces_enabled": enabled,
             "safe_state": not enabled, "safety_events": len(supervisor.events) + len(
                 self.events),
             **(passivity_summary(tick_state.passivity, self.tick.node.passivity_standby)

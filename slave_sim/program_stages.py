@@ -27,6 +27,7 @@ from haptic.common.model.passivity import passivity_summary
 from haptic.common.records.run_recording import RunRecording
 from haptic.common.records.trace import TraceRecorder
 from haptic.common.runtime.inert import InertMonitor
+from haptic.common.runtime.linked_side import LinkedSide
 from haptic.common.runtime.program_harness import ProgramHarness
 from haptic.common.runtime.tick_driver import Stage
 from haptic.common.wire.link import Link
@@ -57,8 +58,9 @@ def removed_total_m3(state: Any) -> float:
     return 0.0 if total is None else float(total[0])
 
 
-class SlaveStages:
-    """The networked slave's side of the tick driver (see the module docstring).
+class SlaveStages(LinkedSide):
+    """The networked slave's side of the tick driver (see the module docstring; what both
+    sides hold: common/runtime/linked_side.py).
 
     ``tick``: the slave's tick (its lane is configured here with ``pacing``: one node step
     per master sample; slave_sim/tick.py ``SlaveTick.configure_lane``); ``phase_lock``: the
@@ -68,24 +70,18 @@ class SlaveStages:
     """
 
     stage_names = TICK_STAGES
+    tick: SlaveTick
+    supervisor: SlaveSupervisor
 
     def __init__(self, link: Link, tick: SlaveTick, harness: ProgramHarness,
                  pacing: MasterSamplePacing, phase_lock: PhaseLock | None,
                  trace: TraceRecorder, tool_path: ToolPath, path_every: int,
                  recording: RunRecording | None, inert: InertMonitor, ros2: Any | None,
                  clock_ns: Callable[[], int] = time.perf_counter_ns) -> None:
-        self.link = link
-        self.tick = tick
-        self.supervisor: SlaveSupervisor = tick.supervisors[0]
-        self.harness = harness
+        super().__init__(link, tick, harness, trace, recording, inert, ros2, clock_ns)
         self.phase_lock = phase_lock
-        self.trace = trace
         self.tool_path = tool_path
         self.path_every = path_every
-        self.recording = recording
-        self.inert = inert
-        self.ros2 = ros2
-        self.clock_ns = clock_ns
         self.inputs = SlaveLaneInputs()
         self.outputs = tick.configure_lane(pacing)
         #: the phase lock's correction of the runner's schedule, ns (the driver hands it on)
@@ -95,13 +91,11 @@ class SlaveStages:
         self.last_delivery_ns: int | None = None
         self.poll_ns = 0
         self.delivery_measured = False
-        self.max_force_N = 0.0
         self.tool_force_N = np.zeros(2)
         self.engagement = 0.0
         self.removed_m3 = 0.0
         #: yt - Ah1 yh at the last tick the tool ran, m (None: it never ran)
         self.running_gap_m: np.ndarray | None = None
-        self._max_age_s = link.config.max_message_age_s
         self._event_lists = (self.supervisor.watchdog.events, self.supervisor.events)
         #: the newest bounded handle force and position, (1, 2) N and m (updated in place)
         self.fh = tick.handle_force_N
@@ -215,18 +209,16 @@ class SlaveStages:
     def _offer_ros2(self, tick: int, now_s: float, out: Any, running: bool,
                     ready: bool) -> None:
         """Off the loop: two reference swaps at their rates."""
-        link, supervisor, node = self.link, self.supervisor, self.tick.node
+        supervisor, node = self.supervisor, self.tick.node
         ft, position, velocity = out.tool_force_N[0], out.tool_position_m[0], \
             out.tool_velocity_m_s[0]
-        watchdog = supervisor.watchdog
         engagement, removed = self.engagement, self.removed_m3
         state = self.tick.state
         self.ros2.offer(tick, lambda: {
             "time_s": now_s, "force_N": (float(ft[0]), float(ft[1])),
             "position_m": (float(position[0]), float(position[1])),
             "velocity_m_s": (float(velocity[0]), float(velocity[1]))}, lambda: {
-            **link.summary(), "watchdog_state": watchdog.state.value,
-            "watchdog_trips": watchdog.trips, "running": running,
+            **self.link_status(), "running": running,
             "safe_state": not ready, "safety_events": len(supervisor.events),
             "clay_engagement": engagement, "removed_volume_m3": removed,
             **passivity_summary(state.passivity, node.passivity_standby)})
