@@ -13,7 +13,11 @@ whose forces come on. :meth:`MasterTick.control` steps the node's safety layer a
 for the lanes whose forces are enabled and returns what the node used
 (:class:`MasterTickOutput`): the command, the handle force and the tool force the compensator
 used (saturated, scaled by the force ramp), the ramp's scale, and the flags to send. Lanes
-whose forces are off hold the supervisor's ``hold_m`` and send no force.
+whose forces are off hold the supervisor's ``hold_m`` and send no force. What the node takes
+from the slave's message and the governor besides the reading (the slave's handed-over
+energy, the tool's position as the drift correction's target, k/k0) are
+:meth:`MasterTick.control`'s inputs, for the program's lane and the simulator's lanes alike,
+so neither writes the node's state itself.
 
 The program has one lane; the simulator one lane per cell of a sweep (the node is one Warp
 kernel over every lane; one supervisor per lane). :meth:`MasterTick.supervise` is the one way

@@ -16,7 +16,9 @@ work-area guard; slave_sim/supervisor.py) says whether the tool follows the hand
 (``ToolResync``: through the clay at a bounded speed) and whether it runs, stops or resumes.
 :meth:`SlaveTick.control` steps the node (Ch2/Ct2, the tool, the environment) with the
 bounded handle force where the tool runs and zero force elsewhere, and returns the node's
-outputs with the flags to send.
+outputs with the flags to send. The master's handed-over energy enters the passivity layer
+through :meth:`SlaveTick.receive_peer_energy`, for the program's lane (a fresh message's) and
+the simulator's lanes (the line's newest) alike.
 
 :meth:`SlaveTick.supervise` is the one way in: the simulator's quiet-lane filter
 (lockstep/quiet_lanes.py) calls it on the lanes whose guard or supervisor has something to
