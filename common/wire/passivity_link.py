@@ -12,8 +12,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from haptic.common.model.passivity import PassivityPort
 from haptic.common.wire.errors import LinkOpenError
 from haptic.common.wire.messages import Flags, control_mismatch
@@ -27,7 +25,6 @@ class PassivityLink:
         self.flags = Flags.TDPA if tdpa else Flags(0)
         self._peer_epoch: int | None = None
         self._checked_epoch: int | None = None
-        self._value = np.zeros(1)
 
     def check(self, message: Any) -> None:
         """Raise :class:`LinkOpenError` when the first message of a peer's run (epoch) shows
@@ -42,24 +39,14 @@ class PassivityLink:
 
     def peer_energy(self, port: PassivityPort, message: Any) -> float:
         """The peer's cumulative handed-over energy in ``message``, J; a new epoch (the peer
-        restarted) first makes ``port`` count the peer's energy from zero again."""
+        restarted) first makes ``port`` count the peer's energy from zero again. The ticks
+        give it to their node (master/tick.py ``control``, slave_sim/tick.py
+        ``receive_peer_energy``)."""
         if message.epoch != self._peer_epoch:
             if self._peer_epoch is not None:
                 port.peer_restarted()
             self._peer_epoch = message.epoch
         return float(message.energy_J)
-
-    def receive(self, port: PassivityPort, message: Any) -> None:
-        """Give ``port`` (one lane) the peer's energy from ``message`` (numpy path). A layer
-        switched off (on standby for the governor) only notes the newest value, as
-        :meth:`PassivityPort.receive` would, without its numpy calls on every tick."""
-        value = self.peer_energy(port, message)
-        if not port.active[0]:
-            if value > port.peer_sent_J[0]:  # NaN compares False: nothing noted
-                port.peer_sent_J[0] = value
-            return
-        self._value[0] = value
-        port.receive(self._value)
 
     @staticmethod
     def sent_J(state: Any) -> float:

@@ -1,9 +1,8 @@
-"""The passivity layer on the wire (common/wire/passivity_link.py): what a program's tick does
-with the peer's ``energy_J``, on a layer switched on and on one on standby."""
+"""The passivity layer on the wire (common/wire/passivity_link.py): the peer's ``energy_J`` and
+its restarts, the modes' flags and the refusal of a peer in the other mode."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from haptic.common.model.passivity import PassivityPort, PassivitySettings
@@ -16,26 +15,15 @@ def _message(energy_J: float, epoch: int = 1, flags: Flags = Flags.TDPA) -> Hand
     return HandleState(epoch, 0, 0, flags, (0.0, 0.0), (0.0, 0.0), energy_J=energy_J)
 
 
-def test_a_switched_on_layer_credits_the_newest_energy_once() -> None:
+def test_the_peers_energy_is_read_and_a_new_epoch_restarts_its_count() -> None:
+    """The ticks give the value to their node (tests/slave_sim/test_tick_peer_energy.py)."""
     port = PassivityPort.create(PassivitySettings(), 0.00054, 1)
     link = PassivityLink(True)
-    for value in (0.001, 0.003, 0.002):  # the older, smaller value changes nothing
-        link.receive(port, _message(value))
-    assert port.peer_sent_J[0] == 0.003 and port.tank_J[0] == pytest.approx(0.003)
-    link.receive(port, _message(0.0005, epoch=2))  # the peer restarted: counts from zero
-    assert port.peer_sent_J[0] == 0.0005 and port.tank_J[0] == pytest.approx(0.0035)
-
-
-def test_a_standby_layer_notes_the_energy_without_crediting_it() -> None:
-    port = PassivityPort.create(PassivitySettings(), 0.00054, 1, active=False)
-    link = PassivityLink(False)
-    for value in (0.001, 0.003, 0.002, float("nan")):
-        link.receive(port, _message(value, flags=Flags.TDPA_SWITCHED))
-    assert port.peer_sent_J[0] == 0.003 and port.tank_J[0] == 0.0
-    # switched on, only what the peer hands over from then on is credited
-    port.switch(np.ones(1, bool), True)
-    link.receive(port, _message(0.004, flags=Flags.TDPA_SWITCHED))
-    assert port.tank_J[0] == pytest.approx(0.001)
+    port.peer_sent_J[:] = 0.003
+    assert link.peer_energy(port, _message(0.003)) == 0.003
+    assert port.peer_sent_J[0] == 0.003  # the same run: the count stands
+    assert link.peer_energy(port, _message(0.0005, epoch=2)) == 0.0005
+    assert port.peer_sent_J[0] == 0.0  # the peer restarted: counts from zero
 
 
 def test_a_peer_configured_in_the_other_mode_is_refused_a_switched_one_is_not() -> None:
