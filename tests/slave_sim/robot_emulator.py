@@ -48,8 +48,9 @@ class EmulatedRobot:
     def __init__(self, endpoint: str, clay: Any, start_m: tuple[float, float], period_s: float,
                  namespace: str = "haptic", domain: int = 0, mass_kg: float = 2.0,
                  servo_N_s_per_m: float = 20000.0, silent_after: int | None = None) -> None:
-        """``silent_after``: stop publishing the force after that many commands (a robot
-        whose driver hangs), while still taking commands."""
+        """``silent_after``: stop publishing the force after that many commands counted from
+        the first that moves the tool (a robot whose driver hangs mid-cut, however long the
+        programs took to start), while still taking commands."""
         config = zenoh.Config()
         config.insert_json5("mode", '"client"')
         config.insert_json5("connect/endpoints", json.dumps([endpoint]))
@@ -73,6 +74,8 @@ class EmulatedRobot:
         self.gid = bytes(range(100, 116))
         self.sequence = 0
         self.commands = 0
+        #: commands since the first non-zero one (the tool running)
+        self.moving_commands = 0
         self.silent_after = silent_after
         self.bad_attachments = 0
         self.lock = threading.Lock()
@@ -88,6 +91,8 @@ class EmulatedRobot:
         linear = read_twist(sample.payload.to_bytes())["linear"]
         with self.lock:
             self.commands += 1
+            if self.moving_commands or any(value != 0.0 for value in linear[:2]):
+                self.moving_commands += 1
             self._step(np.array(linear[:2]))
 
     def _step(self, command: np.ndarray) -> None:
@@ -104,7 +109,7 @@ class EmulatedRobot:
         result = self.clay.step(self.state, previous, self.position.copy(),
                                 self.velocity.copy())
         self.force = np.asarray(result.force_N[0], float)
-        if self.silent_after is not None and self.commands > self.silent_after:
+        if self.silent_after is not None and self.moving_commands > self.silent_after:
             return
         stamp = time.time_ns()
         self.sequence += 1
