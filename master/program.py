@@ -233,6 +233,9 @@ class _LinkedMaster:
         period_s = self.model.sample_period_s
         harness = self.harness = ProgramHarness("haptic-master", "slave", options, link,
                                                 period_s, self.recording)
+        # the ROS 2 bridge process first: it joins its router while the slave comes
+        self.ros2 = start_ros2(options.config, "master", period_s, say=harness.say,
+                               loop_counts=harness.loop_counts)
         came = harness.wait_for_peer(self.loop_options.peer_wait_s, signals)
         if came is not None:
             return came
@@ -244,8 +247,6 @@ class _LinkedMaster:
         if self.loop_options.display and link.session is not None:
             harness.attach_display(DisplayPublisher(
                 link.session, options.link.key_prefix, "master").start())
-        self.ros2 = start_ros2(options.config, "master", period_s, say=harness.say,
-                               loop_counts=harness.loop_counts)
         stages = LinkedMasterStages(
             hardware, link, self.tick, harness, self.model.ch1_gain_k,
             self.loop_options.governor, self.loop_options.allow_unstable, self.trace,

@@ -221,12 +221,14 @@ class _SlaveRun:
     def run(self) -> int:
         """The run; returns the exit status."""
         with StopSignals() as signals, Link(self.options.link) as link:
-            run = self._run_linked(link, signals)
+            try:
+                run = self._run_linked(link, signals)
+            finally:
+                if self.ros2 is not None:  # the tokens withdrawn, the bridge ended
+                    self.ros2.stop()
+                    self.extra_summary.update(self.ros2.figures)
             if isinstance(run, int):  # the master did not come (or a stop came first)
                 return run
-            if self.ros2 is not None:  # the tokens withdrawn, the session closed
-                self.ros2.stop()
-                self.extra_summary.update(self.ros2.figures)
             if self.node.environment_kind == "ros2":  # the robot plant's counters
                 self.extra_summary.update(self.node.environment.figures)
             guard_summary = {**self.guard.summary(), **self.inert.summary(run.elapsed_s)}
@@ -239,6 +241,9 @@ class _SlaveRun:
         period_s = node.sample_period_s
         harness = self.harness = ProgramHarness("haptic-slave", "master", self.options, link,
                                                 period_s, recording)
+        # the ROS 2 bridge process first: it joins its router while the master comes
+        self.ros2 = start_ros2(self.options.config, "slave", period_s, say=harness.say,
+                               loop_counts=harness.loop_counts, **_ros2_clay(node, self.state))
         on = "" if node.clay_device is None else f" on {node.clay_device}"
         came = harness.wait_for_peer(self.args.peer_wait, signals, f"{node.scenario.name}, "
                                      f"environment {node.environment_kind}{on}; ")
@@ -251,8 +256,6 @@ class _SlaveRun:
             _record_clay(recording, self.state, harness.realtime_start_ns, layout=True)
         if getattr(self.args, "display", False) and link.session is not None:
             harness.attach_display(_display_publisher(link, node, self.state, recording))
-        self.ros2 = start_ros2(self.options.config, "slave", period_s, say=harness.say,
-                               loop_counts=harness.loop_counts, **_ros2_clay(node, self.state))
         # the master's governed k (never above ours) and the echo of its send time
         self.tick.follow_gain(node.model.ch1_gain_k, gain_scalable(node.model))
         stages = self.stages = SlaveStages(

@@ -5,10 +5,11 @@ never by hand: ``python -m haptic.common.ros2.bridge --feed PATH --side master .
 runs a :class:`~haptic.common.ros2.publisher.Ros2Publisher` (its own Zenoh session in
 client mode to the router, the liveliness tokens, the topics) fed from the feed
 (:mod:`haptic.common.ros2.feed`) at the publish rate, and writes the publisher's counters
-back for the program's summary. It runs under SCHED_BATCH where the platform has it (its
-wake-ups never preempt the thread running on their CPU; it inherits the program's CPUs for
-threads other than the loop). It ends on SIGTERM or SIGINT (tokens withdrawn, session
-closed, exit 0), and by itself when the program that started it is gone.
+back for the program's summary. It runs under SCHED_IDLE where the platform has it (only on
+CPU time the program's threads leave; it inherits the program's CPUs for threads other than
+the loop). It ends on SIGTERM or SIGINT (tokens withdrawn, session
+closed, exit 0), and by itself when the program that started it is gone (removing the feed
+file, which the program would have removed).
 """
 
 from __future__ import annotations
@@ -47,10 +48,12 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _batch_scheduling() -> None:
-    """SCHED_BATCH for this process and the threads it starts (best effort)."""
-    if hasattr(os, "sched_setscheduler") and hasattr(os, "SCHED_BATCH"):
+    """SCHED_IDLE for this process and the threads it starts (best effort): it runs only
+    on CPU time nothing else of the program's wants, so it never takes a time slice from
+    a thread of the program (a Zenoh thread holding the program's GIL, the loop waiting)."""
+    if hasattr(os, "sched_setscheduler") and hasattr(os, "SCHED_IDLE"):
         try:
-            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
         except OSError:
             pass
 
@@ -86,6 +89,8 @@ def serve(args: argparse.Namespace, stop: threading.Event) -> int:
         publisher.stop()
         reader.write_counters(_counters(publisher))
         reader.close()
+        if os.getppid() != args.parent_pid:  # the program is gone: nobody else removes it
+            args.feed.unlink(missing_ok=True)
     return 0
 
 

@@ -10,6 +10,7 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -95,7 +96,7 @@ from haptic.common.ros2.bridge_handle import Ros2Bridge
 from haptic.common.ros2.settings import Ros2Settings
 bridge = Ros2Bridge(Ros2Settings(0, "/", sys.argv[1], 100.0, frozenset({"wrench"})),
                     "master", 1e-3, say=print, loop_counts=lambda: (0, 0)).start()
-print(bridge._process.pid, flush=True)
+print(bridge._process.pid, bridge.feed.path, flush=True)
 time.sleep(1.0)
 import os
 os._exit(0)  # gone without stopping its bridge
@@ -106,11 +107,12 @@ def test_a_bridge_whose_program_is_gone_ends_by_itself() -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     parent = subprocess.run([sys.executable, "-c", ORPHANING_PARENT, endpoint],
                             capture_output=True, text=True, timeout=120)
-    bridge_pid = int(parent.stdout.split()[0])
+    bridge_pid, feed_path = int(parent.stdout.split()[0]), Path(parent.stdout.split()[1])
     deadline = time.monotonic() + 30.0
     while time.monotonic() < deadline and _alive(bridge_pid):
         time.sleep(0.1)
     assert not _alive(bridge_pid), "the orphaned bridge ended"
+    assert not feed_path.exists(), "and removed the feed its program left"
 
 
 def _alive(pid: int) -> bool:
