@@ -6,7 +6,8 @@ reads as it comes, so a chatty child never blocks on a full pipe and a test can 
 with a deadline. It is ended by its own PID only (never a process group or a name): the signal
 asked for, then SIGKILL after a grace period; it is always reaped and its pipes closed, also
 when the test fails. Every wait is bounded and a wait that runs out fails the test with the
-output so far."""
+output so far. :func:`run_to_end` runs a short program to its end with stdout and stderr
+apart, for a test that tells them apart."""
 
 from __future__ import annotations
 
@@ -32,6 +33,29 @@ def python_module(module: str, *args: str) -> list[str]:
     """The command line running ``module`` with this interpreter (``python -m module args``),
     so a test runs the code of this checkout whatever is on PATH."""
     return [sys.executable, "-m", module, *args]
+
+
+def run_to_end(args: Sequence[str], timeout_s: float, *, env: Mapping[str, str] | None = None,
+               cwd: Path | str | None = None) -> subprocess.CompletedProcess[str]:
+    """Run ``args`` to its end with its stdout and stderr apart (text), for a test that tells
+    them apart; stdin reads nothing, ``env`` as for :class:`Program`. Fails with both outputs
+    when it runs past ``timeout_s`` s (then killed by its own PID and reaped)."""
+    environment = {**os.environ, **env} if env is not None else None
+    command = [str(arg) for arg in args]
+    try:
+        return subprocess.run(command, capture_output=True, text=True, timeout=timeout_s,
+                              stdin=subprocess.DEVNULL, env=environment, cwd=cwd, check=False)
+    except subprocess.TimeoutExpired as expired:  # subprocess.run killed and reaped it
+        output = _text(expired.stdout) + _text(expired.stderr)
+        raise AssertionError(f"still running after {timeout_s} s ({' '.join(command)}); "
+                             f"its output ends:\n{output[-QUOTED_OUTPUT_CHARS:]}") from None
+
+
+def _text(output: str | bytes | None) -> str:
+    """What a timed-out run captured (bytes when cut off mid-character), as text."""
+    if isinstance(output, bytes):
+        return output.decode(errors="replace")
+    return output or ""
 
 
 class Program:
@@ -195,6 +219,21 @@ class Programs:
                           new_session=new_session)
         self.started.append(program)
         return program
+
+    def first_to_end(self, timeout_s: float, poll_s: float = 0.05) -> Program:
+        """The first started program found ended (reaped), checked every ``poll_s`` s; fails
+        with every program's output when none has ended within ``timeout_s`` s."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            for program in self.started:
+                if not program.running():
+                    return program
+            if time.monotonic() >= deadline:
+                break
+            time.sleep(poll_s)
+        outputs = "\n".join(f"{' '.join(p.args)}:\n{p.output()[-QUOTED_OUTPUT_CHARS:]}"
+                            for p in self.started)
+        raise AssertionError(f"none of the programs ended within {timeout_s} s:\n{outputs}")
 
     def close(self) -> None:
         """End, reap and close every program started, whatever fails on the way."""

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from tests.helpers.programs import Program, Programs
+from tests.helpers.programs import Program, Programs, run_to_end
 
 #: A child that says it is ready, then ends with status 0 on SIGINT.
 READY_UNTIL_SIGINT = (
@@ -100,3 +100,28 @@ def test_programs_end_every_child_even_when_one_already_ended() -> None:
         assert done.wait(timeout_s=30.0) == 0
     assert waiting.returncode == 0 and done.returncode == 0
     assert _reaped(waiting.pid) and _reaped(done.pid)
+
+
+def test_run_to_end_keeps_stdout_and_stderr_apart() -> None:
+    script = "import sys\nprint('out')\nprint('err', file=sys.stderr)\nsys.exit(3)\n"
+    result = run_to_end([sys.executable, "-c", script], timeout_s=30.0)
+    assert (result.returncode, result.stdout, result.stderr) == (3, "out\n", "err\n")
+
+
+def test_run_to_end_fails_at_its_deadline_with_the_output_and_reaps() -> None:
+    script = "import time\nprint('started', flush=True)\ntime.sleep(60)\n"
+    started = time.monotonic()
+    with pytest.raises(AssertionError, match="(?s)still running after 1.0 s.*started"):
+        run_to_end([sys.executable, "-c", script], timeout_s=1.0)
+    assert time.monotonic() - started < 30.0
+
+
+def test_the_first_program_to_end_is_found_and_none_ending_fails() -> None:
+    with Programs() as programs:
+        waiting = programs.start([sys.executable, "-c", READY_UNTIL_SIGINT])
+        waiting.wait_for("ready", timeout_s=30.0)
+        with pytest.raises(AssertionError, match="none of the programs ended within 0.2 s"):
+            programs.first_to_end(timeout_s=0.2)
+        done = programs.start([sys.executable, "-c", "print('done')"])
+        assert programs.first_to_end(timeout_s=30.0) is done
+        assert done.returncode == 0 and waiting.running()
