@@ -164,7 +164,7 @@ def _add_compare_parser(sub: argparse._SubParsersAction) -> None:
                          "four-channel,mmt)")
     compare.add_argument("--seed", type=int, default=0)
     compare.add_argument("--out", type=Path, default=None,
-                         help="write compare.json and cells.csv here")
+                         help="write compare.json, cells.csv and the heat maps here")
     compare.add_argument("--json", action="store_true", help="print the result as JSON")
 
 

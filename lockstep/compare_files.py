@@ -1,5 +1,6 @@
-"""The files ``haptic-sim compare --out DIR`` writes: the whole result as compare.json and
-one row per cell as cells.csv (the same keys; empty where a figure does not exist)."""
+"""The files ``haptic-sim compare --out DIR`` writes: the whole result as compare.json, one
+row per cell as cells.csv (the same keys; empty where a figure does not exist) and one SVG
+heat map per metric, heatmap_<metric>.svg (lockstep/compare_heatmap.py)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ import csv
 import json
 from pathlib import Path
 from typing import Any
+
+from haptic.lockstep.compare_heatmap import write_heatmaps
 
 CELL_COLUMNS = ("control", "task", "round_trip_s", "loss", "loss_model", "jitter_s", "bounded",
                 "predicted_bounded", "peak_force_N", "impact_overshoot_ratio",
@@ -24,6 +27,7 @@ def write_compare_files(data: dict[str, Any], out: Path) -> None:
         for cell in data["cells"]:
             writer.writerow({key: "" if cell.get(key) is None else cell[key]
                              for key in CELL_COLUMNS})
+    write_heatmaps(data, out)
 
 
 __all__ = ["CELL_COLUMNS", "write_compare_files"]

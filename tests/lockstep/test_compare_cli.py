@@ -7,6 +7,7 @@ import json
 
 from haptic.lockstep.cli import main
 from haptic.lockstep.compare_grid import CONTROLS
+from haptic.lockstep.compare_heatmap import HEATMAP_METRICS
 from tests.helpers.programs import Program, python_module
 
 #: The quick grid's budget in CI on a loaded 2-core machine, s (it runs in well under it).
@@ -47,6 +48,8 @@ def test_quick_compare_prints_every_cell_z_width_and_theory_as_json(tmp_path) ->
     assert 0 < data["wall_seconds"] < data["simulated_seconds"]
     assert json.loads((tmp_path / "compare.json").read_text())["cells"] == data["cells"]
     assert len((tmp_path / "cells.csv").read_text().splitlines()) == 1 + len(data["cells"])
+    for metric in HEATMAP_METRICS:
+        assert (tmp_path / f"heatmap_{metric.key}.svg").read_text().startswith("<svg")
 
 
 def test_an_unknown_control_is_a_config_error(capsys) -> None:
