@@ -1,9 +1,10 @@
 """One SVG heat map per metric of ``haptic-sim compare`` (docs/architectures.md).
 
 Rows are control x task, columns round trip x loss; a cell shows the median of the metric
-over the grid cells that share its row and column (the loss models and the jitters), and for
-``bounded`` the fraction of them that stayed bounded. Figures that do not exist in any of them
-(no contact, a diverged lane) make a marked cell. Plain SVG text, no plotting dependency: a
+over the bounded grid cells that share its row and column (the loss models and the jitters:
+an unbounded run's figures measure its divergence, not the control), and for ``bounded`` the
+fraction of them that stayed bounded. Where none of them is bounded or has the figure (no
+contact) the cell is marked. Plain SVG text, no plotting dependency: a
 sequential colour scale (dark to light as the value grows), its legend with the units, and
 each cell's value written in it.
 """
@@ -65,8 +66,9 @@ class HeatmapTable:
 
 
 def heatmap_table(data: dict[str, Any], metric: HeatmapMetric) -> HeatmapTable:
-    """The median of ``metric`` (for ``bounded``: the bounded fraction) per control x task and
-    round trip x loss over the cells of ``data`` (:meth:`CompareResult.to_json`)."""
+    """The median of ``metric`` over the bounded cells of ``data``
+    (:meth:`CompareResult.to_json`) per control x task and round trip x loss; for
+    ``bounded``: the bounded fraction of all of them."""
     tasks = list(data["grid"]["tasks"])
     present = {(cell["control"], cell["task"]) for cell in data["cells"]}
     rows = [(control, task) for control in data["controls"] for task in tasks
@@ -79,7 +81,8 @@ def heatmap_table(data: dict[str, Any], metric: HeatmapMetric) -> HeatmapTable:
         key = (row_index[(cell["control"], cell["task"])],
                column_index[(cell["round_trip_s"], cell["loss"])])
         value = cell.get(metric.key)
-        figure = float(value) if value is not None else math.nan
+        kept = metric.key == "bounded" or cell["bounded"]
+        figure = float(value) if value is not None and kept else math.nan
         groups.setdefault(key, []).append(figure)
     values = np.full((len(rows), len(columns)), math.nan)
     for (i, j), figures in groups.items():
@@ -186,7 +189,7 @@ def _legend(x: float, y: float, scale: _Scale, metric: HeatmapMetric) -> list[st
     sx = x + _LEGEND_W + 30
     parts += [f'<rect x="{sx}" y="{y}" width="{_CELL_W}" height="{_LEGEND_H}" '
               f'fill="{_MISSING_FILL}" stroke="#999999"/>',
-              _text(sx + _CELL_W + 6, y + 10, "n/a: no figure (no contact, or diverged)", 9,
+              _text(sx + _CELL_W + 6, y + 10, "n/a: no bounded cell with this figure", 9,
                     "start")]
     return parts
 
@@ -216,7 +219,7 @@ def heatmap_svg(table: HeatmapTable, metric: HeatmapMetric) -> str:
     width = max(_LEFT + len(table.columns) * _CELL_W + 20, _LEFT + _LEGEND_W + _CELL_W + 300)
     legend_y = _TOP + len(table.rows) * _CELL_H + 30
     height = legend_y + _LEGEND_H + 30
-    statistic = "fraction bounded" if metric.key == "bounded" else "median"
+    statistic = "fraction bounded" if metric.key == "bounded" else "median of the bounded cells"
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
              f'viewBox="0 0 {width} {height}" font-family="sans-serif">',
              f'<rect width="{width}" height="{height}" fill="#ffffff"/>',
