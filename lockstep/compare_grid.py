@@ -14,8 +14,9 @@ from haptic.common.wire.injection import InjectionConfig
 
 CONTROLS = ("paper", "tdpa", "wave", "four-channel", "mmt")
 TASKS = ("free-sine", "wall", "clay-cut")
-#: The clay cut runs the lockstep's clay, which only the programs' own controls drive yet.
-CLAY_CONTROLS = ("paper", "tdpa")
+#: The controls that run the clay cut: every one (the lockstep's clay for paper and tdpa, the
+#: same Warp clay in the lane simulator for the others).
+CLAY_CONTROLS = CONTROLS
 #: The paper's constant-rate cut (section 4.1): its force, N, and speed, m/s.
 PAPER_CUT_FORCE_N = 3.6
 PAPER_CUT_SPEED_M_PER_S = 0.038
@@ -40,8 +41,9 @@ QUICK_STIFFNESS_LADDER_N_PER_M = (300.0, 3e3, 3e4)
 class TaskSettings:
     """The two tasks along x (SI units in the names).
 
-    clay-cut (paper and tdpa only): the paper's constant-rate cut in the lockstep's clay
-    (lockstep/compare_paper.py);
+    clay-cut: the paper's constant-rate cut in the lockstep's clay (lockstep/compare_paper.py)
+    or the same Warp clay in the lane simulator, the hand pushing ``cut_push_force_N`` ramped
+    in over ``cut_rise_s`` through the operator impedance;
     free-sine: the hand tracks a sine of ``sine_amplitude_m`` at ``sine_frequency_hz`` through
     a spring and damper (``track_*``, the simulated rig's tracking operator's gains);
     wall: the hand pushes with an intent force ramped from 0 to ``push_force_N`` over the first
@@ -60,6 +62,10 @@ class TaskSettings:
     hand_mass_kg: float = 0.25
     hand_damping_N_s_per_m: float = 2.0
     hand_stiffness_N_per_m: float = 6.0
+    #: clay-cut: the clay sweep's steady push (lockstep/sweep.py's ``CLAY_OPERATOR``), N,
+    #: ramped in over ``cut_rise_s``, s, through the same operator impedance.
+    cut_push_force_N: float = 3.6
+    cut_rise_s: float = 1.0
     #: Simulated time after the longest round trip of the grid, s.
     settle_s: float = 6.0
 

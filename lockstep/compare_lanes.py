@@ -5,8 +5,10 @@ One tick (period ``Ts``), every lane at once:
 
 1. the operator's hand and the environment give the measured forces from the devices' state:
    ``fh`` on the handle (free-sine: a spring and damper towards the sine; wall: the intent
-   force through the paper's operator impedance), ``fe`` the tool applies to the wall
-   (``max(0, k p + b v)`` inside, common/control/tasks.py's law with each lane's stiffness);
+   force through the paper's operator impedance; clay-cut: the clay sweep's steady push
+   through the same impedance), ``fe`` the tool applies to the wall (``max(0, k p + b v)``
+   inside, common/control/tasks.py's law with each lane's stiffness) or to the clay (the
+   constant-rate scenario's Warp clay, which the paper's and TDPA's clay cells also cut);
 2. the master reads the tool line and steps its law (a Warp kernel over the lanes), then
    sends on the handle line;
 3. the slave reads the handle line and steps its law, then sends on the tool line;
@@ -30,6 +32,7 @@ from typing import Protocol
 
 import numpy as np
 
+from haptic.common.config.scenario import load_scenario
 from haptic.common.control.four_channel import FourChannelGains, Impedance, side_laws
 from haptic.common.control.four_channel_kernel import FourChannelSideKernel
 from haptic.common.control.mmt import EnvironmentModel, EstimatorSettings, RendererSettings
@@ -40,6 +43,7 @@ from haptic.common.control.wave_kernel import WavePortKernel
 from haptic.lockstep.compare_grid import CompareGrid, Lane
 from haptic.lockstep.compare_links import lane_lines
 from haptic.lockstep.compare_records import LaneRecords
+from haptic.slave_sim.environment import ClayEnvironment
 
 #: The laws' period, s: the paper's (common/config/defaults, section 4.1).
 PERIOD_S = 0.00054
@@ -230,15 +234,49 @@ class Device:
 
 @dataclass(frozen=True)
 class LaneTasks:
-    """The task of each lane as arrays: which lanes push into a wall and its stiffness."""
+    """The task of each lane as arrays: which lanes push into a wall and its stiffness, which
+    cut the clay."""
 
     wall: np.ndarray  # (lanes,) bool
     stiffness_N_per_m: np.ndarray  # (lanes,)
+    clay: np.ndarray  # (lanes,) bool
 
     @classmethod
     def of(cls, lanes: list[Lane]) -> LaneTasks:
         return cls(np.array([lane.task == "wall" for lane in lanes]),
-                   np.array([lane.wall_stiffness_N_per_m for lane in lanes]))
+                   np.array([lane.wall_stiffness_N_per_m for lane in lanes]),
+                   np.array([lane.task == "clay-cut" for lane in lanes]))
+
+
+class LaneClay:
+    """The constant-rate scenario's Warp clay (a 10 cm block at 100 N s/m from x = 2 cm, the
+    tool starting at 0, as in the lockstep's clay cells) on the clay-cut lanes only: each
+    lane its own workpiece, cut along the tool's move of each period."""
+
+    def __init__(self, tasks: LaneTasks) -> None:
+        self.lanes = np.flatnonzero(tasks.clay)
+        self.clay = None
+        if self.lanes.size:
+            self.clay = ClayEnvironment(load_scenario("constant-rate"), PERIOD_S, "warp", "cpu")
+            self.state = self.clay.initial_state(self.lanes.size)
+            self.previous_m = np.zeros((self.lanes.size, 2))
+
+    def force_N(self, position_m: np.ndarray, velocity_m_per_s: np.ndarray) -> np.ndarray:
+        """The force the tool applies to the clay (lanes, 2), N, 0 on the other lanes; the
+        tool moved to ``position_m`` since the last call."""
+        force = np.zeros_like(position_m)
+        if self.clay is None:
+            return force
+        position, velocity = position_m[self.lanes], velocity_m_per_s[self.lanes]
+        # a diverged lane's tool stays where it was for the clay and gets no force (as the
+        # wall gives none to a non-finite position); its records show the divergence
+        finite = (np.isfinite(position).all(axis=1) & np.isfinite(velocity).all(axis=1))[:, None]
+        position = np.where(finite, position, self.previous_m)
+        cut = self.clay.step(self.state, self.previous_m, position,
+                             np.where(finite, velocity, 0.0), np.zeros_like(position))
+        self.previous_m = position
+        force[self.lanes] = np.where(finite & np.isfinite(cut.force_N), cut.force_N, 0.0)
+        return force
 
 
 def hand_force_N(grid: CompareGrid, tasks: LaneTasks, time_s: float, duration_s: float,
@@ -249,11 +287,13 @@ def hand_force_N(grid: CompareGrid, tasks: LaneTasks, time_s: float, duration_s:
                                            task.sine_frequency_hz)
     track = (task.track_stiffness_N_per_m * (target - position_m)
              + task.track_damping_N_s_per_m * (target_rate - velocity_m_per_s))
-    intent = np.zeros(2)
-    intent[0] = task.push_force_N * min(1.0, time_s / (0.5 * duration_s))
-    push = (intent - task.hand_damping_N_s_per_m * velocity_m_per_s
+    intent = np.zeros((2, 2))
+    intent[0, 0] = task.push_force_N * min(1.0, time_s / (0.5 * duration_s))
+    intent[1, 0] = task.cut_push_force_N * min(1.0, time_s / task.cut_rise_s)
+    push = (np.where(tasks.clay[:, None], intent[1], intent[0])
+            - task.hand_damping_N_s_per_m * velocity_m_per_s
             - task.hand_stiffness_N_per_m * position_m)
-    return np.where(tasks.wall[:, None], push, track)
+    return np.where((tasks.wall | tasks.clay)[:, None], push, track)
 
 
 def wall_force_N(grid: CompareGrid, tasks: LaneTasks, position_m: np.ndarray,
@@ -282,6 +322,7 @@ def simulate_lanes(control: str, lanes: list[Lane], grid: CompareGrid) -> LaneRe
     handle_line, tool_line = lane_lines(lanes, steps, PERIOD_S, grid.seed, handle_initial,
                                         tool_initial)
     tasks = LaneTasks.of(lanes)
+    clay = LaneClay(tasks)
     handle = Device.at_rest(HANDLE_DEVICE_MASS_KG + grid.task.hand_mass_kg,
                             HANDLE_DEVICE_DAMPING_N_S_PER_M, count)
     tool = Device.at_rest(TOOL_DEVICE_MASS_KG, TOOL_DEVICE_DAMPING_N_S_PER_M, count)
@@ -290,7 +331,8 @@ def simulate_lanes(control: str, lanes: list[Lane], grid: CompareGrid) -> LaneRe
         for k in range(steps):
             fh = hand_force_N(grid, tasks, k * PERIOD_S, duration, handle.position_m,
                               handle.velocity_m_per_s)
-            fe = wall_force_N(grid, tasks, tool.position_m, tool.velocity_m_per_s)
+            fe = (wall_force_N(grid, tasks, tool.position_m, tool.velocity_m_per_s)
+                  + clay.force_N(tool.position_m, tool.velocity_m_per_s))
             records.add(k, handle.position_m[:, 0], tool.position_m[:, 0], fh[:, 0], fe[:, 0])
             tool_message = tool_line.receive(k)
             master_command = pair.master(fh, tool_message, tool_line.fresh, handle_line.slot(k))

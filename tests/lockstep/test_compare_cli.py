@@ -28,11 +28,10 @@ def test_quick_compare_prints_every_cell_z_width_and_theory_as_json(tmp_path) ->
     assert set(data) >= {"controls", "cells", "z_width", "theory", "simulated_seconds",
                          "wall_seconds"}
     assert data["controls"] == list(CONTROLS)
-    # 5 controls x 2 tasks x 3 delays x (no loss, 20 % bursty) x no jitter, and the clay cut
-    # for paper and tdpa
-    assert len(data["cells"]) == 5 * 2 * 3 * 2 + 2 * 3 * 2
+    # 5 controls x 3 tasks x 3 delays x (no loss, 20 % bursty) x no jitter
+    assert len(data["cells"]) == 5 * 3 * 3 * 2
     cuts = [cell for cell in data["cells"] if cell["task"] == "clay-cut"]
-    assert {cell["control"] for cell in cuts} == {"paper", "tdpa"}
+    assert {cell["control"] for cell in cuts} == set(CONTROLS)
     # without delay the paper's scheme cuts steadily, near the paper's 3.6 N at 38 mm/s
     paper_cut = next(cell for cell in cuts if cell["control"] == "paper"
                      and cell["round_trip_s"] == 0.0 and cell["loss"] == 0.0)
