@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import subprocess
 import sys
 import threading
 import time
@@ -13,6 +12,7 @@ import can
 import pytest
 
 from haptic.master.hardware.unix_can import RESCAN_S, UnixDatagramBus
+from tests.helpers.programs import Program
 
 
 @pytest.fixture
@@ -125,19 +125,13 @@ def test_it_crosses_processes(buses, tmp_path) -> None:
               "bus.send(can.Message(arbitration_id=message.arbitration_id + 1,"
               " data=bytes(message.data), is_extended_id=False))\n"
               "bus.shutdown()\n")
-    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
-    try:
-        assert child.stdout is not None and child.stdout.readline().strip() == "ready"
+    with Program([sys.executable, "-c", script]) as child:
+        child.wait_for(r"^ready$", timeout_s=30.0)
         here.send(_frame(0x200, b"\xaa"))
         answer = here.recv(10.0)
         assert answer is not None and (answer.arbitration_id, bytes(answer.data)) == (
             0x201, b"\xaa")
-        assert child.wait(timeout=10.0) == 0
-    finally:
-        if child.poll() is None:
-            child.kill()
-        child.wait()
-        child.stdout.close()
+        assert child.wait(timeout_s=10.0) == 0
     assert [p.name for p in tmp_path.iterdir()] == [os.path.basename(here.path)]
 
 
