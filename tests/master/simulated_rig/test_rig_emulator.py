@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -39,6 +40,7 @@ from haptic.master.simulated_rig.can_devices import (
 from haptic.master.simulated_rig.cli import main as rig_sim_main
 from haptic.master.simulated_rig.rig_emulator import READY_PREFIX, EmulatedRigHardware
 from haptic.master.standalone import run_master
+from tests.helpers.programs import Program, Programs, python_module, run_to_end
 
 #: Cap on waiting for anything a child does, s.
 WAIT_S = 40.0
@@ -594,44 +596,31 @@ def test_a_bad_config_file_exits_2_naming_the_key(tmp_path, capsys) -> None:
     assert len(err) == 1 and "master.sim.emulator.port" in err[0]
 
 
-def _start_emulator(*argv: str) -> tuple[subprocess.Popen, str]:
-    process = subprocess.Popen([sys.executable, "-m", "haptic.master.simulated_rig.cli", *argv],
-                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    assert process.stdout is not None
-    ready = process.stdout.readline()
-    return process, ready
-
-
-def _end(process: subprocess.Popen) -> None:
-    if process.poll() is None:
-        process.kill()
-    process.wait(timeout=WAIT_S)
-    if process.stdout is not None:
-        process.stdout.close()
+def _start_emulator(programs: Programs, *argv: str) -> tuple[Program, str]:
+    """An emulator and its ready line (fails when it does not say it is ready in time)."""
+    process = programs.start(python_module("haptic.master.simulated_rig.cli", *argv))
+    ready = process.wait_for(rf"^{re.escape(READY_PREFIX)}.*$", timeout_s=WAIT_S)
+    return process, ready.group(0)
 
 
 @pytest.mark.parametrize("number", [signal.SIGTERM, signal.SIGINT])
 def test_the_emulator_says_when_it_is_ready_and_ends_cleanly_on_a_signal(tmp_path,
                                                                           number) -> None:
-    process, ready = _start_emulator("--can-channel", str(tmp_path / "bus"))
-    try:
+    with Programs() as programs:
+        process, ready = _start_emulator(programs, "--can-channel", str(tmp_path / "bus"))
         assert ready.startswith(READY_PREFIX) and str(tmp_path / "bus") in ready
         process.send_signal(number)
-        out, _ = process.communicate(timeout=WAIT_S)
-        assert process.returncode == 0
-        assert "stopped after 0 SYNCs" in out
-    finally:
-        _end(process)
+        assert process.wait(timeout_s=WAIT_S) == 0
+        assert "stopped after 0 SYNCs" in process.output()
     assert list((tmp_path / "bus").iterdir()) == []  # it left the bus
 
 
 def test_the_emulator_ends_after_its_duration_and_when_its_parent_is_gone(tmp_path) -> None:
-    process, ready = _start_emulator("--can-channel", str(tmp_path), "--duration", "0.3")
-    try:
+    with Programs() as programs:
+        process, ready = _start_emulator(programs, "--can-channel", str(tmp_path),
+                                         "--duration", "0.3")
         assert ready.startswith(READY_PREFIX)
-        assert process.wait(timeout=WAIT_S) == 0
-    finally:
-        _end(process)
+        assert process.wait(timeout_s=WAIT_S) == 0
     # A parent that starts an emulator watching it, prints its PID and exits (SIGKILL-like:
     # no cleanup): the emulator notices and ends by itself.
     script = ("import os, subprocess, sys\n"
@@ -642,8 +631,7 @@ def test_the_emulator_ends_after_its_duration_and_when_its_parent_is_gone(tmp_pa
               "print(child.stdout.readline().strip(), flush=True)\n"
               "print(child.pid, flush=True)\n"
               "os._exit(0)\n")
-    parent = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                            timeout=WAIT_S)
+    parent = run_to_end([sys.executable, "-c", script], timeout_s=WAIT_S)
     ready_line, pid_line = parent.stdout.strip().splitlines()
     assert ready_line.startswith(READY_PREFIX)
     orphan = int(pid_line)
@@ -672,8 +660,9 @@ def test_haptic_master_drives_an_emulator_started_by_hand(tmp_path, capsys) -> N
                       0.5)  # a shared machine: the real-rig 2 ms timeout is too tight here
     path = tmp_path / "rig.toml"
     path.write_text(to_toml(config))
-    process, ready = _start_emulator("--config", str(path), "--can-channel", str(bus))
-    try:
+    with Programs() as programs:
+        process, ready = _start_emulator(programs, "--config", str(path), "--can-channel",
+                                         str(bus))
         assert ready.startswith(READY_PREFIX)
         status = master_main(["--config", str(path), "--rig", "can", "--can-interface",
                               "unix_datagram", "--can-channel", str(bus), "--no-link",
@@ -683,13 +672,7 @@ def test_haptic_master_drives_an_emulator_started_by_hand(tmp_path, capsys) -> N
         result = json.loads(printed.out)
         assert result["rig"] == "can" and result["cycles"] == 185
         assert result["final_position_m"][0] > 0.0 and not result["hardware_faults"]
-    finally:
-        process.send_signal(signal.SIGTERM)
-        try:
-            process.wait(timeout=WAIT_S)
-        finally:
-            _end(process)
-    assert process.returncode == 0
+        assert process.stop(signal.SIGTERM, grace_s=WAIT_S) == 0
 
 
 def _serve_for(rig: SimulatedCanRig, seconds: float) -> None:
