@@ -8,14 +8,15 @@ from __future__ import annotations
 
 import json
 import re
-import subprocess
-import sys
+import signal
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from haptic.common.wire.ports import free_port as _free_port
+from haptic.common.wire.ports import free_port
+from tests.helpers.programs import Programs, python_module
 
 WAIT_S = 60.0
 #: When the tool's delay steps from 2 to 40 ms one way, s (CONFIG's delay_profile).
@@ -45,50 +46,35 @@ recover_after_s = 0.0
 
 
 @pytest.fixture
-def processes():
-    started: list[subprocess.Popen] = []
-    try:
+def programs() -> Iterator[Programs]:
+    with Programs() as started:
         yield started
-    finally:
-        for process in started:  # each by its own PID, always reaped
-            if process.poll() is None:
-                process.kill()
-            process.wait()
-            if process.stdout is not None:
-                process.stdout.close()
 
 
-def _start(processes: list, args: list[str]) -> subprocess.Popen:
-    process = subprocess.Popen([sys.executable, "-m", *args], stdout=subprocess.PIPE,
-                               stderr=subprocess.STDOUT, text=True)
-    processes.append(process)
-    return process
-
-
-def _governed_run(tmp_path: Path, processes: list, extra_config: str = ""
+def _governed_run(tmp_path: Path, programs: Programs, extra_config: str = ""
                   ) -> tuple[str, dict, dict]:
     """The two programs over the step; returns the master's output and both summaries."""
     config = tmp_path / "governed.toml"
     config.write_text(CONFIG + extra_config)
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     common = ["--config", str(config), "--key-prefix", f"test/{uuid.uuid4().hex[:8]}",
               "--no-status", "--peer-wait", "40", "--k", "13"]
     master_json, slave_json = tmp_path / "master.json", tmp_path / "slave.json"
-    slave = _start(processes, ["haptic.slave_sim.cli", *common, "--connect", endpoint,
-                               "--json-summary", str(slave_json), "--duration", "30"])
-    master = _start(processes, ["haptic.master.cli", *common, "--listen", endpoint, "--rig",
-                                "model", "--operator", "constant:fx=1.0,onset=0.05",
-                                "--json-summary", str(master_json), "--duration", "4"])
-    out, _ = master.communicate(timeout=WAIT_S)
-    assert master.returncode == 0, out
-    slave.terminate()
-    slave_out, _ = slave.communicate(timeout=WAIT_S)
-    return out, json.loads(master_json.read_text()), json.loads(slave_json.read_text())
+    slave = programs.start(python_module(
+        "haptic.slave_sim.cli", *common, "--connect", endpoint, "--json-summary",
+        str(slave_json), "--duration", "30"))
+    master = programs.start(python_module(
+        "haptic.master.cli", *common, "--listen", endpoint, "--rig", "model", "--operator",
+        "constant:fx=1.0,onset=0.05", "--json-summary", str(master_json), "--duration", "4"))
+    assert master.wait(timeout_s=WAIT_S) == 0, master.output()
+    slave.stop(signal.SIGTERM, grace_s=WAIT_S)
+    return master.output(), json.loads(master_json.read_text()), json.loads(
+        slave_json.read_text())
 
 
 def test_a_delay_step_lowers_k_on_both_sides_and_the_run_stays_bounded(tmp_path: Path,
-                                                                        processes) -> None:
-    out, summary, slave_summary = _governed_run(tmp_path, processes)
+                                                                        programs) -> None:
+    out, summary, slave_summary = _governed_run(tmp_path, programs)
     assert "governor (lower_k" in out and "k 13: 14.3 ms" in out
     assert summary["governor_nominal_k"] == 13.0
     lowest = summary["governor_table"]["k"][-1]
@@ -106,10 +92,10 @@ def test_a_delay_step_lowers_k_on_both_sides_and_the_run_stays_bounded(tmp_path:
 
 
 def test_a_delay_step_switches_the_passivity_layer_on_at_both_sides(tmp_path: Path,
-                                                                    processes) -> None:
+                                                                    programs) -> None:
     """``action = "tdpa"`` in paper mode: the master's layer waits on standby, the step
     switches it on (TDPA_SWITCHED on the wire), the slave's follows; k stays 13."""
-    out, summary, slave_summary = _governed_run(tmp_path, processes, "action = \"tdpa\"\n")
+    out, summary, slave_summary = _governed_run(tmp_path, programs, "action = \"tdpa\"\n")
     assert "governor (tdpa" in out
     assert summary["governor_final_k"] == 13.0 and summary["governor_min_k"] == 13.0
     assert summary["governor_tdpa_requested"] and summary["governor_max_round_trip_s"] > 0.040
