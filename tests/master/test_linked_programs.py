@@ -9,17 +9,17 @@ from __future__ import annotations
 import json
 import re
 import signal
-import subprocess
-import sys
 import time
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from haptic.common.runtime.summary import REQUIRED_SUMMARY_KEYS
-from haptic.common.wire.ports import free_port as _free_port
+from haptic.common.wire.ports import free_port
+from tests.helpers.programs import Program, Programs, python_module, run_to_end
 
 #: One-way cap on waiting for anything a child does, s.
 WAIT_S = 40.0
@@ -35,81 +35,51 @@ def _linear_config(tmp_path: Path) -> Path:
 
 
 class Pair:
-    """Starts and always ends the two programs (by their own PIDs)."""
+    """Starts the two programs in ``programs``, which always ends them (by their own PIDs)."""
 
-    def __init__(self, tmp_path: Path) -> None:
+    def __init__(self, tmp_path: Path, programs: Programs) -> None:
         self.tmp = tmp_path
-        self.endpoint = f"tcp/127.0.0.1:{_free_port()}"
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.prefix = f"test/{uuid.uuid4().hex[:8]}"
         self.config = _linear_config(tmp_path)
-        self.processes: list[subprocess.Popen] = []
+        self.programs = programs
 
     def _common(self) -> list[str]:
         return ["--config", str(self.config), "--key-prefix", self.prefix, "--no-status",
                 "--peer-wait", "30"]
 
-    def master(self, duration: float | None, summary: Path, *extra: str) -> subprocess.Popen:
-        args = [sys.executable, "-m", "haptic.master.cli", *self._common(), "--listen",
-                self.endpoint, "--rig", "sim", "--operator", "constant:fx=1.0,onset=0.05",
-                "--json-summary", str(summary), *extra]
+    def master(self, duration: float | None, summary: Path, *extra: str) -> Program:
+        args = python_module(
+            "haptic.master.cli", *self._common(), "--listen", self.endpoint, "--rig", "sim",
+            "--operator", "constant:fx=1.0,onset=0.05", "--json-summary", str(summary), *extra)
         if duration is not None:
             args += ["--duration", str(duration)]
-        return self._start(args)
+        return self.programs.start(args)
 
-    def slave(self, duration: float | None, summary: Path, *extra: str) -> subprocess.Popen:
-        args = [sys.executable, "-m", "haptic.slave_sim.cli", *self._common(), "--connect",
-                self.endpoint, "--json-summary", str(summary), *extra]
+    def slave(self, duration: float | None, summary: Path, *extra: str) -> Program:
+        args = python_module("haptic.slave_sim.cli", *self._common(), "--connect",
+                             self.endpoint, "--json-summary", str(summary), *extra)
         if duration is not None:
             args += ["--duration", str(duration)]
-        return self._start(args)
-
-    def _start(self, args: list[str]) -> subprocess.Popen:
-        process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                   text=True)
-        self.processes.append(process)
-        return process
-
-    def close(self) -> None:
-        for process in self.processes:
-            if process.poll() is None:
-                process.kill()
-            process.wait()
-            if process.stdout is not None:
-                process.stdout.close()
+        return self.programs.start(args)
 
 
 @pytest.fixture
-def pair(tmp_path):
-    programs = Pair(tmp_path)
-    try:
-        yield programs
-    finally:
-        programs.close()
+def pair(tmp_path: Path) -> Iterator[Pair]:
+    with Programs() as programs:
+        yield Pair(tmp_path, programs)
 
 
-def _wait(process: subprocess.Popen, timeout: float = WAIT_S) -> tuple[int, str]:
-    out, _ = process.communicate(timeout=timeout)
-    return process.returncode, out
+def _wait(program: Program, timeout_s: float = WAIT_S) -> tuple[int, str]:
+    """The program's exit status and output once it has ended by itself (fails when it runs
+    past ``timeout_s`` s)."""
+    status = program.wait(timeout_s=timeout_s)
+    return status, program.output()
 
 
-def _read_until(process: subprocess.Popen, text: str) -> str:
-    """Read the child's output up to the line containing ``text`` (the lines so far); fails
-    when the output ends first (bounded by the child's own start-up timeouts). Its output is
-    short, so a later ``_wait`` reads the rest."""
-    assert process.stdout is not None
-    lines = []
-    for line in process.stdout:
-        lines.append(line)
-        if text in line:
-            return "".join(lines)
-    raise AssertionError(f"no line with {text!r} in: {''.join(lines)}")
-
-
-def _wait_for_file(path: Path, timeout: float = WAIT_S) -> None:
-    deadline = time.monotonic() + timeout
-    while not path.exists():
-        assert time.monotonic() < deadline, f"{path} never appeared"
-        time.sleep(0.05)
+def _wait_for_line(program: Program, text: str) -> None:
+    """Wait for a line of the program's output containing ``text``."""
+    program.wait_for(re.escape(text), timeout_s=WAIT_S)
 
 
 def _events(summary: dict, kind: str) -> list[dict]:
@@ -218,21 +188,20 @@ def test_killed_slave_trips_the_master_and_a_new_slave_resumes(pair, tmp_path) -
     master_json = tmp_path / "master.json"
     master = pair.master(None, master_json)
     # The master waits for a slave once its simulated rig (a child process) answers.
-    _read_until(master, "waiting for the slave")
+    _wait_for_line(master, "waiting for the slave")
     first = pair.slave(None, tmp_path / "slave1.json")
-    _read_until(first, "waiting for the master")  # however long its start-up takes
-    assert first.poll() is None and master.poll() is None
+    _wait_for_line(first, "waiting for the master")  # however long its start-up takes
+    assert first.running() and master.running()
     # Let the loop run, then kill the slave by its own PID.
     time.sleep(2.5)
     killed_at = time.time()
-    first.kill()
-    first.wait(timeout=WAIT_S)
+    first.stop(signal.SIGKILL)
     time.sleep(1.0)
     second_json = tmp_path / "slave2.json"
     second = pair.slave(None, second_json)
     # its signal handlers are in place once it waits for the master (a SIGTERM during its
     # start-up, on a loaded machine, would end it by the default action)
-    _read_until(second, "waiting for the master")
+    _wait_for_line(second, "waiting for the master")
     time.sleep(2.5)
     # SIGTERM to each program: both end cleanly with status 0 and write their summaries.
     for process in (second, master):
@@ -272,42 +241,26 @@ def test_killed_slave_trips_the_master_and_a_new_slave_resumes(pair, tmp_path) -
 
 @pytest.mark.parametrize("program", ["haptic.slave_sim.cli", "haptic.master.cli"])
 def test_the_analysis_refuses_an_unstable_loop(program) -> None:
-    args = [sys.executable, "-m", program, "--k", "19", "--one-way-delay", "0.02",
-            "--duration", "1", "--no-status", "--peer-wait", "1", "--key-prefix",
-            f"test/{uuid.uuid4().hex[:8]}"]
-    process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        out, err = process.communicate(timeout=WAIT_S)
-    finally:
-        if process.poll() is None:
-            process.kill()
-        process.wait()
-    assert process.returncode == 3, err
+    args = python_module(program, "--k", "19", "--one-way-delay", "0.02", "--duration", "1",
+                         "--no-status", "--peer-wait", "1", "--key-prefix",
+                         f"test/{uuid.uuid4().hex[:8]}")
+    result = run_to_end(args, timeout_s=WAIT_S)
+    err = result.stderr
+    assert result.returncode == 3, err
     refusal = [line for line in err.splitlines() if "refusing" in line]
     assert len(refusal) == 1 and "--allow-unstable" in refusal[0]
     assert "UNSTABLE" in err
 
 
 def test_the_slave_ends_cleanly_on_sigterm_while_waiting_for_its_master(tmp_path) -> None:
-    args = [sys.executable, "-m", "haptic.slave_sim.cli", "--no-status", "--key-prefix",
-            f"test/{uuid.uuid4().hex[:8]}", "--connect", f"tcp/127.0.0.1:{_free_port()}",
-            "--config", str(_linear_config(tmp_path))]
-    process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        deadline = time.monotonic() + WAIT_S
-        line = ""
-        while "waiting for the master" not in line:
-            assert time.monotonic() < deadline
-            line = process.stdout.readline()
-            assert line or process.poll() is None
-        process.send_signal(signal.SIGTERM)
-        process.wait(timeout=5.0)
-    finally:
-        if process.poll() is None:
-            process.kill()
-        process.wait()
-        process.stdout.close()
-    assert process.returncode == 0
+    args = python_module("haptic.slave_sim.cli", "--no-status", "--key-prefix",
+                         f"test/{uuid.uuid4().hex[:8]}", "--connect",
+                         f"tcp/127.0.0.1:{free_port()}", "--config",
+                         str(_linear_config(tmp_path)))
+    with Program(args) as slave:
+        _wait_for_line(slave, "waiting for the master")
+        slave.send_signal(signal.SIGTERM)
+        assert slave.wait(timeout_s=5.0) == 0
 
 
 def test_a_drive_fault_latches_the_linked_master_in_its_safe_state(pair, tmp_path) -> None:
@@ -356,7 +309,7 @@ def test_a_drive_fault_latches_the_linked_master_in_its_safe_state(pair, tmp_pat
     finally:
         fault.cancel()
         slave.send_signal(signal.SIGTERM)
-        slave.wait(timeout=10.0)
+        slave.wait(timeout_s=10.0)
     assert status == 1
     summary = json.loads(summary_path.read_text())
     assert summary["node_faulted"] and summary["hardware_faults"]
@@ -408,7 +361,7 @@ def test_the_drives_are_enabled_last_right_before_the_first_tick(pair, tmp_path)
                                    MasterLoopOptions(peer_wait_s=30.0))
     finally:
         slave.send_signal(signal.SIGTERM)
-        slave.wait(timeout=10.0)
+        slave.wait(timeout_s=10.0)
     assert status == 0
     names = [name for name, _ in calls]
     enabled = names.index("activate")
