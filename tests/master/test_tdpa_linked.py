@@ -9,16 +9,16 @@ nothing here asserts timing."""
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
-import sys
-import time
 import uuid
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from haptic.common.wire.ports import free_port as _free_port
+from haptic.common.wire.ports import free_port
+from tests.helpers.programs import Program, Programs, python_module
 
 WAIT_S = 90.0
 
@@ -32,31 +32,27 @@ def _config(tmp_path: Path, mode: str) -> Path:
 
 def _run_pair(tmp_path: Path, master_mode: str, slave_mode: str, duration_s: float,
               *injection: str) -> tuple[subprocess.CompletedProcess, ...]:
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     prefix = f"test/{uuid.uuid4().hex[:8]}"
     common = ["--key-prefix", prefix, "--no-status", "--peer-wait", "30", *injection]
-    slave_args = [sys.executable, "-m", "haptic.slave_sim.cli", "--config",
-                  str(_config(tmp_path, slave_mode)), *common, "--connect", endpoint,
-                  "--json-summary", str(tmp_path / "slave.json"), "--out",
-                  str(tmp_path / "slave_out"), "--duration", str(duration_s + 1.0)]
-    master_args = [sys.executable, "-m", "haptic.master.cli", "--config",
-                   str(_config(tmp_path, master_mode)), *common, "--listen", endpoint,
-                   "--rig", "model", "--operator", "constant:fx=1.0,onset=0.05,rise=0.5",
-                   "--json-summary", str(tmp_path / "master.json"), "--duration",
-                   str(duration_s)]
-    processes = [subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                  text=True) for args in (slave_args, master_args)]
-    results = []
-    try:
-        for process in processes:
-            out, _ = process.communicate(timeout=WAIT_S)
-            results.append(subprocess.CompletedProcess(process.args, process.returncode, out))
-    finally:
-        for process in processes:
-            if process.poll() is None:
-                process.kill()
-            process.wait()
-    return tuple(results)
+    slave_args = python_module(
+        "haptic.slave_sim.cli", "--config", str(_config(tmp_path, slave_mode)), *common,
+        "--connect", endpoint, "--json-summary", str(tmp_path / "slave.json"), "--out",
+        str(tmp_path / "slave_out"), "--duration", str(duration_s + 1.0))
+    master_args = python_module(
+        "haptic.master.cli", "--config", str(_config(tmp_path, master_mode)), *common,
+        "--listen", endpoint, "--rig", "model", "--operator",
+        "constant:fx=1.0,onset=0.05,rise=0.5", "--json-summary", str(tmp_path / "master.json"),
+        "--duration", str(duration_s))
+    with Programs() as programs:
+        started = [programs.start(args) for args in (slave_args, master_args)]
+        return tuple(_ended(program, WAIT_S) for program in started)
+
+
+def _ended(program: Program, timeout_s: float) -> subprocess.CompletedProcess[str]:
+    """The program's run once it has ended by itself (fails when it runs past ``timeout_s``)."""
+    status = program.wait(timeout_s=timeout_s)
+    return subprocess.CompletedProcess(program.args, status, program.output())
 
 
 @pytest.mark.slow
@@ -87,33 +83,25 @@ def test_a_pair_in_different_control_modes_is_refused(tmp_path) -> None:
     """Whichever side first hears the other refuses with exit status 4 and a line naming
     ``[control] mode``; the other may then wait for a peer that left, so it is ended by its
     PID once the first has refused."""
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     prefix = f"test/{uuid.uuid4().hex[:8]}"
     common = ["--key-prefix", prefix, "--no-status", "--peer-wait", "30"]
-    processes = [
-        subprocess.Popen([sys.executable, "-m", "haptic.slave_sim.cli", "--config",
-                          str(_config(tmp_path, "paper")), *common, "--connect", endpoint,
-                          "--duration", "20"], stdout=subprocess.PIPE,
-                         stderr=subprocess.STDOUT, text=True),
-        subprocess.Popen([sys.executable, "-m", "haptic.master.cli", "--config",
-                          str(_config(tmp_path, "tdpa")), *common, "--listen", endpoint,
-                          # the rig is not under test: the model rig has no emulated drive
-                          # start-up to fail under load (EMCY during enable, seen in CI here)
-                          "--rig", "model", "--duration", "20"], stdout=subprocess.PIPE,
-                         stderr=subprocess.STDOUT, text=True)]
-    try:
-        deadline = time.monotonic() + WAIT_S
-        while all(p.poll() is None for p in processes):
-            assert time.monotonic() < deadline, "neither side refused the other"
-            time.sleep(0.1)
-        time.sleep(2.0)  # the other side may refuse too
-    finally:
-        for process in processes:
-            if process.poll() is None:
-                process.kill()
-        outputs = [process.communicate(timeout=WAIT_S)[0] for process in processes]
-    refused = [out for process, out in zip(processes, outputs, strict=True)
-               if process.returncode == 4]
-    assert refused, outputs
-    assert all("[control] mode" in out for out in refused)
-    assert all(process.returncode != 0 for process in processes)
+    with Programs() as programs:
+        programs.start(python_module(
+            "haptic.slave_sim.cli", "--config", str(_config(tmp_path, "paper")), *common,
+            "--connect", endpoint, "--duration", "20"))
+        # the rig is not under test: the model rig has no emulated drive start-up to fail
+        # under load (EMCY during enable, seen in CI here)
+        programs.start(python_module(
+            "haptic.master.cli", "--config", str(_config(tmp_path, "tdpa")), *common,
+            "--listen", endpoint, "--rig", "model", "--duration", "20"))
+        first = programs.first_to_end(timeout_s=WAIT_S)  # "neither side refused the other"
+        other = next(program for program in programs.started if program is not first)
+        other.ended_within(2.0)  # the other side may refuse too
+        for program in programs.started:
+            program.stop(signal.SIGKILL)
+        outputs = [program.output() for program in programs.started]
+        refused = [program.output() for program in programs.started if program.returncode == 4]
+        assert refused, outputs
+        assert all("[control] mode" in out for out in refused)
+        assert all(program.returncode != 0 for program in programs.started)
