@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import json
 import signal
-import subprocess
-import sys
 import uuid
 from collections import Counter
 from pathlib import Path
@@ -18,6 +16,7 @@ import pytest
 
 from haptic.common.runtime.tick_driver import TickDriver
 from haptic.common.wire.ports import free_port
+from tests.helpers.programs import Program, python_module
 
 WAIT_S = 60.0
 
@@ -131,20 +130,6 @@ def _linear_config(tmp_path: Path) -> Path:
     return path
 
 
-def _peer(args: list[str]) -> subprocess.Popen:
-    return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-
-
-def _end(process: subprocess.Popen) -> None:
-    if process.poll() is None:
-        process.send_signal(signal.SIGTERM)
-    try:
-        process.communicate(timeout=WAIT_S)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        process.communicate()
-
-
 @pytest.mark.parametrize("side", ["master", "slave"])
 def test_both_programs_run_through_the_driver(counted_ticks, tmp_path, side) -> None:
     """The program under test runs in this process, its peer as a child."""
@@ -159,15 +144,15 @@ def test_both_programs_run_through_the_driver(counted_ticks, tmp_path, side) -> 
     slave_args = [*common, "--connect", endpoint]
     summary_path = tmp_path / "summary.json"
     if side == "master":
-        peer = _peer([sys.executable, "-m", "haptic.slave_sim.cli", *slave_args])
+        peer = Program(python_module("haptic.slave_sim.cli", *slave_args))
         run, args, stages = master_main, master_args, "LinkedMasterStages"
     else:
-        peer = _peer([sys.executable, "-m", "haptic.master.cli", *master_args])
+        peer = Program(python_module("haptic.master.cli", *master_args))
         run, args, stages = slave_main, slave_args, "SlaveStages"
     try:
         status = run([*args, "--duration", "1.0", "--json-summary", str(summary_path)])
     finally:
-        _end(peer)
+        peer.stop(signal.SIGTERM, grace_s=WAIT_S)
     assert status == 0
     summary = json.loads(summary_path.read_text())
     assert summary["steps"] > 0
