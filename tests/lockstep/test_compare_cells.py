@@ -67,9 +67,9 @@ def test_the_paper_scheme_beyond_its_delay_margin_is_reported_unbounded() -> Non
 
 
 def test_the_lane_simulator_controls_cut_the_clay_without_delay() -> None:
-    # 2.6 s: the push ramps in over 1 s, the tool reaches the block at 2 cm and cuts past 4 cm
+    # 2.2 s: the push ramps in over 1 s, the tool reaches the block at 2 cm and cuts past 4 cm
     grid = CompareGrid(("wave", "four-channel", "mmt"), ("clay-cut",), (0.0,), (0.0,),
-                       ("independent",), (0.0,), (300.0,), TaskSettings(settle_s=2.6))
+                       ("independent",), (0.0,), (300.0,), TaskSettings(settle_s=2.2))
     result = run_compare(grid)
     assert [cell["control"] for cell in result.cells] == ["wave", "four-channel", "mmt"]
     for cell in result.cells:
