@@ -37,6 +37,8 @@ from haptic.slave_sim.tool import POSITION_COLUMNS, VELOCITY_COLUMNS, tool_const
 
 COMPENSATOR_INPUTS = ("fh_x", "fh_y", "ft_x", "ft_y")
 COMPENSATOR_OUTPUTS = ("vt_x", "vt_y")
+#: The shape of one lane's (x, y) inputs.
+_ONE_LANE = (1, 2)
 #: The Warp device of the node's buffers: the CPU, whose arrays numpy views share (the clay
 #: runs on its own device).
 DEVICE = "cpu"
@@ -277,18 +279,35 @@ class SlaveNode:
         """Advance every lane by one period Ts; inputs (lanes, 2) in N and m;
         ``peer_energy_J`` (lanes,): the master's cumulative input energy received (``tdpa``
         mode; ignored otherwise). The law runs in :mod:`haptic.slave_sim.node_kernels`."""
+        position, velocity, result = self._advance(state, handle_force_N, handle_position_m,
+                                                   peer_energy_J)
+        return SlaveOutputs(
+            tool_position_m=position,
+            tool_velocity_m_s=velocity,
+            tool_force_N=state.tool_force_N,
+            actuator_force_N=state.actuator_force_N,
+            cutting=result.cutting,
+            engagement=result.engagement,
+            removed_volume_m3=result.removed_volume_m3,
+            tracking_error_m=position - self._position_ratio * handle_position_m,
+        )
+
+    def advance(self, state: SlaveState, handle_force_N: np.ndarray,
+                handle_position_m: np.ndarray, peer_energy_J: np.ndarray | None = None
+                ) -> None:
+        """:meth:`step` without its outputs: the state (the node's, the environment's)
+        advances exactly as :meth:`step` advances it. For the steps whose outputs nobody
+        reads (a catch-up tick's earlier samples, slave_sim/tick.py): building the outputs
+        costs several us a step."""
+        self._advance(state, handle_force_N, handle_position_m, peer_energy_J)
+
+    def _advance(self, state: SlaveState, handle_force_N: np.ndarray,
+                 handle_position_m: np.ndarray, peer_energy_J: np.ndarray | None
+                 ) -> tuple[np.ndarray, np.ndarray, Any]:
+        """One step of :meth:`step`; returns the tool's position and velocity after it
+        ((lanes, 2) copies, m and m/s) and the environment's result."""
         runtime = state.kernels
-        inputs = runtime.inputs
-        inputs[:, 0:2] = handle_force_N
-        inputs[:, 2:4] = handle_position_m
-        inputs[:, 4:6] = state.tool_force_N
-        scale, gain = state.tool_force_scale, state.gain_ratio
-        if scale is not None or not runtime.unit_scale:  # 1 where none: written once
-            inputs[:, 6] = 1.0 if scale is None else scale
-            runtime.unit_scale = scale is None
-        if gain is not None or not runtime.unit_gain:
-            inputs[:, 7] = 1.0 if gain is None else gain
-            runtime.unit_gain = gain is None
+        self._write_inputs(runtime, state, handle_force_N, handle_position_m)
         port = state.passivity
         if port is not None and not (bool(port.active[0]) if runtime.lanes == 1
                                      else port.active.any()):  # on standby: the paper's scheme
@@ -329,16 +348,39 @@ class SlaveNode:
             port.observe(-np.einsum("ij,ij->i", force, position - previous))
         state.handle_position_m = handle_position_m
         state.step_count += 1
-        return SlaveOutputs(
-            tool_position_m=position,
-            tool_velocity_m_s=velocity,
-            tool_force_N=force,
-            actuator_force_N=actuator,
-            cutting=result.cutting,
-            engagement=result.engagement,
-            removed_volume_m3=result.removed_volume_m3,
-            tracking_error_m=position - self._position_ratio * handle_position_m,
-        )
+        return position, velocity, result
+
+    @staticmethod
+    def _write_inputs(runtime: _NodeKernels, state: SlaveState, handle_force_N: np.ndarray,
+                      handle_position_m: np.ndarray) -> None:
+        """The step's inputs into the kernels' buffer (:data:`~haptic.slave_sim.node_kernels.
+        INPUT_COLUMNS`): one lane element by element (about half the time of the slice
+        writes, the same values), more lanes by columns."""
+        scale, gain = state.tool_force_scale, state.gain_ratio
+        fh, yh, ft = handle_force_N, handle_position_m, state.tool_force_N
+        if (runtime.lanes == 1 and getattr(fh, "shape", None) == _ONE_LANE
+                and getattr(yh, "shape", None) == _ONE_LANE):  # else: broadcast by columns
+            row = runtime.inputs_row
+            row[0] = fh[0, 0]
+            row[1] = fh[0, 1]
+            row[2] = yh[0, 0]
+            row[3] = yh[0, 1]
+            row[4] = ft[0, 0]
+            row[5] = ft[0, 1]
+            row[6] = 1.0 if scale is None else scale[0]
+            row[7] = 1.0 if gain is None else gain[0]
+            runtime.unit_scale = runtime.unit_gain = False  # the columns written here
+            return
+        inputs = runtime.inputs
+        inputs[:, 0:2] = handle_force_N
+        inputs[:, 2:4] = handle_position_m
+        inputs[:, 4:6] = state.tool_force_N
+        if scale is not None or not runtime.unit_scale:  # 1 where none: written once
+            inputs[:, 6] = 1.0 if scale is None else scale
+            runtime.unit_scale = scale is None
+        if gain is not None or not runtime.unit_gain:
+            inputs[:, 7] = 1.0 if gain is None else gain
+            runtime.unit_gain = gain is None
 
     def _passivity_force(self, state: SlaveState, port: PassivityPort, actuator: np.ndarray,
                          handle_position_m: np.ndarray, peer_energy_J: np.ndarray | None
@@ -463,6 +505,8 @@ class _NodeKernels:
         self.lanes = lanes
         #: (lanes, 8) the step's inputs (:data:`~haptic.slave_sim.node_kernels.INPUT_COLUMNS`)
         self.inputs = inputs.numpy()
+        #: the first lane's row of :attr:`inputs` (a view: the one-lane step writes into it)
+        self.inputs_row = self.inputs[0]
         #: whether the scale and gain columns hold the 1 of a state without them (the step
         #: then leaves them as they are)
         self.unit_scale = False
