@@ -398,7 +398,22 @@ def _side_figures(summary: dict[str, Any], ts_s: float) -> dict[str, Any]:
         # tick's node stage two or more steps long
         "pacing": {key.removeprefix("pacing_"): value for key, value in summary.items()
                    if key.startswith("pacing_")} or None,
+        **_node_step_figures(summary.get("node_times")),
     }
+
+
+def _node_step_figures(node_times: dict[str, Any] | None) -> dict[str, Any]:
+    """What the slave's node stage p99 holds (slave_sim/pacing.py: one node step per master
+    sample, 0 to several a tick): ``node_per_step``, the node part's time divided by the
+    tick's node steps over the ticks with at least one step (p50/p99/max/mean, s; timed inside
+    ``SlaveTick.step_lane``, from the supervise | node boundary to the node part's end, so
+    it leaves out the stage's last few instructions), and ``node_steps_per_tick``, the step
+    count -> the ticks with it and their node part's p50/p99, s. Empty for a side without
+    them (the master, the echo nodes)."""
+    if not node_times:
+        return {}
+    return {"node_per_step": node_times["per_step"],
+            "node_steps_per_tick": node_times["by_steps"]}
 
 
 def _phase_lock(slave: dict[str, Any]) -> dict[str, Any] | None:
@@ -501,6 +516,20 @@ def _us(value: float | None) -> str:
     return "n/a" if value is None else f"{value * 1e6:8.1f} us"
 
 
+def print_node_steps(figures: dict[str, Any]) -> None:
+    """The slave's node part per node step and its ticks by node steps (none: nothing)."""
+    per_step = figures.get("node_per_step")
+    if not per_step or not per_step.get("ticks"):
+        return
+    print(f"         node part per node step (ticks with >= 1 step): p50 "
+          f"{per_step['p50_s'] * 1e6:.1f} p99 {per_step['p99_s'] * 1e6:.1f} us")
+    print("         ticks by node steps (ticks, node part p50/p99 us): " + "  ".join(
+        f"{steps}: {entry['ticks']}" + (f" ({entry['p50_s'] * 1e6:.1f}/"
+                                        f"{entry['p99_s'] * 1e6:.1f})" if "p50_s" in entry
+                                        else "")
+        for steps, entry in figures.get("node_steps_per_tick", {}).items()))
+
+
 def print_table(result: dict[str, Any]) -> None:
     print(f"loop benchmark, {result['duration_s']:g} s on loopback, nodes: "
           f"{result.get('nodes', '?')}, CPU layout {result.get('cpu_layout', '?')} "
@@ -532,6 +561,7 @@ def print_table(result: dict[str, Any]) -> None:
                   f"{pacing['caught_up_steps']} caught up, most in one tick "
                   f"{pacing['max_tick_steps']}, largest backlog "
                   f"{pacing['max_backlog_samples']}")
+        print_node_steps(f)
     lock = result.get("phase_lock")
     if lock and lock.get("used_after_arrival_p50_s") is not None:
         print(f"  slave phase lock: the master's messages used "

@@ -287,6 +287,7 @@ class _SlaveRun:
             **(self.phase_lock.summary() if self.phase_lock is not None
                else {"phase_lock_enabled": False}),
             **self.pacing.summary(),
+            node_times=self.tick.node_times.summary(),
             **passivity_summary(state.passivity, node.passivity_standby),
             clay_device=node.clay_device,
             **self.extra_summary,

@@ -205,6 +205,7 @@ class SlaveStages(LinkedSide):
                             running=running)
         if self.ros2 is not None:
             self._offer_ros2(tick, now_s, out, running, ready)
+        self.tick.note_node_time()  # the node part per node step (the summary's node_times)
 
     def _offer_ros2(self, tick: int, now_s: float, out: Any, running: bool,
                     ready: bool) -> None:

@@ -43,6 +43,7 @@ import numpy as np
 
 from haptic.common.analysis.margin_table import follow_gain
 from haptic.common.runtime.lane_tick import UNCONFIGURED_LANE, TickFlags, one_lane_passivity
+from haptic.common.runtime.stage_times import StepSplitTimes
 from haptic.common.wire.lane_flags import lane_flag_values
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, HandleState
 from haptic.common.wire.passivity_link import PassivityLink
@@ -125,6 +126,8 @@ class SlaveTick:
         self._outside = np.zeros(lanes, bool)
         self._flag_values = np.zeros(lanes, np.int64)
         self._none_switched = np.zeros(lanes, bool)
+        #: the one lane's node part per tick by its node steps (:meth:`note_node_time`)
+        self.node_times = StepSplitTimes()
 
     #: the one lane's whole-tick setup (:meth:`configure_lane`)
     _lane: _LaneSetup = UNCONFIGURED_LANE
@@ -193,9 +196,11 @@ class SlaveTick:
             follow[lane] = supervisors[lane].receive(message if admitted else None)
         if admitted_lanes:  # lane by lane: the program's one lane takes scalar writes
             gain = self._gain
+            force, position = self.handle_force_N, self.handle_position_m
             for lane in admitted_lanes:
-                self.handle_force_N[lane] = guards[lane].force_N  # bounded
-                self.handle_position_m[lane] = guards[lane].position_m
+                guard = guards[lane]
+                force[lane, 0], force[lane, 1] = guard.force_N  # bounded
+                position[lane, 0], position[lane, 1] = guard.position_m
                 message = messages[lane]
                 self.echo_send_time_ns[lane] = message.send_time_ns
                 self.force_scale[lane] = message.force_scale
@@ -295,31 +300,39 @@ class SlaveTick:
         (x, y) m and force scale, or the tick's own input where the entry is None (at least
         one step). Afterwards :attr:`handle_force_N`, :attr:`handle_position_m` and
         :attr:`force_scale` hold the tick's own input again (the newest admitted message).
-        Returns the last step's output."""
+        Returns the last step's output; the earlier steps advance the node without building
+        outputs nobody reads (``SlaveNode.advance``: the same state)."""
         fh, yh, scale = self.handle_force_N, self.handle_position_m, self.force_scale
         newest = (fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0])
-        ticked = None
-        for sample in plan or (None,):
+        steps = plan or (None,)
+        for sample in steps[:-1]:
             if sample is not None:
                 fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = sample
-            ticked = self.control()
+            self.node.advance(self.state, self._force(), yh)
+        sample = steps[-1]
+        if sample is not None:
+            fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = sample
+        ticked = self.control()
         fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = newest
-        assert ticked is not None
         return ticked
+
+    def _force(self) -> np.ndarray:
+        """The node's handle force input (lanes, 2), N: the bounded handle force where the
+        tool runs, zero elsewhere."""
+        running = self.running
+        if self.lanes == 1:  # the program's lane: Python scalars are cheaper than numpy calls
+            return self.handle_force_N if running[0] else self._zero_force
+        if (count := np.count_nonzero(running)) == self.lanes:
+            return self.handle_force_N
+        if not count:
+            return self._zero_force
+        return np.where(running[:, None], self.handle_force_N, 0.0)
 
     def control(self) -> SlaveTickOutput:
         """The node stage: Ch2/Ct2, the tool and the environment, with the bounded handle
         force where the tool runs and zero force elsewhere."""
         running = self.running
-        if self.lanes == 1:  # the program's lane: Python scalars are cheaper than numpy calls
-            force = self.handle_force_N if running[0] else self._zero_force
-        elif (count := np.count_nonzero(running)) == self.lanes:
-            force = self.handle_force_N
-        elif not count:
-            force = self._zero_force
-        else:
-            force = np.where(running[:, None], self.handle_force_N, 0.0)
-        out = self.node.step(self.state, force, self.handle_position_m)
+        out = self.node.step(self.state, self._force(), self.handle_position_m)
         port = self.state.passivity
         switched = (port.active if port is not None and self.node.passivity_standby
                     else self._none_switched)
@@ -375,11 +388,26 @@ class SlaveTick:
         pacing = lane.pacing
         if pacing is None:
             self._node_part(lane, ())
+            outputs.node_steps = 1
         else:
             plan = pacing.plan(bool(self.running[0]), self.samples[0])
             if plan or outputs.ticked is None:  # each step with its own sample's force
                 self._node_part(lane, plan)
+                outputs.node_steps = max(len(plan), 1)
+            else:
+                outputs.node_steps = 0
+        outputs.node_end_ns = clock_ns() if clock_ns is not None else 0
         return outputs
+
+    def note_node_time(self) -> None:
+        """Record the last :meth:`step_lane`'s node part (its steps and its time from
+        ``supervised_ns`` to ``node_end_ns``) in :attr:`node_times` (the program's summary's
+        ``node_times``); nothing without a clock. Called after the timed stages (the
+        program's telemetry), so the record costs none of them."""
+        outputs = self._lane.outputs
+        if outputs.node_end_ns:
+            self.node_times.record(outputs.node_steps,
+                                   outputs.node_end_ns - outputs.supervised_ns)
 
     def _node_part(self, lane: _LaneSetup, plan: Sequence[Step]) -> None:
         """The node stage over ``plan`` (at least one step) into the outputs record, with the
@@ -415,7 +443,8 @@ class SlaveLaneOutputs:
     Ts); ``flags``: the message's to the master (the mode's TDPA flag included);
     ``echo_send_time_ns``: the newest admitted handle message's send time, ns (0: none);
     ``energy_J``: this side's handed-over energy to send, J; ``supervised_ns``: the clock at
-    the end of the supervise part, ns (0: not taken)."""
+    the end of the supervise part, ns (0: not taken); ``node_steps``: the node steps of the
+    tick; ``node_end_ns``: the clock at the end of the node part, ns (0: not taken)."""
 
     fresh: bool = False
     ticked: SlaveTickOutput | None = None
@@ -424,6 +453,8 @@ class SlaveLaneOutputs:
     echo_send_time_ns: int = 0
     energy_J: float = 0.0
     supervised_ns: int = 0
+    node_steps: int = 0
+    node_end_ns: int = 0
 
 
 @dataclass(frozen=True, slots=True)

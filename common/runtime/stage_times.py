@@ -71,3 +71,52 @@ def _us_figure(value_s: float | None) -> str:
     if value_s is None or not math.isfinite(value_s):
         return "n/a"
     return f"{value_s * 1e6:.1f}"
+
+
+class StepSplitTimes:
+    """A stage that runs a varying number of steps a tick (the slave's node: one step per
+    master sample, none while the next has not come, several after a gap;
+    slave_sim/pacing.py): its time per step over the ticks with at least one step, its time
+    by the tick's step count, and the ticks that took each count, so a reader sees what the
+    stage's p99 holds. A record costs about a microsecond; the caller records outside the
+    timed stages."""
+
+    def __init__(self) -> None:
+        self._per_step = LogHistogram()
+        self._by_steps: dict[int, LogHistogram] = {}
+        #: ticks by the steps they took
+        self.ticks_by_steps: dict[int, int] = {}
+
+    def record(self, steps: int, duration_ns: int) -> None:
+        """One tick: ``steps`` steps (0: none) that took ``duration_ns``, ns."""
+        counts = self.ticks_by_steps
+        counts[steps] = counts.get(steps, 0) + 1
+        if steps <= 0:
+            return
+        duration_s = duration_ns * 1e-9
+        self._per_step.record(duration_s / steps)
+        histogram = self._by_steps.get(steps)
+        if histogram is None:
+            histogram = self._by_steps[steps] = LogHistogram()
+        histogram.record(duration_s)
+
+    def summary(self) -> dict[str, object]:
+        """``per_step``: p50, p99, max and mean of the stage's time divided by its steps, over
+        the ticks with at least one step, s; ``by_steps``: the step count (a string, for
+        JSON) -> the ticks with that count and their stage time's p50 and p99, s
+        (``ticks`` only for 0 steps)."""
+        per_step = self._per_step
+        p50, p99 = per_step.percentiles((50.0, 99.0))
+        count = per_step.count
+        by_steps: dict[str, dict[str, float]] = {}
+        for steps in sorted(self.ticks_by_steps):
+            entry: dict[str, float] = {"ticks": self.ticks_by_steps[steps]}
+            histogram = self._by_steps.get(steps)
+            if histogram is not None:
+                entry["p50_s"], entry["p99_s"] = histogram.percentiles((50.0, 99.0))
+            by_steps[str(steps)] = entry
+        return {"per_step": {"p50_s": p50, "p99_s": p99,
+                             "max_s": per_step.max_s if count else math.nan,
+                             "mean_s": per_step.sum_s / count if count else math.nan,
+                             "ticks": count},
+                "by_steps": by_steps}

@@ -40,11 +40,20 @@ def test_json_shape(load_bench, capsys, monkeypatch):
         pacing)
     assert pacing["max_tick_steps"] >= 1
     assert result["master"]["pacing"] is None
-    bench.print_table(result)
+    # what the node stage's p99 holds: its time per node step and the ticks by node steps
+    by_steps = result["slave"]["node_steps_per_tick"]
+    assert sum(entry["ticks"] for entry in by_steps.values()) > 0
+    assert max(int(steps) for steps in by_steps) == pacing["max_tick_steps"]
+    per_step = result["slave"]["node_per_step"]
+    assert per_step["ticks"] == sum(entry["ticks"] for steps, entry in by_steps.items()
+                                    if steps != "0")
+    assert 0 < per_step["p50_s"] <= per_step["max_s"]
+    assert "node_per_step" not in result["master"]
     table = capsys.readouterr().out
     assert f"node steps: {pacing['waited_ticks']} ticks waited, {pacing['caught_up_steps']} " \
         "caught up" in table
     assert table.count("node steps:") == 1
+    assert table.count("node part per node step") == 1
 
 
 def test_cpu_layouts(load_bench):
