@@ -49,6 +49,7 @@ def test_json_shape(load_bench, capsys, monkeypatch):
                                     if steps != "0")
     assert 0 < per_step["p50_s"] <= per_step["max_s"]
     assert "node_per_step" not in result["master"]
+    bench.print_table(result)
     table = capsys.readouterr().out
     assert f"node steps: {pacing['waited_ticks']} ticks waited, {pacing['caught_up_steps']} " \
         "caught up" in table
