@@ -5,8 +5,6 @@ tool cuts the scenario's clay; the cut reproduces the virtual tool's within 10 %
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -15,7 +13,9 @@ import pytest
 
 from haptic.common.config import load_config
 from haptic.common.config.scenario import load_scenario
-from tests.common.ros2.zenoh_graph import free_port, zenoh_router
+from haptic.common.wire.ports import free_port
+from tests.common.ros2.zenoh_graph import zenoh_router
+from tests.helpers.programs import Program, python_module
 from tests.slave_sim.robot_emulator import EmulatedRobot
 
 DURATION_S = 3.0
@@ -23,17 +23,10 @@ DURATION_S = 3.0
 
 def _session(out: Path, *extra: str) -> dict:
     """Run haptic-session; the slave's summary."""
-    process = subprocess.Popen(
-        [sys.executable, "-m", "haptic.common.launch.cli", "--duration", repr(DURATION_S),
-         "--out", str(out), "--cpu-layout", "free", *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        output, _ = process.communicate(timeout=500)
-    finally:
-        if process.poll() is None:
-            process.kill()  # by its own PID; reaped below
-        process.wait()
-    assert process.returncode == 0, output[-4000:]
+    with Program(python_module(
+            "haptic.common.launch.cli", "--duration", repr(DURATION_S), "--out", str(out),
+            "--cpu-layout", "free", *extra)) as session:
+        assert session.wait(timeout_s=500.0) == 0, session.output()[-4000:]
     return json.loads((out / "slave.json").read_text())
 
 
