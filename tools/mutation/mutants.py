@@ -99,11 +99,12 @@ def mutants(root: Path, path: str,
     source = (root / path).read_text()
     lines = source.splitlines()
     annotations = annotation_spans(source)
+    nodes = list(ast_nodes(get_ast(source)))  # read only: one parse serves every operator
     found = []
     for name in OPERATORS:
         operator = get_operator(name)()
         occurrence = 0
-        for node in ast_nodes(get_ast(source)):
+        for node in nodes:
             for index, (start, _end) in enumerate(operator.mutation_positions(node)):
                 line = start[0]
                 text = lines[line - 1]
