@@ -32,6 +32,8 @@ from haptic.common.config import ConfigError
 from haptic.common.wire.send_clock import SendClock, receive_time_ns
 
 _Limits = TypeVar("_Limits", bound="PeerLimits")
+#: a module-level name: one lookup less per call, four calls per message
+_isfinite = math.isfinite
 
 
 @dataclass(frozen=True)
@@ -137,8 +139,7 @@ class PeerGuard:
         self.counters.checked += 1
         fx, fy = getattr(message, side.force_field)
         px, py = getattr(message, side.position_field)
-        if not (math.isfinite(fx) and math.isfinite(fy) and math.isfinite(px)
-                and math.isfinite(py)):
+        if not (_isfinite(fx) and _isfinite(fy) and _isfinite(px) and _isfinite(py)):
             self.counters.non_finite += 1
             self._fault(now_s, f"non-finite {side.noun} force or position")
             return False
@@ -168,7 +169,8 @@ class PeerGuard:
         self.bound(fx, fy, dt_s, now_s)
         self.position_m = (px, py)
         self.clock.accept(epoch, send_ns, now_ns)
-        self._count_plausible(now_s)
+        if self.faulted:  # counting towards clearing the fault
+            self._count_plausible(now_s)
         return True
 
     def bound(self, fx: float, fy: float, dt_s: float, now_s: float) -> None:
