@@ -21,6 +21,13 @@ watchdog, a poll, a send per tick; no control law, no hardware): the link and ru
 took of the machine, from its summary: ``process_cpu_cores`` and the loop thread's CPU per
 tick, ``loop_thread_cpu_per_step_s``.
 
+The stages (``stages.<name>.p50_s``/``p99_s``) are each stage's whole time per tick. The
+slave's node stage runs one node step per master sample (slave_sim/pacing.py: none while the
+next has not come, several after a gap), so its p99 holds the catch-up ticks; the slave's
+figures add ``node_per_step`` (the node part's time divided by the tick's node steps, over the
+ticks with at least one) and ``node_steps_per_tick`` (the step count -> the ticks with it and
+their node part's p50/p99), both timed inside ``SlaveTick.step_lane``.
+
 CPU layout (``--cpu-layout``, :func:`cpu_layout_args`): ``partitioned`` by default, as on a rig
 PC: both loops in SCHED_FIFO 40 on the last CPU (the slave's phase lock makes them take turns),
 a 20 us spin, and every other thread (Zenoh's, the display's) on the other CPUs. ``free``
