@@ -12,9 +12,15 @@ damping ``b`` N s/m, the force ``f0`` at the anchor ``x0``, the position where c
 
 with ``phi = (x - x0, v, 1)``, then ``k`` clamped to ``[stiffness_min, stiffness_max]``,
 ``b`` to ``[0, damping_max]``, ``f0`` to the force limit, and ``P`` scaled down when its trace
-exceeds ``covariance_trace_max`` (no wind-up while the motion excites nothing). Contact starts
-from the prior ``(stiffness_prior, 0, f)`` and ``P0``; leaving contact resets the estimate.
-A sample with a non-finite field changes nothing.
+exceeds ``covariance_trace_max`` (no wind-up while the motion excites nothing). A touch
+with no model on its side starts one from the prior ``(stiffness_prior, 0, f)`` and ``P0``.
+Leaving contact keeps the model (the surface is still there: the master, ahead of the tool by
+the round trip, must keep feeling it, or it falls through and the tool bounces between touch
+and release); a touch on the model's side resumes its estimate. The model is dropped only when
+the tool, not touching, is inside the modelled surface by more than ``surface_tolerance_m``:
+the surface is not where the model says. The fit skips samples whose force reached
+``force_limit_N`` (clamped, they no longer fit). A sample with a non-finite field changes
+nothing.
 
 **The model on the wire**, per axis: :data:`MODEL_FIELDS`: ``stiffness_N_per_m``,
 ``damping_N_s_per_m``, ``contact_position_m`` (``xc = x0 - f0 / k``, where the spring's force
@@ -28,7 +34,13 @@ pulls). The step is implicit Euler in everything (the force at the new position 
 velocity), so for a constant model the operator's work ``sum fh dx`` always covers the change
 of ``M v^2 / 2 + k p^2 / 2``: the rendering is passive at any period (the implicit solve has
 three cases: free, inside, stopped on the surface). A received model with a non-finite or
-out-of-range field is ignored (the last one stays). Arrays are (lanes, 2): x and y.
+out-of-range field is ignored (the last one stays). The rendered surface never jumps into the
+handle: a new contact (a side where none or the other was) that finds the handle already
+inside (it moved on, unaware, while the touch travelled back a round trip) starts its surface
+at the handle, and the rendered surface moves towards the received one at most
+``surface_rate_m_per_s``; rendering the received surface at once would hand the operator
+``k p^2 / 2`` in one period (at 0.8 s round trip and 0.1 m/s, p is 7 cm: 5 J at 2 kN/m).
+Arrays are (lanes, 2): x and y.
 """
 
 from __future__ import annotations
@@ -81,6 +93,7 @@ class EstimatorSettings:
     tracking_gain_per_s: float = 50.0
     force_limit_N: float = 40.0
     speed_limit_m_per_s: float = 1.0
+    surface_tolerance_m: float = 0.001
 
     def __post_init__(self) -> None:
         if not 0.0 < self.forgetting_factor <= 1.0:
@@ -89,13 +102,16 @@ class EstimatorSettings:
             raise ValueError("0 < release_force_N <= contact_force_N is required")
         if not 0.0 < self.stiffness_min_N_per_m <= self.stiffness_max_N_per_m:
             raise ValueError("0 < stiffness_min_N_per_m <= stiffness_max_N_per_m is required")
+        if self.surface_tolerance_m < 0.0:
+            raise ValueError("surface_tolerance_m must be >= 0")
 
 
 @dataclass(eq=False)
 class EstimatorState:
     """The slave's estimator over lanes: per axis ``theta`` (lanes, 2, 3) = (k, b, f0),
-    ``covariance`` (lanes, 2, 3, 3), ``anchor_m`` and ``side`` (lanes, 2), and the last
-    received handle position and velocity (lanes, 2)."""
+    ``covariance`` (lanes, 2, 3, 3), ``anchor_m`` and ``side`` (the model's, 0: none)
+    (lanes, 2), the last received handle position and velocity (lanes, 2), and ``touching``
+    (lanes, 2): 1 while the tool presses (the contact hysteresis), else 0."""
 
     theta: np.ndarray
     covariance: np.ndarray
@@ -103,6 +119,7 @@ class EstimatorState:
     side: np.ndarray
     handle_position_m: np.ndarray
     handle_velocity_m_per_s: np.ndarray
+    touching: np.ndarray
 
     @classmethod
     def create(cls, start_m: np.ndarray) -> EstimatorState:
@@ -110,7 +127,8 @@ class EstimatorState:
         start = np.array(start_m, dtype=float)
         lanes = start.shape[0]
         return cls(np.zeros((lanes, 2, 3)), np.zeros((lanes, 2, 3, 3)), np.zeros((lanes, 2)),
-                   np.zeros((lanes, 2)), start.copy(), np.zeros((lanes, 2)))
+                   np.zeros((lanes, 2)), start.copy(), np.zeros((lanes, 2)),
+                   np.zeros((lanes, 2)))
 
 
 def _rls_update(settings: EstimatorSettings, theta: np.ndarray, covariance: np.ndarray,
@@ -144,6 +162,36 @@ def _rls_update(settings: EstimatorSettings, theta: np.ndarray, covariance: np.n
     covariance[...] = np.where(update[..., None, None], new_p, covariance)
 
 
+def _contact_transition(settings: EstimatorSettings, state: EstimatorState, sample: np.ndarray,
+                        x: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Touch, release, a new model or a dropped one (see the module's docstring), in place;
+    returns where the estimate takes this sample: touching, not a model just started, the
+    force under ``force_limit_N`` (a clamped force no longer fits the spring: fed to the fit it
+    drags the estimate off, and the model the master renders with it)."""
+    magnitude = np.abs(f)
+    was = state.touching != 0.0
+    leave = sample & was & (magnitude < settings.release_force_N)
+    start = sample & ~was & (magnitude >= settings.contact_force_N)
+    touching = np.where(leave, False, np.where(start, True, was))
+    # a touch on a side without a model starts one, anchoring the prior at this sample
+    new = start & (state.side != np.sign(f))
+    in_model = state.side != 0.0
+    safe_k = np.where(in_model, state.theta[..., 0], 1.0)
+    depth = state.side * (x - (state.anchor_m - state.theta[..., 2] / safe_k))
+    drop = sample & ~touching & in_model & (depth > settings.surface_tolerance_m)
+    state.touching[...] = np.where(touching, 1.0, 0.0)
+    state.side[...] = np.where(drop, 0.0, np.where(new, np.sign(f), state.side))
+    state.anchor_m[...] = np.where(new, x, state.anchor_m)
+    prior = np.stack([np.full_like(f, settings.stiffness_prior_N_per_m), np.zeros_like(f), f],
+                     axis=-1)
+    state.theta[...] = np.where((new | drop)[..., None],
+                                np.where(new[..., None], prior, 0.0), state.theta)
+    initial = np.diag(np.asarray(settings.initial_covariance, dtype=float))
+    state.covariance[...] = np.where(new[..., None, None], initial,
+                                     np.where(drop[..., None, None], 0.0, state.covariance))
+    return sample & touching & ~new & (magnitude < settings.force_limit_N)
+
+
 def estimator_step_reference(settings: EstimatorSettings, state: EstimatorState,
                              tool_position_m: np.ndarray, tool_velocity_m_per_s: np.ndarray,
                              tool_force_N: np.ndarray, handle_position_m: np.ndarray,
@@ -157,21 +205,7 @@ def estimator_step_reference(settings: EstimatorSettings, state: EstimatorState,
     sample = np.isfinite(x) & np.isfinite(v) & np.isfinite(tool_force_N)
     x = np.where(sample, x, 0.0)
     v = np.where(sample, v, 0.0)
-    magnitude = np.abs(f)
-    was = state.side != 0.0
-    leave = sample & was & (magnitude < settings.release_force_N)
-    start = sample & ~was & (magnitude >= settings.contact_force_N)
-    # leaving contact resets the estimate; starting it anchors the prior at this sample
-    state.side[...] = np.where(leave, 0.0, np.where(start, np.sign(f), state.side))
-    state.anchor_m[...] = np.where(start, x, state.anchor_m)
-    prior = np.stack([np.full_like(f, settings.stiffness_prior_N_per_m), np.zeros_like(f), f],
-                     axis=-1)
-    state.theta[...] = np.where((start | leave)[..., None],
-                                np.where(start[..., None], prior, 0.0), state.theta)
-    initial = np.diag(np.asarray(settings.initial_covariance, dtype=float))
-    state.covariance[...] = np.where(start[..., None, None], initial,
-                                     np.where(leave[..., None, None], 0.0, state.covariance))
-    update = sample & (state.side != 0.0) & ~start
+    update = _contact_transition(settings, state, sample, x, f)
     phi = (x - state.anchor_m, v, np.ones_like(x))
     _rls_update(settings, state.theta, state.covariance, phi, f, update)
     # the tool tracks the newest usable handle state
@@ -209,18 +243,22 @@ class RendererSettings:
     stiffness_max_N_per_m: float = 1e5
     damping_max_N_s_per_m: float = 500.0
     position_limit_m: float = 1.0
+    surface_rate_m_per_s: float = 0.05
 
     def __post_init__(self) -> None:
         if not (self.period_s > 0.0 and self.handle_mass_kg > 0.0):
             raise ValueError("period_s and handle_mass_kg must be > 0")
+        if self.surface_rate_m_per_s <= 0.0:
+            raise ValueError("surface_rate_m_per_s must be > 0")
         if self.handle_damping_N_s_per_m < 0.0:
             raise ValueError("handle_damping_N_s_per_m must be >= 0")
 
 
 @dataclass(eq=False)
 class RendererState:
-    """The master's virtual handle (position m, velocity m/s) and the model it renders, each
-    (lanes, 2)."""
+    """The master's virtual handle (position m, velocity m/s), the model it renders (its
+    ``contact_position_m`` the rendered surface) and the received surface the rendered one
+    moves towards, ``target_position_m``, each (lanes, 2)."""
 
     position_m: np.ndarray
     velocity_m_per_s: np.ndarray
@@ -228,12 +266,13 @@ class RendererState:
     damping_N_s_per_m: np.ndarray
     contact_position_m: np.ndarray
     contact_side: np.ndarray
+    target_position_m: np.ndarray
 
     @classmethod
     def create(cls, start_m: np.ndarray) -> RendererState:
         """At rest at ``start_m`` (lanes, 2), nothing to render."""
         start = np.array(start_m, dtype=float)
-        return cls(start.copy(), *(np.zeros_like(start) for _ in range(5)))
+        return cls(start.copy(), *(np.zeros_like(start) for _ in range(6)))
 
 
 def _usable_model(settings: RendererSettings, model: EnvironmentModel) -> np.ndarray:
@@ -245,16 +284,32 @@ def _usable_model(settings: RendererSettings, model: EnvironmentModel) -> np.nda
             & ((side == 0.0) | (side == 1.0) | (side == -1.0)))
 
 
+def _take_model(settings: RendererSettings, state: RendererState, model: EnvironmentModel,
+                take: np.ndarray) -> None:
+    """Take the received model where ``take``; a new contact's surface starts at the handle
+    when the handle is inside it; the rendered surface then moves towards the received one at
+    most ``surface_rate_m_per_s``."""
+    k, b, xc, side = (np.where(take, value, 0.0) for value in model)
+    new = take & (side != 0.0) & (side != state.contact_side)
+    inside = side * (state.position_m - xc) > 0.0
+    state.contact_position_m[...] = np.where(new, np.where(inside, state.position_m, xc),
+                                             state.contact_position_m)
+    state.stiffness_N_per_m[...] = np.where(take, k, state.stiffness_N_per_m)
+    state.damping_N_s_per_m[...] = np.where(take, b, state.damping_N_s_per_m)
+    state.contact_side[...] = np.where(take, side, state.contact_side)
+    state.target_position_m[...] = np.where(take, xc, state.target_position_m)
+    step = settings.surface_rate_m_per_s * settings.period_s
+    state.contact_position_m[...] = state.contact_position_m + np.clip(
+        state.target_position_m - state.contact_position_m, -step, step)
+
+
 def renderer_step_reference(settings: RendererSettings, state: RendererState,
                             handle_force_N: np.ndarray, model: EnvironmentModel,
                             fresh: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One period of the master over lanes: (position command m, velocity m/s, the model's
     force on the handle N), each (lanes, 2); ``state`` advances in place."""
     take = _usable_model(settings, model) & np.asarray(fresh, bool)[:, None]
-    for name, value in zip(("stiffness_N_per_m", "damping_N_s_per_m", "contact_position_m",
-                            "contact_side"), model, strict=True):
-        current = getattr(state, name)
-        current[...] = np.where(take, np.where(take, value, 0.0), current)
+    _take_model(settings, state, model, take)
     ts, mass = settings.period_s, settings.handle_mass_kg
     fh = np.clip(np.where(np.isfinite(handle_force_N), handle_force_N, 0.0),
                  -settings.force_limit_N, settings.force_limit_N)

@@ -39,6 +39,7 @@ class EstimatorLimits:
     tracking_gain_per_s: wp.float64
     force_limit_N: wp.float64
     speed_limit_m_per_s: wp.float64
+    surface_tolerance_m: wp.float64
 
 
 @wp.struct
@@ -52,6 +53,7 @@ class RendererLimits:
     stiffness_max_N_per_m: wp.float64
     damping_max_N_s_per_m: wp.float64
     position_limit_m: wp.float64
+    surface_rate_m_per_s: wp.float64
 
 
 @wp.func
@@ -101,37 +103,63 @@ def rls_update(lane: int, axis: int, phi: wp.vec3d, force: wp.float64,
 
 
 @wp.func
+def new_model(lane: int, axis: int, position: wp.float64, force: wp.float64,
+              side: wp.array2d(dtype=wp.float64), anchor: wp.array2d(dtype=wp.float64),
+              theta: wp.array3d(dtype=wp.float64), covariance: wp.array4d(dtype=wp.float64),
+              limits: EstimatorLimits):
+    """A model on the side of ``force``, anchored here, from the prior."""
+    zero = wp.float64(0.0)
+    if force > zero:
+        side[lane, axis] = wp.float64(1.0)
+    else:
+        side[lane, axis] = wp.float64(-1.0)
+    anchor[lane, axis] = position
+    theta[lane, axis, 0] = limits.stiffness_prior_N_per_m
+    theta[lane, axis, 1] = zero
+    theta[lane, axis, 2] = force
+    for i in range(3):
+        for j in range(3):
+            covariance[lane, axis, i, j] = zero
+        covariance[lane, axis, i, i] = limits.initial_covariance[i]
+
+
+@wp.func
 def contact_transition(lane: int, axis: int, sample: bool, position: wp.float64,
                        force: wp.float64, side: wp.array2d(dtype=wp.float64),
+                       touching: wp.array2d(dtype=wp.float64),
                        anchor: wp.array2d(dtype=wp.float64),
                        theta: wp.array3d(dtype=wp.float64),
                        covariance: wp.array4d(dtype=wp.float64),
                        limits: EstimatorLimits) -> bool:
-    """Start (anchor and prior) or leave (reset) contact on this axis; True when it started."""
-    magnitude = wp.abs(force)
-    was = side[lane, axis] != wp.float64(0.0)
+    """Touch or release; a touch on a side without a model starts one; the tool inside the
+    model's surface beyond the tolerance without touching drops it. True when the estimate
+    takes this sample (touching, not a model just started, the force under its limit)."""
     zero = wp.float64(0.0)
-    if sample and was and magnitude < limits.release_force_N:
-        side[lane, axis] = zero
-        for i in range(3):
-            theta[lane, axis, i] = zero
-            for j in range(3):
-                covariance[lane, axis, i, j] = zero
+    one = wp.float64(1.0)
+    if not sample:
         return False
-    if sample and not was and magnitude >= limits.contact_force_N:
+    magnitude = wp.abs(force)
+    if touching[lane, axis] != zero:
+        if magnitude < limits.release_force_N:
+            touching[lane, axis] = zero
+    elif magnitude >= limits.contact_force_N:
+        touching[lane, axis] = one
+        sign = -one
         if force > zero:
-            side[lane, axis] = wp.float64(1.0)
-        else:
-            side[lane, axis] = wp.float64(-1.0)
-        anchor[lane, axis] = position
-        theta[lane, axis, 0] = limits.stiffness_prior_N_per_m
-        theta[lane, axis, 1] = zero
-        theta[lane, axis, 2] = force
-        for i in range(3):
-            for j in range(3):
-                covariance[lane, axis, i, j] = zero
-            covariance[lane, axis, i, i] = limits.initial_covariance[i]
-        return True
+            sign = one
+        if side[lane, axis] != sign:
+            new_model(lane, axis, position, force, side, anchor, theta, covariance, limits)
+            return False
+    if touching[lane, axis] != zero:
+        return magnitude < limits.force_limit_N
+    if side[lane, axis] != zero:
+        surface = anchor[lane, axis] - theta[lane, axis, 2] / theta[lane, axis, 0]
+        if side[lane, axis] * (position - surface) > limits.surface_tolerance_m:
+            side[lane, axis] = zero
+            for i in range(3):
+                theta[lane, axis, i] = zero
+                for j in range(3):
+                    covariance[lane, axis, i, j] = zero
     return False
 
 
@@ -149,6 +177,7 @@ def mmt_estimator_kernel(
     side: wp.array2d(dtype=wp.float64),
     handle_position: wp.array2d(dtype=wp.float64),
     handle_velocity: wp.array2d(dtype=wp.float64),
+    touching: wp.array2d(dtype=wp.float64),
     command: wp.array2d(dtype=wp.float64),
     model: wp.array3d(dtype=wp.float64),
     limits: EstimatorLimits,
@@ -171,9 +200,8 @@ def mmt_estimator_kernel(
         if sample:
             x = raw_x
             v = raw_v
-        started = contact_transition(lane, axis, sample, x, f, side, anchor, theta, covariance,
-                                     limits)
-        if sample and side[lane, axis] != zero and not started:
+        if contact_transition(lane, axis, sample, x, f, side, touching, anchor, theta,
+                              covariance, limits):
             rls_update(lane, axis, wp.vec3d(x - anchor[lane, axis], v, wp.float64(1.0)), f,
                        theta, covariance, limits)
         if take:
@@ -217,28 +245,43 @@ def mmt_renderer_kernel(
     position: wp.array2d(dtype=wp.float64),
     velocity: wp.array2d(dtype=wp.float64),
     model: wp.array3d(dtype=wp.float64),
+    target: wp.array2d(dtype=wp.float64),
     on_handle: wp.array2d(dtype=wp.float64),
     limits: RendererLimits,
 ):
-    """One period of one lane: take a usable model, then the implicit step of the virtual
-    handle against it (free, pressed in, or stopped on the surface)."""
+    """One period of one lane: take a usable model (a new contact's surface at the handle
+    when the handle is inside it), move the rendered surface towards the received one at the
+    bounded rate, then the implicit step of the virtual handle against it (free, pressed in,
+    or stopped on the surface)."""
     lane = wp.tid()
     ts = limits.period_s
     mass = limits.handle_mass_kg
     damping = limits.handle_damping_N_s_per_m
     zero = wp.float64(0.0)
+    step = limits.surface_rate_m_per_s * ts
     for axis in range(2):
+        x = position[lane, axis]
         if fresh[lane] and usable_model(model_in[0, lane, axis], model_in[1, lane, axis],
                                         model_in[2, lane, axis], model_in[3, lane, axis],
                                         limits):
-            for field in range(4):
-                model[field, lane, axis] = model_in[field, lane, axis]
+            side_in = model_in[3, lane, axis]
+            surface_in = model_in[2, lane, axis]
+            if side_in != zero and side_in != model[3, lane, axis]:
+                if side_in * (x - surface_in) > zero:
+                    model[2, lane, axis] = x
+                else:
+                    model[2, lane, axis] = surface_in
+            model[0, lane, axis] = model_in[0, lane, axis]
+            model[1, lane, axis] = model_in[1, lane, axis]
+            model[3, lane, axis] = side_in
+            target[lane, axis] = surface_in
+        model[2, lane, axis] = model[2, lane, axis] + wp.clamp(
+            target[lane, axis] - model[2, lane, axis], -step, step)
         k = model[0, lane, axis]
         b = model[1, lane, axis]
         xc = model[2, lane, axis]
         side = model[3, lane, axis]
         fh = clamped_force(handle_force[lane, axis], limits.force_limit_N)
-        x = position[lane, axis]
         v = velocity[lane, axis]
         free = (mass * v + ts * fh) / (mass + ts * damping)
         out = free
@@ -266,7 +309,7 @@ class EstimatorKernel:
     :class:`EstimatorState` of numpy views of the kernel's buffers."""
 
     _STATE = ("theta", "covariance", "anchor_m", "side", "handle_position_m",
-              "handle_velocity_m_per_s")
+              "handle_velocity_m_per_s", "touching")
     _INPUTS = ("tool_position", "tool_velocity", "tool_force", "handle_position_in",
                "handle_velocity_in")
 
@@ -276,7 +319,8 @@ class EstimatorKernel:
         for name in ("forgetting_factor", "contact_force_N", "release_force_N",
                      "stiffness_prior_N_per_m", "stiffness_min_N_per_m",
                      "stiffness_max_N_per_m", "damping_max_N_s_per_m", "covariance_trace_max",
-                     "tracking_gain_per_s", "force_limit_N", "speed_limit_m_per_s"):
+                     "tracking_gain_per_s", "force_limit_N", "speed_limit_m_per_s",
+                     "surface_tolerance_m"):
             setattr(limits, name, float(getattr(settings, name)))
         limits.initial_covariance = wp.vec3d(*settings.initial_covariance)
         start = EstimatorState.create(start_m)
@@ -320,7 +364,7 @@ class RendererKernel:
         limits = RendererLimits()
         for name in ("period_s", "handle_mass_kg", "handle_damping_N_s_per_m",
                      "force_limit_N", "stiffness_max_N_per_m", "damping_max_N_s_per_m",
-                     "position_limit_m"):
+                     "position_limit_m", "surface_rate_m_per_s"):
             setattr(limits, name, float(getattr(settings, name)))
         start = RendererState.create(start_m)
         self.lanes = start.position_m.shape[0]
@@ -331,14 +375,17 @@ class RendererKernel:
         self.buffers.add("position", start.position_m)
         self.buffers.add("velocity", start.velocity_m_per_s)
         self.buffers.add("model", np.zeros((4, self.lanes, 2)))
+        self.buffers.add("target", np.zeros((self.lanes, 2)))
         self.buffers.add("on_handle", np.zeros((self.lanes, 2)))
         view = self.buffers.view
-        self.state = RendererState(view["position"], view["velocity"], *view["model"])
+        self.state = RendererState(view["position"], view["velocity"], *view["model"],
+                                   view["target"])
         arrays = self.buffers.arrays
         #: the launch, recorded once over the persistent buffers (a node may replay it)
         self.command = wp.launch(mmt_renderer_kernel, dim=self.lanes, device=DEVICE, inputs=[
             arrays["handle_force"], arrays["model_in"], arrays["fresh"], arrays["position"],
-            arrays["velocity"], arrays["model"], arrays["on_handle"], limits], record_cmd=True)
+            arrays["velocity"], arrays["model"], arrays["target"], arrays["on_handle"], limits],
+            record_cmd=True)
 
     def step(self, handle_force_N: np.ndarray, model: EnvironmentModel, fresh: np.ndarray
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

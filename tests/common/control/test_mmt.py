@@ -1,7 +1,8 @@
 """Model-mediated teleoperation (common/control/mmt.py and its kernels): the estimate
-converges on a known spring and damper with noise and resets when contact ends, the rendering
-of a constant model is passive, and both kernels equal their references on random inputs,
-non-finite ones included."""
+converges on a known spring and damper with noise, outlives a release and is dropped only when
+the tool is inside it without force, skips clamped forces; the rendering of a constant model
+is passive, a new contact found inside never jumps the force, and both kernels equal their
+references on random inputs, non-finite ones included."""
 
 from __future__ import annotations
 
@@ -57,28 +58,60 @@ def test_the_estimate_converges_on_a_known_spring_and_damper_with_noise() -> Non
     assert model.stiffness_N_per_m[0, 1] == 0.0
 
 
-def test_leaving_contact_resets_the_estimate() -> None:
-    settings = EstimatorSettings(period_s=PERIOD_S)
+def _pressed_estimator(settings: EstimatorSettings) -> EstimatorState:
+    """An estimator after a second of noiseless pressing into the wall."""
     state = EstimatorState.create(np.zeros((1, 2)))
     positions, velocities, forces = _press(1.0, np.random.default_rng(2), noise_N=0.0)
     handle = np.zeros((1, 2))
-    fresh = np.array([True])
     for x, v, f in zip(positions, velocities, forces, strict=True):
-        estimator_step_reference(settings, state, x, v, f, handle, handle, fresh)
-    below = np.array([[0.2, 0.0]])  # under contact_force_N, above release_force_N: still in
-    _, model = estimator_step_reference(settings, state, positions[-1], velocities[-1], below,
-                                        handle, handle, fresh)
-    assert model.contact_side[0, 0] == 1.0
-    _, model = estimator_step_reference(settings, state, positions[-1], velocities[-1],
-                                        np.array([[0.1, 0.0]]), handle, handle, fresh)
+        estimator_step_reference(settings, state, x, v, f, handle, handle, np.array([True]))
+    return state
+
+
+def _estimate(settings: EstimatorSettings, state: EstimatorState, x: float, f: float
+              ) -> EnvironmentModel:
+    handle = np.zeros((1, 2))
+    return estimator_step_reference(settings, state, np.array([[x, 0.0]]), np.zeros((1, 2)),
+                                    np.array([[f, 0.0]]), handle, handle, np.array([True]))[1]
+
+
+def test_leaving_contact_keeps_the_model_until_the_tool_is_inside_it() -> None:
+    """The wall is still there when the tool bounces off it: the master must keep rendering
+    it; only a tool inside the modelled surface without force shows it gone."""
+    settings = EstimatorSettings(period_s=PERIOD_S)
+    state = _pressed_estimator(settings)
+    kept = state.theta.copy()
+    model = _estimate(settings, state, WALL_M + 0.0001, 0.2)  # above release_force_N: in
+    assert state.touching[0, 0] == 1.0
+    model = _estimate(settings, state, WALL_M - 0.002, 0.1)  # released, off the wall
+    assert state.touching[0, 0] == 0.0 and model.contact_side[0, 0] == 1.0
+    assert model.stiffness_N_per_m[0, 0] == pytest.approx(STIFFNESS_N_PER_M, rel=0.01)
+    assert model.contact_position_m[0, 0] == pytest.approx(WALL_M, abs=1e-5)
+    # touching again on the same side resumes the estimate (no prior, no new anchor)
+    model = _estimate(settings, state, WALL_M + 0.0005, 1.0)
+    assert model.stiffness_N_per_m[0, 0] == pytest.approx(STIFFNESS_N_PER_M, rel=0.01)
+    assert abs(state.theta[0, 0, 0] - kept[0, 0, 0]) < 0.01 * STIFFNESS_N_PER_M
+    # released, then inside the surface beyond the tolerance without force: no wall there
+    _estimate(settings, state, WALL_M + 0.0005, 0.0)
+    model = _estimate(settings, state, WALL_M + 0.0005 + settings.surface_tolerance_m, 0.0)
     assert model.contact_side[0, 0] == 0.0 and model.stiffness_N_per_m[0, 0] == 0.0
     assert not state.theta.any() and not state.covariance.any()
     # the next touch, on the other side, starts again from the prior
-    _, model = estimator_step_reference(settings, state, np.array([[0.0, 0.0]]),
-                                        np.zeros((1, 2)), np.array([[-1.0, 0.0]]), handle,
-                                        handle, fresh)
+    model = _estimate(settings, state, 0.0, -1.0)
     assert model.contact_side[0, 0] == -1.0
     assert model.stiffness_N_per_m[0, 0] == settings.stiffness_prior_N_per_m
+
+
+def test_the_fit_skips_forces_at_the_limit() -> None:
+    """A clamped force does not fit the spring: the estimate keeps what it had."""
+    settings = EstimatorSettings(period_s=PERIOD_S)
+    state = _pressed_estimator(settings)
+    kept = state.theta.copy()
+    for depth in (0.03, 0.05, 0.08):  # 60 to 160 N on the 2 kN/m wall: clamped to 40 N
+        _estimate(settings, state, WALL_M + depth, STIFFNESS_N_PER_M * depth)
+    assert np.array_equal(state.theta, kept)
+    _estimate(settings, state, WALL_M + 0.003, STIFFNESS_N_PER_M * 0.003 + 1.0)
+    assert not np.array_equal(state.theta, kept)  # an unclamped sample is taken
 
 
 def test_the_tool_tracks_the_newest_usable_handle_state() -> None:
@@ -127,6 +160,28 @@ def test_rendering_a_constant_model_is_passive(side: float) -> None:
         assert np.all(np.abs(state.position_m) < settings.position_limit_m)
         deepest = max(deepest, float(depth.max()))
     assert deepest > 0.0  # the wall was reached
+
+
+def test_a_new_contact_found_inside_starts_its_surface_at_the_handle() -> None:
+    """The handle walked 40 mm into the wall while the touch travelled back: the first model
+    must not throw it out with k p (80 N here); its surface starts at the handle and moves
+    to the received one at most surface_rate_m_per_s."""
+    settings = RendererSettings(period_s=PERIOD_S, surface_rate_m_per_s=0.05)
+    state = RendererState.create(np.array([[0.05, 0.0]]))
+    model = _model(1, 2000.0, 0.0, 0.01, 1.0)
+    model.contact_side[0, 1] = 0.0
+    forces = []
+    for step in range(1000):
+        _, _, force = renderer_step_reference(settings, state, np.zeros((1, 2)), model,
+                                              np.array([step == 0]))
+        forces.append(-force[0, 0])
+        travel = abs(state.contact_position_m[0, 0] - 0.05)
+        assert travel <= settings.surface_rate_m_per_s * PERIOD_S * (step + 1) + 1e-15
+    assert forces[0] < 0.5
+    assert max(forces) < 2000.0 * 0.04 / 2.0  # never the received surface's k p
+    assert np.all(np.diff(forces) < 2000.0 * settings.surface_rate_m_per_s * PERIOD_S + 1e-9)
+    assert state.target_position_m[0, 0] == 0.01
+    assert state.contact_position_m[0, 0] == pytest.approx(0.01)  # 40 mm at 50 mm/s: 0.8 s
 
 
 def test_an_empty_model_renders_the_free_handle() -> None:
@@ -184,7 +239,7 @@ def test_the_estimator_kernel_equals_the_reference_on_random_inputs() -> None:
             np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
         contacts += int(np.count_nonzero(model.contact_side))
     for name in ("theta", "covariance", "anchor_m", "side", "handle_position_m",
-                 "handle_velocity_m_per_s"):
+                 "handle_velocity_m_per_s", "touching"):
         np.testing.assert_allclose(getattr(kernel.state, name), getattr(reference, name),
                                    rtol=1e-9, atol=1e-9, err_msg=name)
     assert contacts > 1000
@@ -219,7 +274,7 @@ def test_the_renderer_kernel_equals_the_reference_on_random_inputs() -> None:
             np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
         pushed += int(np.count_nonzero(got[2]))
     for name in ("position_m", "velocity_m_per_s", "stiffness_N_per_m", "damping_N_s_per_m",
-                 "contact_position_m", "contact_side"):
+                 "contact_position_m", "contact_side", "target_position_m"):
         np.testing.assert_allclose(getattr(kernel.state, name), getattr(reference, name),
                                    rtol=1e-12, atol=1e-12, err_msg=name)
     assert pushed > 100  # the model did push back
