@@ -6,6 +6,8 @@ import ast
 import textwrap
 from pathlib import Path
 
+import pytest
+
 from tools.mutation import finder, modules
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -128,8 +130,16 @@ def test_imports_are_read_wherever_they_are() -> None:
         "haptic.common.b", "haptic.common.b.c"}
 
 
-def test_every_configured_module_has_tests_in_the_repository() -> None:
-    graph = finder.ImportGraph(ROOT)
+@pytest.fixture(scope="module")
+def repository_graph() -> finder.ImportGraph:
+    """The repository's import graph, shared: it reads each file once, on first use, and the
+    tests below only read it."""
+    return finder.ImportGraph(ROOT)
+
+
+def test_every_configured_module_has_tests_in_the_repository(
+        repository_graph: finder.ImportGraph) -> None:
+    graph = repository_graph
     for configured in modules.load(ROOT):
         tests = finder.tests_for(configured.path, graph)
         assert tests, configured.path
@@ -151,10 +161,11 @@ def _imported_names(source: str) -> set[str]:
     return names
 
 
-def test_every_test_file_importing_a_configured_module_is_found_for_it() -> None:
+def test_every_test_file_importing_a_configured_module_is_found_for_it(
+        repository_graph: finder.ImportGraph) -> None:
     """A test file whose import statements (lazy ones too) name a configured module is one
     of that module's tests."""
-    graph = finder.ImportGraph(ROOT)
+    graph = repository_graph
     imported = {test: _imported_names((ROOT / test).read_text())
                 for test in graph.test_files()}
     checked = 0
