@@ -61,6 +61,21 @@ def test_bounds_catch_a_large_force_a_non_finite_sample_and_a_fast_oscillation()
     assert not bounded_lanes(_records([1.0], moving=True), bounds)[0]
 
 
+def test_a_steady_drift_is_not_an_oscillation() -> None:
+    """Both devices still driven through the tail at 0.16 to 0.15 m/s (17 mJ of kinetic
+    energy, over the 10 mJ bound: the clay cut's tool running on past the block) are bounded;
+    a fast oscillation of 0.25 m/s amplitude (21 mJ) is not."""
+    steps = 400
+    records = LaneRecords.create(0.001, steps, 2, stride=1)
+    time = np.arange(steps) * 0.001
+    drift = 0.2 * time - 0.0625 * time * time  # 0.2 m/s at the start, 0.15 m/s at the end
+    swing = 0.25 * np.sin(1000.0 * time) / 1000.0
+    for k in range(steps):
+        position = np.array([drift[k], swing[k]])
+        records.add(k, position, position, np.zeros(2), np.zeros(2))
+    assert bounded_lanes(records, BoundSettings()).tolist() == [True, False]
+
+
 def test_z_width_is_the_last_rung_before_the_first_unbounded_one() -> None:
     grid = CompareGrid(controls=("wave",), round_trips_s=(0.0, 0.1),
                        stiffness_ladder_N_per_m=(100.0, 1e3, 1e4, 1e5))
