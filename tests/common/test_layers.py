@@ -306,16 +306,30 @@ def _program_modules(root: Path = ROOT) -> list[Path]:
     return sorted({path for pattern in PROGRAM_MODULES for path in root.glob(pattern)})
 
 
-def test_no_function_is_longer_than_the_limit() -> None:
-    long = _long_functions(_source_files(), LONGEST_FUNCTION_LINES, nested_only=False)
+@pytest.fixture(scope="module")
+def long_functions() -> dict[tuple[str, str], int]:
+    """The source files' functions over the limit, read once for the two tests using them."""
+    return _long_functions(_source_files(), LONGEST_FUNCTION_LINES, nested_only=False)
+
+
+@pytest.fixture(scope="module")
+def long_nested_functions() -> dict[tuple[str, str], int]:
+    """The program modules' nested functions over their limit, read once."""
+    return _long_functions(_program_modules(), LONGEST_NESTED_FUNCTION_LINES, nested_only=True)
+
+
+def test_no_function_is_longer_than_the_limit(
+        long_functions: dict[tuple[str, str], int]) -> None:
+    long = long_functions
     offences = [f"{path}: {name} spans {lines} lines (at most {LONGEST_FUNCTION_LINES})"
                 for (path, name), lines in sorted(long.items())
                 if (path, name) not in LONG_FUNCTIONS_BEING_SPLIT]
     assert not offences, "\n".join(offences)
 
 
-def test_no_program_module_nests_a_long_function() -> None:
-    long = _long_functions(_program_modules(), LONGEST_NESTED_FUNCTION_LINES, nested_only=True)
+def test_no_program_module_nests_a_long_function(
+        long_nested_functions: dict[tuple[str, str], int]) -> None:
+    long = long_nested_functions
     offences = [f"{path}: nested {name} spans {lines} lines "
                 f"(at most {LONGEST_NESTED_FUNCTION_LINES})"
                 for (path, name), lines in sorted(long.items())
@@ -323,12 +337,12 @@ def test_no_program_module_nests_a_long_function() -> None:
     assert not offences, "\n".join(offences)
 
 
-def test_the_long_function_allowlists_hold_only_long_functions() -> None:
+def test_the_long_function_allowlists_hold_only_long_functions(
+        long_functions: dict[tuple[str, str], int],
+        long_nested_functions: dict[tuple[str, str], int]) -> None:
     """An entry whose function is now short (or gone) leaves its allowlist, so the lists
     shrink to empty."""
-    long = _long_functions(_source_files(), LONGEST_FUNCTION_LINES, nested_only=False)
-    nested = _long_functions(_program_modules(), LONGEST_NESTED_FUNCTION_LINES,
-                             nested_only=True)
+    long, nested = long_functions, long_nested_functions
     stale = [f"LONG_FUNCTIONS_BEING_SPLIT{key}" for key in LONG_FUNCTIONS_BEING_SPLIT
              if key not in long]
     stale += [f"LONG_NESTED_FUNCTIONS_BEING_SPLIT{key}"
@@ -383,16 +397,24 @@ def _files_with_dated_or_machine_prose() -> dict[str, list[tuple[int, str]]]:
     return {path: hits for path, hits in found.items() if hits}
 
 
-def test_no_docstring_or_comment_holds_a_date_a_machine_or_an_issue_number() -> None:
+@pytest.fixture(scope="module")
+def prose_found() -> dict[str, list[tuple[int, str]]]:
+    """The source files' dated or machine prose, read once for the two tests using it."""
+    return _files_with_dated_or_machine_prose()
+
+
+def test_no_docstring_or_comment_holds_a_date_a_machine_or_an_issue_number(
+        prose_found: dict[str, list[tuple[int, str]]]) -> None:
     offences = [f"{path}:{line}: {text!r}"
-                for path, hits in sorted(_files_with_dated_or_machine_prose().items())
+                for path, hits in sorted(prose_found.items())
                 if path not in PROSE_BEING_CLEANED for line, text in hits]
     assert not offences, ("dates, machines and issue numbers belong in docs/measurements/ or "
                           "the commit message:\n" + "\n".join(offences))
 
 
-def test_the_prose_allowlist_holds_only_files_with_such_prose() -> None:
-    found = _files_with_dated_or_machine_prose()
+def test_the_prose_allowlist_holds_only_files_with_such_prose(
+        prose_found: dict[str, list[tuple[int, str]]]) -> None:
+    found = prose_found
     stale = [path for path in PROSE_BEING_CLEANED if path not in found]
     assert not stale, "clean now (or gone), remove from PROSE_BEING_CLEANED: " + ", ".join(stale)
 
