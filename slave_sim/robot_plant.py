@@ -7,10 +7,14 @@ stands (the node calls it as an environment): each step it publishes that veloci
 TwistStamped topic for the robot to follow, and returns as ft the newest contact force the
 robot reports on a WrenchStamped topic (the force the tool applies to the workpiece, N, x-y).
 
-Watchdog: once the robot's force has come, a force older than ``watchdog_s`` trips the
-plant: from then on it commands zero velocity (the robot holds), reports no force, counts
-the trip and says so once. Before the first force the robot is taken as not touching
-anything (ft = 0) and is still commanded.
+Watchdog: once the robot's force has come, the robot silent for more than ``watchdog_s``
+while the slave commands it trips the plant: from then on it commands zero velocity (the
+robot holds), reports no force, counts the trip and says so once. The silence is timed from
+the first command sent after the newest force arrived (monotonic clock), not from the
+force's arrival: a stall of the slave's own process (no steps, so no commands, its
+subscriber's thread starved too) is the slave's lateness, which its runner counts, not the
+robot's. Before the first force the robot is taken as not touching anything (ft = 0) and is
+still commanded.
 
 The command is serialized by rosbags and published from the loop's thread (tens of us a
 step); the force is deserialized only when a new sample came.
@@ -67,6 +71,8 @@ class RobotPlant:
         self._sequence = 0
         self._force_N = np.zeros(2)
         self._force_sequence = -1
+        #: monotonic time, s, of the first command sent after the newest force (None: none)
+        self._unanswered_since_s: float | None = None
         self.tripped = False
         self.trips = 0
         self.command_errors = 0
@@ -78,29 +84,41 @@ class RobotPlant:
     def step(self, state: Any, previous_xy: np.ndarray, position_xy: np.ndarray,
              velocity_xy: np.ndarray, acceleration_xy: np.ndarray) -> ClayStepResult:
         """Command the step's tool velocity (lane 0), return the robot's newest force."""
-        self._check_watchdog()
+        now_s = time.monotonic()
+        self._take_newest_force()
+        self._check_watchdog(now_s)
         velocity = (0.0, 0.0) if self.tripped else (float(velocity_xy[0, 0]),
                                                     float(velocity_xy[0, 1]))
         self._send(velocity)
-        newest = self.force.newest() if self.force.received != self._force_sequence else None
-        if newest is not None:
-            self._force_sequence = self.force.received
-            force = newest.message.wrench.force
-            self._force_N = np.array([force.x, force.y])
+        if self._unanswered_since_s is None:
+            self._unanswered_since_s = now_s
         force_N = np.zeros((1, 2)) if self.tripped else self._force_N[None, :].copy()
         cutting = np.array([bool(np.hypot(*force_N[0]) > CUTTING_FORCE_N)])
         return ClayStepResult(force_N, cutting, cutting.astype(float), np.zeros(1),
                               np.zeros(1))
 
-    def _check_watchdog(self) -> None:
-        if self.tripped or self.force.received == 0:
+    def _take_newest_force(self) -> None:
+        """A force newer than the last one taken: deserialized, kept, the robot answered."""
+        if self.force.received == self._force_sequence:
             return
-        age = self.force.age_s()
-        if age > self.topics.watchdog_s:
+        newest = self.force.newest()
+        if newest is None:
+            return
+        self._force_sequence = self.force.received
+        force = newest.message.wrench.force
+        self._force_N = np.array([force.x, force.y])
+        self._unanswered_since_s = None
+
+    def _check_watchdog(self, now_s: float) -> None:
+        """Trip when, once a force has come, commands went unanswered for ``watchdog_s``."""
+        if self.tripped or self.force.received == 0 or self._unanswered_since_s is None:
+            return
+        silent_s = now_s - self._unanswered_since_s
+        if silent_s > self.topics.watchdog_s:
             self.tripped = True
             self.trips += 1
             self._say(f"robot watchdog: no force on {self.topics.force} for "
-                      f"{age * 1e3:.0f} ms; the robot is commanded to hold")
+                      f"{silent_s * 1e3:.0f} ms of commands; the robot is commanded to hold")
 
     def _send(self, velocity: tuple[float, float]) -> None:
         stamp_ns = time.time_ns()

@@ -79,13 +79,57 @@ def test_the_robot_watchdog_holds_the_robot_when_its_force_stops(tmp_path: Path)
                 time.sleep(0.005)
             assert plant.force.received >= 5 and not plant.tripped
             commands = robot.commands
-            robot.close()  # the robot goes silent
-            time.sleep(0.3)
+            robot.close()  # the robot goes silent; the slave goes on commanding it
+            deadline = time.monotonic() + 10.0
             result = plant.step(None, still, still, moving, still)
+            while not plant.tripped and time.monotonic() < deadline:
+                time.sleep(0.005)
+                result = plant.step(None, still, still, moving, still)
             assert plant.tripped and plant.trips == 1 and len(said) == 1
             assert "watchdog" in said[0] and np.all(result.force_N == 0.0)
             assert plant.figures["robot_watchdog_trips"] == 1
             assert commands > 0
+            plant.close()
+        finally:
+            robot.close()
+            session.close()
+
+
+def test_a_stall_of_the_slave_itself_does_not_trip_the_robot_watchdog(tmp_path: Path) -> None:
+    """The slave's process stalls (no steps, no commands) longer than the watchdog while the
+    robot has answered every command: the robot is not silent while commanded, so its
+    watchdog holds (a loaded machine's stall is the slave's lateness, not the robot's)."""
+    from haptic.common.ros2.publisher import open_client_session
+    from haptic.common.ros2.settings import Ros2Settings
+    from haptic.slave_sim.clay.sim import make_clay
+    from haptic.slave_sim.plant_options import RobotTopics
+    from haptic.slave_sim.robot_plant import RobotPlant
+
+    scenario = load_scenario("constant-rate")
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    watchdog_s = 0.5
+    with zenoh_router(endpoint):
+        robot = EmulatedRobot(endpoint, make_clay(scenario, 1e-3, "numpy"),
+                              scenario.tool.start_position_m, 1e-3)
+        session = open_client_session(endpoint)
+        try:
+            plant = RobotPlant(session, Ros2Settings(0, "/haptic", endpoint, 100.0,
+                                                     frozenset()),
+                               RobotTopics(watchdog_s=watchdog_s), say=print)
+            still = np.zeros((1, 2))
+            moving = np.array([[0.01, 0.0]])
+            deadline = time.monotonic() + 10.0
+            while plant.force.received < 5 and time.monotonic() < deadline:
+                plant.step(None, still, still, moving, still)
+                time.sleep(0.005)
+            # every command answered before the stall, however slow the machine
+            while (robot.sequence < plant.figures["robot_commands"]
+                   or plant.force.received < robot.sequence) and time.monotonic() < deadline:
+                time.sleep(0.005)
+            assert plant.force.received == plant.figures["robot_commands"] >= 5
+            time.sleep(1.5 * watchdog_s)  # the slave's stall
+            plant.step(None, still, still, moving, still)
+            assert not plant.tripped and plant.trips == 0
             plant.close()
         finally:
             robot.close()
