@@ -9,12 +9,15 @@ robot reports on a WrenchStamped topic (the force the tool applies to the workpi
 
 Watchdog: once the robot's force has come, the robot silent for more than ``watchdog_s``
 while the slave commands it trips the plant: from then on it commands zero velocity (the
-robot holds), reports no force, counts the trip and says so once. The silence is timed from
-the first command sent after the newest force arrived (monotonic clock), not from the
-force's arrival: a stall of the slave's own process (no steps, so no commands, its
-subscriber's thread starved too) is the slave's lateness, which its runner counts, not the
-robot's. Before the first force the robot is taken as not touching anything (ft = 0) and is
-still commanded.
+robot holds), reports no force, counts the trip and says so once. Silent while commanded:
+no new force both for ``watchdog_s`` of wall time (monotonic clock) since the first command
+sent after the newest force, and over more than ``watchdog_s`` of the slave's own commands
+(commands left unanswered times the period ``period_s``). A stall of the slave's own process
+(no steps, so no commands, its subscriber's thread starved with it) is the slave's lateness,
+which its runner counts as skipped ticks, not the robot's silence: timed from the force's
+arrival alone, one such stall on a loaded machine held a live robot for the rest of the run.
+Before the first force the robot is taken as not touching anything (ft = 0) and is still
+commanded.
 
 The command is serialized by rosbags and published from the loop's thread (tens of us a
 step); the force is deserialized only when a new sample came.
@@ -45,12 +48,12 @@ COMMAND_QOS = Qos(reliability=2, depth=1)  # best effort, keep last 1: only the 
 
 class RobotPlant:
     """See the module docstring; ``session``: an open Zenoh client session (closed by the
-    caller after :meth:`close`)."""
+    caller after :meth:`close`); ``period_s``: the slave's sample period, s."""
 
     kind = "ros2"
 
     def __init__(self, session: Any, settings: Ros2Settings, topics: RobotTopics,
-                 say: Callable[[str], None] | None = None) -> None:
+                 period_s: float, say: Callable[[str], None] | None = None) -> None:
         self._say = say or (lambda text: print(f"haptic-slave: {text}", file=sys.stderr))
         self.topics = topics
         node = NodeName(settings.domain_id, str(session.info.zid()), 0, settings.namespace,
@@ -73,6 +76,9 @@ class RobotPlant:
         self._force_sequence = -1
         #: monotonic time, s, of the first command sent after the newest force (None: none)
         self._unanswered_since_s: float | None = None
+        #: commands sent since the newest force
+        self._unanswered = 0
+        self._watchdog_commands = topics.watchdog_s / period_s
         self.tripped = False
         self.trips = 0
         self.command_errors = 0
@@ -90,6 +96,7 @@ class RobotPlant:
         velocity = (0.0, 0.0) if self.tripped else (float(velocity_xy[0, 0]),
                                                     float(velocity_xy[0, 1]))
         self._send(velocity)
+        self._unanswered += 1
         if self._unanswered_since_s is None:
             self._unanswered_since_s = now_s
         force_N = np.zeros((1, 2)) if self.tripped else self._force_N[None, :].copy()
@@ -107,18 +114,20 @@ class RobotPlant:
         self._force_sequence = self.force.received
         force = newest.message.wrench.force
         self._force_N = np.array([force.x, force.y])
-        self._unanswered_since_s = None
+        self._unanswered_since_s, self._unanswered = None, 0
 
     def _check_watchdog(self, now_s: float) -> None:
-        """Trip when, once a force has come, commands went unanswered for ``watchdog_s``."""
+        """Trip when, once a force has come, commands went unanswered for ``watchdog_s`` of
+        wall time and of the slave's commands."""
         if self.tripped or self.force.received == 0 or self._unanswered_since_s is None:
             return
         silent_s = now_s - self._unanswered_since_s
-        if silent_s > self.topics.watchdog_s:
+        if silent_s > self.topics.watchdog_s and self._unanswered > self._watchdog_commands:
             self.tripped = True
             self.trips += 1
             self._say(f"robot watchdog: no force on {self.topics.force} for "
-                      f"{silent_s * 1e3:.0f} ms of commands; the robot is commanded to hold")
+                      f"{silent_s * 1e3:.0f} ms ({self._unanswered} commands); the robot is "
+                      "commanded to hold")
 
     def _send(self, velocity: tuple[float, float]) -> None:
         stamp_ns = time.time_ns()
@@ -174,7 +183,8 @@ def plant_for(args: Any, config: Any, node: Any) -> Iterator[RobotPlant | None]:
         raise SystemExit(4) from None
     try:
         plant = RobotPlant(session, settings, RobotTopics(
-            args.plant_command_topic, args.plant_force_topic, args.plant_watchdog))
+            args.plant_command_topic, args.plant_force_topic, args.plant_watchdog),
+            node.sample_period_s)
         node.environment, node.environment_kind = plant, plant.kind
         try:
             yield plant

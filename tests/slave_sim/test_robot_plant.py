@@ -70,7 +70,7 @@ def test_the_robot_watchdog_holds_the_robot_when_its_force_stops(tmp_path: Path)
         try:
             plant = RobotPlant(session, Ros2Settings(0, "/haptic", endpoint, 100.0,
                                                      frozenset()),
-                               RobotTopics(watchdog_s=0.2), say=said.append)
+                               RobotTopics(watchdog_s=0.2), 1e-3, say=said.append)
             still = np.zeros((1, 2))
             moving = np.array([[0.01, 0.0]])
             deadline = time.monotonic() + 10.0
@@ -115,7 +115,7 @@ def test_a_stall_of_the_slave_itself_does_not_trip_the_robot_watchdog(tmp_path: 
         try:
             plant = RobotPlant(session, Ros2Settings(0, "/haptic", endpoint, 100.0,
                                                      frozenset()),
-                               RobotTopics(watchdog_s=watchdog_s), say=print)
+                               RobotTopics(watchdog_s=watchdog_s), 1e-3, say=print)
             still = np.zeros((1, 2))
             moving = np.array([[0.01, 0.0]])
             deadline = time.monotonic() + 10.0
