@@ -106,7 +106,7 @@ class SlaveSupervisor(SupervisionCore):
         force stopped coming): the tool stops like on an input fault, so its forces go off
         and the master holds the handle."""
         self.input_fault = input_fault
-        self.plant_fault = plant_fault
+        was_plant_fault, self.plant_fault = self.plant_fault, plant_fault
         input_fault = input_fault or plant_fault
         tool_x_m, tool_y_m = tool_position_m
         synced = self.in_sync(tool_x_m, tool_y_m)
@@ -159,6 +159,13 @@ class SlaveSupervisor(SupervisionCore):
                           else "the master is in its safe state")
                 self.events.append({"time_s": now_s, "kind": "tool_stopped",
                                     "reason": f"{reason}: the tool stops"})
+        if plant_fault and not was_plant_fault and not (
+                self.events and self.events[-1]["time_s"] == now_s
+                and "robot plant" in self.events[-1]["reason"]):
+            # said even when the tool stopped for another cause: it now stays stopped for good
+            self.events.append({"time_s": now_s, "kind": "tool_stopped",
+                                "reason": "the robot plant's watchdog tripped: the tool stays "
+                                "stopped"})
         self.running = running
         return transition
 

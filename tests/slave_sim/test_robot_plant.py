@@ -160,3 +160,24 @@ def test_a_robot_that_stops_publishing_stops_the_tool_and_holds_the_handle(
     stops = [e for e in slave["events"] if e["kind"] == "tool_stopped"]
     assert any("robot plant's watchdog" in e["reason"] for e in stops), slave["events"]
     assert any(e["kind"] == "handle_held" for e in master["events"]), master["events"]
+
+
+def test_a_robot_trip_while_the_tool_is_already_stopped_is_said_once() -> None:
+    """The robot's watchdog trips while the tool is stopped for another cause (the master in
+    its safe state, a resync after a late message on a loaded machine): the tool now stays
+    stopped for the robot, and a ``tool_stopped`` event says so, once."""
+    from haptic.slave_sim.supervisor import Transition
+    from tests.slave_sim.test_supervisor import handle, make, start
+
+    supervisor = make()
+    start(supervisor)
+    supervisor.receive(handle(0.05, enabled=False, seq=10))
+    assert supervisor.update(0.01, True, (0.05, 0.0)) is Transition.STOP
+    assert "robot" not in supervisor.events[-1]["reason"]
+    for sequence, now_s in ((11, 0.011), (12, 0.012)):
+        supervisor.receive(handle(0.05, enabled=False, seq=sequence))
+        assert supervisor.update(now_s, True, (0.05, 0.0), plant_fault=True) is Transition.NONE
+    robot_stops = [event for event in supervisor.events if event["kind"] == "tool_stopped"
+                   and "robot plant's watchdog" in event["reason"]]
+    assert len(robot_stops) == 1 and robot_stops[0]["time_s"] == 0.011
+    assert supervisor.stop_reason() == "the robot plant's watchdog tripped"
