@@ -90,6 +90,8 @@ class EmulatedRobot:
             return
         linear = read_twist(sample.payload.to_bytes())["linear"]
         with self.lock:
+            if self.closed:
+                return
             self.commands += 1
             if self.moving_commands or any(value != 0.0 for value in linear[:2]):
                 self.moving_commands += 1
@@ -119,10 +121,12 @@ class EmulatedRobot:
                                         [ext.UInt8(b) for b in self.gid])).to_bytes())
 
     def close(self) -> None:
-        """Undeclare everything and close the session (again: nothing)."""
-        if self.closed:
-            return
-        self.closed = True
+        """Undeclare everything and close the session (again: nothing). Under the lock, so no
+        command's callback is publishing then (an undeclare of a publisher in use raises)."""
+        with self.lock:
+            if self.closed:
+                return
+            self.closed = True
         for entity in (self.subscriber, self.publisher, *self.tokens):
             entity.undeclare()
         self.session.close()
