@@ -67,7 +67,7 @@ from haptic.common.wire.ports import free_port
 DEFAULT_OPERATOR = "regulate:fx=3.6,onset=0.2,max=5"
 #: Seconds a child gets after SIGTERM before SIGKILL: the slave, stopped once the master is
 #: done, then writes its summary, trace and clay map, which takes several seconds on a loaded
-#: 2-core machine (3 s killed it there mid-write).
+#: machine of few CPUs (a few seconds' grace killed it there mid-write).
 TERM_GRACE_S = 15.0
 #: Start-up allowance on top of the duration (Python, Warp and Zenoh start, the peer wait), s.
 START_ALLOWANCE_S = 40.0

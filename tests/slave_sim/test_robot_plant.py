@@ -20,7 +20,7 @@ from tests.slave_sim.robot_emulator import EmulatedRobot
 
 DURATION_S = 3.0
 #: The cut's robot watchdog, s. The emulated robot is a Python process on the tests' machine:
-#: on a loaded 2-core machine its callbacks were starved up to about a second, a silence the
+#: on a loaded machine of few CPUs its callbacks were starved up to about a second, a silence the
 #: default 0.05 s holds the robot for, which ends the cut that this test compares. The
 #: watchdog's own contract is the other tests' (a silent robot, the default limit).
 CUT_WATCHDOG_S = 2.0
