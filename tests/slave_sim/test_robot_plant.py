@@ -4,9 +4,12 @@ tool cuts the scenario's clay; the cut reproduces the virtual tool's within 10 %
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -59,7 +62,12 @@ def test_the_robot_plant_cuts_as_the_virtual_tool(tmp_path: Path) -> None:
         assert plant[key] == pytest.approx(virtual[key], rel=0.10), key
 
 
-def test_the_robot_watchdog_holds_the_robot_when_its_force_stops(tmp_path: Path) -> None:
+@contextlib.contextmanager
+def _robot_and_plant(watchdog_s: float, say: Callable[[str], None]) -> Iterator[
+        tuple[EmulatedRobot, Any]]:
+    """A router, the emulated robot on the scenario's clay (1 ms period) and a
+    ``RobotPlant`` with ``watchdog_s`` driving it, the plant already answered 5 times; all
+    closed afterwards (the robot also when the test closed it first)."""
     from haptic.common.ros2.publisher import open_client_session
     from haptic.common.ros2.settings import Ros2Settings
     from haptic.slave_sim.clay.sim import make_clay
@@ -68,7 +76,6 @@ def test_the_robot_watchdog_holds_the_robot_when_its_force_stops(tmp_path: Path)
 
     scenario = load_scenario("constant-rate")
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    said: list[str] = []
     with zenoh_router(endpoint):
         robot = EmulatedRobot(endpoint, make_clay(scenario, 1e-3, "numpy"),
                               scenario.tool.start_position_m, 1e-3)
@@ -76,70 +83,55 @@ def test_the_robot_watchdog_holds_the_robot_when_its_force_stops(tmp_path: Path)
         try:
             plant = RobotPlant(session, Ros2Settings(0, "/haptic", endpoint, 100.0,
                                                      frozenset()),
-                               RobotTopics(watchdog_s=0.2), 1e-3, say=said.append)
-            still = np.zeros((1, 2))
-            moving = np.array([[0.01, 0.0]])
+                               RobotTopics(watchdog_s=watchdog_s), 1e-3, say=say)
             deadline = time.monotonic() + 10.0
             while plant.force.received < 5 and time.monotonic() < deadline:
-                plant.step(None, still, still, moving, still)
+                plant.step(None, STILL, STILL, MOVING, STILL)
                 time.sleep(0.005)
             assert plant.force.received >= 5 and not plant.tripped
-            commands = robot.commands
-            robot.close()  # the robot goes silent; the slave goes on commanding it
-            deadline = time.monotonic() + 10.0
-            result = plant.step(None, still, still, moving, still)
-            while not plant.tripped and time.monotonic() < deadline:
-                time.sleep(0.005)
-                result = plant.step(None, still, still, moving, still)
-            assert plant.tripped and plant.trips == 1 and len(said) == 1
-            assert "watchdog" in said[0] and np.all(result.force_N == 0.0)
-            assert plant.figures["robot_watchdog_trips"] == 1
-            assert commands > 0
+            yield robot, plant
             plant.close()
         finally:
             robot.close()
             session.close()
+
+
+#: A tool at rest and one moving at 10 mm/s along x, (1, 2) m or m/s.
+STILL = np.zeros((1, 2))
+MOVING = np.array([[0.01, 0.0]])
+
+
+def test_the_robot_watchdog_holds_the_robot_when_its_force_stops(tmp_path: Path) -> None:
+    said: list[str] = []
+    with _robot_and_plant(0.2, said.append) as (robot, plant):
+        commands = robot.commands
+        robot.close()  # the robot goes silent; the slave goes on commanding it
+        deadline = time.monotonic() + 10.0
+        result = plant.step(None, STILL, STILL, MOVING, STILL)
+        while not plant.tripped and time.monotonic() < deadline:
+            time.sleep(0.005)
+            result = plant.step(None, STILL, STILL, MOVING, STILL)
+        assert plant.tripped and plant.trips == 1 and len(said) == 1
+        assert "watchdog" in said[0] and np.all(result.force_N == 0.0)
+        assert plant.figures["robot_watchdog_trips"] == 1
+        assert commands > 0
 
 
 def test_a_stall_of_the_slave_itself_does_not_trip_the_robot_watchdog(tmp_path: Path) -> None:
     """The slave's process stalls (no steps, no commands) longer than the watchdog while the
     robot has answered every command: the robot is not silent while commanded, so its
     watchdog holds (a loaded machine's stall is the slave's lateness, not the robot's)."""
-    from haptic.common.ros2.publisher import open_client_session
-    from haptic.common.ros2.settings import Ros2Settings
-    from haptic.slave_sim.clay.sim import make_clay
-    from haptic.slave_sim.plant_options import RobotTopics
-    from haptic.slave_sim.robot_plant import RobotPlant
-
-    scenario = load_scenario("constant-rate")
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
     watchdog_s = 0.5
-    with zenoh_router(endpoint):
-        robot = EmulatedRobot(endpoint, make_clay(scenario, 1e-3, "numpy"),
-                              scenario.tool.start_position_m, 1e-3)
-        session = open_client_session(endpoint)
-        try:
-            plant = RobotPlant(session, Ros2Settings(0, "/haptic", endpoint, 100.0,
-                                                     frozenset()),
-                               RobotTopics(watchdog_s=watchdog_s), 1e-3, say=print)
-            still = np.zeros((1, 2))
-            moving = np.array([[0.01, 0.0]])
-            deadline = time.monotonic() + 10.0
-            while plant.force.received < 5 and time.monotonic() < deadline:
-                plant.step(None, still, still, moving, still)
-                time.sleep(0.005)
-            # every command answered before the stall, however slow the machine
-            while (robot.sequence < plant.figures["robot_commands"]
-                   or plant.force.received < robot.sequence) and time.monotonic() < deadline:
-                time.sleep(0.005)
-            assert plant.force.received == plant.figures["robot_commands"] >= 5
-            time.sleep(1.5 * watchdog_s)  # the slave's stall
-            plant.step(None, still, still, moving, still)
-            assert not plant.tripped and plant.trips == 0
-            plant.close()
-        finally:
-            robot.close()
-            session.close()
+    with _robot_and_plant(watchdog_s, print) as (robot, plant):
+        # every command answered before the stall, however slow the machine
+        deadline = time.monotonic() + 10.0
+        while (robot.sequence < plant.figures["robot_commands"]
+               or plant.force.received < robot.sequence) and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert plant.force.received == plant.figures["robot_commands"] >= 5
+        time.sleep(1.5 * watchdog_s)  # the slave's stall
+        plant.step(None, STILL, STILL, MOVING, STILL)
+        assert not plant.tripped and plant.trips == 0
 
 
 @pytest.mark.slow
