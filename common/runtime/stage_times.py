@@ -78,20 +78,33 @@ class StepSplitTimes:
     master sample, none while the next has not come, several after a gap;
     slave_sim/pacing.py): its time per step over the ticks with at least one step, its time
     by the tick's step count, and the ticks that took each count, so a reader sees what the
-    stage's p99 holds. A record costs about a microsecond; the caller records outside the
-    timed stages."""
+    stage's p99 holds. A record costs about a microsecond (a tick of one step less); the
+    caller records outside the timed stages."""
 
     def __init__(self) -> None:
+        #: ticks of two steps or more, per step (a tick of one is in ``_by_steps[1]`` only)
         self._per_step = LogHistogram()
-        self._by_steps: dict[int, LogHistogram] = {}
-        #: ticks by the steps they took
-        self.ticks_by_steps: dict[int, int] = {}
+        self._one_step = LogHistogram()
+        self._by_steps: dict[int, LogHistogram] = {1: self._one_step}
+        self._no_step_ticks = 0
+
+    @property
+    def ticks_by_steps(self) -> dict[int, int]:
+        """Ticks by the steps they took (only the counts that occurred)."""
+        counts = {0: self._no_step_ticks} if self._no_step_ticks else {}
+        counts.update((steps, histogram.count) for steps, histogram
+                      in sorted(self._by_steps.items()) if histogram.count)
+        return counts
 
     def record(self, steps: int, duration_ns: int) -> None:
-        """One tick: ``steps`` steps (0: none) that took ``duration_ns``, ns."""
-        counts = self.ticks_by_steps
-        counts[steps] = counts.get(steps, 0) + 1
+        """One tick: ``steps`` steps (0: none) that took ``duration_ns``, ns. A tick of one
+        step (the common one) is recorded once: its time per step is its time, which
+        :meth:`summary` adds to the per-step figures."""
+        if steps == 1:
+            self._one_step.record(duration_ns * 1e-9)
+            return
         if steps <= 0:
+            self._no_step_ticks += 1
             return
         duration_s = duration_ns * 1e-9
         self._per_step.record(duration_s / steps)
@@ -105,15 +118,16 @@ class StepSplitTimes:
         the ticks with at least one step, s; ``by_steps``: the step count (a string, for
         JSON) -> the ticks with that count and their stage time's p50 and p99, s
         (``ticks`` only for 0 steps)."""
-        per_step = self._per_step
+        per_step = LogHistogram()
+        per_step.merge(self._one_step)
+        per_step.merge(self._per_step)
         p50, p99 = per_step.percentiles((50.0, 99.0))
         count = per_step.count
         by_steps: dict[str, dict[str, float]] = {}
-        for steps in sorted(self.ticks_by_steps):
-            entry: dict[str, float] = {"ticks": self.ticks_by_steps[steps]}
-            histogram = self._by_steps.get(steps)
-            if histogram is not None:
-                entry["p50_s"], entry["p99_s"] = histogram.percentiles((50.0, 99.0))
+        for steps, ticks in self.ticks_by_steps.items():
+            entry: dict[str, float] = {"ticks": ticks}
+            if steps > 0:
+                entry["p50_s"], entry["p99_s"] = self._by_steps[steps].percentiles((50.0, 99.0))
             by_steps[str(steps)] = entry
         return {"per_step": {"p50_s": p50, "p99_s": p99,
                              "max_s": per_step.max_s if count else math.nan,
