@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -142,7 +143,10 @@ class ReceivePath:
     """Validation, ordering, injection and statistics for one direction of the link.
 
     ``expected_kind`` is the message kind this side receives; ``stale_after_s`` the largest age
-    (s) a message may have at arrival beyond the injected delay; ``rng`` feeds the injection.
+    (s) a message may have at arrival beyond the injected delay; ``rng`` feeds the injection;
+    ``decoder(payload, expected_kind)`` parses and validates a payload, raising only
+    :class:`~haptic.common.wire.messages.DecodeError` (default: the programs' messages; the
+    lane laws' have their own schema, common/wire/law_messages.py).
     """
 
     def __init__(
@@ -151,8 +155,10 @@ class ReceivePath:
         injection: InjectionConfig,
         rng: np.random.Generator,
         stale_after_s: float,
+        decoder: Callable[[bytes, int], Message] = decode,
     ) -> None:
         self.expected_kind = expected_kind
+        self._decode = decoder
         self.injection = injection
         self._impairment = Impairment(injection, rng)
         self._inject = injection.active
@@ -223,7 +229,7 @@ class ReceivePath:
         n = self._n
         n.received += 1
         try:
-            message = decode(payload, self.expected_kind)
+            message = self._decode(payload, self.expected_kind)
         except DecodeError as error:
             self._drop(error.reason)
             if error.reason is DropReason.UNKNOWN_VERSION:
