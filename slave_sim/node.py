@@ -494,9 +494,13 @@ class _NodeKernels:
         constants = node._constants
         actuate_args = [inputs, compensator_arrays(compensator_matrices, per_lane, compensator),
                         tool, drift, actuator]
+        #: the step kernel's arguments, in its order (slave_sim/catch_up.py launches them too)
+        self.step_arguments = [*actuate_args, plant_a, plant_b, halted, halted_count, motion,
+                               constants]
+        #: the compensators' layout the kernels were compiled for
+        self.layout = layout
         self.step = ReplayedLaunch(wp.launch(step_kernel, dim=lanes, device=DEVICE,
-                              inputs=[*actuate_args, plant_a, plant_b, halted, halted_count,
-                                      motion, constants], record_cmd=True))
+                                             inputs=self.step_arguments, record_cmd=True))
         self.actuate = ReplayedLaunch(wp.launch(actuator_kernel, dim=lanes, device=DEVICE,
                                  inputs=[*actuate_args, constants], record_cmd=True))
         self.move = ReplayedLaunch(wp.launch(motion_kernel, dim=lanes, device=DEVICE,

@@ -47,6 +47,7 @@ from haptic.common.runtime.stage_times import StepSplitTimes
 from haptic.common.wire.lane_flags import lane_flag_values
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, HandleState
 from haptic.common.wire.passivity_link import PassivityLink
+from haptic.slave_sim.catch_up import CatchUpStep
 from haptic.slave_sim.input_guard import InputGuard
 from haptic.slave_sim.node import SlaveNode, SlaveOutputs, SlaveState
 from haptic.slave_sim.pacing import MasterSamplePacing, Sample, Step
@@ -128,6 +129,9 @@ class SlaveTick:
         self._none_switched = np.zeros(lanes, bool)
         #: the one lane's node part per tick by its node steps (:meth:`note_node_time`)
         self.node_times = StepSplitTimes()
+        #: the program's lane's node steps in one launch where they can run so
+        #: (slave_sim/catch_up.py); None: stepped apart
+        self._catch_up = CatchUpStep.of(node, state)
 
     #: the one lane's whole-tick setup (:meth:`configure_lane`)
     _lane: _LaneSetup = UNCONFIGURED_LANE
@@ -305,6 +309,9 @@ class SlaveTick:
         fh, yh, scale = self.handle_force_N, self.handle_position_m, self.force_scale
         newest = (fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0])
         steps = plan or (None,)
+        catch_up = self._catch_up
+        if catch_up is not None and catch_up.applies(self.state):
+            return self._catch_up_samples(catch_up, steps, newest)
         for sample in steps[:-1]:
             if sample is not None:
                 fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = sample
@@ -313,6 +320,18 @@ class SlaveTick:
         if sample is not None:
             fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = sample
         ticked = self.control()
+        fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = newest
+        return ticked
+
+    def _catch_up_samples(self, catch_up: CatchUpStep, steps: Sequence[Step],
+                          newest: tuple[Any, ...]) -> SlaveTickOutput:
+        """:meth:`control_samples` in one launch (slave_sim/catch_up.py): the same state, the
+        same outputs and flags."""
+        fh, yh, scale = self.handle_force_N, self.handle_position_m, self.force_scale
+        samples = [newest if sample is None else sample for sample in steps]
+        fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = samples[-1]
+        out = catch_up.step(self.state, samples, not self.running[0], yh)
+        ticked = self._ticked(out)
         fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = newest
         return ticked
 
@@ -331,8 +350,11 @@ class SlaveTick:
     def control(self) -> SlaveTickOutput:
         """The node stage: Ch2/Ct2, the tool and the environment, with the bounded handle
         force where the tool runs and zero force elsewhere."""
+        return self._ticked(self.node.step(self.state, self._force(), self.handle_position_m))
+
+    def _ticked(self, out: SlaveOutputs) -> SlaveTickOutput:
+        """The tick's output of the node's outputs ``out``: the flags to send with them."""
         running = self.running
-        out = self.node.step(self.state, self._force(), self.handle_position_m)
         port = self.state.passivity
         switched = (port.active if port is not None and self.node.passivity_standby
                     else self._none_switched)

@@ -5,6 +5,10 @@ window of ``window_y x window_x`` cells placed around that lane's tool position,
 covers every lane and never touches the rest of the grid; a thread walks its row and adds its
 row's sums to the lane's accumulators once (few atomics, little per-thread overhead on CPU).
 The arithmetic matches :mod:`haptic.slave_sim.clay.clay_numpy` operation for operation (float64).
+
+Each kernel's per-lane (or per-row) work is a Warp function of its own (:func:`proxy_lane`,
+:func:`cut_row`, :func:`yield_lane`), so a kernel that steps the node and the clay together
+for several samples (slave_sim/catch_up_kernels.py) runs the very same arithmetic.
 """
 
 from __future__ import annotations
@@ -48,8 +52,10 @@ def edge_profile(t: wp.float64) -> wp.float64:
     return u * u * (wp.float64(3.0) - wp.float64(2.0) * u)
 
 
-@wp.kernel
-def cut_kernel(
+@wp.func
+def cut_row(
+    lane: int,
+    j: int,
     heights: wp.array3d(dtype=wp.float64),
     block_id: wp.array2d(dtype=wp.int32),
     damping: wp.array2d(dtype=wp.float64),
@@ -68,7 +74,6 @@ def cut_kernel(
     tests/slave_sim/test_clay.py). A row visits only its chord of the outer circle, widened
     by two cells each side (a tool off the grid, whose window is clamped away from it, costs
     almost nothing: bench/clay_bench.py measures the step)."""
-    lane, j = wp.tid()
     px = tool_xy[lane, 0]
     py = tool_xy[lane, 1]
     ix0 = window_start(px, geo.x0, geo.dx, geo.outer_radius, geo.cells_x, geo.window_x)
@@ -119,6 +124,20 @@ def cut_kernel(
         wp.atomic_add(accumulators, lane, 1, weighted_sum)
 
 
+@wp.kernel
+def cut_kernel(
+    heights: wp.array3d(dtype=wp.float64),
+    block_id: wp.array2d(dtype=wp.int32),
+    damping: wp.array2d(dtype=wp.float64),
+    tool_xy: wp.array2d(dtype=wp.float64),
+    geo: ClayGeometry,
+    accumulators: wp.array2d(dtype=wp.float64),
+):
+    """:func:`cut_row` for every (lane, window row)."""
+    lane, j = wp.tid()
+    cut_row(lane, j, heights, block_id, damping, tool_xy, geo, accumulators)
+
+
 #: Columns of the yield kernel's ``result`` (lanes, 4).
 RESULT_COLUMNS = ("removed_volume_m3", "cutting", "engagement", "damping_N_s_per_m")
 
@@ -135,8 +154,9 @@ class ContactConstants:
     min_step: wp.float64
 
 
-@wp.kernel
-def proxy_kernel(
+@wp.func
+def proxy_lane(
+    lane: int,
     tool_xy: wp.array2d(dtype=wp.float64),
     tool_v: wp.array2d(dtype=wp.float64),
     proxy: wp.array2d(dtype=wp.float64),
@@ -151,7 +171,6 @@ def proxy_kernel(
     f = K (x - p) + b (v - dp/dt) against the clay's yield law f = c dp/dt, solved at the
     step's end; no clay or a tool pulling back: the proxy is the tool, no force. Also zeroes
     the lane's accumulators for the cut that follows."""
-    lane = wp.tid()
     zero = wp.float64(0.0)
     px = proxy[lane, 0]
     py = proxy[lane, 1]
@@ -177,7 +196,25 @@ def proxy_kernel(
 
 
 @wp.kernel
-def yield_kernel(
+def proxy_kernel(
+    tool_xy: wp.array2d(dtype=wp.float64),
+    tool_v: wp.array2d(dtype=wp.float64),
+    proxy: wp.array2d(dtype=wp.float64),
+    proxy_prev: wp.array2d(dtype=wp.float64),
+    resistance: wp.array1d(dtype=wp.float64),
+    direction: wp.array2d(dtype=wp.float64),
+    force: wp.array2d(dtype=wp.float64),
+    accumulators: wp.array2d(dtype=wp.float64),
+    cc: ContactConstants,
+):
+    """:func:`proxy_lane` for every lane."""
+    proxy_lane(wp.tid(), tool_xy, tool_v, proxy, proxy_prev, resistance, direction, force,
+               accumulators, cc)
+
+
+@wp.func
+def yield_lane(
+    lane: int,
     proxy: wp.array2d(dtype=wp.float64),
     proxy_prev: wp.array2d(dtype=wp.float64),
     accumulators: wp.array2d(dtype=wp.float64),
@@ -191,7 +228,6 @@ def yield_kernel(
     resistance; a proxy that did not move keeps both. Also the step's result per lane
     (:data:`RESULT_COLUMNS`: removed volume m^3, cutting 1/0, engagement 0..1, the
     removal-weighted damping N s/m), as ``_ClayBase._result`` computes it in numpy."""
-    lane = wp.tid()
     zero = wp.float64(0.0)
     dx = proxy[lane, 0] - proxy_prev[lane, 0]
     dy = proxy[lane, 1] - proxy_prev[lane, 1]
@@ -214,3 +250,17 @@ def yield_kernel(
             direction[lane, 1] = dy / step
         else:
             resistance[lane] = wp.float64(0.0)
+
+
+@wp.kernel
+def yield_kernel(
+    proxy: wp.array2d(dtype=wp.float64),
+    proxy_prev: wp.array2d(dtype=wp.float64),
+    accumulators: wp.array2d(dtype=wp.float64),
+    resistance: wp.array1d(dtype=wp.float64),
+    direction: wp.array2d(dtype=wp.float64),
+    cc: ContactConstants,
+    result: wp.array2d(dtype=wp.float64),
+):
+    """:func:`yield_lane` for every lane."""
+    yield_lane(wp.tid(), proxy, proxy_prev, accumulators, resistance, direction, cc, result)

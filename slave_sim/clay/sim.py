@@ -439,6 +439,17 @@ class WarpClay(_ClayBase):
         state.runtime = runtime
         return state
 
+    def step_arguments(self, state: ClayState) -> list[Any]:
+        """The Warp arrays and constants of ``state``'s step, in the order a kernel that runs
+        the proxy, the cut and the yield itself takes them (slave_sim/catch_up_kernels.py):
+        the tool's position and velocity (inputs), proxy, previous proxy, resistance,
+        direction, force, sums, contact constants, heights, block ids, block dampings,
+        geometry, result."""
+        a = state.runtime["arrays"]
+        return [a["tool"], a["velocity"], a["proxy"], a["proxy_prev"], state.resistance,
+                a["direction"], a["force"], a["sums"], self._cc, state.heights,
+                self._block_id, state.damping, self._geo, a["result"]]
+
     def _capture_step(self, runtime: dict[str, Any]) -> Any:
         """The CUDA step as one graph: the inputs copied in from the pinned buffers, the three
         launches, the outputs copied back (a replay costs one launch instead of eight; the
