@@ -4,10 +4,11 @@ model-mediated): what each side of such a law sends the other over a real link.
 These laws do not exchange the programs' :class:`~haptic.common.wire.messages.HandleState`
 and :class:`~haptic.common.wire.messages.ToolState`; each sends a vector of floats whose
 meaning and length its control declares (:data:`LAW_CHANNELS`): wave variables a wave and
-its integral per axis, four-channel a position, velocity and force per axis, model-mediated
-the handle's position and velocity one way and the environment model's four fields the
-other. The message has the programs' header, so the receive path's ordering, injection and
-counters (common/wire/receive.py) apply unchanged::
+its integral per axis, four-channel a position, velocity and force per axis (with the TDPA
+on its ports, the cumulative energy its passivity observer handed over after them),
+model-mediated the handle's position and velocity one way and the environment model's four
+fields the other. The message has the programs' header, so the receive path's ordering,
+injection and counters (common/wire/receive.py) apply unchanged::
 
     [version, kind, epoch, seq, send_time_ns, flags, *values]
 
@@ -41,11 +42,13 @@ from haptic.common.wire.messages import (
     send_time_bytes,
 )
 
-#: Each law's (handle, tool) payload lengths, floats: master to slave, slave to master.
+#: Each law's (handle, tool) payload lengths, floats: master to slave, slave to master. The
+#: order fixes the kinds (:func:`law_kind`): a new law goes at the end.
 LAW_CHANNELS: dict[str, tuple[int, int]] = {
     "wave": (4, 4),
     "four-channel": (6, 6),
     "mmt": (4, 8),
+    "four-channel-tdpa": (7, 7),
 }
 DIRECTIONS = ("handle", "tool")
 #: The first law kind; the programs' kinds are 1 (handle) and 2 (tool).

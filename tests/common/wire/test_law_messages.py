@@ -58,7 +58,10 @@ def test_every_law_message_round_trips(schema: LawSchema) -> None:
 
 
 def test_the_declared_lengths_are_the_laws_channels() -> None:
-    assert LAW_CHANNELS == {"wave": (4, 4), "four-channel": (6, 6), "mmt": (4, 8)}
+    assert LAW_CHANNELS == {"wave": (4, 4), "four-channel": (6, 6), "mmt": (4, 8),
+                            "four-channel-tdpa": (7, 7)}
+    # the kinds are fixed by the order: the first laws' stay what they were
+    assert [law_kind("wave", "handle"), law_kind("mmt", "tool")] == [16, 21]
     assert max(max(lengths) for lengths in LAW_CHANNELS.values()) <= MAX_VALUES
 
 
