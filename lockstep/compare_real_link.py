@@ -121,11 +121,33 @@ def real_link_cell(control: str, lane: Lane, grid: CompareGrid, model: TeleopMod
             "agree": real["bounded"] == lockstep["bounded"], "on_target": on_target}
 
 
+def lockstep_at_measured(cells: RealLinkSet, row: dict[str, Any],
+                         model: TeleopModel | None) -> dict[str, Any] | None:
+    """The lockstep's verdict of an off-target cell's task at the round trip the real link
+    measured (same duration and loss; None when none was measured): what the loop that ran
+    should be compared with."""
+    measured = row["real_link"]["measured_round_trip_s"]
+    if measured is None:
+        return None
+    control = row["control"]
+    settle = cells.settle_s + row["round_trip_s"] - measured
+    grid = CompareGrid((control,), (row["task"],), (measured,), (cells.loss,),
+                       ("independent",), (0.0,), (), TaskSettings(settle_s=settle),
+                       seed=cells.seed)
+    lanes = grid.cell_lanes(control)
+    records = _lockstep_records(control, lanes, grid, model)
+    surface = 0.0 if control in PAPER_CONTROLS else grid.task.wall_surface_m
+    bounded = _verdict(records, 0, lanes[0], grid, surface)["bounded"]
+    return {"round_trip_s": measured, "bounded": bounded,
+            "agree": bounded == row["real_link"]["bounded"]}
+
+
 def run_real_link_cells(cells: RealLinkSet, model: TeleopModel | None = None
                         ) -> dict[str, Any]:
-    """Every cell of ``cells``, each beside its lockstep cell; the JSON's ``real_link``:
-    ``cells``, ``agreements``, ``disagreements`` (those on target and in all), ``off_target``
-    and ``wall_seconds``."""
+    """Every cell of ``cells``, each beside its lockstep cell (an off-target one also beside
+    the lockstep at its measured round trip, ``lockstep_at_measured``); the JSON's
+    ``real_link``: ``cells``, ``agreements``, ``disagreements`` (those on target and in
+    all), ``off_target`` and ``wall_seconds``."""
     started = time.perf_counter()
     rows = []
     for control in cells.controls:
@@ -137,7 +159,10 @@ def run_real_link_cells(cells: RealLinkSet, model: TeleopModel | None = None
             for index, lane in enumerate(lanes):
                 lockstep = _verdict(records, index, lane, grid, surface)
                 seed = cells.seed * 1000 + len(rows)
-                rows.append(real_link_cell(control, lane, grid, model, lockstep, seed))
+                row = real_link_cell(control, lane, grid, model, lockstep, seed)
+                if not row["on_target"]:
+                    row["lockstep_at_measured"] = lockstep_at_measured(cells, row, model)
+                rows.append(row)
     return {"settings": {"controls": list(cells.controls), "tasks": list(cells.tasks),
                          "round_trips_s": list(cells.round_trips_s), "loss": cells.loss,
                          "loss_model": "independent", "settle_s": cells.settle_s,
@@ -155,6 +180,16 @@ def _figure(value: float | None, scale: float = 1.0, digits: int = 3) -> str:
     return "-" if value is None else f"{value * scale:.{digits}g}"
 
 
+def _at_measured(row: dict[str, Any]) -> str:
+    """An off-target cell's lockstep verdict at its measured round trip, as text."""
+    at = row.get("lockstep_at_measured")
+    if at is None:
+        return ""
+    return (f" (lockstep at the measured round trip: "
+            f"{'bounded' if at['bounded'] else 'unbounded'}, "
+            f"{'agree' if at['agree'] else 'DISAGREE'})")
+
+
 def real_link_text(result: dict[str, Any]) -> str:
     """One line per real-link cell and a closing count."""
     lines = []
@@ -168,6 +203,7 @@ def real_link_text(result: dict[str, Any]) -> str:
             f"{'' if row['on_target'] else ', off target'}): {verdict[real['bounded']]}, "
             f"lockstep {verdict[lock['bounded']]}  {'agree' if row['agree'] else 'DISAGREE'}"
             f"  peak {_figure(real['peak_force_N'])} N ({_figure(lock['peak_force_N'])})"
+            f"{_at_measured(row)}"
             f"  rms pos {_figure(real['rms_position_error_m'], 1e3)} mm "
             f"({_figure(lock['rms_position_error_m'], 1e3)})  overruns {real['overruns']}")
     lines.append(f"real link: {result['agreements']}/{len(result['cells'])} agree with the "
