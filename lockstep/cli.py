@@ -166,6 +166,11 @@ def _add_compare_parser(sub: argparse._SubParsersAction) -> None:
     compare.add_argument("--out", type=Path, default=None,
                          help="write compare.json, cells.csv and the heat maps here")
     compare.add_argument("--json", action="store_true", help="print the result as JSON")
+    compare.add_argument("--real-link", action="store_true",
+                         help="also run each control's real-link cells (200 ms and 1 s round "
+                         "trip, 5 %% loss, over real Zenoh links in real time) beside the "
+                         "lockstep's (JSON key real_link); exit 1 when one measured on target "
+                         "disagrees (lockstep/compare_real_link.py)")
 
 
 def _names(text: str) -> tuple[str, ...]:
@@ -475,12 +480,25 @@ def command_compare(args: argparse.Namespace, config: dict[str, Any]) -> int:
     model = model_from_config(config) if set(controls) & set(PAPER_CONTROLS) else None
     result = run_compare(grid, model)
     data = result.to_json()
+    real_link = None
+    if args.real_link:
+        from haptic.lockstep.compare_real_link import RealLinkSet, run_real_link_cells
+
+        cells = (RealLinkSet.quick(controls, args.seed) if args.quick
+                 else RealLinkSet(controls, seed=args.seed))
+        real_link = data["real_link"] = run_real_link_cells(cells, model)
     if args.out is not None:
         from haptic.lockstep.compare_files import write_compare_files
 
         write_compare_files(data, args.out)
     print(json.dumps(data) if args.json else summary_text(result))
-    return 0
+    if real_link is None:
+        return 0
+    if not args.json:
+        from haptic.lockstep.compare_real_link import real_link_text
+
+        print(real_link_text(real_link))
+    return 1 if real_link["disagreements_on_target"] else 0
 
 
 def _watchdog_trips(simulator: LockstepSimulator) -> dict[str, int]:
