@@ -168,7 +168,8 @@ def _add_compare_parser(sub: argparse._SubParsersAction) -> None:
     compare.add_argument("--json", action="store_true", help="print the result as JSON")
     compare.add_argument("--real-link", action="store_true",
                          help="also run each control's real-link cells (200 ms and 1 s round "
-                         "trip, 5 %% loss, over real Zenoh links in real time) beside the "
+                         "trip, 5 %% loss, over real Zenoh links in real time; the wall and "
+                         "the sine, with --quick the wall only) beside the "
                          "lockstep's (JSON key real_link); exit 1 when one measured on target "
                          "disagrees (lockstep/compare_real_link.py)")
 

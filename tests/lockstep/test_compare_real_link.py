@@ -7,10 +7,13 @@ injection, or was still in flight at the end; nothing else was dropped."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import pytest
 
+from haptic.lockstep.cli import main
+from haptic.lockstep.compare_grid import CompareGrid
 from haptic.lockstep.compare_real_link import (
     RealLinkSet,
     lockstep_at_measured,
@@ -79,3 +82,18 @@ def test_an_off_target_cell_is_judged_at_its_measured_round_trip_too() -> None:
     assert lockstep_at_measured(cells, row, None)["agree"] is False
     row["real_link"]["measured_round_trip_s"] = None
     assert lockstep_at_measured(cells, row, None) is None
+
+
+def test_compare_real_link_adds_the_quick_cells_to_the_json(capsys) -> None:
+    """``haptic-sim compare --quick --real-link --json`` for one control: the quick grid's
+    JSON with the wall's two real-link cells (200 ms and 1 s), which agree."""
+    assert main(["compare", "--quick", "--controls", "four-channel", "--real-link",
+                 "--json"]) == 0
+    data = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    real = data["real_link"]
+    assert [(cell["task"], cell["round_trip_s"]) for cell in real["cells"]] == [
+        ("wall", 0.2), ("wall", 1.0)]
+    assert real["agreements"] == 2 and real["disagreements"] == 0
+    quick = CompareGrid.quick(("four-channel",))
+    assert real["settings"]["loss"] == 0.05
+    assert len(data["cells"]) == len(quick.cell_lanes("four-channel"))
