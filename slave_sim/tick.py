@@ -239,6 +239,58 @@ class SlaveTick:
             self.node.safe_stop(state, None if all(stop) else np.array(stop))
         return fresh
 
+    def _supervise_lane(self, now_s: float, message: HandleState | None, silence_s: float,
+                        peer_alive: bool, earlier: Sequence[HandleState] | None) -> bool:
+        """:meth:`supervise` of the one lane (:meth:`step_lane`) with Python scalars instead
+        of per-lane lists (the same calls in the same order, the same state); returns
+        whether the message was an input."""
+        guard, supervisor = self.guards[0], self.supervisors[0]
+        samples = self.samples[0]
+        if earlier is not None:
+            samples.clear()
+            for older in earlier:  # a fault among them latches the guard too
+                if guard.admit(older, now_s):
+                    samples.append((older.epoch, older.seq, guard.force_N, guard.position_m,
+                                    older.force_scale))
+        admitted = message is not None and guard.admit(message, now_s)
+        self.fresh[0] = admitted
+        if admitted and earlier is not None:
+            samples.append((message.epoch, message.seq, guard.force_N, guard.position_m,
+                            message.force_scale))
+        follow = supervisor.receive(message if admitted else None)  # a fault is not an input
+        if admitted:
+            self._take_lane_input(now_s, message)
+        state = self.state
+        if follow:  # to the held handle, cutting (slave_sim/resync.py)
+            self.resync.step(state, self.handle_position_m, now_s, None)
+        tool = state.tool
+        transition = supervisor.update(
+            now_s, admitted, (float(tool[0, 0]), float(tool[0, 2])), float(silence_s),
+            peer_alive, guard.faulted, bool(getattr(self.node.environment, "tripped", False)))
+        self.running[0] = supervisor.running
+        self._ready[0] = supervisor.ready
+        self._outside[0] = supervisor.outside
+        if transition is Transition.RESUME:
+            self.node.resume(state, None)
+        elif transition is Transition.STOP:
+            self.node.safe_stop(state, None)
+        return admitted
+
+    def _take_lane_input(self, now_s: float, message: HandleState) -> None:
+        """The one lane's admitted message as the tick's input: the guard's bounded force and
+        position, the echo, the force ramp, the governed gain, the passivity layer's switch."""
+        guard = self.guards[0]
+        force, position = self.handle_force_N, self.handle_position_m
+        force[0, 0], force[0, 1] = guard.force_N  # bounded
+        position[0, 0], position[0, 1] = guard.position_m
+        self.echo_send_time_ns[0] = message.send_time_ns
+        self.force_scale[0] = message.force_scale
+        gain = self._gain
+        if gain is not None:
+            self.state.gain_ratio[0] = follow_gain(message.gain_k, *gain)
+        if self.node.passivity_standby:
+            self.follow_switch(now_s, (0,), (int(message.flags),))
+
     def receive_peer_energy(self, energy_J: Any) -> None:
         """The master's cumulative handed-over energy, J, into the passivity layer (a node
         with the layer), the same for the program's lane and the lockstep's lanes: (lanes,)
@@ -400,9 +452,9 @@ class SlaveTick:
         message = inputs.message
         if message is not None:  # a peer in the other [control] mode: refused
             lane.passivity.check(message)
-        fresh = outputs.fresh = bool(self.supervise(
-            inputs.now_s, (message,), (inputs.silence_s,), (inputs.peer_alive,),
-            None if lane.pacing is None else (inputs.earlier,))[0])
+        fresh = outputs.fresh = self._supervise_lane(
+            inputs.now_s, message, inputs.silence_s, inputs.peer_alive,
+            None if lane.pacing is None else inputs.earlier)
         state = self.state
         if fresh and state.passivity is not None:  # the master's handed-over energy
             self.receive_peer_energy(lane.passivity.peer_energy(state.passivity, message))
