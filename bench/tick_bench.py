@@ -21,9 +21,12 @@ Reported per side and stage: p50, p99, max and mean (us), over the measured tick
 stage also the time per node step over the ticks with at least one step, and the
 distribution of node steps per tick. The garbage collector runs as in the programs (they
 freeze it at the start: common/runtime/gc_pauses.py is not applied here; ``--no-gc``
-disables it while timing).
+disables it while timing). ``--cpu-clock`` times with the thread's CPU time instead of the
+wall clock: on a machine shared with other work it leaves out the time the thread waited for
+a core (for comparing two trees there; the real-time figures are the wall clock's).
 
-Usage: ``python bench/tick_bench.py [--ticks N] [--json] [--profile slave|master]``;
+Usage: ``python bench/tick_bench.py [--ticks N] [--json] [--cpu-clock]
+[--profile slave|master]``;
 ``--profile`` prints the top of a cProfile of that side's ticks instead.
 """
 
@@ -252,8 +255,10 @@ def master_figures(times: dict[str, np.ndarray]) -> dict[str, Any]:
 
 
 def benchmark(ticks: int, warmup: int, late: float, late2: float, seed: int,
-              no_gc: bool) -> dict[str, Any]:
-    """Both sides' figures (see the module docstring)."""
+              no_gc: bool, cpu_clock: bool = False) -> dict[str, Any]:
+    """Both sides' figures (see the module docstring); ``cpu_clock``: timed with the thread's
+    CPU time instead of the wall clock."""
+    clock = time.thread_time_ns if cpu_clock else time.perf_counter_ns
     config = load_config()
     slave, master = SlaveBench(config), MasterBench(config)
     groups = delivery_groups(ticks + warmup, late, late2, seed)
@@ -261,12 +266,13 @@ def benchmark(ticks: int, warmup: int, late: float, late2: float, seed: int,
         gc.collect()
         gc.disable()
     try:
-        slave_times = slave.run(groups, warmup)
-        master_times = master.run(ticks + warmup, warmup)
+        slave_times = slave.run(groups, warmup, clock)
+        master_times = master.run(ticks + warmup, warmup, clock)
     finally:
         gc.enable()
     return {"cpu": cpu_model(), "ticks": ticks, "warmup": warmup, "late": late,
             "late2": late2, "seed": seed, "gc_disabled": no_gc,
+            "clock": "thread CPU time" if cpu_clock else "wall",
             "slave": slave_figures(slave_times), "master": master_figures(master_times)}
 
 
@@ -286,7 +292,8 @@ def profile(side: str, ticks: int, warmup: int, late: float, late2: float, seed:
 
 def print_table(result: dict[str, Any]) -> None:
     """The figures as text."""
-    print(f"tick_bench: {result['ticks']} ticks after {result['warmup']} ({result['cpu']})")
+    print(f"tick_bench: {result['ticks']} ticks after {result['warmup']} ({result['cpu']}, "
+          f"{result['clock']} clock)")
     for side in ("master", "slave"):
         figures = result[side]
         for name, f in figures["stages"].items():
@@ -313,6 +320,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="fraction of ticks that start a two-tick gap (0, 0 then 3)")
     parser.add_argument("--seed", type=int, default=3)
     parser.add_argument("--no-gc", action="store_true", help="disable the GC while timing")
+    parser.add_argument("--cpu-clock", action="store_true",
+                        help="time with the thread's CPU time (time.thread_time_ns): on a shared "
+                        "machine, leaves out the time other processes held the core")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--profile", choices=("slave", "master"),
                         help="print a cProfile of that side's ticks instead")
@@ -322,7 +332,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.profile:
         profile(args.profile, args.ticks, args.warmup, args.late, args.late2, args.seed)
         return 0
-    result = benchmark(args.ticks, args.warmup, args.late, args.late2, args.seed, args.no_gc)
+    result = benchmark(args.ticks, args.warmup, args.late, args.late2, args.seed, args.no_gc,
+                       args.cpu_clock)
     if args.json:
         json.dump(result, sys.stdout, indent=2, sort_keys=True)
         print()
