@@ -195,6 +195,28 @@ class MasterTick:
             self._renew(now_s, np.nan_to_num(position), activate, resume)
         return transitions
 
+    def _supervise_lane(self, now_s: float, message: ToolState | None,
+                        handle_position_m: np.ndarray, faults: Sequence[str], cycle: int,
+                        silence_s: float, peer_alive: bool) -> Transition:
+        """:meth:`supervise` of the one lane (:meth:`step_lane`) without the per-lane lists
+        (the same calls in the same order, the same state); returns its transition."""
+        position = np.asarray(handle_position_m, float)
+        supervisor = self.supervisors[0]
+        transition = supervisor.update(now_s, message, position.tolist()[0], faults, cycle,
+                                       float(silence_s), peer_alive)
+        self.enabled[0] = supervisor.enabled
+        tool = supervisor.tool
+        if tool is not None:  # element by element: cheaper than a row from a tuple
+            tool_force = self.tool_force_N
+            tool_force[0, 0], tool_force[0, 1] = tool.tool_force_N
+        if transition is Transition.HOLD:
+            self._hold[0] = supervisor.hold_m
+        elif transition is Transition.ACTIVATE or transition is Transition.RESUME:
+            self._renew(now_s, np.nan_to_num(position),
+                        np.array([transition is Transition.ACTIVATE]),
+                        np.array([transition is Transition.RESUME]))
+        return transition
+
     def _renew(self, now_s: float, position_m: np.ndarray, activate: np.ndarray,
                resume: np.ndarray) -> None:
         """Start the node afresh, in place, in the ``activate`` and ``resume`` lanes at
@@ -373,9 +395,9 @@ class MasterTick:
             lane.passivity.check(message)
         now_s = inputs.now_s
         position = inputs.handle_position_m
-        outputs.transition = self.supervise(
-            now_s, (message,), position, (inputs.faults,), inputs.cycle, (inputs.silence_s,),
-            (inputs.peer_alive,))[0]
+        outputs.transition = self._supervise_lane(now_s, message, position, inputs.faults,
+                                                  inputs.cycle, inputs.silence_s,
+                                                  inputs.peer_alive)
         supervisor = self.supervisors[0]
         outputs.enabled = enabled = supervisor.enabled
         if lane.governor is None:
