@@ -11,9 +11,12 @@ delay and the loss are the links' own injection on their receive paths, not re-s
 Its lockstep counterpart is the comparison's lane simulator (or the lockstep simulator) on the
 same task, network and duration; both are judged by the comparison's bounds
 (lockstep/compare_records.py). The cell reports the round trip it measured: a loop that
-stalls on a loaded machine skips ticks, so a wall-clock delay then spans fewer of them, and
-a cell whose measured round trip is more than :data:`ON_TARGET_BAND` off the network's is
-marked ``on_target: false``.
+stalls on a loaded machine skips ticks, so a wall-clock delay then spans fewer of them. A
+cell is on target when at least :data:`ON_TARGET_SHARE` of its ticks held messages whose
+round trip lies within :data:`ON_TARGET_BAND` of the network's; one that is not is run again
+(at most :data:`ATTEMPTS` runs in all) and, if still off target, also set beside the lockstep
+at the round trip it measured. The count that decides (``disagreements_on_target``) is over
+the cells on target.
 """
 
 from __future__ import annotations
@@ -42,8 +45,12 @@ QUICK_REAL_LINK_TASKS = ("wall",)
 #: Simulated time after the round trip, s: the full set's and the quick set's.
 REAL_LINK_SETTLE_S = 3.0
 QUICK_REAL_LINK_SETTLE_S = 2.0
-#: A measured round trip further than this share from the network's is off target.
+#: A tick's round trip further than this share from the network's is off target ...
 ON_TARGET_BAND = 0.1
+#: ... and a cell is on target when at least this share of its ticks is not.
+ON_TARGET_SHARE = 0.9
+#: Runs of a cell at most, while it lands off target.
+ATTEMPTS = 2
 
 
 @dataclass(frozen=True)
@@ -102,22 +109,27 @@ def _verdict(records: LaneRecords, index: int, lane: Lane, grid: CompareGrid,
 
 def real_link_cell(control: str, lane: Lane, grid: CompareGrid, model: TeleopModel | None,
                    lockstep: dict[str, Any], seed: int) -> dict[str, Any]:
-    """One real-link cell beside its lockstep cell (``lockstep``: its verdict and figures)."""
+    """One real-link cell beside its lockstep cell (``lockstep``: its verdict and figures),
+    run again while it lands off target (at most :data:`ATTEMPTS` runs; the last is kept)."""
     surface = 0.0 if control in PAPER_CONTROLS else grid.task.wall_surface_m
     period = model.sample_period_s if control in PAPER_CONTROLS and model else PERIOD_S
-    started = time.perf_counter()
-    run = _real_run(control, lane, grid, model, seed)
-    wall = time.perf_counter() - started
     network = lane.network
+    for attempt in range(1, ATTEMPTS + 1):
+        started = time.perf_counter()
+        run = _real_run(control, lane, grid, model, seed + 100 * (attempt - 1))
+        wall = time.perf_counter() - started
+        share = run.lags.share_within(network.round_trip_s, ON_TARGET_BAND, period)
+        on_target = share >= ON_TARGET_SHARE
+        if on_target:
+            break
     measured = run.lags.round_trip_s(period)
     real = {**_verdict(run.records, 0, lane, grid, surface),
             "measured_round_trip_s": measured if np.isfinite(measured) else None,
+            "on_target_share": round(share, 4), "attempts": attempt,
             "steps": run.runner.steps,
             "overruns": run.runner.overruns, "stalls": run.runner.stalls,
             "skipped_ticks": run.runner.skipped_ticks, "links": run.links,
             "wall_seconds": round(wall, 3)}
-    on_target = bool(np.isfinite(measured) and abs(measured - network.round_trip_s)
-                     <= ON_TARGET_BAND * network.round_trip_s)
     return {"control": control, "task": lane.task, "round_trip_s": network.round_trip_s,
             "loss": network.loss, "loss_model": network.loss_model,
             "jitter_s": network.jitter_s, "duration_s": grid.duration_s,
@@ -170,7 +182,8 @@ def run_real_link_cells(cells: RealLinkSet, model: TeleopModel | None = None
     return {"settings": {"controls": list(cells.controls), "tasks": list(cells.tasks),
                          "round_trips_s": list(cells.round_trips_s), "loss": cells.loss,
                          "loss_model": "independent", "settle_s": cells.settle_s,
-                         "on_target_band": ON_TARGET_BAND},
+                         "on_target_band": ON_TARGET_BAND,
+                         "on_target_share": ON_TARGET_SHARE, "attempts": ATTEMPTS},
             "cells": rows,
             "agreements": sum(row["agree"] for row in rows),
             "disagreements": sum(not row["agree"] for row in rows),
@@ -209,7 +222,8 @@ def real_link_text(result: dict[str, Any]) -> str:
             f"  peak {_figure(real['peak_force_N'])} N ({_figure(lock['peak_force_N'])})"
             f"{_at_measured(row)}"
             f"  rms pos {_figure(real['rms_position_error_m'], 1e3)} mm "
-            f"({_figure(lock['rms_position_error_m'], 1e3)})  overruns {real['overruns']}")
+            f"({_figure(lock['rms_position_error_m'], 1e3)})  overruns {real['overruns']}"
+            + (f", {real['attempts']} runs" if real["attempts"] > 1 else ""))
     lines.append(f"real link: {result['agreements']}/{len(result['cells'])} agree with the "
                  f"lockstep ({result['disagreements_on_target']} disagreements on target, "
                  f"{result['off_target']} off target) in {result['wall_seconds']:.0f} s wall")

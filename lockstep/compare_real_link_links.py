@@ -75,6 +75,22 @@ class LagRecord:
         """``tick`` minus the tick the message was sent in (NaN: no message)."""
         return np.nan if message_tick is None else float(tick - message_tick)
 
+    def tick_round_trips_s(self, period_s: float) -> np.ndarray:
+        """Each tick's round trip, s: the two lags it held minus 1, times Ts (NaN before
+        both sides had a message)."""
+        return (self.to_slave + self.to_master - 1.0) * period_s
+
+    def share_within(self, round_trip_s: float, band: float, period_s: float) -> float:
+        """The share of the ticks (from the first with a message on both sides) whose round
+        trip lies within ``band`` (a share) of ``round_trip_s``: a loop that stalled, its
+        skipped ticks shrinking a wall-clock delay in ticks, has a smaller one (0 when no
+        tick had messages both ways)."""
+        ticks = self.tick_round_trips_s(period_s)
+        ticks = ticks[np.isfinite(ticks)]
+        if ticks.size == 0:
+            return 0.0
+        return float(np.mean(np.abs(ticks - round_trip_s) <= band * round_trip_s))
+
     def round_trip_s(self, period_s: float) -> float:
         """The measured round trip (s) over the last three quarters of the run (NaN when a
         side never received a message there)."""
