@@ -161,7 +161,7 @@ def _add_compare_parser(sub: argparse._SubParsersAction) -> None:
                          "no jitter x both tasks")
     compare.add_argument("--controls", type=_names, default=None, metavar="LIST",
                          help="comma-separated controls (default: paper,tdpa,wave,"
-                         "four-channel,mmt)")
+                         "four-channel,four-channel-tdpa,mmt)")
     compare.add_argument("--seed", type=int, default=0)
     compare.add_argument("--out", type=Path, default=None,
                          help="write compare.json, cells.csv and the heat maps here")

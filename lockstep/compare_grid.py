@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 from haptic.common.wire.injection import InjectionConfig
 
-CONTROLS = ("paper", "tdpa", "wave", "four-channel", "mmt")
+CONTROLS = ("paper", "tdpa", "wave", "four-channel", "four-channel-tdpa", "mmt")
 TASKS = ("free-sine", "wall", "clay-cut")
 #: The controls that run the clay cut: every one (the lockstep's clay for paper and tdpa, the
 #: same Warp clay in the lane simulator for the others).

@@ -1,5 +1,6 @@
 """The comparison's lane simulator for the laws of common/control: wave variables,
-four-channel and model-mediated teleoperation, every cell of a control one lane.
+four-channel (plain, and with the TDPA on its ports) and model-mediated teleoperation, every
+cell of a control one lane.
 
 One tick (period ``Ts``), every lane at once:
 
@@ -35,11 +36,14 @@ import numpy as np
 from haptic.common.config.scenario import load_scenario
 from haptic.common.control.four_channel import FourChannelGains, Impedance, side_laws
 from haptic.common.control.four_channel_kernel import FourChannelSideKernel
+from haptic.common.control.four_channel_passivity import MASTER_PORT_SIGN, SLAVE_PORT_SIGN
 from haptic.common.control.mmt import EnvironmentModel, EstimatorSettings, RendererSettings
 from haptic.common.control.mmt_kernel import EstimatorKernel, RendererKernel
 from haptic.common.control.tasks import free_motion_sine
 from haptic.common.control.wave import MASTER_SIGN, SLAVE_SIGN, WaveSettings
 from haptic.common.control.wave_kernel import WavePortKernel
+from haptic.common.model.passivity import PassivitySettings
+from haptic.lockstep.compare_four_channel_tdpa import PassiveFourChannelSideKernel
 from haptic.lockstep.compare_grid import CompareGrid, Lane
 from haptic.lockstep.compare_links import lane_lines
 from haptic.lockstep.compare_records import LaneRecords
@@ -63,7 +67,7 @@ WAVE_IMPEDANCE_N_S_PER_M = 20.0
 #: channels without the masses (docs/architectures.md, "A sampled loop and the masses").
 FOUR_CHANNEL_MANIPULATOR = Impedance(mass_kg=0.1, damping_N_s_per_m=1.0)
 FOUR_CHANNEL_LOCAL = Impedance(damping_N_s_per_m=50.0, stiffness_N_per_m=500.0)
-LANE_CONTROLS = ("wave", "four-channel", "mmt")
+LANE_CONTROLS = ("wave", "four-channel", "four-channel-tdpa", "mmt")
 
 
 def four_channel_gains() -> FourChannelGains:
@@ -157,6 +161,54 @@ class FourChannelPair:
         return command, rate
 
 
+class PassiveFourChannelPair:
+    """Four-channel with the TDPA on both ports (``four-channel-tdpa``): each message is the
+    side's (position, velocity, measured force) and, in its last channel, the cumulative
+    energy (J) the side's passivity observer handed over, as the ``tdpa`` mode's ``energy_J``.
+    Both ports are on the laws' position commands, as the paper's master port
+    (common/control/four_channel_passivity.py); the TDPA has its default settings
+    (common/model/passivity.py)."""
+
+    handle_channels = tool_channels = 7
+
+    def __init__(self, lanes: int) -> None:
+        master_law, slave_law = side_laws(four_channel_gains(), PERIOD_S)
+        settings = PassivitySettings()
+        start = np.zeros((lanes, 2))
+        self.master_side = PassiveFourChannelSideKernel(master_law, settings,
+                                                        settings.master_keep_J,
+                                                        MASTER_PORT_SIGN, start)
+        self.slave_side = PassiveFourChannelSideKernel(slave_law, settings,
+                                                       settings.slave_keep_J,
+                                                       SLAVE_PORT_SIGN, start)
+
+    def initial_messages(self, lanes: int) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros((lanes, 7)), np.zeros((lanes, 7))
+
+    def master(self, fh: np.ndarray, tool_message: np.ndarray, fresh: np.ndarray,
+               handle_message: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        position, velocity = self.master_side.step(fh, tool_message[:, :2], tool_message[:, 2:4],
+                                                   tool_message[:, 4:6], tool_message[:, 6],
+                                                   fresh)
+        handle_message[:, :2] = position
+        handle_message[:, 2:4] = velocity
+        handle_message[:, 4:6] = fh
+        handle_message[:, 6] = self.master_side.port.sent_J
+        return position, velocity
+
+    def slave(self, fe: np.ndarray, position: np.ndarray, velocity: np.ndarray,
+              handle_message: np.ndarray, fresh: np.ndarray, tool_message: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+        command, rate = self.slave_side.step(fe, handle_message[:, :2], handle_message[:, 2:4],
+                                             handle_message[:, 4:6], handle_message[:, 6],
+                                             fresh)
+        tool_message[:, :2] = command
+        tool_message[:, 2:4] = rate
+        tool_message[:, 4:6] = fe
+        tool_message[:, 6] = self.slave_side.port.sent_J
+        return command, rate
+
+
 class ModelMediatedPair:
     """Model-mediated: the handle line carries the handle's (position, velocity), the tool
     line the environment model's four fields; the master renders the model, the tool tracks
@@ -191,7 +243,8 @@ class ModelMediatedPair:
         return None, command
 
 
-PAIRS = {"wave": WavePair, "four-channel": FourChannelPair, "mmt": ModelMediatedPair}
+PAIRS = {"wave": WavePair, "four-channel": FourChannelPair,
+         "four-channel-tdpa": PassiveFourChannelPair, "mmt": ModelMediatedPair}
 
 
 @dataclass(eq=False)
@@ -310,7 +363,7 @@ def wall_force_N(grid: CompareGrid, tasks: LaneTasks, position_m: np.ndarray,
 
 
 def simulate_lanes(control: str, lanes: list[Lane], grid: CompareGrid) -> LaneRecords:
-    """Run ``control`` ("wave", "four-channel" or "mmt") on every lane for the grid's
+    """Run ``control`` (one of :data:`LANE_CONTROLS`) on every lane for the grid's
     duration; the records of the task axis."""
     if control not in PAIRS:
         raise ValueError(f"the lane simulator runs {', '.join(LANE_CONTROLS)} (got {control!r})")

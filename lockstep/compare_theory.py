@@ -3,8 +3,8 @@
 - paper: the sampled Nyquist test of the paper's loop with the task's linear environment
   (lockstep/sweep.py's ``analytic_margin_s``): bounded below the round-trip delay margin,
   unbounded above it. Necessary and sufficient for the linear loop the lockstep runs.
-- tdpa and wave: a passive channel with a passive operator and environment stays passive
-  for any constant delay: bounded (sufficient).
+- tdpa, wave and four-channel-tdpa: a passive channel with a passive operator and
+  environment stays passive for any constant delay: bounded (sufficient).
 - four-channel: Llewellyn's absolute stability of the two-port at the cell's one-way delay
   (common/control/two_port.py): bounded where it holds (sufficient); where it fails the
   theory guarantees nothing, so no verdict is predicted.
@@ -32,7 +32,8 @@ from haptic.lockstep.sweep import analytic_margin_s
 #: Llewellyn's inequalities are checked over this grid, rad/s.
 LLEWELLYN_FREQUENCIES_RAD_S = np.logspace(-1.0, 4.0, 2000)
 THEORIES = {"paper": "nyquist delay margin", "tdpa": "passivity (constant delay)",
-            "wave": "passivity (constant delay)", "four-channel": "llewellyn absolute stability"}
+            "wave": "passivity (constant delay)", "four-channel": "llewellyn absolute stability",
+            "four-channel-tdpa": "passivity (constant delay)"}
 
 
 @dataclass(frozen=True)

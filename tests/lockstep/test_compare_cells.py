@@ -38,6 +38,19 @@ def test_a_soft_wall_without_delay_feels_like_itself_through_wave_and_four_chann
     assert result.theory()["checked"] == 2 and result.theory()["disagreements"] == 0
 
 
+def test_the_passivity_layer_on_four_channel_keeps_the_soft_wall_and_yields_on_it() -> None:
+    """Without delay the soft wall still feels like itself through four-channel-tdpa, which
+    passivity predicts bounded; the master's account runs short when the wall gives energy
+    back a period before the slave's account of it arrives, so the handle yields and ends
+    millimetres from the tool (the layer has no drift correction)."""
+    result = run_compare(_wall_grid(("four-channel-tdpa",), 300.0, (0.0,)))
+    (cell,) = result.cells
+    assert cell["bounded"] and cell["predicted_bounded"] is True
+    assert cell["perceived_stiffness_ratio"] == pytest.approx(1.0, abs=0.2), cell
+    assert 1e-3 < cell["final_position_gap_m"] < 5e-3
+    assert result.theory()["checked"] == 1 and result.theory()["disagreements"] == 0
+
+
 def test_free_motion_has_no_contact_figures() -> None:
     grid = CompareGrid(("mmt",), ("free-sine",), (0.05,), (0.0,), ("independent",), (0.0,),
                        (300.0,), TaskSettings(settle_s=2.0))

@@ -28,8 +28,8 @@ def test_quick_compare_prints_every_cell_z_width_and_theory_as_json(tmp_path) ->
     assert set(data) >= {"controls", "cells", "z_width", "theory", "simulated_seconds",
                          "wall_seconds"}
     assert data["controls"] == list(CONTROLS)
-    # 5 controls x 3 tasks x 3 delays x (no loss, 20 % bursty) x no jitter
-    assert len(data["cells"]) == 5 * 3 * 3 * 2
+    # the controls x 3 tasks x 3 delays x (no loss, 20 % bursty) x no jitter
+    assert len(data["cells"]) == len(CONTROLS) * 3 * 3 * 2
     cuts = [cell for cell in data["cells"] if cell["task"] == "clay-cut"]
     assert {cell["control"] for cell in cuts} == set(CONTROLS)
     # without delay the paper's scheme cuts steadily, near the paper's 3.6 N at 38 mm/s
@@ -39,10 +39,11 @@ def test_quick_compare_prints_every_cell_z_width_and_theory_as_json(tmp_path) ->
     assert 0.02 < paper_cut["cut_speed_m_per_s"] < 0.045
     assert all(set(cell) >= CELL_KEYS for cell in data["cells"])
     assert {cell["loss_model"] for cell in data["cells"] if cell["loss"] > 0} == {"bursty"}
-    assert len(data["z_width"]) == 5 * 3
+    assert len(data["z_width"]) == len(CONTROLS) * 3
     theory = data["theory"]
-    # paper, tdpa, wave: every constant-delay cell; four-channel: where Llewellyn holds
-    assert theory["checked"] >= 3 * 2 * 3
+    # paper, tdpa, wave, four-channel-tdpa: every constant-delay cell; four-channel: where
+    # Llewellyn holds
+    assert theory["checked"] >= 4 * 2 * 3
     assert theory["disagreements"] == sum(not p["agree"] for p in theory["predictions"])
     assert 0 < data["wall_seconds"] < data["simulated_seconds"]
     assert json.loads((tmp_path / "compare.json").read_text())["cells"] == data["cells"]
