@@ -288,8 +288,11 @@ class SlaveTick:
         gain = self._gain
         if gain is not None:
             self.state.gain_ratio[0] = follow_gain(message.gain_k, *gain)
-        if self.node.passivity_standby:
-            self.follow_switch(now_s, (0,), (int(message.flags),))
+        port = self.state.passivity
+        if port is not None and self.node.passivity_standby:  # follow_switch, for lane 0
+            on = bool(int(message.flags) & _TDPA_SWITCHED)
+            if on != bool(port.active[0]):
+                self._switch(now_s, 0, on)
 
     def receive_peer_energy(self, energy_J: Any) -> None:
         """The master's cumulative handed-over energy, J, into the passivity layer (a node
@@ -358,12 +361,12 @@ class SlaveTick:
         :attr:`force_scale` hold the tick's own input again (the newest admitted message).
         Returns the last step's output; the earlier steps advance the node without building
         outputs nobody reads (``SlaveNode.advance``: the same state)."""
-        fh, yh, scale = self.handle_force_N, self.handle_position_m, self.force_scale
-        newest = (fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0])
         steps = plan or (None,)
         catch_up = self._catch_up
         if catch_up is not None and catch_up.applies(self.state):
-            return self._catch_up_samples(catch_up, steps, newest)
+            return self._catch_up_samples(catch_up, steps)
+        fh, yh, scale = self.handle_force_N, self.handle_position_m, self.force_scale
+        newest = (fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0])
         for sample in steps[:-1]:
             if sample is not None:
                 fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = sample
@@ -375,17 +378,17 @@ class SlaveTick:
         fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = newest
         return ticked
 
-    def _catch_up_samples(self, catch_up: CatchUpStep, steps: Sequence[Step],
-                          newest: tuple[Any, ...]) -> SlaveTickOutput:
+    def _catch_up_samples(self, catch_up: CatchUpStep, steps: Sequence[Step]
+                          ) -> SlaveTickOutput:
         """:meth:`control_samples` in one launch (slave_sim/catch_up.py): the same state, the
-        same outputs and flags."""
-        fh, yh, scale = self.handle_force_N, self.handle_position_m, self.force_scale
-        samples = [newest if sample is None else sample for sample in steps]
-        fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = samples[-1]
-        out = catch_up.step(self.state, samples, not self.running[0], yh)
-        ticked = self._ticked(out)
-        fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0] = newest
-        return ticked
+        same outputs and flags. The samples go to the launch as they are (the tick's own
+        arrays keep the newest input throughout: nothing to restore)."""
+        if None in steps:  # the tick's own input
+            fh, yh, scale = self.handle_force_N, self.handle_position_m, self.force_scale
+            newest = (fh[0, 0], fh[0, 1], yh[0, 0], yh[0, 1], scale[0])
+            steps = [newest if sample is None else sample for sample in steps]
+        return self._ticked(catch_up.step(self.state, steps, not self.running[0],
+                                          self.handle_position_m))
 
     def _force(self) -> np.ndarray:
         """The node's handle force input (lanes, 2), N: the bounded handle force where the
