@@ -3,8 +3,9 @@
 lockstep's cell of the same network, with the agreements counted (docs/architectures.md).
 The quick set (CI) runs the wall cells only, with a shorter settling time.
 
-A real-link cell runs one lane in real time at Ts: the lane laws (wave, four-channel, mmt)
-over :class:`~haptic.common.wire.law_link.LawLink` objects carrying their own messages
+A real-link cell runs one lane in real time at Ts: the lane laws (wave, four-channel with and
+without its TDPA, mmt: compare_lanes.py's ``LANE_CONTROLS``) over
+:class:`~haptic.common.wire.law_link.LawLink` objects carrying their own messages
 (lockstep/compare_real_link_lanes.py), the paper's scheme and TDPA as the programs' ticks over
 :class:`~haptic.common.wire.link.Link` objects (lockstep/compare_real_link_paper.py); the
 delay and the loss are the links' own injection on their receive paths, not re-simulated.

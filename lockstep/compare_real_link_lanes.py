@@ -1,9 +1,10 @@
-"""A real-link cell of a lane law (wave variables, four-channel, model-mediated): the lane
-simulator's devices, hand, environment and law kernels (lockstep/compare_lanes.py) on one
-lane, the two delay lines replaced by two :class:`~haptic.common.wire.law_link.LawLink`
-objects (master and slave side, in this process, over TCP on loopback) that carry the law's
-messages (common/wire/law_messages.py) with the cell's delay and loss injected on their
-receive paths, paced in real time at Ts by the programs' runner over the tick driver.
+"""A real-link cell of a lane law (wave variables, four-channel with and without its TDPA,
+model-mediated): the lane simulator's devices, hand, environment and law kernels
+(lockstep/compare_lanes.py) on one lane, the two delay lines replaced by two
+:class:`~haptic.common.wire.law_link.LawLink` objects (master and slave side, in this process,
+over TCP on loopback) that carry the law's messages (common/wire/law_messages.py) with the
+cell's delay and loss injected on their receive paths, paced in real time at Ts by the
+programs' runner over the tick driver.
 
 One tick, as the lane simulator's: the master side senses (the hand's and the environment's
 forces from the devices, recorded), polls the newest tool message, steps its law and sends;
