@@ -130,8 +130,8 @@ class CatchUpStep:
     def _outputs(self, state: SlaveState, handle_x_m: float, handle_y_m: float
                  ) -> SlaveOutputs:
         """The last step's outputs, the values :meth:`SlaveNode.step` gives
-        (``handle_x_m``, ``handle_y_m``: the last sample's position, m). Fewer numpy calls
-        (a call costs about a us): the cutting flag is the result's 1.0/0.0 column as bools;
+        (``handle_x_m``, ``handle_y_m``: the last sample's position, m), in fewer numpy
+        calls than it takes: the cutting flag is the result's 1.0/0.0 column as bools;
         the tracking error ``yt - Ah1 yh`` is computed on floats, the same IEEE products and
         differences numpy's elementwise ones are."""
         tool = state.tool
