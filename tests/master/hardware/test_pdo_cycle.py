@@ -13,6 +13,7 @@ import can
 import pytest
 
 from haptic.master.hardware import cia402
+from haptic.master.hardware.canopen_setup import CyclicPdo, DrivePlan
 from haptic.master.hardware.cia402 import DriveState
 from haptic.master.hardware.frame_sender import FrameSender
 from haptic.master.hardware.pdo_cycle import EMCY, HEARTBEAT, OTHER, SENSOR, TPDO, PdoCycle
@@ -138,3 +139,22 @@ def test_holding_the_targets_takes_the_positions_as_they_are() -> None:
     assert pdos.target_counts.tolist() == [500, -700]
     pdos.position_counts[0] = 9
     assert pdos.target_counts.tolist() == [500, -700]  # a copy, not the positions
+
+
+def test_a_plan_maps_an_axis_pdos_and_leaves_the_other_frames() -> None:
+    pdos = cycle_on(None)
+    pdos.frames.own_ids.update(pdos.rpdo_ids)
+    plan = DrivePlan(
+        cia402.build_object_dictionary(), (),
+        rpdo=CyclicPdo("RPDO2", 0x1401, 0x303, ((0x607A, 0, 32), (0x6040, 0, 16))),
+        tpdo=CyclicPdo("TPDO2", 0x1801, 0x283, ((0x6041, 0, 16), (0x6064, 0, 32))),
+        ignored_cob_ids=frozenset({0x383}))
+    pdos.use_plan(0, plan)
+    assert pdos.dispatch[0x283] == (TPDO, 0) and 0x183 not in pdos.dispatch
+    assert pdos.dispatch[0x083] == (EMCY, 0) and pdos.dispatch[0x184] == (TPDO, 1)
+    assert len(pdos.dispatch) == 7
+    assert pdos.rpdo_ids == [0x303, 0x204]
+    assert pdos.frames.own_ids == {cia402.SYNC_COB_ID, 0x204, 0x303, 0x383}
+    assert pdos.tpdo_names == ["TPDO2", "TPDO1"]
+    assert (pdos.rpdo_reversed, pdos.tpdo_reversed) == ([True, False], [False, False])
+    assert bytes(pdos.rpdo_frame(0, 6, -5).data) == struct.pack("<iH", -5, 6)
