@@ -40,7 +40,13 @@ from haptic.common.control.four_channel_passivity import MASTER_PORT_SIGN, SLAVE
 from haptic.common.control.mmt import EnvironmentModel, EstimatorSettings, RendererSettings
 from haptic.common.control.mmt_kernel import EstimatorKernel, RendererKernel
 from haptic.common.control.tasks import free_motion_sine
-from haptic.common.control.wave import MASTER_SIGN, SLAVE_SIGN, WaveSettings
+from haptic.common.control.wave import (
+    MASTER_SIGN,
+    MESSAGE_CHANNELS,
+    SLAVE_SIGN,
+    WaveSettings,
+    message_fields,
+)
 from haptic.common.control.wave_kernel import WavePortKernel
 from haptic.common.model.passivity import PassivitySettings
 from haptic.lockstep.compare_four_channel_tdpa import PassiveFourChannelSideKernel
@@ -97,9 +103,10 @@ class ControlPair(Protocol):
 
 
 class WavePair:
-    """Wave variables: each message is (wave, its integral); each side commands a velocity."""
+    """Wave variables: each message is (wave, its integral, its energy) (common/control/wave.py's
+    :data:`~haptic.common.control.wave.MESSAGE_CHANNELS`); each side commands a velocity."""
 
-    handle_channels = tool_channels = 4
+    handle_channels = tool_channels = MESSAGE_CHANNELS
 
     def __init__(self, lanes: int) -> None:
         settings = WaveSettings(period_s=PERIOD_S, impedance_N_s_per_m=WAVE_IMPEDANCE_N_S_PER_M)
@@ -107,23 +114,21 @@ class WavePair:
         self.slave_port = WavePortKernel(settings, lanes, SLAVE_SIGN)
 
     def initial_messages(self, lanes: int) -> tuple[np.ndarray, np.ndarray]:
-        return np.zeros((lanes, 4)), np.zeros((lanes, 4))
+        return np.zeros((lanes, MESSAGE_CHANNELS)), np.zeros((lanes, MESSAGE_CHANNELS))
 
     def master(self, fh: np.ndarray, tool_message: np.ndarray, fresh: np.ndarray,
                handle_message: np.ndarray) -> tuple[np.ndarray | None, np.ndarray]:
-        velocity, sent, integral = self.master_port.step(fh, tool_message[:, :2],
-                                                         tool_message[:, 2:], fresh)
-        handle_message[:, :2] = sent
-        handle_message[:, 2:] = integral
+        velocity, *sent = self.master_port.step(fh, *message_fields(tool_message), fresh)
+        for field, value in zip(message_fields(handle_message), sent, strict=True):
+            field[...] = value
         return None, velocity
 
     def slave(self, fe: np.ndarray, position: np.ndarray, velocity: np.ndarray,
               handle_message: np.ndarray, fresh: np.ndarray, tool_message: np.ndarray
               ) -> tuple[np.ndarray | None, np.ndarray]:
-        command, sent, integral = self.slave_port.step(fe, handle_message[:, :2],
-                                                       handle_message[:, 2:], fresh)
-        tool_message[:, :2] = sent
-        tool_message[:, 2:] = integral
+        command, *sent = self.slave_port.step(fe, *message_fields(handle_message), fresh)
+        for field, value in zip(message_fields(tool_message), sent, strict=True):
+            field[...] = value
         return None, command
 
 

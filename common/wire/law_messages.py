@@ -3,9 +3,9 @@ model-mediated): what each side of such a law sends the other over a real link.
 
 These laws do not exchange the programs' :class:`~haptic.common.wire.messages.HandleState`
 and :class:`~haptic.common.wire.messages.ToolState`; each sends a vector of floats whose
-meaning and length its control declares (:data:`LAW_CHANNELS`): wave variables a wave and
-its integral per axis, four-channel a position, velocity and force per axis (with the TDPA
-on its ports, the cumulative energy its passivity observer handed over after them),
+meaning and length its control declares (:data:`LAW_CHANNELS`): wave variables a wave, its
+integral and its energy per axis, four-channel a position, velocity and force per axis (with
+the TDPA on its ports, the cumulative energy its passivity observer handed over after them),
 model-mediated the handle's position and velocity one way and the environment model's four
 fields the other. The message has the programs' header, so the receive path's ordering,
 injection and counters (common/wire/receive.py) apply unchanged::
@@ -45,7 +45,7 @@ from haptic.common.wire.messages import (
 #: Each law's (handle, tool) payload lengths, floats: master to slave, slave to master. The
 #: order fixes the kinds (:func:`law_kind`): a new law goes at the end.
 LAW_CHANNELS: dict[str, tuple[int, int]] = {
-    "wave": (4, 4),
+    "wave": (6, 6),
     "four-channel": (6, 6),
     "mmt": (4, 8),
     "four-channel-tdpa": (7, 7),

@@ -70,7 +70,7 @@ def test_law_messages_arrive_and_bad_ones_are_counted_and_dropped() -> None:
 
 def test_a_non_finite_law_value_is_not_sent_and_the_peer_counts_it_lost() -> None:
     master_cfg, slave_cfg = configs()
-    with LawLink(master_cfg, "wave") as master, LawLink(slave_cfg, "wave") as slave:
+    with LawLink(master_cfg, "mmt") as master, LawLink(slave_cfg, "mmt") as slave:
         wait_for_peers(master, slave)
         assert master.send_values((0.0, 0.0, 0.0, 0.0)) is not None
         assert master.send_values((math.inf, 0.0, 0.0, 0.0)) is None

@@ -58,7 +58,7 @@ def test_every_law_message_round_trips(schema: LawSchema) -> None:
 
 
 def test_the_declared_lengths_are_the_laws_channels() -> None:
-    assert LAW_CHANNELS == {"wave": (4, 4), "four-channel": (6, 6), "mmt": (4, 8),
+    assert LAW_CHANNELS == {"wave": (6, 6), "four-channel": (6, 6), "mmt": (4, 8),
                             "four-channel-tdpa": (7, 7)}
     # the kinds are fixed by the order: the first laws' stay what they were
     assert [law_kind("wave", "handle"), law_kind("mmt", "tool")] == [16, 21]
@@ -84,7 +84,7 @@ def test_the_send_time_is_stamped_between_the_two_parts() -> None:
 
 
 def test_the_encoder_refuses_a_wrong_length_or_a_non_finite_value() -> None:
-    schema = LawSchema("wave", "handle")
+    schema = LawSchema("mmt", "handle")
     with pytest.raises(ValueError, match="carry 4"):
         schema.encode_around_send_time(1, 1, 0, (0.0,) * 5)
     with pytest.raises(ValueError, match="non-finite"):
@@ -92,24 +92,24 @@ def test_the_encoder_refuses_a_wrong_length_or_a_non_finite_value() -> None:
     with pytest.raises(ValueError, match="header"):
         schema.encode_around_send_time(1, -1, 0, (0.0,) * 4)
     with pytest.raises(ValueError, match="kind"):
-        schema.encode(_message(LawSchema("wave", "tool")))
+        schema.encode(_message(LawSchema("mmt", "tool")))
 
 
 @pytest.mark.parametrize(("payload", "reason"), [
-    (_raw(LawSchema("wave", "tool"), [0.0, 1.0, 2.0]), DropReason.MALFORMED),
-    (_raw(LawSchema("wave", "tool"), [0.0, 1.0, 2.0, 3.0, 4.0]), DropReason.MALFORMED),
-    (_raw(LawSchema("wave", "tool"), [0.0, math.nan, 2.0, 3.0]), DropReason.NON_FINITE),
-    (_raw(LawSchema("wave", "tool"), [0.0, math.inf, 2.0, 3.0]), DropReason.NON_FINITE),
-    (_raw(LawSchema("wave", "tool"), [0.0, "x", 2.0, 3.0]), DropReason.MALFORMED),
-    (_raw(LawSchema("wave", "tool"), [0.0, True, 2.0, 3.0]), DropReason.MALFORMED),
-    (_raw(LawSchema("wave", "tool"), [0.0] * 4, version=SCHEMA_VERSION + 1),
+    (_raw(LawSchema("mmt", "handle"), [0.0, 1.0, 2.0]), DropReason.MALFORMED),
+    (_raw(LawSchema("mmt", "handle"), [0.0, 1.0, 2.0, 3.0, 4.0]), DropReason.MALFORMED),
+    (_raw(LawSchema("mmt", "handle"), [0.0, math.nan, 2.0, 3.0]), DropReason.NON_FINITE),
+    (_raw(LawSchema("mmt", "handle"), [0.0, math.inf, 2.0, 3.0]), DropReason.NON_FINITE),
+    (_raw(LawSchema("mmt", "handle"), [0.0, "x", 2.0, 3.0]), DropReason.MALFORMED),
+    (_raw(LawSchema("mmt", "handle"), [0.0, True, 2.0, 3.0]), DropReason.MALFORMED),
+    (_raw(LawSchema("mmt", "handle"), [0.0] * 4, version=SCHEMA_VERSION + 1),
      DropReason.UNKNOWN_VERSION),
-    (_raw(LawSchema("wave", "tool"), [0.0] * 4, kind=law_kind("wave", "handle")),
+    (_raw(LawSchema("mmt", "handle"), [0.0] * 4, kind=law_kind("mmt", "tool")),
      DropReason.WRONG_KIND),
-    (_raw(LawSchema("wave", "tool"), [0.0] * 4, kind=law_kind("mmt", "tool")),
+    (_raw(LawSchema("mmt", "handle"), [0.0] * 4, kind=law_kind("wave", "handle")),
      DropReason.WRONG_KIND),
-    (_raw(LawSchema("wave", "tool"), [0.0] * 4, seq=-1), DropReason.MALFORMED),
-    (_raw(LawSchema("wave", "tool"), [0.0] * 4, seq=1.0), DropReason.MALFORMED),
+    (_raw(LawSchema("mmt", "handle"), [0.0] * 4, seq=-1), DropReason.MALFORMED),
+    (_raw(LawSchema("mmt", "handle"), [0.0] * 4, seq=1.0), DropReason.MALFORMED),
     (b"\x00\x01not msgpack", DropReason.MALFORMED),
     (msgpack.packb([SCHEMA_VERSION, 1]), DropReason.MALFORMED),
     (b"\x94" + b"\xcb" + bytes(8) * 2000, DropReason.MALFORMED),
@@ -118,7 +118,7 @@ def test_the_encoder_refuses_a_wrong_length_or_a_non_finite_value() -> None:
 def test_every_bad_payload_is_refused_with_its_reason(payload: bytes,
                                                       reason: DropReason) -> None:
     with pytest.raises(DecodeError) as error:
-        LawSchema("wave", "tool").decode(payload, law_kind("wave", "tool"))
+        LawSchema("mmt", "handle").decode(payload, law_kind("mmt", "handle"))
     assert error.value.reason is reason
 
 
