@@ -24,9 +24,10 @@ from haptic.lockstep.compare_grid import (
     CompareGrid,
     Lane,
 )
-from haptic.lockstep.compare_lanes import PERIOD_S, simulate_lanes
-from haptic.lockstep.compare_paper import PAPER_CONTROLS, simulate_paper_lanes
-from haptic.lockstep.compare_records import LaneRecords, bounded_lanes, cell_figures
+from haptic.lockstep.compare_lanes import PERIOD_S
+from haptic.lockstep.compare_paper import PAPER_CONTROLS
+from haptic.lockstep.compare_records import bounded_lanes, cell_figures
+from haptic.lockstep.compare_simulate import simulate_control
 from haptic.lockstep.compare_theory import Theory
 
 
@@ -82,15 +83,6 @@ class CompareResult:
         }
 
 
-def _simulate(control: str, lanes: list[Lane], grid: CompareGrid,
-              model: TeleopModel | None) -> LaneRecords:
-    if control in PAPER_CONTROLS:
-        if model is None:
-            raise ValueError(f"{control} needs the paper's model")
-        return simulate_paper_lanes(control, lanes, grid, model)
-    return simulate_lanes(control, lanes, grid)
-
-
 def _width(rungs: list[tuple[float, bool | None]]) -> float | None:
     """The largest stiffness below which every rung is bounded (rungs sorted)."""
     width = None
@@ -136,7 +128,7 @@ def run_compare(grid: CompareGrid, model: TeleopModel | None = None) -> CompareR
     for control in grid.controls:
         control_started = time.perf_counter()
         lanes = grid.cell_lanes(control) + grid.ladder_lanes()
-        records = _simulate(control, lanes, grid, model)
+        records = simulate_control(control, lanes, grid, model)
         bounded = bounded_lanes(records, grid.bounds)
         surface = 0.0 if control in PAPER_CONTROLS else grid.task.wall_surface_m
         period = model.sample_period_s if control in PAPER_CONTROLS and model else PERIOD_S

@@ -30,12 +30,13 @@ import numpy as np
 
 from haptic.common.model.teleop import TeleopModel
 from haptic.lockstep.compare_grid import CompareGrid, Lane, TaskSettings
-from haptic.lockstep.compare_lanes import LANE_CONTROLS, PERIOD_S, simulate_lanes
-from haptic.lockstep.compare_paper import PAPER_CONTROLS, simulate_paper_lanes
+from haptic.lockstep.compare_lanes import LANE_CONTROLS, PERIOD_S
+from haptic.lockstep.compare_paper import PAPER_CONTROLS
 from haptic.lockstep.compare_real_link_lanes import RealLinkRun, run_lane_law_cell
 from haptic.lockstep.compare_real_link_links import cell_link_configs
 from haptic.lockstep.compare_real_link_paper import run_paper_cell
 from haptic.lockstep.compare_records import LaneRecords, bounded_lanes, cell_figures
+from haptic.lockstep.compare_simulate import simulate_control
 
 #: The networks of the real-link cells: round trips (s), independent loss.
 REAL_LINK_ROUND_TRIPS_S = (0.2, 1.0)
@@ -78,15 +79,6 @@ class RealLinkSet:
         return CompareGrid((control,), self.tasks, (round_trip_s,), (self.loss,),
                            ("independent",), (0.0,), (), TaskSettings(settle_s=self.settle_s),
                            seed=self.seed)
-
-
-def _lockstep_records(control: str, lanes: list[Lane], grid: CompareGrid,
-                      model: TeleopModel | None) -> LaneRecords:
-    if control in PAPER_CONTROLS:
-        if model is None:
-            raise ValueError(f"{control} needs the paper's model")
-        return simulate_paper_lanes(control, lanes, grid, model)
-    return simulate_lanes(control, lanes, grid)
 
 
 def _real_run(control: str, lane: Lane, grid: CompareGrid, model: TeleopModel | None,
@@ -152,7 +144,7 @@ def lockstep_at_measured(cells: RealLinkSet, row: dict[str, Any],
                        ("independent",), (0.0,), (), TaskSettings(settle_s=settle),
                        seed=cells.seed)
     lanes = grid.cell_lanes(control)
-    records = _lockstep_records(control, lanes, grid, model)
+    records = simulate_control(control, lanes, grid, model)
     surface = 0.0 if control in PAPER_CONTROLS else grid.task.wall_surface_m
     bounded = _verdict(records, 0, lanes[0], grid, surface)["bounded"]
     return {"round_trip_s": measured, "bounded": bounded,
@@ -171,7 +163,7 @@ def run_real_link_cells(cells: RealLinkSet, model: TeleopModel | None = None
         for round_trip in cells.round_trips_s:
             grid = cells.grid(control, round_trip)
             lanes = grid.cell_lanes(control)
-            records = _lockstep_records(control, lanes, grid, model)
+            records = simulate_control(control, lanes, grid, model)
             surface = 0.0 if control in PAPER_CONTROLS else grid.task.wall_surface_m
             for index, lane in enumerate(lanes):
                 lockstep = _verdict(records, index, lane, grid, surface)
