@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.control.law_pairs import PERIOD_S
 from haptic.common.model.teleop import TeleopModel
 from haptic.lockstep.compare_grid import (
     PAPER_CUT_FORCE_N,
@@ -24,7 +25,6 @@ from haptic.lockstep.compare_grid import (
     CompareGrid,
     Lane,
 )
-from haptic.lockstep.compare_lanes import PERIOD_S
 from haptic.lockstep.compare_paper import PAPER_CONTROLS
 from haptic.lockstep.compare_records import bounded_lanes, cell_figures
 from haptic.lockstep.compare_simulate import simulate_control

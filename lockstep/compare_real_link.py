@@ -28,9 +28,9 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.control.law_pairs import LANE_CONTROLS, PERIOD_S
 from haptic.common.model.teleop import TeleopModel
 from haptic.lockstep.compare_grid import CompareGrid, Lane, TaskSettings
-from haptic.lockstep.compare_lanes import LANE_CONTROLS, PERIOD_S
 from haptic.lockstep.compare_paper import PAPER_CONTROLS
 from haptic.lockstep.compare_real_link_lanes import RealLinkRun, run_lane_law_cell
 from haptic.lockstep.compare_real_link_links import cell_link_configs

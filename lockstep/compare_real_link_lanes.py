@@ -23,13 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from haptic.common.runtime.runner import RealTimeRunner, RunStats
-from haptic.common.runtime.tick_driver import Stage, TickDriver
-from haptic.common.wire.law_link import LawLink
-from haptic.common.wire.law_messages import LAW_CHANNELS
-from haptic.common.wire.link_config import LinkConfig
-from haptic.lockstep.compare_grid import CompareGrid, Lane
-from haptic.lockstep.compare_lanes import (
+from haptic.common.control.law_pairs import (
     HANDLE_DEVICE_DAMPING_N_S_PER_M,
     HANDLE_DEVICE_MASS_KG,
     PAIRS,
@@ -38,6 +32,14 @@ from haptic.lockstep.compare_lanes import (
     TOOL_DEVICE_MASS_KG,
     ControlPair,
     Device,
+)
+from haptic.common.runtime.runner import RealTimeRunner, RunStats
+from haptic.common.runtime.tick_driver import Stage, TickDriver
+from haptic.common.wire.law_link import LawLink
+from haptic.common.wire.law_messages import LAW_CHANNELS
+from haptic.common.wire.link_config import LinkConfig
+from haptic.lockstep.compare_grid import CompareGrid, Lane
+from haptic.lockstep.compare_lanes import (
     LaneClay,
     LaneTasks,
     hand_force_N,

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from haptic.common.control.law_pairs import four_channel_gains
 from haptic.common.control.two_port import absolute_stability
 from haptic.common.model.teleop import TeleopModel
-from haptic.lockstep.compare_lanes import four_channel_gains
 from haptic.lockstep.compare_paper import task_model
 from haptic.lockstep.sweep import analytic_margin_s
 

@@ -44,6 +44,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from haptic.common.control import passivity_kernel
 from haptic.common.model.block_kernels import compensator_arrays
 from haptic.common.model.block_layout import CompensatorLayout
 from haptic.common.model.lti import DiscreteLTI, Path, combine, discretize
@@ -52,7 +53,6 @@ from haptic.common.model.synthesis import AxisCompensators, synthesize
 from haptic.common.model.teleop import TeleopModel
 from haptic.common.runtime.replayed_launch import ReplayedLaunch
 from haptic.master import node_kernels as kernels
-from haptic.master import passivity_kernel
 from haptic.master.settings import SafetySettings
 
 AXES = ("x", "y")
@@ -456,7 +456,7 @@ class MasterNode:
     def _attach_passivity(self, state: MasterNodeState, position: np.ndarray,
                           node_buffers: tuple) -> None:
         """The TDPA port of ``state``: its arrays as views of Warp buffers, and the recorded
-        launch of :mod:`haptic.master.passivity_kernel` over them and the node's buffers."""
+        launch of :mod:`haptic.common.control.passivity_kernel` over them and the node's buffers."""
         wp = _warp()
         lanes = position.shape[0]
         buffers: list = []

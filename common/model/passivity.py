@@ -358,7 +358,7 @@ def master_step_reference(port: PassivityPort, inputs: np.ndarray, command_m: np
     step's work ``fh . dcmd``, then drifts towards ``peer_target_m`` (Ah1^-1 yt_recv, (lanes,
     2), m; NaN or None: no target) on ``enabled`` lanes (:meth:`PassivityPort.drift_command`),
     the offset is re-based like the kernel's own limits, then the work is observed. The
-    reference of haptic.master.passivity_kernel (same arithmetic)."""
+    reference of haptic.common.control.passivity_kernel (same arithmetic)."""
     raw = inputs[:, 0:2]
     force = np.clip(np.where(np.isfinite(raw), raw, 0.0), -force_limit_N, force_limit_N)
     correction = port.yield_command(force, command_m - port.previous_position_m)

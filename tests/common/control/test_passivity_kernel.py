@@ -1,4 +1,4 @@
-"""The master's passivity kernel (master/passivity_kernel.py) against its numpy reference
+"""The master's passivity kernel (common/control/passivity_kernel.py) against its numpy reference
 (common/model/passivity.py): the same node, the same inputs, the same energy flows and commands."""
 
 from __future__ import annotations

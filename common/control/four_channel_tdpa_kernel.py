@@ -1,7 +1,7 @@
 """One side of ``four-channel-tdpa`` on Warp: the four-channel law's kernel
 (:mod:`haptic.common.control.four_channel_kernel`) and then the master's TDPA kernel
-(:mod:`haptic.master.passivity_kernel`) over the same position buffer, every lane in one launch
-each.
+(:mod:`haptic.common.control.passivity_kernel`) over the same position buffer, every lane in
+one launch each.
 
 Both sides of the four-channel law command a position from a measured force, the contract of
 the master's passivity kernel (receive the peer's energy, yield along the port's force by what
@@ -10,9 +10,8 @@ master with the operator's force as the port force, the slave with the environme
 the tool (``-fe``). No drift stage (its rate is 0: the law's position channels pull the sides
 together), no fault, the workspace the law's position limit. The numpy reference is
 :func:`haptic.common.control.four_channel_passivity.passive_side_step_reference`;
-tests/lockstep/test_compare_four_channel_tdpa.py runs both on the same inputs. This lives in
-lockstep, not in common/control, because the TDPA kernel is the master's (common does not
-import the programs).
+tests/common/control/test_four_channel_tdpa_kernel.py runs both on the same inputs. Both programs
+(the four-channel mode with its passivity layer) and the comparison's lanes run it.
 """
 
 from __future__ import annotations
@@ -22,12 +21,12 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from haptic.common.control import passivity_kernel
 from haptic.common.control.four_channel import SideLaw
 from haptic.common.control.four_channel_kernel import FourChannelSideKernel
+from haptic.common.control.passivity_kernel import PassivityLimits
 from haptic.common.control.warp_lanes import DEVICE, warp
 from haptic.common.model.passivity import PassivityPort, PassivitySettings
-from haptic.master import passivity_kernel
-from haptic.master.passivity_kernel import PassivityLimits
 
 wp.config.log_level = wp.LOG_WARNING
 

@@ -1,5 +1,5 @@
-"""``four-channel-tdpa``'s side on Warp (lockstep/compare_four_channel_tdpa.py: the four-channel
-kernel, then the master's TDPA kernel) against its numpy reference
+"""``four-channel-tdpa``'s side on Warp (common/control/four_channel_tdpa_kernel.py: the
+four-channel kernel, then the master's TDPA kernel) against its numpy reference
 (common/control/four_channel_passivity.py), both sides, on random inputs with non-finite
 ones; and the comparison's pair carrying each side's handed-over energy in its messages."""
 
@@ -14,9 +14,9 @@ from haptic.common.control.four_channel_passivity import (
     PassiveSideState,
     passive_side_step_reference,
 )
+from haptic.common.control.four_channel_tdpa_kernel import PassiveFourChannelSideKernel
+from haptic.common.control.law_pairs import PassiveFourChannelPair
 from haptic.common.model.passivity import PassivitySettings
-from haptic.lockstep.compare_four_channel_tdpa import PassiveFourChannelSideKernel
-from haptic.lockstep.compare_lanes import PassiveFourChannelPair
 
 MANIPULATOR = Impedance(mass_kg=0.1, damping_N_s_per_m=1.0)
 LOCAL = Impedance(damping_N_s_per_m=50.0, stiffness_N_per_m=500.0)

@@ -4,8 +4,8 @@ kernel (:mod:`haptic.master.node_kernels`) wrote the command.
 
 It computes exactly what :class:`haptic.common.model.passivity.PassivityPort` does on the master
 (``receive``, ``yield_command``, ``observe``), which stays the numpy reference:
-tests/master/test_passivity_kernel.py runs both on the same inputs. The kernel exists because
-the port's numpy calls cost several times the node's own step (bench/loop_bench.py measures
+tests/common/control/test_passivity_kernel.py runs both on the same inputs. The kernel exists
+because the port's numpy calls cost several times the node's own step (bench/loop_bench.py measures
 the node stage). The port's arrays are numpy views of this kernel's buffers.
 """
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from haptic.master.node_kernels import clamp_to_box, finite_or_zero, rebase_origin
+from haptic.common.control.command_funcs import clamp_to_box, finite_or_zero, rebase_origin
 
 wp.config.log_level = wp.LOG_WARNING
 
