@@ -8,9 +8,15 @@ anything:
 *hello* on ``<prefix>/pair/<side>`` every :data:`HELLO_PERIOD_S` (and at once after pairing
 with a new peer)::
 
-    msgpack [SCHEMA_VERSION, KIND_HELLO, side, epoch, nonce, time_ns, authenticated] + tag
+    msgpack [SCHEMA_VERSION, KIND_HELLO, side, epoch, nonce, time_ns, authenticated
+             (, control)] + tag
 
-the tag being HMAC-SHA256(pre-shared key, hello)[:16] (no tag without a key). A hello is
+the tag being HMAC-SHA256(pre-shared key, hello body)[:16] (no tag without a key), the 8th
+field included. ``control`` is present only on a side that runs a lane law (its
+``[control] mode``: 1 to :data:`CONTROL_MAX_CHARS` characters of ``[a-z0-9-]``, e.g.
+``"wave"``); a hello of 7 fields comes from a side that exchanges the programs' own messages
+(``[control] mode`` "paper" or "tdpa", which their flags tell apart). The link refuses to
+pair with a peer whose control differs from its own (common/wire/link.py). A hello is
 accepted only with a valid tag, from the peer's side, at most :data:`HELLO_MAX_AGE_S` old and
 newer than the hello the current pairing came from; a replayed old hello changes nothing. A
 hello with a new (epoch, nonce) is an explicit re-pairing (the peer restarted): both sides
@@ -37,6 +43,7 @@ from __future__ import annotations
 import hashlib
 import hmac
 import os
+import re
 import secrets
 import stat
 from dataclasses import dataclass
@@ -57,6 +64,15 @@ HELLO_MAX_AGE_S = 5.0
 _SIDE_CODE = {"master": 1, "slave": 2}
 _SIDE_NAME = {code: side for side, code in _SIDE_CODE.items()}
 _SESSION_LABEL = b"haptic-teleop/2/session"
+#: The longest control name a hello may carry, characters.
+CONTROL_MAX_CHARS = 32
+_CONTROL_NAME = re.compile(rf"[a-z0-9-]{{1,{CONTROL_MAX_CHARS}}}")
+
+
+def is_control_name(value: object) -> bool:
+    """Whether ``value`` may be a hello's control: a str of 1 to :data:`CONTROL_MAX_CHARS`
+    characters, each of ``a-z``, ``0-9`` or ``-`` (ASCII only)."""
+    return type(value) is str and _CONTROL_NAME.fullmatch(value) is not None
 
 
 def load_key_file(path: str | Path, key: str = "link.security.session_key_file") -> bytes:
@@ -98,8 +114,9 @@ def _mac(key: bytes, data: bytes) -> bytes:
 
 @dataclass(frozen=True)
 class Hello:
-    """A decoded hello: the sender's side, epoch, nonce, CLOCK_REALTIME time (ns) and whether
-    it authenticates; ``version`` is its wire schema version."""
+    """A decoded hello: the sender's side, epoch, nonce, CLOCK_REALTIME time (ns), whether
+    it authenticates and the lane law it runs (``control``; None: the programs' own messages,
+    "paper" or "tdpa"); ``version`` is its wire schema version."""
 
     version: int
     side: str
@@ -107,6 +124,7 @@ class Hello:
     nonce: bytes
     time_ns: int
     authenticated: bool
+    control: str | None = None
 
 
 class HelloError(ValueError):
@@ -114,16 +132,25 @@ class HelloError(ValueError):
 
 
 def encode_hello(side: str, epoch: int, nonce: bytes, time_ns: int,
-                 psk: bytes | None) -> bytes:
-    """A hello of ``side`` (tagged with the pre-shared key ``psk`` when given)."""
-    body = msgpack.packb([SCHEMA_VERSION, KIND_HELLO, _SIDE_CODE[side], int(epoch), nonce,
-                          int(time_ns), psk is not None], use_bin_type=True)
+                 psk: bytes | None, control: str | None = None) -> bytes:
+    """A hello of ``side`` (tagged with the pre-shared key ``psk`` when given), with the lane
+    law ``control`` as its 8th field when given. Raises ValueError for a ``control`` that
+    :func:`is_control_name` refuses (the peer would refuse the hello)."""
+    fields = [SCHEMA_VERSION, KIND_HELLO, _SIDE_CODE[side], int(epoch), nonce, int(time_ns),
+              psk is not None]
+    if control is not None:
+        if not is_control_name(control):
+            raise ValueError(f"a hello's control is 1 to {CONTROL_MAX_CHARS} characters of "
+                             f"[a-z0-9-], not {control!r}")
+        fields.append(control)
+    body = msgpack.packb(fields, use_bin_type=True)
     return body + _mac(psk, body) if psk is not None else body
 
 
 def decode_hello(payload: bytes, psk: bytes | None) -> Hello:
-    """Parse a hello; with ``psk`` its tag must verify. Raises :class:`HelloError`. A hello of
-    another schema version decodes as far as its version (so the caller can say so)."""
+    """Parse a hello of 7 fields, or 8 with a control (:func:`is_control_name`); with ``psk``
+    its tag must verify. Raises :class:`HelloError`. A hello of another schema version
+    decodes as far as its version (so the caller can say so)."""
     if len(payload) > 256:
         raise HelloError("too long")
     try:
@@ -141,14 +168,16 @@ def decode_hello(payload: bytes, psk: bytes | None) -> Hello:
     version = fields[0]
     if version != SCHEMA_VERSION or type(version) is not int:
         return Hello(version if type(version) is int else -1, "", 0, b"", 0, False)
-    if len(fields) != 7:
+    if len(fields) not in (7, 8):
         raise HelloError("wrong shape")
-    _, _, side_code, epoch, nonce, time_ns, authenticated = fields
+    _, _, side_code, epoch, nonce, time_ns, authenticated = fields[:7]
+    control = fields[7] if len(fields) == 8 else None
     if (type(side_code) is not int or side_code not in _SIDE_NAME
             or type(epoch) is not int or not 0 <= epoch < 2**32
             or type(nonce) is not bytes or len(nonce) != NONCE_BYTES
             or type(time_ns) is not int or not 0 <= time_ns < 2**63
-            or type(authenticated) is not bool):
+            or type(authenticated) is not bool
+            or (len(fields) == 8 and not is_control_name(control))):
         raise HelloError("bad field")
     tag = payload[body_length:]
     if authenticated and psk is not None:
@@ -158,7 +187,7 @@ def decode_hello(payload: bytes, psk: bytes | None) -> Hello:
         raise HelloError("trailing bytes")
     # without a psk an authenticated hello is returned unverified: the caller can only
     # report the mismatch, never pair on it
-    return Hello(version, _SIDE_NAME[side_code], epoch, nonce, time_ns, authenticated)
+    return Hello(version, _SIDE_NAME[side_code], epoch, nonce, time_ns, authenticated, control)
 
 
 class SessionAuth:
@@ -190,9 +219,10 @@ class SessionAuth:
     def peer_epoch(self) -> int | None:
         return None if self.peer is None else self.peer.epoch
 
-    def hello(self, now_ns: int) -> bytes:
-        """This side's hello, stamped ``now_ns`` (CLOCK_REALTIME)."""
-        return encode_hello(self.side, self.epoch, self.nonce, now_ns, self._psk)
+    def hello(self, now_ns: int, control: str | None = None) -> bytes:
+        """This side's hello, stamped ``now_ns`` (CLOCK_REALTIME), announcing the lane law
+        ``control`` this side runs (None: the programs' own messages)."""
+        return encode_hello(self.side, self.epoch, self.nonce, now_ns, self._psk, control)
 
     def accept_hello(self, hello: Hello, now_ns: int) -> bool:
         """Take a verified hello (:func:`decode_hello` with the psk); True when it paired this

@@ -121,7 +121,8 @@ def test_a_hello_carries_its_fields_and_a_16_byte_tag() -> None:
     ([SCHEMA_VERSION, 3, 1, 7, bytes(16), 1.5, False], "bad field"),         # time not int
     ([SCHEMA_VERSION, 3, 1, 7, bytes(16), NOW_NS, 1], "bad field"),          # flag not bool
     ([SCHEMA_VERSION, 3, 1, 7, bytes(16), NOW_NS], "wrong shape"),
-    ([SCHEMA_VERSION, 3, 1, 7, bytes(16), NOW_NS, False, 0], "wrong shape"),
+    ([SCHEMA_VERSION, 3, 1, 7, bytes(16), NOW_NS, False, 0], "bad field"),   # control int
+    ([SCHEMA_VERSION, 3, 1, 7, bytes(16), NOW_NS, False, "wave", 0], "wrong shape"),
     ([SCHEMA_VERSION, 1, 1, 7, bytes(16), NOW_NS, False], "not a hello"),
     ([SCHEMA_VERSION], "not a hello"),
     ({"a": 1}, "not a hello"),
@@ -162,6 +163,59 @@ def test_an_authenticated_hello_needs_a_tag_that_verifies() -> None:
             decode_hello(bad, PSK)
     # without a psk it decodes unverified (the caller reports the mismatch)
     assert decode_hello(payload, None).authenticated
+
+
+
+def test_a_hello_may_carry_the_lane_law_it_runs_as_an_8th_field() -> None:
+    nonce = bytes(range(16))
+    plain = encode_hello("master", 7, nonce, NOW_NS, None, "four-channel-tdpa")
+    assert plain == msgpack.packb([SCHEMA_VERSION, 3, 1, 7, nonce, NOW_NS, False,
+                                   "four-channel-tdpa"], use_bin_type=True)
+    assert decode_hello(plain, None).control == "four-channel-tdpa"
+    assert decode_hello(encode_hello("master", 7, nonce, NOW_NS, None), None).control is None
+    longest = "a-0" * 10 + "z9"  # 32 characters
+    assert decode_hello(encode_hello("slave", 7, nonce, NOW_NS, None, longest),
+                        None).control == longest
+    # the tag covers the 8th field: its body is the whole msgpack array
+    tagged = encode_hello("slave", 7, nonce, NOW_NS, PSK, "wave")
+    body = msgpack.packb([SCHEMA_VERSION, 3, 2, 7, nonce, NOW_NS, True, "wave"],
+                         use_bin_type=True)
+    assert tagged == body + hmac.new(PSK, body, hashlib.sha256).digest()[:16]
+    hello = decode_hello(tagged, PSK)
+    assert (hello.side, hello.authenticated, hello.control) == ("slave", True, "wave")
+    swapped = msgpack.packb([SCHEMA_VERSION, 3, 2, 7, nonce, NOW_NS, True, "mmt"],
+                            use_bin_type=True) + tagged[len(body):]
+    with pytest.raises(HelloError, match="tag does not verify"):
+        decode_hello(swapped, PSK)
+    untagged_control = msgpack.packb([SCHEMA_VERSION, 3, 2, 7, nonce, NOW_NS, True],
+                                     use_bin_type=True) + tagged[len(body):]
+    with pytest.raises(HelloError, match="tag does not verify"):
+        decode_hello(untagged_control, PSK)
+    master = SessionAuth(PSK, "master", 11)
+    assert decode_hello(master.hello(NOW_NS, "mmt"), PSK).control == "mmt"
+    assert decode_hello(master.hello(NOW_NS), PSK).control is None
+
+
+@pytest.mark.parametrize("control", [
+    b"wave",          # bytes, not a str
+    7,                # an int
+    None,             # nil is not "no control": that is 7 fields
+    ["wave"],         # a list
+    "",               # empty
+    "a" * 33,         # too long
+    "Wave",           # upper case
+    "wave_2",         # an underscore
+    "wave ",          # a space
+    "w\u00e4ve",      # not ASCII
+    "wave\n",         # a trailing newline
+])
+def test_a_hello_whose_8th_field_is_not_a_control_name_is_refused(control) -> None:
+    fields = [SCHEMA_VERSION, 3, 1, 7, bytes(16), NOW_NS, False, control]
+    with pytest.raises(HelloError, match="bad field"):
+        decode_hello(msgpack.packb(fields, use_bin_type=True), None)
+    if type(control) is str:
+        with pytest.raises(ValueError, match="a-z0-9-"):
+            encode_hello("master", 7, bytes(16), NOW_NS, None, control)
 
 
 def pair() -> tuple[SessionAuth, SessionAuth]:
