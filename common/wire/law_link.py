@@ -6,6 +6,13 @@ pairing and the receive path's ordering, injection and counters) with the receiv
 decoder set to the law's schema for the peer's direction, and a send of the law's values.
 The master side sends the control's "handle" messages and receives its "tool" messages; the
 slave side the other way round.
+
+Its hellos name the control (:attr:`Link.hello_control`, the hello's 8th field:
+common/wire/auth.py), and it pairs only with a peer whose hellos name the same one: against
+another law, or a program link of the programs' own messages ("paper" or "tdpa"), both
+sides' :meth:`Link.wait_for_peer` raise :class:`~haptic.common.wire.errors.LinkOpenError`
+naming the two modes, instead of pairing and dropping each other's messages as
+``wrong_kind``.
 """
 
 from __future__ import annotations
@@ -27,8 +34,9 @@ _NO_FLAGS = Flags(0)
 class LawLink(Link):
     """One side's end of a lane law's link (use it as a context manager, as :class:`Link`).
 
-    ``control``: the law ("wave", "four-channel" or "mmt"); ``rng`` drives the injected
-    jitter and loss (default: seeded from ``config.seed``).
+    ``control``: the law ("wave", "four-channel", "four-channel-tdpa" or "mmt"), announced in
+    this side's hellos and required in the peer's; ``rng`` drives the injected jitter and
+    loss (default: seeded from ``config.seed``).
     """
 
     def __init__(self, config: LinkConfig, control: str,
@@ -41,6 +49,7 @@ class LawLink(Link):
         master = config.side == "master"
         self.send_schema = LawSchema(control, "handle" if master else "tool")
         self.receive_schema = LawSchema(control, "tool" if master else "handle")
+        self.hello_control = control  # before open(): every hello this side sends names it
         # the law's receive path replaces the programs' (which has drawn nothing from rng)
         self.receive = ReceivePath(self.receive_schema.kind, config.injection, rng,
                                    config.stale_after_s, decoder=self.receive_schema.decode)

@@ -15,8 +15,9 @@ injection and counters (common/wire/receive.py) apply unchanged::
 ``version`` is :data:`~haptic.common.wire.messages.SCHEMA_VERSION`; ``kind`` names the
 control and the direction (:func:`law_kind`: a program's receiver drops it as
 ``wrong_kind``, and a receiver of another law as well, so a mismatched pair never mixes
-channels); ``epoch``, ``seq``, ``send_time_ns`` and ``flags`` as in messages.py; ``values``
-exactly the declared number of msgpack float 64s, every one finite.
+channels; such a pair does not start at all, its pairing hellos naming different controls:
+common/wire/link.py); ``epoch``, ``seq``, ``send_time_ns`` and ``flags`` as in messages.py;
+``values`` exactly the declared number of msgpack float 64s, every one finite.
 
 :meth:`LawSchema.decode` never lets an exception other than
 :class:`~haptic.common.wire.messages.DecodeError` escape; its reason says which counter the

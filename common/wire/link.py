@@ -14,6 +14,15 @@ arrival time of a sample is Zenoh's own receive timestamp (timestamp-stack instr
 taken in the Zenoh runtime when the sample arrives, on the same clock), so the measured delay
 does not include the wait for the loop's next poll; without it the poll time is used.
 
+Pairing (common/wire/auth.py): each side publishes a hello on ``<prefix>/pair/<side>`` that
+names the lane law it runs (:attr:`Link.hello_control`; None, a 7-field hello: the programs'
+own messages, ``[control] mode`` "paper" or "tdpa"). A peer's hello of another schema
+version, with authentication on one side only, or naming another control is never paired on:
+it sets :attr:`Link.peer_mismatch`, and :meth:`Link.wait_for_peer` raises
+:class:`~haptic.common.wire.errors.LinkOpenError` with that line once such a peer has been seen
+for :data:`MISMATCH_GRACE_S` without a pairing, so a master and a slave of different control
+families refuse to start instead of dropping each other's messages as ``wrong_kind``.
+
 Injection, ordering and the counters live in :class:`haptic.common.wire.receive.ReceivePath`.
 """
 
@@ -58,8 +67,8 @@ from haptic.common.wire.receive import LinkStats, ReceivePath
 from haptic.common.wire.transport_auth import open_session
 
 NO_FLAGS = Flags(0)
-#: A mismatched peer (another schema version, authentication on one side) seen this long
-#: without a pairing stops the start, s.
+#: A mismatched peer (another schema version, authentication on one side, another control)
+#: seen this long without a pairing stops the start, s.
 MISMATCH_GRACE_S = 1.0
 _CONGESTION = {"drop": zenoh.CongestionControl.DROP, "block": zenoh.CongestionControl.BLOCK}
 
@@ -73,6 +82,11 @@ def _receive_instrumentation() -> object | None:
 
 
 _RECEIVE_POINT = getattr(getattr(zenoh, "InterceptionPoint", None), "RECEIVE", None)
+
+
+def _mode_text(control: str | None) -> str:
+    """A hello's control as the ``[control] mode`` values it stands for, quoted."""
+    return '"paper" or "tdpa"' if control is None else f'"{control}"'
 
 
 def zenoh_config(config: LinkConfig) -> zenoh.Config:
@@ -108,6 +122,10 @@ class Link:
     ``clock_ns`` is the send-time clock (CLOCK_REALTIME); ``epoch`` identifies this run of the
     sender (default: random).
     """
+
+    hello_control: str | None = None
+    """The lane law this side's hellos announce and its peer's must announce too (None: the
+    programs' own messages; :class:`~haptic.common.wire.law_link.LawLink` sets its control)."""
 
     def __init__(
         self,
@@ -166,7 +184,7 @@ class Link:
         """The peer's latest valid hello (its run's epoch; None before the first)."""
         self.peer_mismatch: str | None = None
         """Why the peer cannot be paired with (another schema version, authentication on one
-        side only), or None."""
+        side only, another control), or None: one line."""
         self.unpaired_sends = 0
         self._mismatch_since: float | None = None
         """Messages not sent because this authenticated side was not paired yet."""
@@ -429,8 +447,10 @@ class Link:
         return count
 
     def _pair(self, now_ns: int) -> None:
-        """Take the peer's hellos (at most 8 per poll), pair on a new authenticated one, and
-        publish this side's hello every HELLO_PERIOD_S (at once after a new pairing)."""
+        """Take the peer's hellos (at most 8 per poll), pair on a new one (authenticated, with
+        a key) that matches this side (:meth:`_mismatch_of`; a mismatched one only sets
+        :attr:`peer_mismatch`), and publish this side's hello, with :attr:`hello_control`,
+        every HELLO_PERIOD_S (at once after a new pairing)."""
         subscriber = self._hello_subscriber
         if subscriber is None:
             return
@@ -444,18 +464,9 @@ class Link:
             except HelloError:
                 self.undecodable_hellos += 1
                 continue
-            if hello.version != SCHEMA_VERSION:
-                self.peer_mismatch = (
-                    f"the {self.config.peer_side} speaks wire schema version {hello.version}, "
-                    f"this program {SCHEMA_VERSION}: run the same haptic-teleop on both sides")
-                continue
-            if hello.authenticated != (auth is not None):
-                self.peer_mismatch = (
-                    f"the {self.config.peer_side} "
-                    f"{'authenticates' if hello.authenticated else 'does not authenticate'} "
-                    f"its messages and this side "
-                    f"{'does' if auth is not None else 'does not'}: give both sides the same "
-                    "[link.security] session_key_file (--session-key), or neither")
+            mismatch = self._mismatch_of(hello)
+            if mismatch is not None:
+                self.peer_mismatch = mismatch
                 continue
             if auth is None:
                 if hello.side == self.config.peer_side:
@@ -470,12 +481,35 @@ class Link:
         publisher = self._hello_publisher
         if publisher is not None and now_ns >= self._next_hello_ns:
             self._next_hello_ns = now_ns + int(HELLO_PERIOD_S * 1e9)
-            payload = (auth.hello(now_ns) if auth is not None else
-                       encode_hello(self.config.side, self.epoch, self._nonce, now_ns, None))
+            control = self.hello_control
+            payload = (auth.hello(now_ns, control) if auth is not None else
+                       encode_hello(self.config.side, self.epoch, self._nonce, now_ns, None,
+                                    control))
             try:
                 publisher.put(payload)
             except Exception:  # noqa: BLE001 - a lost hello is sent again
                 self.send_errors += 1
+
+    def _mismatch_of(self, hello: Hello) -> str | None:
+        """Why this decoded hello cannot pair (one line), or None: another schema version,
+        authentication on one side only, or, from the peer's side, another control than
+        :attr:`hello_control`."""
+        peer = self.config.peer_side
+        if hello.version != SCHEMA_VERSION:
+            return (f"the {peer} speaks wire schema version {hello.version}, "
+                    f"this program {SCHEMA_VERSION}: run the same haptic-teleop on both sides")
+        authenticated = self.auth is not None
+        if hello.authenticated != authenticated:
+            return (f"the {peer} "
+                    f"{'authenticates' if hello.authenticated else 'does not authenticate'} "
+                    f"its messages and this side {'does' if authenticated else 'does not'}: "
+                    "give both sides the same [link.security] session_key_file "
+                    "(--session-key), or neither")
+        if hello.side == peer and hello.control != self.hello_control:
+            return (f"the {peer} runs [control] mode = {_mode_text(hello.control)}, this side "
+                    f"{_mode_text(self.hello_control)}; set the same [control] mode on both "
+                    "sides")
+        return None
 
     @property
     def paired(self) -> bool:
@@ -527,7 +561,8 @@ class Link:
         and, authenticated, verified) (True), or ``timeout_s`` passes (``None``: no limit) or
         ``should_stop()`` says so (False). Messages that arrive meanwhile go through the
         receive path as usual. Raises :class:`LinkOpenError` for a peer that cannot be paired
-        with (another wire schema version, authentication on one side only)."""
+        with (another wire schema version, authentication on one side only, another control:
+        :attr:`peer_mismatch`)."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         while not (self.peer_alive and self.paired):
             self._check_peer()
