@@ -12,7 +12,7 @@ import argparse
 import json
 import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -21,20 +21,24 @@ import zenoh
 from haptic.common.analysis.preflight import add_preflight_options, run_preflight
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.config.control_schema import (
+    check_lane_law,
+    lane_law,
+    law_settings,
     passivity_settings,
     standby_passivity_settings,
 )
 from haptic.common.config.scenario import load_scenario, max_block_damping
 from haptic.common.model.work_area import work_area_from_config
 from haptic.common.ros2.options import add_ros2_options, apply_ros2_options
-from haptic.common.runtime.cli_options import add_run_options, run_options_from_args
+from haptic.common.runtime.cli_options import RunOptions, add_run_options, run_options_from_args
 from haptic.common.runtime.console import script_description
 from haptic.common.runtime.failures import exit_on_link_error
 from haptic.common.runtime.program_harness import add_networked_options, check_networked_options
+from haptic.common.runtime.runner_config import place_other_threads
 from haptic.common.runtime.warp_init import init_warp
 from haptic.common.runtime.watchdog import DEFAULT_SYNC_TOLERANCE_M
 from haptic.master.hardware.interface import HardwareError, create_hardware
-from haptic.master.settings import master_settings, with_work_area
+from haptic.master.settings import MasterSettings, master_settings, with_work_area
 
 # The node, the loop, the governor and the model's synthesis bring Warp, python-control and
 # scipy: imported in main() after the parse, so --help and a bad flag answer at once.
@@ -121,6 +125,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         options = run_options_from_args(args, "master", config=config)
         check_networked_options(args)
         settings = master_settings(options.config)
+        law_run = _law_run(args, options, settings) if lane_law(config) is not None else None
+    if law_run is not None:
+        with exit_on_link_error("haptic-master"):
+            return law_run()
+    with exit_on_config_error():
         model = model_from_config(options.config)
         if args.rig_time is not None:
             options = replace(options, max_steps=rig_time_steps(args.rig_time, settings.rig,
@@ -160,6 +169,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_linked_master(options, model, node, hardware, loop_options,
                                  {"rig": settings.rig, "analysis": analysis.as_dict(),
                                   "work_area": area.describe()})
+
+
+def _law_run(args: argparse.Namespace, options: RunOptions,
+             settings: MasterSettings) -> Callable[[], int]:
+    """The networked master in a lane-law mode (master/law_program.py), checked and built
+    (raises ConfigError): the run, to call outside the configuration's error handling. The
+    stability pre-flight is the paper scheme's and does not run (docs/architectures.md gives
+    each law's theory)."""
+    from haptic.master.law_program import LawMasterGuard, run_law_master
+    from haptic.master.program import MasterLoopOptions
+
+    config = options.config
+    check_lane_law(config, args.record)
+    control = str(lane_law(config))
+    law = law_settings(config)
+    if args.rig_time is not None:
+        options = replace(options, max_steps=rig_time_steps(args.rig_time, settings.rig,
+                                                             law.period_s))
+    scenario = load_scenario(config["slave"]["scenario"])
+    area = work_area_from_config(config, scenario.grid.x_range_m, scenario.grid.y_range_m)
+    hardware = create_hardware(settings.rig, config)
+    loop_options = MasterLoopOptions(
+        peer_wait_s=args.peer_wait, trace_every=args.trace_every,
+        trace_path=None if args.out is None else str(Path(args.out) / "master_trace.npz"))
+    guard = LawMasterGuard(settings.safety, area)
+    extra = {"rig": settings.rig, "work_area": area.describe(),
+             **place_other_threads(options.runner)}
+    return lambda: run_law_master(options, control, law, hardware, guard, loop_options, extra)
 
 
 def rig_time_steps(rig_time_s: float, rig: str, period_s: float) -> int:

@@ -63,7 +63,7 @@ from haptic.master.tick import MasterTick
 from haptic.master.tool_guard import ToolGuardSettings, ToolInputGuard
 
 __all__ = ["MASTER_RECORD_COLUMNS", "MASTER_TRACE_COLUMNS", "TICK_STAGES", "WARM_CAN_CYCLES",
-           "MasterLoopOptions", "device_process_cpu", "emulator_placement",
+           "MasterLoopOptions", "device_process_cpu", "emulator_placement", "enable_drives",
            "position_for_the_wire", "run_linked_master"]
 
 #: CAN cycles the master runs on its loop's CPU right before the first tick, once the
@@ -73,7 +73,7 @@ __all__ = ["MASTER_RECORD_COLUMNS", "MASTER_TRACE_COLUMNS", "TICK_STAGES", "WARM
 WARM_CAN_CYCLES = 3
 
 
-def _enable_drives(hardware: HandleHardware) -> HandleReading:
+def enable_drives(hardware: HandleHardware) -> HandleReading:
     """Enable the drives (``activate``) and run :data:`WARM_CAN_CYCLES` cycles; returns the
     last reading. For the runner's last moment before the first tick: from enable on only
     the loop's reads send the master's heartbeat, and the work before the loop (the heap's
@@ -257,7 +257,7 @@ class _LinkedMaster:
         run = harness.run(self.driver, stages.status_text, signals, stages.stop_safely,
                           lead=early_sync(hardware),
                           lead_s=options.config["master"]["can"]["sync_lead_s"],
-                          before_loop=lambda: stages.start(_enable_drives(hardware)))
+                          before_loop=lambda: stages.start(enable_drives(hardware)))
         self.extra_summary.update(self.inert.summary(run.elapsed_s))
         self.extra_summary.update(device_process_cpu(
             device_cpu_start_s, hardware.device_process_cpu_s(), run.elapsed_s))

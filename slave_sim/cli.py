@@ -7,13 +7,16 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
+import numpy as np
 import zenoh
 
 from haptic.common.analysis.preflight import add_preflight_options, run_preflight
-from haptic.common.config import exit_on_config_error, load_config, override
-from haptic.common.config.scenario import load_scenario, max_block_damping
+from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
+from haptic.common.config.control_schema import check_lane_law, lane_law, law_settings
+from haptic.common.config.scenario import Scenario, load_scenario, max_block_damping
 from haptic.common.ros2.options import (
     add_ros2_options,
     apply_ros2_options,
@@ -76,6 +79,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         options = run_options_from_args(args, "slave", config=config)
         check_networked_options(args)
         scenario = load_scenario(options.config["slave"]["scenario"])
+        law_run = _law_run(args, options, scenario) if lane_law(config) is not None else None
+    if law_run is not None:
+        with exit_on_link_error("haptic-slave"):
+            return law_run()
+    with exit_on_config_error():
         phase_lock_from(options.config, options.config["model"]["sample_period_s"])
         InputGuardSettings.from_config(options.config)  # [slave.safety]'s cross-key checks
         if getattr(args, "plant", "virtual") == "ros2":
@@ -96,6 +104,38 @@ def main(argv: Sequence[str] | None = None) -> int:
     with exit_on_link_error("haptic-slave"), plant_for(args, options.config, node):
         return run_slave(node, options, args, {"scenario": scenario.name,
                                                "analysis": analysis.as_dict(), **placement})
+
+
+def _law_run(args: argparse.Namespace, options: Any, scenario: Scenario) -> Callable[[], int]:
+    """The networked slave in a lane-law mode (slave_sim/law_program.py), checked and built
+    (raises ConfigError): the run, to call outside the configuration's error handling. The
+    stability pre-flight is the paper scheme's and does not run."""
+    from haptic.common.model.teleop import model_from_config
+    from haptic.common.model.work_area import work_area_from_config
+    from haptic.slave_sim.environment import make_environment
+    from haptic.slave_sim.law_program import LawSlaveWorld, run_law_slave
+
+    config = options.config
+    check_lane_law(config, getattr(args, "record", None))
+    if getattr(args, "plant", "virtual") != "virtual":
+        raise ConfigError("--plant", f"only the virtual tool runs with [control] mode = "
+                          f"\"{config['control']['mode']}\"")
+    control = str(lane_law(config))
+    law = law_settings(config)
+    placement = place_other_threads(options.runner)  # before Warp's threads start
+    init_warp()
+    section = config["slave"]
+    kind = scenario.environment if section["environment"] == "scenario" else (
+        section["environment"])
+    environment = make_environment(kind, model_from_config(config), scenario,
+                                   section["clay_impl"], section["device"])
+    area = work_area_from_config(config, scenario.grid.x_range_m, scenario.grid.y_range_m)
+    world = LawSlaveWorld(environment, np.asarray(scenario.tool.start_position_m, float),
+                          law.period_s,
+                          (np.asarray(area.tool_low_m), np.asarray(area.tool_high_m)))
+    extra = {"scenario": scenario.name, "work_area": area.describe(), **placement}
+    return lambda: run_law_slave(options, control, law, world, args.peer_wait,
+                                 args.trace_every, args.out, extra)
 
 
 if __name__ == "__main__":

@@ -1,18 +1,34 @@
-"""The ``[control]`` table: which control scheme runs (the paper's, or with the passivity
-layer, TDPA), the passivity layer's limits and the paper mode's drift coupling."""
+"""The ``[control]`` table: which control scheme runs (the paper's, with the passivity layer
+TDPA, or one of the lane laws: wave variables, four-channel with or without its TDPA,
+model-mediated), the passivity layer's limits, the paper mode's drift coupling and the wave
+variables' settings."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from haptic.common.config.fields import Field, Schema
+from haptic.common.control.law_settings import LANE_CONTROLS, LawSettings
 from haptic.common.model.drift import DriftCoupling
+from haptic.common.model.errors import ConfigError
 from haptic.common.model.passivity import MODES, PassivitySettings
+
+#: Every control mode: the paper's scheme and its passivity layer (the programs' HandleState
+#: and ToolState), then the lane laws (their own messages, common/wire/law_messages.py).
+CONTROL_MODES = MODES + LANE_CONTROLS
 
 CONTROL_SCHEMA: Schema = {
     "mode": Field("str", "\"paper\": the paper's scheme as published; \"tdpa\": with the "
-                  "passivity layer (time domain passivity, docs/control.md). Both programs "
-                  "must run the same mode.", choices=MODES),
+                  "passivity layer (time domain passivity, docs/control.md); \"wave\", "
+                  "\"four-channel\", \"four-channel-tdpa\", \"mmt\": the lane laws "
+                  "(docs/architectures.md). Both programs must run the same mode.",
+                  choices=CONTROL_MODES),
+    "wave_impedance_N_s_per_m": Field("float", "wave: the wave impedance b, N s/m.",
+                                      minimum=0.0, exclusive_minimum=True),
+    "wave_filter_bandwidth_rad_s": Field("float", "wave: the wave filter's bandwidth, rad/s "
+                                         "(0: off).", minimum=0.0),
+    "wave_drift_gain_per_s": Field("float", "wave: the drift correction's gain on the wave "
+                                   "integrals, 1/s (0: off).", minimum=0.0),
     "force_floor_N": Field("float", "tdpa: below this operator force the master's passivity "
                            "controller does not act, N.", minimum=0.0, exclusive_minimum=True),
     "conductance_max_m_per_N_s": Field("float", "tdpa: cap of the master's adaptive "
@@ -81,8 +97,27 @@ def drift_parameters(config: dict[str, Any]) -> tuple[float, float] | None:
 
 
 def control_mode(config: dict[str, Any]) -> str:
-    """The validated configuration's control mode, "paper" or "tdpa"."""
+    """The validated configuration's control mode (one of :data:`CONTROL_MODES`)."""
     return str(config["control"]["mode"])
+
+
+def lane_law(config: dict[str, Any]) -> str | None:
+    """The lane law the configuration runs (one of ``LANE_CONTROLS``), or None for the paper's
+    scheme and its passivity layer."""
+    mode = str(config["control"]["mode"])
+    return mode if mode in LANE_CONTROLS else None
+
+
+def law_settings(config: dict[str, Any]) -> LawSettings:
+    """A lane law's settings: the model's period (s), the wave variables' and the TDPA's (for
+    ``four-channel-tdpa``) from ``[control]``."""
+    section = config["control"]
+    return LawSettings(period_s=float(config["model"]["sample_period_s"]),
+                       wave_impedance_N_s_per_m=float(section["wave_impedance_N_s_per_m"]),
+                       wave_filter_bandwidth_rad_s=float(
+                           section["wave_filter_bandwidth_rad_s"]),
+                       wave_drift_gain_per_s=float(section["wave_drift_gain_per_s"]),
+                       passivity=standby_passivity_settings(config))
 
 
 def passivity_settings(config: dict[str, Any]) -> PassivitySettings | None:
@@ -98,3 +133,24 @@ def standby_passivity_settings(config: dict[str, Any]) -> PassivitySettings:
     section = config["control"]
     names = PassivitySettings.__dataclass_fields__
     return PassivitySettings(**{name: float(section[name]) for name in names})
+
+
+def check_lane_law(config: dict[str, Any], record_path: object = None) -> None:
+    """What a lane-law mode needs of the rest of the configuration (raises ConfigError naming
+    the key): the laws exchange the tool's and the handle's coordinates one to one
+    (``model.position_ratio_ah1`` the identity); the margin governor, the ROS 2 bridge and
+    the MCAP recording (``--record``) belong to the paper's scheme and its passivity layer."""
+    mode = config["control"]["mode"]
+    ratio = config["model"]["position_ratio_ah1"]
+    if [list(map(float, row)) for row in ratio] != [[1.0, 0.0], [0.0, 1.0]]:
+        raise ConfigError("model.position_ratio_ah1", f"must be the identity with [control] "
+                          f"mode = \"{mode}\" (the lane laws scale no positions)")
+    if config["governor"]["enabled"]:
+        raise ConfigError("governor.enabled", f"the margin governor runs in the paper and "
+                          f"tdpa modes only, not with [control] mode = \"{mode}\"")
+    if config["ros2"]["enabled"]:
+        raise ConfigError("ros2.enabled", f"the ROS 2 bridge runs in the paper and tdpa modes "
+                          f"only, not with [control] mode = \"{mode}\"")
+    if record_path:
+        raise ConfigError("--record", f"the MCAP recording runs in the paper and tdpa modes "
+                          f"only, not with [control] mode = \"{mode}\"")

@@ -14,7 +14,6 @@ Arrays are (lanes, 2): x and y.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -24,20 +23,22 @@ from haptic.common.control.four_channel import FourChannelGains, Impedance, side
 from haptic.common.control.four_channel_kernel import FourChannelSideKernel
 from haptic.common.control.four_channel_passivity import MASTER_PORT_SIGN, SLAVE_PORT_SIGN
 from haptic.common.control.four_channel_tdpa_kernel import PassiveFourChannelSideKernel
+from haptic.common.control.law_settings import (
+    LANE_CONTROLS,
+    PERIOD_S,
+    WAVE_IMPEDANCE_N_S_PER_M,
+    LawSettings,
+)
 from haptic.common.control.mmt import EnvironmentModel, EstimatorSettings, RendererSettings
 from haptic.common.control.mmt_kernel import EstimatorKernel, RendererKernel
 from haptic.common.control.wave import (
     MASTER_SIGN,
     MESSAGE_CHANNELS,
     SLAVE_SIGN,
-    WaveSettings,
     message_fields,
 )
 from haptic.common.control.wave_kernel import WavePortKernel
-from haptic.common.model.passivity import PassivitySettings
 
-#: The laws' period, s: the paper's (common/config/defaults, section 4.1).
-PERIOD_S = 0.00054
 #: The handle device without the hand (kg, N s/m); the hand's 0.25 kg rides on it.
 HANDLE_DEVICE_MASS_KG = 0.1
 HANDLE_DEVICE_DAMPING_N_S_PER_M = 1.0
@@ -48,33 +49,11 @@ TOOL_DEVICE_DAMPING_N_S_PER_M = 1.0
 SERVO_FREQUENCY_RAD_S = 200.0
 #: The largest force an integrated velocity command may ask of a servo's spring, N.
 SERVO_FORCE_LIMIT_N = 40.0
-#: Wave impedance b of the wave control, N s/m.
-WAVE_IMPEDANCE_N_S_PER_M = 20.0
 #: The four-channel manipulators and local controllers (the tests' values), transparent
 #: channels without the masses (docs/architectures.md, "A sampled loop and the masses").
 FOUR_CHANNEL_MANIPULATOR = Impedance(mass_kg=0.1, damping_N_s_per_m=1.0)
 FOUR_CHANNEL_LOCAL = Impedance(damping_N_s_per_m=50.0, stiffness_N_per_m=500.0)
-LANE_CONTROLS = ("wave", "four-channel", "four-channel-tdpa", "mmt")
 
-
-@dataclass(frozen=True)
-class LawSettings:
-    """What a pair is built with: the period (s), the wave variables' impedance (N s/m), wave
-    filter bandwidth (rad/s) and drift gain (1/s), and the TDPA's settings for
-    ``four-channel-tdpa``."""
-
-    period_s: float = PERIOD_S
-    wave_impedance_N_s_per_m: float = WAVE_IMPEDANCE_N_S_PER_M
-    wave_filter_bandwidth_rad_s: float = WaveSettings.filter_bandwidth_rad_s
-    wave_drift_gain_per_s: float = WaveSettings.drift_gain_per_s
-    passivity: PassivitySettings = dataclasses.field(default_factory=PassivitySettings)
-
-    def wave_settings(self) -> WaveSettings:
-        """The wave ports' settings (validated by :class:`WaveSettings`)."""
-        return WaveSettings(period_s=self.period_s,
-                            impedance_N_s_per_m=self.wave_impedance_N_s_per_m,
-                            filter_bandwidth_rad_s=self.wave_filter_bandwidth_rad_s,
-                            drift_gain_per_s=self.wave_drift_gain_per_s)
 
 
 
