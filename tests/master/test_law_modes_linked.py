@@ -1,0 +1,150 @@
+"""``haptic-master`` and ``haptic-slave`` in the lane-law modes (``[control] mode`` = wave,
+four-channel, four-channel-tdpa, mmt) over real Zenoh links on loopback: each pair runs, the
+tool follows the handle and they end aligned (gap <= 1 mm), forces stay bounded; a pair in
+different modes is refused at start on both sides with one line; the watchdog stops the tool
+when the master is killed; a law mode refuses the paper scheme's parts with exit status 2.
+The master drives the rig model (the subject is the law over Zenoh, not the CAN path).
+Children are ended by their own PIDs and reaped; nothing here asserts timing."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import time
+import uuid
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from haptic.common.control.law_settings import LANE_CONTROLS
+from haptic.common.wire.ports import free_port
+from tests.helpers.programs import Program, Programs, python_module, run_to_end
+
+WAIT_S = 90.0
+OPERATOR = "constant:fx=1.0,onset=0.05,rise=0.5"
+
+
+def _config(tmp_path: Path, mode: str, environment: str = "linear", extra: str = "") -> Path:
+    path = tmp_path / f"{mode}.toml"
+    path.write_text(f'[slave]\nscenario = "constant-rate"\nenvironment = "{environment}"\n'
+                    f'clay_impl = "warp"\ndevice = "cpu"\n\n[control]\nmode = "{mode}"\n'
+                    + extra)
+    return path
+
+
+def _pair_args(tmp_path: Path, master_mode: str, slave_mode: str, duration_s: float,
+               environment: str = "linear") -> tuple[list[str], list[str]]:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    common = ["--key-prefix", f"test/{uuid.uuid4().hex[:8]}", "--no-status", "--peer-wait",
+              "30"]
+    slave = python_module(
+        "haptic.slave_sim.cli", "--config", str(_config(tmp_path, slave_mode, environment)),
+        *common, "--connect", endpoint, "--json-summary", str(tmp_path / "slave.json"),
+        "--out", str(tmp_path / "slave_out"), "--duration", str(duration_s + 1.5))
+    master = python_module(
+        "haptic.master.cli", "--config", str(_config(tmp_path, master_mode, environment)),
+        *common, "--listen", endpoint, "--rig", "model", "--operator", OPERATOR,
+        "--json-summary", str(tmp_path / "master.json"), "--duration", str(duration_s))
+    return slave, master
+
+
+def _ended(program: Program, timeout_s: float) -> subprocess.CompletedProcess[str]:
+    status = program.wait(timeout_s=timeout_s)
+    return subprocess.CompletedProcess(program.args, status, program.output())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("control", LANE_CONTROLS)
+def test_each_law_runs_both_programs_bounded_and_aligned(tmp_path, control) -> None:
+    with Programs() as programs:
+        started = [programs.start(args) for args in _pair_args(tmp_path, control, control, 3.0)]
+        slave, master = (_ended(program, WAIT_S) for program in started)
+    assert master.returncode == 0, master.stdout
+    assert slave.returncode == 0, slave.stdout
+    master_summary = json.loads((tmp_path / "master.json").read_text())
+    slave_summary = json.loads((tmp_path / "slave.json").read_text())
+    assert master_summary["control"] == slave_summary["control"] == control
+    assert master_summary["watchdog_trips"] == 0 and not master_summary["node_faulted"]
+    # the law's stages, one driver: the summary times each
+    assert set(master_summary["stages"]) == {"read", "poll", "law", "write", "send",
+                                             "telemetry"}
+    assert set(slave_summary["stages"]) == {"poll", "law", "move", "send", "telemetry"}
+    # bounded: the operator pushes 1 N; nothing near the force limits
+    assert 0.1 < master_summary["max_abs_force_N"] < 5.0
+    assert slave_summary["max_abs_force_N"] < 5.0
+    handle = np.array(master_summary["final_handle_position_m"])
+    tool = np.array(slave_summary["final_tool_position_m"])
+    assert tool[0] > 0.005  # the operator's push moved the tool
+    assert np.hypot(*(tool - handle)) <= 0.001  # and the two sides end aligned
+    trace = np.load(tmp_path / "slave_out" / "slave_trace.npz")
+    assert np.all(np.isfinite(trace["tool_position_x_m"]))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("master_mode", "slave_mode"),
+                         [("wave", "paper"), ("tdpa", "mmt"), ("wave", "four-channel")])
+def test_a_pair_in_different_modes_is_refused_on_both_sides(tmp_path, master_mode,
+                                                            slave_mode) -> None:
+    with Programs() as programs:
+        started = [programs.start(args) for args in _pair_args(
+            tmp_path, master_mode, slave_mode, 3.0)]
+        slave, master = (_ended(program, WAIT_S) for program in started)
+    for run, own, peer in ((master, master_mode, slave_mode), (slave, slave_mode, master_mode)):
+        assert run.returncode == 4, run.stdout
+        error = [line for line in run.stdout.splitlines() if "link error" in line]
+        assert len(error) == 1, run.stdout
+        assert f'"{own}"' in error[0] or own in ("paper", "tdpa"), error[0]
+        assert "set the same [control] mode on both sides" in error[0]
+        if peer not in ("paper", "tdpa"):
+            assert f'mode = "{peer}"' in error[0]
+    assert not (tmp_path / "master.json").exists()
+
+
+@pytest.mark.slow
+def test_the_slave_holds_its_tool_when_the_master_dies(tmp_path) -> None:
+    slave_args, master_args = _pair_args(tmp_path, "wave", "wave", 30.0, environment="clay")
+    with Programs() as programs:
+        slave = programs.start(slave_args)
+        master = programs.start(master_args)
+        master.wait_for("waiting for the slave", WAIT_S)
+        slave.wait_for("waiting for the master", WAIT_S)
+        # let the push move the tool, then kill the master without its stopping message
+        time.sleep(4.0)
+        master.send_signal(signal.SIGKILL)
+        master.wait(timeout_s=WAIT_S)
+        time.sleep(2.0)  # the slave's watchdog trips on the silence, then holds
+        slave.stop(signal.SIGINT)
+    summary = json.loads((tmp_path / "slave.json").read_text())
+    assert summary["watchdog_trips"] >= 1
+    trip_s = min(event["time_s"] for event in summary["events"] if event["kind"] == "trip")
+    trace = np.load(tmp_path / "slave_out" / "slave_trace.npz")
+    after = trace["time_s"] > trip_s + 0.05
+    assert after.sum() > 10
+    assert not trace["forces_enabled"][after].any()
+    moved = np.ptp(trace["tool_position_x_m"][after])
+    assert moved < 2e-4  # the servo holds the tool where forces went off
+
+
+@pytest.mark.parametrize(("extra", "key"), [
+    ('\n[governor]\nenabled = true\n', "governor.enabled"),
+    ('\n[model]\nposition_ratio_ah1 = [[2.0, 0.0], [0.0, 2.0]]\n', "model.position_ratio_ah1"),
+])
+def test_a_law_mode_refuses_the_paper_schemes_parts(tmp_path, extra, key) -> None:
+    config = _config(tmp_path, "wave", extra=extra)
+    for module in ("haptic.master.cli", "haptic.slave_sim.cli"):
+        run = run_to_end(python_module(module, "--config", str(config), "--duration", "1",
+                                       "--no-status", "--peer-wait", "1"), timeout_s=WAIT_S)
+        assert run.returncode == 2, run.stderr
+        lines = [line for line in run.stderr.splitlines() if line.strip()]
+        assert len(lines) == 1 and key in lines[0], run.stderr
+
+
+def test_an_unknown_mode_is_a_one_line_configuration_error(tmp_path) -> None:
+    run = run_to_end(python_module("haptic.master.cli", "--config",
+                                   str(_config(tmp_path, "waves")), "--duration", "1"),
+                     timeout_s=WAIT_S)
+    assert run.returncode == 2, run.stderr
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "control.mode" in lines[0] and "wave" in lines[0], run.stderr
