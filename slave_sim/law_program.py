@@ -70,6 +70,7 @@ class LawSlaveWorld:
         self.fe = np.zeros((1, 2))
         self.cutting = False
         self.engagement = 0.0
+        self.removed_volume_m3 = 0.0
 
     def sense(self) -> np.ndarray:
         """The force the tool applies to its environment, (1, 2), N, along its move since
@@ -82,6 +83,7 @@ class LawSlaveWorld:
         self.fe = np.where(np.isfinite(force), force, 0.0)
         self.cutting = bool(np.asarray(result.cutting).reshape(-1)[0])
         self.engagement = float(np.asarray(result.engagement).reshape(-1)[0])
+        self.removed_volume_m3 += float(np.asarray(result.removed_volume_m3).reshape(-1)[0])
         return self.fe
 
     def move(self, command_m: np.ndarray | None, command_m_per_s: np.ndarray) -> None:
@@ -207,7 +209,8 @@ def run_law_slave(options: Any, control: str, settings: LawSettings, world: LawS
         summary = harness.summary(
             run, peer.watchdog, stages.max_force_N, (peer.watchdog.events, stages.events),
             stages=driver.stage_times[0].summary(), control=control,
-            final_tool_position_m=world.tool.position_m[0].tolist(), **extra_summary)
+            final_tool_position_m=world.tool.position_m[0].tolist(),
+            removed_volume_m3=world.removed_volume_m3, **extra_summary)
     traced = trace.arrays()
     on_samples = {**traced, "time_s": traced["sample_time_s"]} if traced else traced
     summary.update(cutting_figures(on_samples))

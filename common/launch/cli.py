@@ -296,6 +296,9 @@ def run_session(args: argparse.Namespace) -> int:
             print(f"haptic-session: {side} wrote no summary", file=sys.stderr)
             return 1
         summaries[side] = json.loads(path.read_text())
+    gap = final_gap_m(summaries["master"], summaries["slave"])
+    if gap is not None:  # a lane-law slave has no handle position to measure it against
+        summaries["slave"]["final_position_gap_m"] = gap
     text = combined_summary(summaries["master"], summaries["slave"]) + inert_flag(summaries)
     print(text)
     plot = _plot(out)
@@ -489,7 +492,7 @@ def _cut_lines(slave: dict[str, Any]) -> list[str]:
         f"from the first to the last removal, removed "
         f"{slave.get('removed_volume_m3', 0.0) * 1e6:.2f} cm^3",
         f"    mean over the cut: tool force |ft| {cut:.2f} N, handle force "
-        f"{slave['cut_mean_handle_force_N']:.2f} N, speed "
+        f"{_newtons(slave.get('cut_mean_handle_force_N'))}, speed "
         f"{slave['cut_mean_speed_m_s'] * 1e3:.1f} mm/s (paper, Fig. 9: 3.6 N at 38 mm/s)",
         f"    while removing clay: |ft| {slave['cutting_mean_force_N']:.2f} N, speed "
         f"{slave['cutting_mean_speed_m_s'] * 1e3:.1f} mm/s",
@@ -504,6 +507,26 @@ def _cut_lines(slave: dict[str, Any]) -> list[str]:
             f"{slave['cutting_velocity_reversals']}"
         )
     return lines
+
+
+def _newtons(value: float | None) -> str:
+    """A force in N with two decimals, or ``n/a`` where the run did not measure it (the
+    wave law's messages carry no handle force)."""
+    return "n/a" if value is None else f"{value:.2f} N"
+
+
+def final_gap_m(master: dict[str, Any], slave: dict[str, Any]) -> list[float] | None:
+    """The position gap at the end (x, y), m: the slave's own (paper, tdpa: against the
+    handle position it received), else, in a lane-law mode, the slave's final tool position
+    less the master's final handle position (the laws scale no positions); None when
+    neither is there."""
+    gap = slave.get("final_position_gap_m")
+    if gap is not None:
+        return list(gap)
+    tool, handle = slave.get("final_tool_position_m"), master.get("final_handle_position_m")
+    if tool is None or handle is None:
+        return None
+    return [float(tool[0]) - float(handle[0]), float(tool[1]) - float(handle[1])]
 
 
 def _ending_lines(master: dict[str, Any], slave: dict[str, Any]) -> list[str]:
@@ -538,7 +561,8 @@ def combined_summary(master: dict[str, Any], slave: dict[str, Any],
                      cpus: int | None = None) -> str:
     """The session's lines: both loops, what they took of the host's CPUs (``cpus``, default
     this process's usable CPUs), both link directions, forces, the cut, the watchdog."""
-    lines = ["session summary"]
+    lines = ["session summary" + (f" ([control] mode = {master['control']})"
+                                  if master.get("control") else "")]
     lines += _loop_lines(master, slave, usable_cpu_count() if cpus is None else cpus)
     lines += _link_lines(master, slave)
     lines.append(f"  max |force|: reflected to the operator {master['max_abs_force_N']:.2f} N,"
