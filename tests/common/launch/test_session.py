@@ -226,3 +226,28 @@ def test_haptic_slave_sim_refuses_a_duration_that_is_no_time(capsys) -> None:
         captured = capsys.readouterr()
         assert captured.err.strip() == (f"config error: --duration: must be in (0, 3600] s "
                                         f"(got {float(duration):g})")
+
+
+def test_a_session_in_a_lane_law_mode_cuts_the_clay_and_ends_aligned(tmp_path) -> None:
+    """``[control] mode = "wave"`` in the session's configuration runs both programs' wave
+    sides: the same report, the cut measured alike, the gap from the two final positions."""
+    config = tmp_path / "wave.toml"
+    config.write_text('[control]\nmode = "wave"\n')
+    out = tmp_path / "session"
+    with Program(python_module("haptic.common.launch.cli", "--out", str(out), "--config",
+                               str(config))) as session:
+        assert session.wait(timeout_s=150) == 0, session.output()
+        log = session.output()
+    assert "session summary ([control] mode = wave)" in log and "in the clay" in log
+    master = json.loads((out / "master.json").read_text())
+    slave = json.loads((out / "slave.json").read_text())
+    for summary in (master, slave):
+        assert set(REQUIRED_SUMMARY_KEYS) <= set(summary)
+        assert summary["control"] == "wave" and summary["watchdog_trips"] == 0
+    assert master["stop_reason"] == "steps"  # the README's 4 s of rig time
+    assert slave["removed_volume_m3"] > 0.0 and slave["cut_mean_force_N"] > 1.0
+    gap = [t - h for t, h in zip(slave["final_tool_position_m"],
+                                 master["final_handle_position_m"], strict=True)]
+    assert max(abs(g) for g in gap) <= 0.001, (master, slave)
+    assert f"position gap at the end |yt - Ah1 yh|: x {abs(gap[0]) * 1e3:.2f} mm" in log
+    assert (out / "report.md").is_file() and (out / "clay.png").is_file()
