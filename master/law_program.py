@@ -36,18 +36,23 @@ from typing import Any
 
 import numpy as np
 
-from haptic.common.control.law_pairs import ControlPair, make_pair
+from haptic.common.control.law_pairs import ControlPair
 from haptic.common.control.law_settings import LawSettings
 from haptic.common.model.work_area import SharedWorkArea
 from haptic.common.records.trace import TraceRecorder
 from haptic.common.runtime.cli_options import RunOptions
-from haptic.common.runtime.law_peer import LawPeer
+from haptic.common.runtime.law_peer import LawPeer, meet_law_peer
 from haptic.common.runtime.program_harness import ProgramHarness
 from haptic.common.runtime.runner import RunStats, StopSignals
 from haptic.common.runtime.tick_driver import Stage, TickDriver
 from haptic.common.wire.law_link import LawLink
 from haptic.master.hardware.interface import HandleHardware, HandleReading, HardwareError
-from haptic.master.program import MasterLoopOptions, enable_drives
+from haptic.master.program import (
+    MasterLoopOptions,
+    configure_hardware,
+    emulator_placement,
+    enable_drives,
+)
 from haptic.master.settings import SafetySettings
 from haptic.master.standalone import early_sync
 
@@ -213,12 +218,10 @@ def run_law_master(options: RunOptions, control: str, settings: LawSettings,
     ``peer_wait_s`` or a latched fault). Raises LinkOpenError for a slave that runs another
     control mode (the pairing refuses it)."""
     with StopSignals() as signals:
-        try:
-            hardware.configure()
-        except HardwareError as error:
-            print(f"haptic-master: hardware error: {error}", file=sys.stderr)
+        if not configure_hardware(hardware):
             return 1
-        extra_summary = {**extra_summary, **hardware.summary(), "control": control}
+        extra_summary = {**extra_summary, **emulator_placement(hardware), **hardware.summary(),
+                         "control": control}
         try:
             with LawLink(options.link, control) as link:
                 return _run_linked(options, control, settings, hardware, guard, loop_options,
@@ -240,15 +243,10 @@ def _run_linked(options: RunOptions, control: str, settings: LawSettings,
                 signals: StopSignals) -> int:
     """The peer wait, the loop and the summary; returns the exit status."""
     harness = ProgramHarness("haptic-master", "slave", options, link, settings.period_s)
-    came = harness.wait_for_peer(loop_options.peer_wait_s, signals,
-                                 preface=f"[control] mode = {control}: ")
-    if came is not None:
-        return came
-    pair = make_pair(control, 1, settings)
-    handle_initial, tool_initial = pair.initial_messages(1)
-    link_config = options.link
-    peer = LawPeer(link, tool_initial, pair.handle_channels, link_config.max_message_age_s,
-                   link_config.resync_messages)
+    met = meet_law_peer(harness, link, control, settings, loop_options.peer_wait_s, signals)
+    if isinstance(met, int):
+        return met
+    pair, peer = met
     trace = TraceRecorder(LAW_MASTER_TRACE_COLUMNS, loop_options.trace_every)
     stages = LawMasterStages(control, hardware, peer, pair, guard, harness, trace)
     driver = TickDriver([stages])

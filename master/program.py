@@ -63,7 +63,8 @@ from haptic.master.tick import MasterTick
 from haptic.master.tool_guard import ToolGuardSettings, ToolInputGuard
 
 __all__ = ["MASTER_RECORD_COLUMNS", "MASTER_TRACE_COLUMNS", "TICK_STAGES", "WARM_CAN_CYCLES",
-           "MasterLoopOptions", "device_process_cpu", "emulator_placement", "enable_drives",
+           "MasterLoopOptions", "configure_hardware", "device_process_cpu", "emulator_placement",
+           "enable_drives",
            "position_for_the_wire", "run_linked_master"]
 
 #: CAN cycles the master runs on its loop's CPU right before the first tick, once the
@@ -84,6 +85,16 @@ def enable_drives(hardware: HandleHardware) -> HandleReading:
     for _ in range(WARM_CAN_CYCLES - 1):
         reading = hardware.read()
     return reading
+
+
+def configure_hardware(hardware: HandleHardware) -> bool:
+    """``hardware.configure()``; False (the error said on stderr) when it fails."""
+    try:
+        hardware.configure()
+    except HardwareError as error:
+        print(f"haptic-master: hardware error: {error}", file=sys.stderr)
+        return False
+    return True
 
 
 #: The columns of ``/master/state`` in the recording (``--record``).
@@ -194,10 +205,7 @@ class _LinkedMaster:
         run = None
         hardware = self.hardware
         with StopSignals() as signals:
-            try:
-                hardware.configure()
-            except HardwareError as error:
-                print(f"haptic-master: hardware error: {error}", file=sys.stderr)
+            if not configure_hardware(hardware):
                 return 1
             self.extra_summary.update(emulator_placement(hardware))
             self.extra_summary.update(hardware.summary())  # e.g. the CAN drives' fallbacks

@@ -36,12 +36,11 @@ from haptic.common.control.law_pairs import (
     TOOL_DEVICE_MASS_KG,
     ControlPair,
     Device,
-    make_pair,
 )
 from haptic.common.control.law_settings import LawSettings
 from haptic.common.records.cutting import cutting_figures, steady_cut_fields
 from haptic.common.records.trace import TraceRecorder
-from haptic.common.runtime.law_peer import LawPeer
+from haptic.common.runtime.law_peer import LawPeer, meet_law_peer
 from haptic.common.runtime.program_harness import ProgramHarness
 from haptic.common.runtime.runner import RunStats, StopSignals
 from haptic.common.runtime.tick_driver import Stage, TickDriver
@@ -192,15 +191,10 @@ def run_law_slave(options: Any, control: str, settings: LawSettings, world: LawS
     LinkOpenError for a master that runs another control mode (the pairing refuses it)."""
     with StopSignals() as signals, LawLink(options.link, control) as link:
         harness = ProgramHarness("haptic-slave", "master", options, link, settings.period_s)
-        came = harness.wait_for_peer(peer_wait_s, signals,
-                                     preface=f"[control] mode = {control}: ")
-        if came is not None:
-            return came
-        pair = make_pair(control, 1, settings)
-        handle_initial, _ = pair.initial_messages(1)
-        config = options.link
-        peer = LawPeer(link, handle_initial, pair.tool_channels, config.max_message_age_s,
-                       config.resync_messages)
+        met = meet_law_peer(harness, link, control, settings, peer_wait_s, signals)
+        if isinstance(met, int):
+            return met
+        pair, peer = met
         trace = TraceRecorder(SLAVE_TRACE_COLUMNS, trace_every)
         stages = LawSlaveStages(control, peer, pair, world, harness, trace)
         driver = TickDriver([stages])

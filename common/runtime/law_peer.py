@@ -18,6 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from haptic.common.control.law_pairs import ControlPair, make_pair
+from haptic.common.control.law_settings import LawSettings
+from haptic.common.runtime.program_harness import ProgramHarness
+from haptic.common.runtime.runner import StopSignals
 from haptic.common.runtime.watchdog import PeerWatchdog, WatchdogState
 from haptic.common.wire.law_link import LawLink
 from haptic.common.wire.messages import Flags
@@ -71,4 +75,25 @@ class LawPeer:
         self.link.send_values(self.outgoing[0], Flags.SAFE_STATE | Flags.STOPPING)
 
 
-__all__ = ["LawPeer"]
+def meet_law_peer(harness: ProgramHarness, link: LawLink, control: str, settings: LawSettings,
+                  peer_wait_s: float | None, signals: StopSignals
+                  ) -> tuple[ControlPair, LawPeer] | int:
+    """Wait for the peer (``peer_wait_s``: at most this long, s; None: until stopped), then
+    build ``control``'s pair on one lane and this side's :class:`LawPeer` (the master's
+    reads tool messages and sends handle messages, the slave's the other way round).
+    Returns the exit status instead when the peer did not come (ProgramHarness.wait_for_peer);
+    raises LinkOpenError for a peer in another control mode."""
+    came = harness.wait_for_peer(peer_wait_s, signals, preface=f"[control] mode = {control}: ")
+    if came is not None:
+        return came
+    pair = make_pair(control, 1, settings)
+    handle_initial, tool_initial = pair.initial_messages(1)
+    master = link.config.side == "master"
+    config = link.config
+    peer = LawPeer(link, tool_initial if master else handle_initial,
+                   pair.handle_channels if master else pair.tool_channels,
+                   config.max_message_age_s, config.resync_messages)
+    return pair, peer
+
+
+__all__ = ["LawPeer", "meet_law_peer"]
