@@ -26,6 +26,9 @@ from haptic.common.analysis.preflight import (
 )
 from haptic.common.config import ConfigError, exit_on_config_error, load_config, override
 from haptic.common.config.control_schema import (
+    CONTROL_MODES,
+    lane_law,
+    law_settings,
     passivity_settings,
     standby_passivity_settings,
 )
@@ -35,6 +38,7 @@ from haptic.common.runtime.cli_options import add_retired_delay_option
 from haptic.common.runtime.console import quiet_on_closed_stdout, script_description
 from haptic.common.runtime.warp_init import init_warp
 from haptic.common.wire.injection import InjectionConfig
+from haptic.lockstep.compare_grid import TASKS
 from haptic.lockstep.environments import ENVIRONMENTS
 from haptic.master.settings import master_settings
 from haptic.master.simulated_rig.operator import parse_operator_spec
@@ -98,8 +102,12 @@ def _add_run_parser(sub: argparse._SubParsersAction) -> None:
                      help="the shipped limits: the master's [master.safety] and the programs' "
                      "supervision (watchdog [link.watchdog], the slave's work area and "
                      "[slave.safety]), or off (transparent)")
-    run.add_argument("--control", choices=("paper", "tdpa"), default=None,
-                     help="control scheme (default: the config's [control] mode)")
+    run.add_argument("--control", choices=CONTROL_MODES, default=None,
+                     help="control scheme (default: the config's [control] mode); a lane law "
+                     "runs the comparison's lane simulator on --task")
+    run.add_argument("--task", choices=TASKS, default="clay-cut",
+                     help="a lane law's task (the comparison's, docs/architectures.md; "
+                     "default clay-cut)")
     run.add_argument("--out", type=Path, default=Path("haptic-sim-run"))
     run.add_argument("--json", action="store_true", help="print a JSON summary")
 
@@ -240,6 +248,23 @@ def _warn_if_unstable(analysis: PreflightResult, gain: float, scenario: Any,
           + "); the run shows what that does", file=sys.stderr)
 
 
+def _command_run_law(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, Any]:
+    """``haptic-sim run`` in a lane-law mode (lockstep/law_run.py); the paper scheme's
+    options (--k, --governor, delay profiles, --operator) do not apply."""
+    from haptic.lockstep.law_run import run_law
+
+    for flag, given in (("--k", args.k is not None), ("--governor", args.governor),
+                        ("--operator", args.operator is not None),
+                        ("--delay-profile-to-slave", bool(args.delay_profile_to_slave)),
+                        ("--delay-profile-to-master", bool(args.delay_profile_to_master))):
+        if given:
+            raise ConfigError(flag, f"not with [control] mode = \"{lane_law(config)}\" "
+                              "(the paper scheme's; the lane laws run the comparison's tasks)")
+    return run_law(str(lane_law(config)), law_settings(config), args.task, args.delay,
+                   args.loss, args.jitter, args.duration, int(config["lockstep"]["seed"]),
+                   args.out)
+
+
 def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, Any]:
     """Run one scenario; write traces.npz and traces.png; return a summary."""
     from haptic.common.model.teleop import model_from_config
@@ -252,6 +277,10 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
     from haptic.master.margin_governor import governor_for
 
     _check_run_flags(args)
+    if args.control is not None:
+        config["control"]["mode"] = args.control
+    if lane_law(config) is not None:
+        return _command_run_law(args, config)
     model = model_from_config(config)
     gain = model.ch1_gain_k if args.k is None else args.k
     model = model.with_gain(gain)
@@ -263,8 +292,6 @@ def command_run(args: argparse.Namespace, config: dict[str, Any]) -> dict[str, A
     safety = master_settings(config).safety if shipped else TRANSPARENT_SAFETY
     supervision = (LockstepSupervision.from_config(config, scenario) if shipped
                    else TRANSPARENT_SUPERVISION)
-    if args.control is not None:
-        config["control"]["mode"] = args.control
     governed = config["governor"]["enabled"] if args.governor is None else args.governor
     # paper mode with the governor's tdpa action: the layer on standby (master/tick.py)
     standby = bool(governed and config["governor"]["action"] == "tdpa"

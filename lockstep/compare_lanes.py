@@ -45,6 +45,7 @@ from haptic.common.control.law_pairs import (
     Device,
     four_channel_gains,
 )
+from haptic.common.control.law_settings import LawSettings
 from haptic.common.control.tasks import free_motion_sine
 from haptic.lockstep.compare_grid import CompareGrid, Lane
 from haptic.lockstep.compare_links import lane_lines
@@ -129,15 +130,17 @@ def wall_force_N(grid: CompareGrid, tasks: LaneTasks, position_m: np.ndarray,
     return force
 
 
-def simulate_lanes(control: str, lanes: list[Lane], grid: CompareGrid) -> LaneRecords:
+def simulate_lanes(control: str, lanes: list[Lane], grid: CompareGrid,
+                   settings: LawSettings | None = None) -> LaneRecords:
     """Run ``control`` (one of :data:`LANE_CONTROLS`) on every lane for the grid's
-    duration; the records of the task axis."""
+    duration, built with ``settings`` (default: the comparison's, at :data:`PERIOD_S`); the
+    records of the task axis."""
     if control not in PAIRS:
         raise ValueError(f"the lane simulator runs {', '.join(LANE_CONTROLS)} (got {control!r})")
     count = len(lanes)
     duration = grid.duration_s
     steps = int(round(duration / PERIOD_S))
-    pair: ControlPair = PAIRS[control](count)
+    pair: ControlPair = PAIRS[control](count, settings)
     handle_initial, tool_initial = pair.initial_messages(count)
     handle_line, tool_line = lane_lines(lanes, steps, PERIOD_S, grid.seed, handle_initial,
                                         tool_initial)
