@@ -15,12 +15,14 @@ One tick at Ts::
 The safety layer around the law: the operator's force reaches the law clamped to ``[master.
 safety] force_limit_N`` (a non-finite axis counts as 0 N), and above ``force_trip_N`` (or on
 a hardware fault) the master latches its safe state for the rest of the run (exit status 1);
-the handle command is held in the work area both sides hold (common/model/work_area.py). A law
-that commands a velocity only (wave variables) drives the handle through the integral of its
-commands, kept within :data:`COMMAND_WINDOW_M` of the measured position (no wind-up against
-the operator's hand). In the safe state (the watchdog not ``ok``, a latched fault) the law is
-not stepped and the handle holds where it was when forces went off; the drives' quick stop and
-re-enable are the paper mode's (``stop_motion``, ``resume_motion``).
+the handle command moves at most ``velocity_limit_m_per_s``, stays within
+:data:`COMMAND_WINDOW_M` of the measured position (inside the drives' following-error window)
+and in the work area both sides hold (common/model/work_area.py). A law that commands a
+velocity only (wave variables) drives the handle through the integral of its commands, kept
+within the same window (no wind-up against the operator's hand). In the safe state (the
+watchdog not ``ok``, a latched fault) the law is not stepped and the handle holds where it was
+when forces went off; the drives' quick stop and re-enable are the paper mode's
+(``stop_motion``, ``resume_motion``).
 
 What the operator feels in these modes is the handle's own motion under the law's command:
 the simulated rig's operator is shown the force the hand applies (the laws render the
@@ -94,6 +96,18 @@ class LawMasterGuard:
         """The command (2,), m, within the work area's handle box."""
         return np.clip(command_m, self.area.handle_low_m, self.area.handle_high_m)
 
+    def command(self, wanted_m: np.ndarray, previous_m: np.ndarray, measured_m: np.ndarray,
+                period_s: float) -> np.ndarray:
+        """The handle command (2,), m, the drives may follow: ``wanted_m`` moved at most
+        ``velocity_limit_m_per_s`` from the previous command, within :data:`COMMAND_WINDOW_M`
+        of the measured position (well inside a drive's following-error window: a law's
+        virtual manipulator may run ahead of a handle its servo has not caught up with), in
+        the work area's handle box."""
+        step = self.safety.velocity_limit_m_per_s * period_s
+        command = np.clip(wanted_m, previous_m - step, previous_m + step)
+        command = np.clip(command, measured_m - COMMAND_WINDOW_M, measured_m + COMMAND_WINDOW_M)
+        return self.held(command)
+
 
 class LawMasterStages:
     """The master's side of the tick driver in a law mode (see the module)."""
@@ -164,14 +178,16 @@ class LawMasterStages:
         self.fh = fh = self.guard.operator_force_N(reading.force_N)
         peer = self.peer
         position, velocity = self.pair.master(fh, peer.message, peer.fresh, peer.outgoing)
+        period_s = self.harness.period_s
         if position is None:
             window = COMMAND_WINDOW_M
-            self.integrated_m = np.clip(self.integrated_m + velocity[0] * self.harness.period_s,
+            self.integrated_m = np.clip(self.integrated_m + velocity[0] * period_s,
                                         reading.position_m - window, reading.position_m + window)
-            command = self.integrated_m
+            wanted = self.integrated_m
         else:
-            command = position[0]
-        self.command_m = self.guard.held(command)
+            wanted = position[0]
+        self.command_m = self.guard.command(wanted, self.command_m, reading.position_m,
+                                            period_s)
 
     def write(self, tick: int, now_ns: int) -> None:
         self.hardware.present_tool_force(self.fh[0] if self.enabled else np.zeros(2))
