@@ -127,6 +127,8 @@ class LawMasterStages:
         self.command_m = np.zeros(2)
         self.integrated_m = np.zeros(2)
         self.enabled = False
+        #: the drives were given a quick stop (stop_motion) that no resume_motion undid yet
+        self.stopped = False
         self.fault: str | None = None
         self.now_s = 0.0
         self.max_force_N = 0.0
@@ -163,10 +165,13 @@ class LawMasterStages:
         position = np.nan_to_num(self.reading.position_m)
         if enabled:
             self.integrated_m = position.copy()
-            hardware.resume_motion()
+            if self.stopped:  # re-enabled holding where they are (not at the first start)
+                hardware.resume_motion()
+                self.stopped = False
         else:
             self.command_m = self.guard.held(position)
             hardware.stop_motion(self.fault or self.peer.watchdog.state_text())
+            self.stopped = True
 
     def law(self, tick: int, now_ns: int) -> None:
         if not self.enabled:
