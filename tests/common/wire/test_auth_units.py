@@ -154,6 +154,14 @@ def test_edges_of_a_hello_decode() -> None:
         decode_hello(ok + bytes(256 - len(ok)), None)
     zero = msgpack.packb([SCHEMA_VERSION, 3, 2, 0, bytes(16), NOW_NS, False], use_bin_type=True)
     assert decode_hello(zero, None).epoch == 0
+    # the time stamp's whole range, 0 to 2**63 - 1 ns, and not one past it
+    for time_ns in (0, 2**63 - 1):
+        edge = msgpack.packb([SCHEMA_VERSION, 3, 2, 7, bytes(16), time_ns, False],
+                             use_bin_type=True)
+        assert decode_hello(edge, None).time_ns == time_ns
+    past = msgpack.packb([SCHEMA_VERSION, 3, 2, 7, bytes(16), 2**63, False], use_bin_type=True)
+    with pytest.raises(HelloError, match="bad field"):
+        decode_hello(past, None)
 
 
 def test_an_authenticated_hello_needs_a_tag_that_verifies() -> None:
