@@ -64,7 +64,8 @@ LAW_MASTER_TRACE_COLUMNS = (
     "time_s", "handle_force_x_N", "handle_force_y_N", "handle_position_x_m",
     "handle_position_y_m", "command_x_m", "command_y_m", "forces_enabled",
 )
-#: How far an integrated velocity command may run ahead of the measured handle position, m.
+#: How far the handle command may run ahead of the measured handle position, m: well inside
+#: the drives' following-error window (``[master.can] following_error_window_m``, 10 mm).
 COMMAND_WINDOW_M = 0.003
 
 
@@ -140,7 +141,8 @@ class LawMasterStages:
     def start(self, reading: HandleReading) -> None:
         """Before the first tick: the drives' reading after their enable; the hold there."""
         self.reading = reading
-        self.command_m = self.integrated_m = np.nan_to_num(reading.position_m).copy()
+        self.command_m = np.nan_to_num(reading.position_m)
+        self.integrated_m = self.command_m.copy()
 
     def read(self, tick: int, now_ns: int) -> None:
         if tick > 0:
