@@ -130,6 +130,14 @@ def wall_force_N(grid: CompareGrid, tasks: LaneTasks, position_m: np.ndarray,
     return force
 
 
+def lane_devices(grid: CompareGrid, lanes: int) -> tuple[Device, Device]:
+    """The handle (the hand's mass riding on it) and the tool devices at rest at 0, over
+    ``lanes`` lanes: the lane simulator's and the real-link cells'."""
+    return (Device.at_rest(HANDLE_DEVICE_MASS_KG + grid.task.hand_mass_kg,
+                           HANDLE_DEVICE_DAMPING_N_S_PER_M, lanes),
+            Device.at_rest(TOOL_DEVICE_MASS_KG, TOOL_DEVICE_DAMPING_N_S_PER_M, lanes))
+
+
 def simulate_lanes(control: str, lanes: list[Lane], grid: CompareGrid,
                    settings: LawSettings | None = None) -> LaneRecords:
     """Run ``control`` (one of :data:`LANE_CONTROLS`) on every lane for the grid's
@@ -146,9 +154,7 @@ def simulate_lanes(control: str, lanes: list[Lane], grid: CompareGrid,
                                         tool_initial)
     tasks = LaneTasks.of(lanes)
     clay = LaneClay(tasks)
-    handle = Device.at_rest(HANDLE_DEVICE_MASS_KG + grid.task.hand_mass_kg,
-                            HANDLE_DEVICE_DAMPING_N_S_PER_M, count)
-    tool = Device.at_rest(TOOL_DEVICE_MASS_KG, TOOL_DEVICE_DAMPING_N_S_PER_M, count)
+    handle, tool = lane_devices(grid, count)
     records = LaneRecords.create(PERIOD_S, steps, count)
     with np.errstate(over="ignore", invalid="ignore"):
         for k in range(steps):
@@ -172,4 +178,5 @@ def lane_steps(grid: CompareGrid) -> int:
     return int(math.floor(grid.duration_s / PERIOD_S + 0.5))
 
 
-__all__ = ["LANE_CONTROLS", "PERIOD_S", "four_channel_gains", "lane_steps", "simulate_lanes"]
+__all__ = ["LANE_CONTROLS", "PERIOD_S", "four_channel_gains", "lane_devices", "lane_steps",
+           "simulate_lanes"]

@@ -23,16 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from haptic.common.control.law_pairs import (
-    HANDLE_DEVICE_DAMPING_N_S_PER_M,
-    HANDLE_DEVICE_MASS_KG,
-    PAIRS,
-    PERIOD_S,
-    TOOL_DEVICE_DAMPING_N_S_PER_M,
-    TOOL_DEVICE_MASS_KG,
-    ControlPair,
-    Device,
-)
+from haptic.common.control.law_pairs import PAIRS, PERIOD_S, ControlPair
 from haptic.common.runtime.runner import RealTimeRunner, RunStats
 from haptic.common.runtime.tick_driver import Stage, TickDriver
 from haptic.common.wire.law_link import LawLink
@@ -43,6 +34,7 @@ from haptic.lockstep.compare_lanes import (
     LaneClay,
     LaneTasks,
     hand_force_N,
+    lane_devices,
     lane_steps,
     wall_force_N,
 )
@@ -74,9 +66,7 @@ class LawPlant:
         self.grid = grid
         self.tasks = LaneTasks.of([lane])
         self.clay = LaneClay(self.tasks)
-        self.handle = Device.at_rest(HANDLE_DEVICE_MASS_KG + grid.task.hand_mass_kg,
-                                     HANDLE_DEVICE_DAMPING_N_S_PER_M, 1)
-        self.tool = Device.at_rest(TOOL_DEVICE_MASS_KG, TOOL_DEVICE_DAMPING_N_S_PER_M, 1)
+        self.handle, self.tool = lane_devices(grid, 1)
         self.records = LaneRecords.create(PERIOD_S, steps, 1)
         self.fh = np.zeros((1, 2))
         self.fe = np.zeros((1, 2))
