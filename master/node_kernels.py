@@ -23,7 +23,12 @@ from typing import Any
 import warp as wp
 
 from haptic.common.control.command_funcs import clamp_to_box, finite_or_zero, rebase_origin
-from haptic.common.model.block_kernels import CompensatorArrays, block_step, governed_inputs
+from haptic.common.model.block_kernels import (
+    EXCHANGE_COLUMNS,
+    CompensatorArrays,
+    block_step,
+    governed_inputs,
+)
 from haptic.common.model.block_layout import CompensatorLayout
 
 # The programs print JSON on stdout: Warp must not announce itself there (its struct
@@ -41,7 +46,7 @@ TRIP_WORKSPACE = 5
 #: force, command rate, workspace); this bit when the force gate opened.
 ENABLE_BIT = 8
 #: Columns of the kernel's ``inputs`` (lanes, 6).
-INPUT_COLUMNS = ("fh_x", "fh_y", "yh_x", "yh_y", "ft_x", "ft_y")
+INPUT_COLUMNS = EXCHANGE_COLUMNS
 #: Columns of ``used`` (lanes, 4): the forces the compensator received this step, N (zero
 #: in a faulted lane, whose compensator is frozen).
 USED_COLUMNS = ("fh_used_x", "fh_used_y", "ft_used_x", "ft_used_y")

@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from haptic.common.model.block_kernels import write_exchange_inputs
 from haptic.common.runtime.lane_tick import UNCONFIGURED_LANE, TickFlags, one_lane_passivity
 from haptic.common.wire.lane_flags import lane_flag_values
 from haptic.common.wire.messages import FLAGS_BY_VALUE, Flags, ToolState
@@ -288,7 +289,7 @@ class MasterTick:
                     supervisor = self.supervisors[0]
                     target[0, 0] = tool_position_m[0] / supervisor.ratio_x
                     target[0, 1] = tool_position_m[1] / supervisor.ratio_y
-            _write_inputs(state.inputs, handle_force_N, handle_position_m, tool_force_N)
+            write_exchange_inputs(state.inputs, handle_force_N, handle_position_m, tool_force_N)
             events_before = len(state.events)
             self.node.step_inputs(state)
             if all_on:  # the node's own arrays, which its next step overwrites
@@ -442,29 +443,6 @@ class MasterTick:
         return gain_k
 
 
-def _write_inputs(inputs: np.ndarray, handle_force_N: Any, handle_position_m: Any,
-                  tool_force_N: Any) -> None:
-    """The node's inputs (lanes, 6+): fh, yh and ft ((lanes, 2) each, N, m, N) into columns
-    0-5; one lane's (1, 2) arrays element by element (about half the time of the slice
-    writes, the same values), else by columns (broadcasting)."""
-    if (inputs.shape[0] == 1 and getattr(handle_force_N, "shape", None) == _ONE_LANE_PAIR
-            and getattr(handle_position_m, "shape", None) == _ONE_LANE_PAIR
-            and getattr(tool_force_N, "shape", None) == _ONE_LANE_PAIR):
-        row = inputs[0]
-        row[0] = handle_force_N[0, 0]
-        row[1] = handle_force_N[0, 1]
-        row[2] = handle_position_m[0, 0]
-        row[3] = handle_position_m[0, 1]
-        row[4] = tool_force_N[0, 0]
-        row[5] = tool_force_N[0, 1]
-        return
-    inputs[:, 0:2] = handle_force_N
-    inputs[:, 2:4] = handle_position_m
-    inputs[:, 4:6] = tool_force_N
-
-
-#: The shape of one lane's (x, y) inputs.
-_ONE_LANE_PAIR = (1, 2)
 #: one lane, as a mask (MasterTick.switch_passivity)
 _ONE_LANE = np.ones(1, bool)
 

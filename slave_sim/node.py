@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from haptic.common.config.scenario import Scenario, load_scenario
-from haptic.common.model.block_kernels import compensator_arrays
+from haptic.common.model.block_kernels import compensator_arrays, write_exchange_inputs
 from haptic.common.model.block_layout import CompensatorLayout
 from haptic.common.model.drift import DriftCoupling
 from haptic.common.model.lti import DiscreteLTI, Path, combine, discretize
@@ -37,8 +37,6 @@ from haptic.slave_sim.tool import POSITION_COLUMNS, VELOCITY_COLUMNS, tool_const
 
 COMPENSATOR_INPUTS = ("fh_x", "fh_y", "ft_x", "ft_y")
 COMPENSATOR_OUTPUTS = ("vt_x", "vt_y")
-#: The shape of one lane's (x, y) inputs.
-_ONE_LANE = (1, 2)
 #: The Warp device of the node's buffers: the CPU, whose arrays numpy views share (the clay
 #: runs on its own device).
 DEVICE = "cpu"
@@ -354,27 +352,18 @@ class SlaveNode:
     def _write_inputs(runtime: _NodeKernels, state: SlaveState, handle_force_N: np.ndarray,
                       handle_position_m: np.ndarray) -> None:
         """The step's inputs into the kernels' buffer (:data:`~haptic.slave_sim.node_kernels.
-        INPUT_COLUMNS`): one lane element by element (about half the time of the slice
-        writes, the same values), more lanes by columns."""
+        INPUT_COLUMNS`): the exchanged forces and position as both nodes write them
+        (:func:`~haptic.common.model.block_kernels.write_exchange_inputs`), then the force
+        ramp and the gain ratio (by columns, and only where they change, for more lanes)."""
         scale, gain = state.tool_force_scale, state.gain_ratio
-        fh, yh, ft = handle_force_N, handle_position_m, state.tool_force_N
-        if (runtime.lanes == 1 and getattr(fh, "shape", None) == _ONE_LANE
-                and getattr(yh, "shape", None) == _ONE_LANE):  # else: broadcast by columns
+        if write_exchange_inputs(runtime.inputs, handle_force_N, handle_position_m,
+                                 state.tool_force_N):  # one lane: these columns too
             row = runtime.inputs_row
-            row[0] = fh[0, 0]
-            row[1] = fh[0, 1]
-            row[2] = yh[0, 0]
-            row[3] = yh[0, 1]
-            row[4] = ft[0, 0]
-            row[5] = ft[0, 1]
             row[6] = 1.0 if scale is None else scale[0]
             row[7] = 1.0 if gain is None else gain[0]
             runtime.unit_scale = runtime.unit_gain = False  # the columns written here
             return
         inputs = runtime.inputs
-        inputs[:, 0:2] = handle_force_N
-        inputs[:, 2:4] = handle_position_m
-        inputs[:, 4:6] = state.tool_force_N
         if scale is not None or not runtime.unit_scale:  # 1 where none: written once
             inputs[:, 6] = 1.0 if scale is None else scale
             runtime.unit_scale = scale is None

@@ -28,7 +28,12 @@ from typing import Any
 
 import warp as wp
 
-from haptic.common.model.block_kernels import CompensatorArrays, block_step, governed_inputs
+from haptic.common.model.block_kernels import (
+    EXCHANGE_COLUMNS,
+    CompensatorArrays,
+    block_step,
+    governed_inputs,
+)
 from haptic.common.model.block_layout import CompensatorLayout
 
 # The programs print JSON on stdout: Warp must not announce itself there.
@@ -37,7 +42,7 @@ wp.config.log_level = wp.LOG_WARNING
 #: Columns of the kernel's ``inputs`` (lanes, 8): the bounded handle force (N) and position
 #: (m) the tool follows, the environment force of the previous step (N), the master's force
 #: ramp on ft (0..1) and the governed gain ratio k/k0.
-INPUT_COLUMNS = ("fh_x", "fh_y", "yh_x", "yh_y", "ft_x", "ft_y", "ft_scale", "gain_ratio")
+INPUT_COLUMNS = (*EXCHANGE_COLUMNS, "ft_scale", "gain_ratio")
 #: Columns of ``motion`` (lanes, 4): the tool's position before the step (m) and its
 #: acceleration at the end of it (m/s^2).
 MOTION_COLUMNS = ("previous_x", "previous_y", "acceleration_x", "acceleration_y")

@@ -49,6 +49,36 @@ def compensator_arrays(matrices: Sequence[Any], per_lane: int, state: Any) -> An
     return arrays
 
 
+#: The input columns both nodes' kernels start with: the handle's force fh (N) and position
+#: yh (m), the tool's force ft (N), (x, y) each (master/node_kernels.py, slave_sim/node_kernels.py).
+EXCHANGE_COLUMNS = ("fh_x", "fh_y", "yh_x", "yh_y", "ft_x", "ft_y")
+#: The shape of one lane's (x, y) pair.
+_ONE_LANE_PAIR = (1, 2)
+
+
+def write_exchange_inputs(inputs: Any, handle_force_N: Any, handle_position_m: Any,
+                          tool_force_N: Any) -> bool:
+    """fh, yh and ft ((lanes, 2) each or broadcastable, N, m, N) into :data:`EXCHANGE_COLUMNS`
+    of a node's input buffer ``inputs`` (lanes, 6+). One lane's (1, 2) arrays are written
+    element by element (about half the time of the slice writes, the same values), anything
+    else by columns; returns whether the one-lane way was taken."""
+    if (inputs.shape[0] == 1 and getattr(handle_force_N, "shape", None) == _ONE_LANE_PAIR
+            and getattr(handle_position_m, "shape", None) == _ONE_LANE_PAIR
+            and getattr(tool_force_N, "shape", None) == _ONE_LANE_PAIR):
+        row = inputs[0]
+        row[0] = handle_force_N[0, 0]
+        row[1] = handle_force_N[0, 1]
+        row[2] = handle_position_m[0, 0]
+        row[3] = handle_position_m[0, 1]
+        row[4] = tool_force_N[0, 0]
+        row[5] = tool_force_N[0, 1]
+        return True
+    inputs[:, 0:2] = handle_force_N
+    inputs[:, 2:4] = handle_position_m
+    inputs[:, 4:6] = tool_force_N
+    return False
+
+
 @wp.func
 def governed_inputs(u: wp.vec4d, gain_ratio: wp.float64) -> wp.vec4d:
     """The compensator's inputs ``u`` (N) scaled by the margin governor's gain ratio k/k0:
@@ -101,4 +131,5 @@ def block_step(layout: CompensatorLayout) -> Any:
     return compensator_step
 
 
-__all__ = ["CompensatorArrays", "block_step", "compensator_arrays", "governed_inputs"]
+__all__ = ["EXCHANGE_COLUMNS", "CompensatorArrays", "block_step", "compensator_arrays",
+           "governed_inputs", "write_exchange_inputs"]
