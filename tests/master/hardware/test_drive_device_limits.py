@@ -635,3 +635,19 @@ def test_on_classical_can_a_pdo_is_at_most_8_bytes() -> None:
     assert link.write(0x1A00, 2, 0x607A0020) is None  # 2 bytes more
     assert link.write(0x1A00, 0, 4) == PDO_LENGTH  # 10 bytes
     assert link.read(0x1A00, 0) == 0
+
+
+@pytest.mark.parametrize(("index", "kind"), [
+    (0x13FF, None),
+    (0x1400, (0x1400, True)), (0x15FF, (0x15FF, True)),  # RPDO communication
+    (0x1600, (0x1400, True)), (0x17FF, (0x15FF, True)),  # RPDO mapping
+    (0x1800, (0x1800, False)), (0x19FF, (0x19FF, False)),  # TPDO communication
+    (0x1A00, (0x1800, False)), (0x1BFF, (0x19FF, False)),  # TPDO mapping
+    (0x1C00, None),
+])
+def test_the_pdo_object_ranges_end_where_cia_301_ends_them(
+        index: int, kind: tuple[int, bool] | None) -> None:
+    """CiA 301's ranges: RPDO communication 0x1400-0x15FF and mapping 0x1600-0x17FF, TPDO
+    communication 0x1800-0x19FF and mapping 0x1A00-0x1BFF (512 PDOs each); a mapping object
+    belongs to the communication object 0x200 below it. Each range's first and last index."""
+    assert dd.pdo_kind(index) == kind
