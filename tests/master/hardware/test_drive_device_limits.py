@@ -25,6 +25,7 @@ from haptic.master.hardware import cia402
 from haptic.master.hardware import drive_device as dd
 from haptic.master.hardware.cia402 import DriveState
 from haptic.master.hardware.drive_device import DriveObjects, DriveRuntime
+from tests.master.hardware import eds_variants
 
 NODE = 3
 INVALID = 0x80000000  # CiA 301 COB-ID bit 31: the PDO does not exist
@@ -651,3 +652,25 @@ def test_the_pdo_object_ranges_end_where_cia_301_ends_them(
     communication 0x1800-0x19FF and mapping 0x1A00-0x1BFF (512 PDOs each); a mapping object
     belongs to the communication object 0x200 below it. Each range's first and last index."""
     assert dd.pdo_kind(index) == kind
+
+
+def test_raw_or_gives_the_absent_value_for_a_sub_index_the_eds_lacks() -> None:
+    """A variable has only sub-index 0, a record only its own entries: anything else is
+    absent, never another entry's value."""
+    device = _Link().device
+    assert device.raw_or(0x1017, 0, 42) == device.raw(0x1017)
+    assert device.raw_or(0x1017, 1, 42) == 42  # a variable at sub-index 1
+    assert device.raw_or(0x1018, 1, 7) == device.raw(0x1018, 1)
+    assert device.raw_or(0x1018, 0x7F, 7) == 7  # a record without that entry
+    assert device.raw_or(0x2FFF, 0, 9) == 9  # no such object
+
+
+def test_a_drive_whose_eds_lacks_the_heartbeat_and_the_interpolation_period(tmp_path) -> None:
+    """Without 0x1017 the drive produces no heartbeat (0 ms); without 0x60C2 its cycle is
+    the SYNC period it was given, 1 ms unless told."""
+    eds = eds_variants.written(tmp_path, "bare.eds",
+                               eds_variants.without(eds_variants.packaged(), 0x1017, 0x60C2))
+    device = _Link(eds=eds).device
+    assert device.heartbeat_producer_ms == 0
+    assert device.interpolation_period_s == 1e-3
+    assert _Link(eds=eds, sync_period_s=0.00054).device.interpolation_period_s == 0.00054
