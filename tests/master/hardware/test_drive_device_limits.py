@@ -674,3 +674,70 @@ def test_a_drive_whose_eds_lacks_the_heartbeat_and_the_interpolation_period(tmp_
     assert device.heartbeat_producer_ms == 0
     assert device.interpolation_period_s == 1e-3
     assert _Link(eds=eds, sync_period_s=0.00054).device.interpolation_period_s == 0.00054
+
+
+def _drive_of(tmp_path: Path, text: str) -> DriveObjects:
+    """The drive of an EDS variant ``text`` (written to ``tmp_path``)."""
+    return _Link(eds=eds_variants.written(tmp_path, "variant.eds", text)).device
+
+
+def test_the_optional_communication_objects_an_eds_lacks_take_their_cia_defaults(
+        tmp_path) -> None:
+    """No heartbeat consumer (0x1016), no node guarding (0x100C, 0x100D: the packaged EDS has
+    neither), no following-error timeout (0x6066); the abort-connection option (0x6007) and
+    the quick-stop option (0x605A) at CiA 402's defaults, 1 and 2."""
+    packaged = _Link().device
+    assert (packaged.guard_time_ms, packaged.life_time_factor) == (0, 0)
+    device = _drive_of(tmp_path, eds_variants.without(
+        eds_variants.packaged(), 0x1016, 0x6066, 0x6007, 0x605A))
+    assert (device.heartbeat_consumer_node, device.heartbeat_consumer_ms) == (0, 0)
+    assert (device.guard_time_ms, device.life_time_factor) == (0, 0)
+    assert device.following_error_timeout_s == 0.0
+    assert (device.abort_connection_option, device.quick_stop_option) == (1, 2)
+
+
+def test_a_drive_without_pdo_1_has_disabled_empty_layouts_for_it(tmp_path) -> None:
+    device = _drive_of(tmp_path, eds_variants.without(
+        eds_variants.packaged(), 0x1400, 0x1600, 0x1800, 0x1A00))
+    empty = dd.PdoLayout(False, 0, 0, (), 0)
+    assert device.rpdo == empty and device.tpdo == empty
+    assert (device.rpdo.comm_index, device.tpdo.comm_index) == (0x1400, 0x1800)
+    assert device.rpdos_by_id == {} and device.tpdos == ()
+
+
+def test_a_mapping_object_without_its_communication_object_is_no_pdo(tmp_path) -> None:
+    """A PDO needs both objects. (The other way round, a communication object without its
+    mapping, canopen's own node refuses the dictionary.)"""
+    device = _drive_of(tmp_path, eds_variants.without(eds_variants.packaged(), 0x1800))
+    assert device.tpdo == dd.PdoLayout(False, 0, 0, (), 0)
+    assert device.tpdo.comm_index == 0x1800 and device.tpdos == ()
+
+
+def test_a_mapping_without_its_count_maps_nothing(tmp_path) -> None:
+    device = _drive_of(tmp_path, eds_variants.without_sections(eds_variants.packaged(),
+                                                               "1A00sub0"))
+    assert device.tpdo.mapping == () and device.tpdo.cob_id == 0x180 + NODE
+
+
+def test_a_mapping_entry_of_the_wrong_length_disables_the_pdo(tmp_path) -> None:
+    """The statusword (16 bits) mapped as 8 bits: the drive cannot fill that frame, so the
+    PDO is disabled, its COB-ID kept, nothing else."""
+    device = _drive_of(tmp_path, eds_variants.entry_set(
+        eds_variants.packaged(), "1A00sub1", "DefaultValue", "0x60410008"))
+    assert device.tpdo == dd.PdoLayout(False, 0x180 + NODE, 0, (), 0)
+    assert device.tpdo.cob_id == 0x180 + NODE
+
+
+def test_a_communication_record_without_its_transmission_type_is_255(tmp_path) -> None:
+    """CiA 301: 255, event-driven (device profile specific), when the type is not given."""
+    device = _drive_of(tmp_path, eds_variants.without_sections(eds_variants.packaged(),
+                                                               "1800sub2"))
+    assert device.tpdo.transmission_type == 255
+
+
+def test_the_identity_objects_read_the_eds_device_information(tmp_path) -> None:
+    """0x1018:01-03 are the ``[DeviceInfo]`` vendor, product and revision numbers."""
+    text = eds_variants.entry_set(eds_variants.packaged(), "DeviceInfo", "VendorNumber",
+                                  "0x0000ABCD")
+    device = _drive_of(tmp_path, text)
+    assert [device.raw(0x1018, sub) for sub in (1, 2, 3)] == [0xABCD, 0x4C02, 0x10000]
