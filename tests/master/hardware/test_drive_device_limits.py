@@ -736,8 +736,21 @@ def test_a_communication_record_without_its_transmission_type_is_255(tmp_path) -
 
 
 def test_the_identity_objects_read_the_eds_device_information(tmp_path) -> None:
-    """0x1018:01-03 are the ``[DeviceInfo]`` vendor, product and revision numbers."""
-    text = eds_variants.entry_set(eds_variants.packaged(), "DeviceInfo", "VendorNumber",
-                                  "0x0000ABCD")
+    """0x1018:01-03 are the ``[DeviceInfo]`` vendor, product and revision numbers, over what
+    the EDS gives those entries as their defaults."""
+    text = eds_variants.packaged()
+    for key, value in (("VendorNumber", "0x0000ABCD"), ("ProductNumber", "0x00001234"),
+                       ("RevisionNumber", "0x00020003")):
+        text = eds_variants.entry_set(text, "DeviceInfo", key, value)
     device = _drive_of(tmp_path, text)
-    assert [device.raw(0x1018, sub) for sub in (1, 2, 3)] == [0xABCD, 0x4C02, 0x10000]
+    assert [device.raw(0x1018, sub) for sub in (1, 2, 3)] == [0xABCD, 0x1234, 0x20003]
+
+
+def test_an_object_the_eds_gives_no_value_reads_0(tmp_path) -> None:
+    """As a drive's firmware has it: an object without a default value is 0."""
+    text = "".join(body if name.upper() != "6066" else body.replace("DefaultValue=10\n", "")
+                   for name, body in eds_variants.sections(eds_variants.packaged()))
+    head = eds_variants.packaged().split("[", 1)[0]
+    assert "DefaultValue=10\n" not in dict(eds_variants.sections(head + text))["6066"]
+    device = _drive_of(tmp_path, head + text)
+    assert device.raw(0x6066) == 0 and device.following_error_timeout_s == 0.0
