@@ -653,6 +653,35 @@ def test_sensor_counts_that_scale_beyond_a_float_are_a_fault_and_nan(axis: int) 
         assert np.isnan(reading.force_N).all()
 
 
+def test_the_smallest_emcy_code_is_logged_and_latches_the_drive_fault() -> None:
+    """Every code but 0 (the error reset) is a fault: reported, logged and quick-stopping
+    the drives, 0x0001 as much as 0x8611."""
+    with active_rig() as hardware:
+        hardware.read()
+        faults = faults_after(hardware, [(cia402.EMCY_BASE + 1, cia402.emcy_frame(0x0001))])
+        assert "x drive EMCY error code 0x0001 (register 0x01)" in faults
+        assert hardware.driver.emcy_log == [("x", 0x0001)]
+        assert any(fault.startswith("quick stop on both drives") for fault in faults), faults
+
+
+def test_remote_frames_on_the_supervision_ids_in_the_cycle_are_ignored() -> None:
+    """A remote frame (a node guarding request) on a drive's EMCY or heartbeat COB-ID is no
+    EMCY and no heartbeat of that drive: neither a malformed EMCY nor a heartbeat without
+    a state."""
+    with inactive_rig() as hardware:
+        hardware.configure()
+        hardware.read()
+        driver = hardware.driver
+        channel = driver.bus_options["channel"]
+        driver.sync()  # the frames come while the cycle collects its replies
+        with can.Bus(interface="virtual", channel=channel) as other:
+            for frame_id in (cia402.EMCY_BASE + 1, HEARTBEAT_BASE + 1):
+                other.send(can.Message(arbitration_id=frame_id, is_remote_frame=True, dlc=1,
+                                       is_extended_id=False))
+        assert hardware.read().faults == ()
+        assert driver.emcy_log == []
+
+
 def test_a_frame_of_an_unknown_id_in_the_cycle_is_ignored() -> None:
     """A stranger's frame (any id the driver does not know, TPDO-sized) while the driver
     collects its cycle is neither a sample nor a fault: the drive whose TPDO is missing

@@ -48,7 +48,8 @@ def test_the_sdo_abort_texts(code: int, meaning: str) -> None:
 
 class _SdoPeer:
     """A second bus member that answers each SDO request to node 1 with the frames
-    ``answer(request_number, request)`` gives (none: the request is lost)."""
+    ``answer(request_number, request)`` gives, (id, data) each, data None for a remote
+    frame (none: the request is lost)."""
 
     def __init__(self, channel: str, answer) -> None:
         self.requests: list[bytes] = []
@@ -61,7 +62,10 @@ class _SdoPeer:
             return
         self.requests.append(bytes(message.data))
         for frame_id, data in self._answer(len(self.requests), bytes(message.data)):
-            self._bus.send(can.Message(arbitration_id=frame_id, data=data,
+            self._bus.send(can.Message(arbitration_id=frame_id, is_extended_id=False,
+                                       data=data, is_remote_frame=True, dlc=1)
+                           if data is None else
+                           can.Message(arbitration_id=frame_id, data=data,
                                        is_extended_id=False))
 
     def close(self) -> None:
@@ -193,6 +197,19 @@ def test_supervision_frames_during_an_sdo_exchange_are_kept_for_the_next_read() 
     assert driver.emcy_log == [("x", 0x5530)]
     assert driver._pending_faults == ["x drive EMCY error code 0x5530 (register 0x01)"]
     assert driver.heartbeats.seen_s[1] >= before and driver.heartbeats.seen_s[0] == 0.0
+
+
+def test_remote_frames_on_the_supervision_ids_during_an_sdo_exchange_are_ignored() -> None:
+    """A remote frame on a drive's EMCY or heartbeat COB-ID (a node guarding request: the
+    master's own, or another master's) is neither an EMCY nor the drive's heartbeat."""
+    def with_requests(number: int, request: bytes):
+        return [(cia402.EMCY_BASE + 1, None), (HEARTBEAT_BASE + 2, None),
+                (_TX, cia402.sdo_upload_response(load_drive_dictionary("", 1)[0x1017], 5))]
+
+    result, driver, _ = _exchange(with_requests, lambda d, od: d.sdo.read(1, od[0x1017], "x"))
+    assert result == 5
+    assert driver.emcy_log == [] and driver._pending_faults == []
+    assert driver.heartbeats.seen_s == [0.0, 0.0]
 
 
 def test_a_drive_that_faults_silently_once_enabled_is_reset_directly(monkeypatch) -> None:
