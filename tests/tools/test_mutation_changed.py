@@ -1,6 +1,7 @@
-"""The CI mode's selection (``--changed-since``) in a throw-away git repository: the change
-since the last full run, the newest first, and nothing to do when no configured module
-changed; the exit decision; the command line's ``--help``."""
+"""The CI mode's selection (``--changed-since``) in a throw-away git repository: each module's
+change since its own last complete run, the newest first, and nothing to do when no configured
+module changed; the records ``--record`` writes; the exit decision; the command line's
+``--help``."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tools.mutation import changed, cli, full_run
+from tools.mutation import changed, cli, last_scores
 from tools.mutation.runner import ModuleResult
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -27,7 +28,7 @@ def git(root: Path, *args: str) -> str:
 @pytest.fixture
 def repo(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """A repository with two configured modules, a test of each (one imports lazily) and
-    two commits, no full run recorded; the command line pointed at it."""
+    two commits, no module's run recorded; the command line pointed at it."""
     files = {
         "pyproject.toml": '[tool.setuptools.package-dir]\n"haptic.common" = "common"\n',
         "common/__init__.py": "",
@@ -49,16 +50,18 @@ def repo(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.setattr(cli, "ROOT", tmp_path)
     monkeypatch.setattr(cli, "MODULES_FILE", tmp_path / "modules.toml")
     monkeypatch.setattr(cli, "EQUIVALENTS_FILE", tmp_path / "equivalents.toml")
-    monkeypatch.setattr(cli, "FULL_RUN_FILE", tmp_path / "last_full_run.toml")
+    monkeypatch.setattr(cli, "SCORES_FILE", tmp_path / "last_scores.toml")
     return tmp_path
 
 
 def record(root: Path, commit: str, scored: tuple[str, ...] = ("common/a.py", "common/b.py"),
-           ) -> None:
-    """Record a full run at ``commit`` that scored ``scored`` (untracked here, so that
-    writing it is no change of a tracked file)."""
-    (root / "last_full_run.toml").write_text(full_run.render(full_run.FullRun(
-        commit, "2026-12-01", 1.0, dict.fromkeys(scored, 1.0))))
+           score: float = 1.0) -> None:
+    """Record a complete run of ``scored`` at ``commit`` (untracked here, so that writing it
+    is no change of a tracked file), keeping the other modules' records."""
+    path = root / "last_scores.toml"
+    records = last_scores.load(path) | {
+        module: last_scores.Scored(commit, "2026-12-01", score) for module in scored}
+    path.write_text(last_scores.render(records))
 
 
 def selected(capsys: pytest.CaptureFixture[str], *args: str) -> list[str]:
@@ -87,7 +90,7 @@ def test_a_changed_test_selects_the_module_it_imports_lazily(repo: Path, capsys)
     assert selected(capsys, "--changed-since", base, "--module", "common/b.py") == []
 
 
-def test_the_default_change_is_since_the_last_full_run(repo: Path, capsys) -> None:
+def test_the_default_change_is_since_each_modules_last_run(repo: Path, capsys) -> None:
     first = git(repo, "rev-parse", "HEAD~1")
     record(repo, first)
     assert changed.default_base(repo, first) == first
@@ -96,8 +99,32 @@ def test_the_default_change_is_since_the_last_full_run(repo: Path, capsys) -> No
     git(repo, "commit", "-q", "-am", "three")
     assert selected(capsys, "--changed-since") == ["common/a.py", "common/b.py"]
     assert changed.changed_files(repo, first) == {"common/a.py", "common/b.py"}
-    record(repo, git(repo, "rev-parse", "HEAD"))  # a full run at HEAD: nothing changed since
+    record(repo, git(repo, "rev-parse", "HEAD"))  # both scored at HEAD: nothing changed since
     assert selected(capsys, "--changed-since") == []
+
+
+def test_each_module_counts_from_its_own_record(repo: Path, capsys) -> None:
+    record(repo, git(repo, "rev-parse", "HEAD~1"), scored=("common/a.py",))
+    record(repo, git(repo, "rev-parse", "HEAD"), scored=("common/b.py",))
+    assert selected(capsys, "--changed-since") == []  # b changed in "two", then was scored
+    (repo / "common/a.py").write_text("A = 5\n")
+    git(repo, "commit", "-q", "-am", "three")
+    assert selected(capsys, "--changed-since") == ["common/a.py"]
+    record(repo, git(repo, "rev-parse", "HEAD"), scored=("common/a.py",))
+    assert selected(capsys, "--changed-since") == []
+
+
+def test_a_record_below_the_minimum_counts_as_changed(repo: Path, capsys) -> None:
+    head = git(repo, "rev-parse", "HEAD")
+    record(repo, head, scored=("common/a.py",), score=0.9)
+    record(repo, head, scored=("common/b.py",), score=0.96)
+    assert cli.main(["--tests", "--json", "--changed-since"]) == 0
+    out, err = capsys.readouterr()
+    assert list(json.loads(out)) == ["common/a.py"]
+    assert "0 with no record and 1 below 95.0 % count as changed" in err
+    assert selected(capsys, "--changed-since", "--min-score", "0.97") == [
+        "common/b.py", "common/a.py"]
+    assert selected(capsys, "--changed-since", "--min-score", "0.8") == []
 
 
 def test_the_newest_change_runs_first(repo: Path, capsys) -> None:
@@ -114,7 +141,7 @@ def test_the_newest_change_runs_first(repo: Path, capsys) -> None:
     assert rank == {"tests/test_a.py": 0, "common/b.py": 1, "common/a.py": 2}
 
 
-def test_a_module_no_full_run_scored_counts_as_changed(repo: Path, capsys) -> None:
+def test_a_module_with_no_record_counts_as_changed(repo: Path, capsys) -> None:
     assert selected(capsys, "--changed-since") == ["common/b.py", "common/a.py"]  # no record
     record(repo, git(repo, "rev-parse", "HEAD"), scored=("common/b.py",))
     assert selected(capsys, "--changed-since") == ["common/a.py"]
@@ -143,22 +170,39 @@ def test_no_configured_module_changed_exits_0_running_nothing(repo: Path, capsys
     git(repo, "commit", "-q", "-m", "docs only")
     assert cli.main(["--changed-since", "--time-budget-s", "300", "--min-score", "0.95"]) == 0
     err = capsys.readouterr().err
-    assert "1 file(s), 0 configured module(s) touched: none" in err
+    assert "(2 recorded; 0 with no record and 0 below 95.0 % count as changed): 0 " \
+        "configured module(s) touched: none" in err
     assert "0 module(s), 0 mutants tested" in err
 
 
-def test_record_takes_a_full_untimed_run_on_a_clean_tree(repo: Path, capsys) -> None:
-    for args in (["--module", "common/a.py"], ["--changed-since"], ["--time-budget-s", "60"]):
+def test_record_takes_the_configured_settings_on_a_clean_tree(repo: Path, capsys) -> None:
+    for args in (["--max-test-files", "1"], ["--tests"], ["--count"]):
         with pytest.raises(SystemExit) as caught:
             cli.main(["--record", *args])
         assert caught.value.code == 2
-        assert "--record: a full run records only every configured module" in \
+        assert "--record: records a run with modules.toml's settings" in \
             capsys.readouterr().err
     (repo / "common/a.py").write_text("A = 8\n")
     with pytest.raises(SystemExit) as caught:
-        cli.main(["--record"])
+        cli.main(["--record", "--module", "common/b.py"])
     assert caught.value.code == 2
     assert "--record: uncommitted changes (common/a.py)" in capsys.readouterr().err
+
+
+def test_record_writes_the_completed_modules_and_keeps_the_others(repo: Path, capsys) -> None:
+    old = git(repo, "rev-parse", "HEAD~1")
+    record(repo, old, scored=("common/a.py", "common/b.py"), score=0.99)
+    results = {"common/b.py": ModuleResult(killed=19, survived=1),
+               "common/a.py": ModuleResult(killed=3, survived=0, planned=9, complete=False)}
+    cli._record(results, ["common/a.py", "common/b.py"])
+    records = last_scores.load(repo / "last_scores.toml")
+    assert list(records) == ["common/a.py", "common/b.py"]
+    assert records["common/a.py"] == last_scores.Scored(old, "2026-12-01", 0.99)  # cut short
+    assert records["common/b.py"].commit == git(repo, "rev-parse", "HEAD")
+    assert records["common/b.py"].score == 0.95
+    err = capsys.readouterr().err
+    assert "1 module(s) recorded" in err
+    assert "1 module(s) not recorded (their run did not complete): common/a.py" in err
 
 
 def test_without_a_parent_the_whole_tree_is_the_change(tmp_path: Path) -> None:

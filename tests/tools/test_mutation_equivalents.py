@@ -59,14 +59,17 @@ def test_the_modules_file_is_checked(tmp_path: Path) -> None:
     (tmp_path / "a.py").write_text("")
     assert modules.parse('modules = ["a.py"]\n[every]\n"a.py" = 3\n[depth]\n"a.py" = 2\n',
                          tmp_path) == [modules.Configured("a.py", every=3, depth=2)]
-    assert modules.parse('tests_cap_s = 30\nmodules = ["a.py"]\n', tmp_path)[0].tests_cap_s == 30
+    assert modules.parse('max_test_files = 3\nmodules = ["a.py"]\n',
+                         tmp_path)[0].max_test_files == 3
     for text, message in (('modules = ["b.py"]\n', "no Python file"),
                           ('modules = ["a.py", "a.py"]\n', "listed twice"),
                           ('modules = ["a.py"]\ntests = {}\n', "unknown key"),
                           ('modules = ["a.py"]\n[every]\n"a.py" = 0\n', ">= 1"),
                           ('modules = []\n[every]\n"a.py" = 2\n', "not in modules"),
                           ('modules = ["a.py"]\n[depth]\n"a.py" = true\n', "integer"),
-                          ('tests_cap_s = 0\nmodules = ["a.py"]\n', "tests_cap_s")):
+                          ('max_test_files = 0\nmodules = ["a.py"]\n', "max_test_files"),
+                          ('max_test_files = 2.5\nmodules = ["a.py"]\n', "max_test_files"),
+                          ('tests_cap_s = 60\nmodules = ["a.py"]\n', "unknown key")):
         with pytest.raises(modules.ModulesError, match=message):
             modules.parse(text, tmp_path)
 

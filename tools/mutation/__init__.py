@@ -4,7 +4,7 @@ One job per module: :mod:`.mutants` makes the mutants (cosmic-ray's operators), 
 finds a module's tests from what they import, :mod:`.modules` and :mod:`.equivalents` load the
 configured modules and the equivalent mutants (``modules.toml``, ``equivalents.toml``),
 :mod:`.runner` runs the tests against each mutant in a forked child, :mod:`.changed` picks the
-modules a change touched, :mod:`.full_run` reads and writes the record of the last full run
-(``last_full_run.toml``, where a change starts from), and :mod:`.cli` is the command line
-(``run.py``; README.md).
+modules a change touched, :mod:`.last_scores` reads and writes each module's last complete run
+(``last_scores.toml``, where that module's change starts from), and :mod:`.cli` is the command
+line (``run.py``; README.md).
 """

@@ -1,11 +1,12 @@
 """Which configured modules a change touched (the CI mode, ``--changed-since [REF]``).
 
 A change is ``git diff REF`` in the working tree: the files changed since ``REF``, committed
-or not. Without ``REF`` it is the change since the last full run (``last_full_run.toml``'s
-commit, when the clone has it), so a clean clone of main, whose merge base with main is HEAD
-itself, still has one. A configured module is touched when its own file changed or one of its
-test files did (a weakened test lowers its score as surely as new code does). The touched
-modules run the newest change first, so a time box spends itself on what changed last.
+or not. Without ``REF`` it is, module by module, the change since that module's last complete
+run (``last_scores.toml``'s commit for it, when the clone has it), so a clean clone of main,
+whose merge base with main is HEAD itself, still has one. A configured module is touched when
+its own file changed or one of its test files did (a weakened test lowers its score as surely
+as new code does). The touched modules run the newest change first, so a time box spends
+itself on what changed last.
 """
 
 from __future__ import annotations
@@ -13,6 +14,10 @@ from __future__ import annotations
 import subprocess
 from collections.abc import Callable, Iterable
 from pathlib import Path
+
+#: git's empty tree: as a base, every file of HEAD is part of the change; to
+#: :func:`recency`, HEAD's whole history counts.
+EMPTY_TREE = "4b825dc642cb6eb9a060e54bf8d69288fbee4904"
 
 
 class GitError(RuntimeError):
@@ -37,8 +42,8 @@ def _is_commit(root: Path, ref: str) -> bool:
 
 
 def default_base(root: Path, recorded: str | None = None) -> str:
-    """The commit a change is measured from, as a commit id: ``recorded`` (the last full
-    run's commit) when it is HEAD or an ancestor of it; else ``HEAD~1`` (the last commit is
+    """The commit a change is measured from, as a commit id: ``recorded`` (a module's
+    recorded commit) when it is HEAD or an ancestor of it; else ``HEAD~1`` (the last commit is
     the change: a clone without that history); git's empty tree when HEAD has no parent
     either (a first commit, a shallow clone): then every file is part of the change."""
     if recorded is not None and _is_commit(root, recorded):
@@ -50,7 +55,7 @@ def default_base(root: Path, recorded: str | None = None) -> str:
     try:
         return _git(root, "rev-parse", "--verify", "--quiet", "HEAD~1").strip()
     except GitError:
-        return _git(root, "hash-object", "-t", "tree", "/dev/null").strip()
+        return EMPTY_TREE
 
 
 def changed_files(root: Path, ref: str) -> set[str]:

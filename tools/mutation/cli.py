@@ -19,16 +19,16 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from . import changed, equivalents, finder, full_run, modules, runner
+from . import changed, equivalents, finder, last_scores, modules, runner
 from .runner import BaselineError, Job, ModuleResult
 
 ROOT = Path(__file__).resolve().parents[2]
 PROGRAM = "python3 tools/mutation/run.py"
 DEFAULT_MIN_SCORE = 0.95
-#: The data files: the configured modules, the equivalent mutants, the last full run.
+#: The data files: the configured modules, the equivalent mutants, each module's last run.
 MODULES_FILE = modules.DEFAULT_PATH
 EQUIVALENTS_FILE = equivalents.DEFAULT_PATH
-FULL_RUN_FILE = full_run.DEFAULT_PATH
+SCORES_FILE = last_scores.DEFAULT_PATH
 #: module path -> its test files (the test-finder, memoised).
 TestsOf = Callable[[str], list[str]]
 
@@ -42,10 +42,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="a configured module to mutate (repeatable; default: all)")
     parser.add_argument("--changed-since", nargs="?", const="", default=None, metavar="REF",
                         help="only the configured modules the change since REF touched (the "
-                        "module or one of its tests), the newest change first; without REF "
-                        "the change since the last full run (tools/mutation/last_full_run.toml"
-                        ") and the modules it did not score, or the last commit when the clone "
-                        "lacks its commit")
+                        "module or one of its tests), the newest change first; without REF, "
+                        "each module's change since its own last complete run "
+                        "(tools/mutation/last_scores.toml; the last commit when the clone "
+                        "lacks that commit), and the modules with no record or one below "
+                        "--min-score")
     parser.add_argument("--time-budget-s", type=float, default=None, metavar="S",
                         help="stop S seconds after the start: modules not reached are reported "
                         "as not run, a module cut short as unfinished (it fails only when its "
@@ -54,13 +55,13 @@ def build_parser() -> argparse.ArgumentParser:
                         help="exit 1 when a module whose run completed scores below X "
                         f"(default {DEFAULT_MIN_SCORE})")
     parser.add_argument("--record", action="store_true",
-                        help="after a complete run of every configured module on a tree with "
-                        "no uncommitted change, write its commit, date and scores to "
-                        "tools/mutation/last_full_run.toml")
-    parser.add_argument("--tests-cap-s", type=float, default=None, metavar="S",
-                        help="run a module's tests, the likeliest first, for about S seconds "
-                        "in the baseline and use those reached (default: modules.toml's "
-                        "tests_cap_s; 0: all of them)")
+                        help="on a tree with no uncommitted change, write the commit, date and "
+                        "score of each module whose run completed to "
+                        "tools/mutation/last_scores.toml (the others keep theirs)")
+    parser.add_argument("--max-test-files", type=int, default=None, metavar="N",
+                        help="run the first N of a module's test files, the likeliest to "
+                        "catch its mutants first (default: modules.toml's max_test_files; "
+                        "0: all of them)")
     parser.add_argument("--json", action="store_true", help="print JSON on stdout")
     parser.add_argument("--all", action="store_true",
                         help="every mutant, also of the sampled modules (the kernels)")
@@ -100,33 +101,65 @@ def _select(args: argparse.Namespace, configured: list[str], tests_of: TestsOf) 
         return args.module or configured
     candidates = args.module or configured
     try:
-        record = None if args.changed_since else full_run.load(FULL_RUN_FILE)
-        ref = args.changed_since or changed.default_base(
-            ROOT, None if record is None else record.commit)
-        files = changed.changed_files(ROOT, ref)
-        rank = changed.recency(ROOT, ref) if files else {}
-    except (changed.GitError, full_run.FullRunError) as error:
+        if args.changed_since:
+            paths, rank, since = _touched_since(args.changed_since, candidates, tests_of)
+        else:
+            paths, rank, since = _touched_since_records(candidates, tests_of, args.min_score)
+    except (changed.GitError, last_scores.RecordError) as error:
         print(f"mutation: --changed-since: {error}", file=sys.stderr)
         raise SystemExit(2) from None
-    any_test = any(f.startswith(finder.TESTS_DIR + "/") for f in files)
-    tests_if_changed = tests_of if any_test else lambda _path: ()
-    paths = changed.touched(candidates, files, tests_if_changed)
-    since = f"changed since {ref[:12]}"
-    if not args.changed_since:
-        if record is None or ref == record.commit:
-            # modules no full run scored count as changed: none has a score yet
-            unscored = [p for p in candidates if record is None or p not in record.scores]
-            paths += [p for p in unscored if p not in paths]
-            since += (" (no full run recorded" if record is None else
-                      f" (the last full run, {record.date}") + \
-                f"; {len(unscored)} configured module(s) it did not score count as changed)"
-        else:
-            since += " (the last full run's commit is not in this history: the last commit)"
-    paths = changed.newest_first(paths, rank, tests_if_changed)
-    print(f"mutation: {since}: {len(files)} file(s), "
-          f"{len(paths)} configured module(s) touched: {', '.join(paths) or 'none'}",
-          file=sys.stderr, flush=True)
+    paths = changed.newest_first(paths, rank, tests_of)
+    print(f"mutation: {since}: {len(paths)} configured module(s) touched: "
+          f"{', '.join(paths) or 'none'}", file=sys.stderr, flush=True)
     return paths
+
+
+def _touched_since(ref: str, candidates: list[str],
+                   tests_of: TestsOf) -> tuple[list[str], dict[str, int], str]:
+    """The ``candidates`` the change since ``ref`` touched, the files' recency and a line
+    saying what the change was."""
+    files = changed.changed_files(ROOT, ref)
+    rank = changed.recency(ROOT, ref) if files else {}
+    return (changed.touched(candidates, files, _tests_if_changed(files, tests_of)), rank,
+            f"changed since {ref[:12]}: {len(files)} file(s)")
+
+
+def _touched_since_records(candidates: list[str], tests_of: TestsOf,
+                           min_score: float) -> tuple[list[str], dict[str, int], str]:
+    """The ``candidates`` changed since their own last complete run (last_scores.toml), those
+    with no record and those whose record is below ``min_score``; the files' recency over
+    HEAD's whole history; and a line saying so."""
+    records = last_scores.load(SCORES_FILE)
+    files_since: dict[str, set[str]] = {}  # base commit -> the files changed since
+    paths, unscored, low, fallback = [], [], [], []
+    for path in candidates:
+        record = records.get(path)
+        if record is None or record.score < min_score:
+            (unscored if record is None else low).append(path)
+            paths.append(path)
+            continue
+        base = changed.default_base(ROOT, record.commit)
+        if base != record.commit:
+            fallback.append(path)
+        if base not in files_since:
+            files_since[base] = changed.changed_files(ROOT, base)
+        files = files_since[base]
+        if changed.touched([path], files, _tests_if_changed(files, tests_of)):
+            paths.append(path)
+    rank = changed.recency(ROOT, changed.EMPTY_TREE)
+    since = (f"changed since each module's last complete run ({len(records)} recorded; "
+             f"{len(unscored)} with no record and {len(low)} below "
+             f"{min_score * 100:.1f} % count as changed")
+    if fallback:
+        since += f"; {len(fallback)} recorded at a commit not in this history: the last commit"
+    return paths, rank, since + ")"
+
+
+def _tests_if_changed(files: set[str], tests_of: TestsOf) -> TestsOf:
+    """``tests_of``, or no tests when no test file changed (the finder need not run)."""
+    if any(f.startswith(finder.TESTS_DIR + "/") for f in files):
+        return tests_of
+    return lambda _path: []
 
 
 def _line(path: str, result: ModuleResult) -> str:
@@ -154,7 +187,8 @@ def _run(args: argparse.Namespace, paths: list[str], configured: dict[str, modul
             continue
         settings = configured[path]
         job = Job(path, finder.module_name(path, package_dir), tests_of(path), settings.every,
-                  settings.tests_cap_s if args.tests_cap_s is None else args.tests_cap_s or None)
+                  settings.max_test_files if args.max_test_files is None
+                  else args.max_test_files or None)
         if not job.tests:
             raise BaselineError(f"no test imports {path} (nor a module that imports it)")
         results[path] = result = runner.score_module(
@@ -238,9 +272,12 @@ def main(argv: list[str] | None = None) -> int:
     started = time.monotonic()
     if args.jobs < 1:
         parser.error("--jobs must be at least 1")
-    if args.record and (args.module or args.changed_since is not None or args.time_budget_s
-                        or args.equivalents or args.count or args.tests):
-        parser.error("--record: a full run records only every configured module, untimed")
+    if args.max_test_files is not None and args.max_test_files < 0:
+        parser.error("--max-test-files must be at least 0 (0: every test file)")
+    if args.record and (args.max_test_files is not None or args.equivalents or args.count
+                        or args.tests):
+        parser.error("--record: records a run with modules.toml's settings: not with "
+                     "--max-test-files, --equivalents, --count or --tests")
     try:
         configured = modules.load(ROOT, MODULES_FILE)
         entries = equivalents.load(EQUIVALENTS_FILE, frozenset(c.path for c in configured))
@@ -250,7 +287,8 @@ def main(argv: list[str] | None = None) -> int:
     for path in args.module or ():
         if path not in by_path:
             parser.error(f"--module {path}: not configured (tools/mutation/modules.toml)")
-    if args.record and (dirty := changed.uncommitted(ROOT)):
+    if args.record and (dirty := [f for f in changed.uncommitted(ROOT)
+                                  if ROOT / f != SCORES_FILE]):
         parser.error(f"--record: uncommitted changes ({', '.join(dirty[:5])}"
                      f"{', ...' if len(dirty) > 5 else ''}): a record names a commit")
     tests_of = _tests_of(finder.ImportGraph(ROOT), {c.path: c.depth for c in configured})
@@ -265,7 +303,7 @@ def main(argv: list[str] | None = None) -> int:
 def _score(args: argparse.Namespace, paths: list[str], configured: dict[str, modules.Configured],
            tests_of: TestsOf, entries: list[equivalents.Equivalent],
            deadline: float | None) -> int:
-    """Preload, score ``paths`` until ``deadline``, report (and record a full run with
+    """Preload, score ``paths`` until ``deadline``, report (and record the completed modules with
     ``--record``); the exit status."""
     start = time.monotonic()
     cache_dir = tempfile.mkdtemp(prefix="mutation-warp-cache-")
@@ -295,21 +333,23 @@ def _score(args: argparse.Namespace, paths: list[str], configured: dict[str, mod
               f"{'' if result.complete else f' so far, at most {best_score(result) * 100:.1f} %'}"
               f", below {args.min_score * 100:.1f} %", file=sys.stderr)
     if args.record:
-        _record(results, killed_total=sum(r.killed for r in results.values() if r is not None))
+        _record(results, list(configured))
     return 1 if below else 0
 
 
-def _record(results: dict[str, ModuleResult | None], killed_total: int) -> None:
-    """Write the run to :data:`FULL_RUN_FILE` when every module's run completed."""
-    if not results or any(r is None or not r.complete for r in results.values()):
-        print("mutation: --record: not every module's run completed; nothing recorded",
-              file=sys.stderr)
-        return
-    tested = sum(r.killed + r.survived for r in results.values() if r is not None)
-    run = full_run.FullRun(
-        changed.head(ROOT), datetime.datetime.now(datetime.UTC).date().isoformat(),
-        killed_total / tested if tested else 1.0,
-        {path: r.score for path, r in results.items() if r is not None})
-    FULL_RUN_FILE.write_text(full_run.render(run))
-    print(f"mutation: recorded the full run at {run.commit[:12]} in {FULL_RUN_FILE.name}",
-          file=sys.stderr)
+def _record(results: dict[str, ModuleResult | None], order: list[str]) -> None:
+    """Write each module whose run completed to :data:`SCORES_FILE`, at HEAD and today's date
+    (UTC); the others keep their records."""
+    new = {path: last_scores.Scored(changed.head(ROOT),
+                                    datetime.datetime.now(datetime.UTC).date().isoformat(),
+                                    r.score)
+           for path, r in results.items() if r is not None and r.complete}
+    skipped = [path for path in results if path not in new]
+    if new:
+        records = last_scores.updated(last_scores.load(SCORES_FILE), new, order)
+        SCORES_FILE.write_text(last_scores.render(records))
+        print(f"mutation: --record: {len(new)} module(s) recorded at "
+              f"{changed.head(ROOT)[:12]} in {SCORES_FILE.name}", file=sys.stderr)
+    if skipped:
+        print(f"mutation: --record: {len(skipped)} module(s) not recorded (their run did not "
+              f"complete): {', '.join(skipped)}", file=sys.stderr)

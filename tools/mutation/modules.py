@@ -5,8 +5,10 @@ run), an optional ``[every]`` table (path -> N: every N-th mutant only, unless `
 an optional ``[depth]`` table (path -> N: the tests of the modules up to N - 1 imports away
 count too; see :func:`tools.mutation.finder.tests_for`). :func:`load` refuses an unknown key,
 a path that is not a file, a duplicate, or a table's entry for a path not listed or below 1.
-An optional ``tests_cap_s`` caps each module's tests: the baseline runs them, the likeliest
-first, until that many seconds have passed, and the files it reached are the ones used.
+An optional ``max_test_files`` (an integer >= 1) caps each module's tests at that many files,
+the likeliest to catch its mutants first (a module half the suite imports is not tested by all
+of it). A count, not a time: the tests a mutant runs, and so its outcome, are the same on any
+machine, however slow or busy.
 """
 
 from __future__ import annotations
@@ -29,12 +31,12 @@ class ModulesError(ValueError):
 @dataclass(frozen=True)
 class Configured:
     """One module under mutation: its path, the sampling of its mutants (1: all), the
-    import depth its tests are found at and the cap on their time (None: all of them)."""
+    import depth its tests are found at and the most test files it takes (None: all of them)."""
 
     path: str
     every: int = 1
     depth: int = 1
-    tests_cap_s: float | None = None
+    max_test_files: int | None = None
 
 
 def parse(text: str, root: Path, source: str = "modules.toml") -> list[Configured]:
@@ -44,7 +46,7 @@ def parse(text: str, root: Path, source: str = "modules.toml") -> list[Configure
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise ModulesError(f"{source}: {error}") from None
-    unknown = sorted(set(data) - {"modules", "tests_cap_s", *_TABLES})
+    unknown = sorted(set(data) - {"modules", "max_test_files", *_TABLES})
     if unknown:
         raise ModulesError(f"{source}: unknown key(s) {', '.join(unknown)}")
     paths = data.get("modules", [])
@@ -62,14 +64,18 @@ def parse(text: str, root: Path, source: str = "modules.toml") -> list[Configure
         for path, n in table.items():
             if path not in paths:
                 raise ModulesError(f"{source}: [{name}] {path} is not in modules")
-            if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+            if not _is_count(n):
                 raise ModulesError(f"{source}: [{name}] {path} must be an integer >= 1")
-    cap = data.get("tests_cap_s")
-    if cap is not None and (not isinstance(cap, int | float) or isinstance(cap, bool)
-                            or cap <= 0):
-        raise ModulesError(f"{source}: tests_cap_s must be a number of seconds > 0")
-    return [Configured(path, tables["every"].get(path, 1), tables["depth"].get(path, 1),
-                       None if cap is None else float(cap)) for path in paths]
+    cap = data.get("max_test_files")
+    if cap is not None and not _is_count(cap):
+        raise ModulesError(f"{source}: max_test_files must be an integer >= 1")
+    return [Configured(path, tables["every"].get(path, 1), tables["depth"].get(path, 1), cap)
+            for path in paths]
+
+
+def _is_count(value: object) -> bool:
+    """An integer >= 1 (TOML's booleans excluded)."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
 
 
 def load(root: Path, path: Path = DEFAULT_PATH) -> list[Configured]:

@@ -104,28 +104,18 @@ def serve_mutant(name: str, path: Path, source: str) -> None:
 
 class _Baseline:
     """A pytest plugin for the baseline: each test file's time (setup, call and teardown),
-    the files run to their end, whether a test failed, and a time cap: once ``cap_s`` has
-    passed, the run stops after the current test (a file it cuts short is not used), once
-    at least one file has run to its end."""
+    the files run to their end and whether a test failed. (No time cap: which tests a mutant
+    runs must not depend on how fast the machine is, or a slow one would find survivors that
+    a fast one kills.)"""
 
-    def __init__(self, cap_s: float | None) -> None:
-        self.cap_s = cap_s
-        self.start = time.monotonic()
+    def __init__(self) -> None:
         self.seconds: dict[str, float] = {}
         self.completed: list[str] = []
         self.failed = False
-        self.capped = False
         self._last: dict[str, str] = {}
-        self._session = None
-
-    def pytest_sessionstart(self, session) -> None:  # noqa: ANN001
-        self._session = session
 
     def pytest_collection_modifyitems(self, items) -> None:  # noqa: ANN001
         self._last = {item.nodeid.split("::")[0]: item.nodeid for item in items}
-
-    def pytest_collection_finish(self, session) -> None:  # noqa: ANN001
-        self.start = time.monotonic()  # the cap is on the tests' time, not the collection's
 
     def pytest_runtest_logreport(self, report) -> None:  # noqa: ANN001
         file = report.nodeid.split("::")[0]
@@ -136,24 +126,17 @@ class _Baseline:
         file = nodeid.split("::")[0]
         if self._last.get(file) == nodeid:
             self.completed.append(file)
-        if (self.cap_s is not None and time.monotonic() - self.start > self.cap_s
-                and 0 < len(self.completed) < len(self._last)):
-            self.capped = True
-            self._session.shouldstop = "mutation: the tests' time cap"
 
     def verdict(self, code: int) -> int:
-        """The child's exit status: 0 when every test run passed (the cap may have stopped
-        the run early: exit code 2 with ``capped``)."""
-        passed = not self.failed and (code == 0 or (code == 2 and self.capped))
-        return 0 if passed else 1
+        """The child's exit status: 0 when every test run passed."""
+        return 0 if code == 0 and not self.failed else 1
 
 
 def _child(root: Path, tests: list[str], timeout_s: float, mutant: tuple[str, Mutant] | None,
-           baseline_file: str | None = None, cap_s: float | None = None) -> None:
+           baseline_file: str | None = None) -> None:
     """In a forked child: run ``tests`` (on ``mutant``: module name and mutant) and exit 0
-    when they pass; for a baseline (``baseline_file``), stop after the test running when
-    ``cap_s`` has passed and write each file's seconds and the files run to their end there
-    (JSON)."""
+    when they pass; for a baseline (``baseline_file``), write each file's seconds and the
+    files run to their end there (JSON)."""
     status = 3
     try:
         os.chdir(root)
@@ -176,7 +159,7 @@ def _child(root: Path, tests: list[str], timeout_s: float, mutant: tuple[str, Mu
         hypothesis_settings.load_profile("mutation")
         import pytest
 
-        plugin = _Baseline(cap_s)
+        plugin = _Baseline()
         code = pytest.main(["-x", "-q", "--no-header", *PYTEST_PLUGINS_OFF,
                             *(str(root / t) for t in tests)], plugins=[plugin])
         if baseline_file is not None:
@@ -195,15 +178,14 @@ def _outcome(status: int) -> str:
     return "passed" if os.WEXITSTATUS(status) == 0 else "failed"
 
 
-def baseline(root: Path, tests: list[str], timeout_s: float,
-             cap_s: float | None = None) -> tuple[str, dict[str, float], list[str]]:
-    """Run ``tests`` unmutated, in their order, until ``cap_s`` has passed (then the test
-    running ends the run): the outcome, each test file's seconds and the files run to their
-    end."""
+def baseline(root: Path, tests: list[str],
+             timeout_s: float) -> tuple[str, dict[str, float], list[str]]:
+    """Run ``tests`` unmutated, in their order: the outcome, each test file's seconds and the
+    files run to their end."""
     with tempfile.NamedTemporaryFile(suffix=".json") as handle:
         pid = os.fork()
         if pid == 0:
-            _child(root, tests, timeout_s, None, handle.name, cap_s)
+            _child(root, tests, timeout_s, None, handle.name)
         _RUNNING[pid] = None
         _, status = os.waitpid(pid, 0)
         del _RUNNING[pid]
@@ -279,13 +261,18 @@ def preload(cache_dir: str) -> None:
 @dataclass
 class Job:
     """What to score: a module, the name it is imported by, its tests (the likeliest to catch
-    its mutants first), its sampling, and the cap on its tests' time (None: every test)."""
+    its mutants first), its sampling, and how many of its test files, the first ones, are
+    run (None: every one)."""
 
     path: str
     name: str
     tests: list[str]
     every: int = 1
-    tests_cap_s: float | None = None
+    max_test_files: int | None = None
+
+    def chosen_tests(self) -> list[str]:
+        """The test files the baseline and the mutants run."""
+        return self.tests[:self.max_test_files]
 
 
 def _planned(root: Path, job: Job, result: ModuleResult, everything: bool,
@@ -304,9 +291,9 @@ def _planned(root: Path, job: Job, result: ModuleResult, everything: bool,
 def score_module(root: Path, job: Job, equivalents: list[Equivalent], *, jobs: int = 1,
                  everything: bool = False, progress: bool = False,
                  deadline: float | None = None) -> ModuleResult:
-    """Baseline (the tests must pass unmutated: BaselineError otherwise; the files it reached
-    within the job's time cap are the ones used, its time sets each mutant's limit and its
-    per-file times the order, fastest first), then the mutants. Past ``deadline`` the result
+    """Baseline (the job's chosen tests must pass unmutated: BaselineError otherwise; its time
+    sets each mutant's limit and its per-file times the order, fastest first), then the
+    mutants. Past ``deadline`` the result
     is returned incomplete."""
     result = ModuleResult()
     start = time.monotonic()
@@ -315,21 +302,22 @@ def score_module(root: Path, job: Job, equivalents: list[Equivalent], *, jobs: i
     # a baseline ended by what was left of the budget did not fail: its module was not reached
     # (the child's alarm counts whole seconds, so it may ring just before the deadline)
     cut_by_budget = limit < BASELINE_LIMIT_S
-    outcome, seconds, completed = baseline(root, job.tests, limit, job.tests_cap_s)
+    chosen = job.chosen_tests()
+    outcome, seconds, completed = baseline(root, chosen, limit)
     baseline_s = time.monotonic() - start
     if outcome != "passed":
         if outcome == "timeout" and cut_by_budget:
             result.complete, result.seconds = False, baseline_s
             return result
         raise BaselineError(f"the tests of {job.path} fail unmutated ({outcome}); run: "
-                            f"python3 -m pytest -x {' '.join(job.tests)}")
+                            f"python3 -m pytest -x {' '.join(chosen)}")
     if not completed:
-        raise BaselineError(f"no test file of {job.path} ran to its end: {job.tests}")
+        raise BaselineError(f"no test file of {job.path} ran to its end: {chosen}")
     result.tests = sorted(completed, key=lambda t: (seconds.get(t, 0.0), t))
     if progress:
-        left = len(job.tests) - len(completed)
+        left = len(job.tests) - len(chosen)
         print(f"  baseline: {len(completed)} test file(s) pass in {baseline_s:.1f} s"
-              f"{f' ({left} left out by the time cap)' if left else ''}; fastest first: "
+              f"{f' ({left} more left out by max_test_files)' if left else ''}; fastest first: "
               f"{', '.join(result.tests)}", file=sys.stderr, flush=True)
     # A mutated Warp kernel compiles first; a mutant much slower than the baseline is stuck
     # (an endless loop, say) and counts as killed.
