@@ -130,7 +130,8 @@ def _touched_since_records(candidates: list[str], tests_of: TestsOf,
     with no record and those whose record is below ``min_score``; the files' recency over
     HEAD's whole history; and a line saying so."""
     records = last_scores.load(SCORES_FILE)
-    files_since: dict[str, set[str]] = {}  # base commit -> the files changed since
+    bases: dict[str, str] = {}  # recorded commit -> the base its change is measured from
+    files_since: dict[str, set[str]] = {}  # base -> the files changed since
     paths, unscored, low, fallback = [], [], [], []
     for path in candidates:
         record = records.get(path)
@@ -138,7 +139,9 @@ def _touched_since_records(candidates: list[str], tests_of: TestsOf,
             (unscored if record is None else low).append(path)
             paths.append(path)
             continue
-        base = changed.default_base(ROOT, record.commit)
+        if record.commit not in bases:
+            bases[record.commit] = changed.default_base(ROOT, record.commit)
+        base = bases[record.commit]
         if base != record.commit:
             fallback.append(path)
         if base not in files_since:
