@@ -15,6 +15,7 @@ from haptic.slave_sim.clay.sim import (
     MIN_DISPLACEMENT_M,
     NumpyClay,
     WarpClay,
+    device_problem,
     geometry_for,
     make_clay,
     resolve_device,
@@ -166,6 +167,44 @@ def test_cut_across_two_blocks_weights_the_damping_by_removal(scenario, impl) ->
     assert result.removed_volume_m3[0] == pytest.approx(volume_a + volume_b, rel=1e-12)
 
 
+def _shifted_scenario(tmp_path, shift_m: tuple[float, float]):
+    """LIMITS_SCENARIO with every x and y range and the start moved by ``shift_m``, m."""
+    lines = []
+    for line in LIMITS_SCENARIO.splitlines():
+        key, _, value = line.partition(" = ")
+        if key in ("x_range_m", "y_range_m", "start_position_m"):
+            numbers = [float(v) for v in value.strip("[]").split(",")]
+            if key == "start_position_m":
+                numbers = [numbers[0] + shift_m[0], numbers[1] + shift_m[1]]
+            else:
+                numbers = [n + shift_m[key == "y_range_m"] for n in numbers]
+            line = f"{key} = [{', '.join(repr(n) for n in numbers)}]"
+        lines.append(line)
+    path = tmp_path / "shifted.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return load_scenario(str(path))
+
+
+@pytest.mark.parametrize("shift_m", [(0.05, 0.03), (-0.05, -0.03)])
+def test_the_cut_does_not_depend_on_where_the_grid_starts(scenario, impl, tmp_path,
+                                                          shift_m) -> None:
+    """The same cut, cell for cell, on a grid whose origin is moved either way, m (the row
+    scan's chord is computed from the grid's origin: a sign slip there would skip cells under
+    the tool on one side or the other)."""
+    cuts, removed = [], []
+    for grid_scenario, (dx, dy) in ((scenario, (0.0, 0.0)),
+                                    (_shifted_scenario(tmp_path, shift_m), shift_m)):
+        clay = _clay(grid_scenario, impl)
+        state = clay.initial_state(1)
+        position = np.array([[0.034 + dx, 0.0015 + dy]])  # across the blocks a and b
+        result = clay.step(state, position, position, np.zeros((1, 2)))
+        cuts.append(clay.workpiece.heights_m - state.heights_m()[0])
+        removed.append(result.removed_volume_m3[0])
+    assert removed[0] > 0.0
+    assert removed[1] == pytest.approx(removed[0], rel=1e-9)
+    np.testing.assert_allclose(cuts[1], cuts[0], rtol=0.0, atol=1e-9)
+
+
 def _hand_made_steps(area: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Six lanes' proxy moves (before, after) (6, 2), m, and cut sums (6, 2): removed m^3,
     damping-weighted m^3 N s/m, for the step's bookkeeping."""
@@ -291,6 +330,20 @@ def test_first_step_places_the_proxy_at_the_previous_position(scenario, impl) ->
     assert not result.cutting[0] and result.engagement[0] == 0.0
 
 
+def test_a_state_says_once_every_lane_has_its_proxy(scenario, impl) -> None:
+    """``contact_all_ready``: false until the first step has placed every lane's proxy, then
+    true for good (the slave's one-launch catch-up, slave_sim/catch_up.py, runs only then)."""
+    clay = _clay(scenario, impl)
+    state = clay.initial_state(2)
+    assert state.contact_all_ready is False
+    position = np.array([[AIR_X_M, 0.0], [AIR_X_M, 0.001]])
+    for _ in range(2):
+        previous, position = position, position + [[1e-5, 0.0], [1e-5, 0.0]]
+        clay.step(state, previous, position, np.array([[0.02, 0.0], [0.02, 0.0]]))
+        assert state.contact_all_ready is True
+        assert state.contact_ready.tolist() == [True, True]
+
+
 def test_a_move_through_air_leaves_no_resistance(scenario, impl) -> None:
     """Cutting, then a step out into the air: the resistance drops to exactly 0 (not NaN)."""
     clay = _clay(scenario, impl)
@@ -344,6 +397,26 @@ def test_device_auto_with_one_cuda_device(monkeypatch) -> None:
         monkeypatch.setattr(wp, "get_cuda_device_count", lambda count=count: count)
         assert resolve_device("auto") == expected
     assert resolve_device("cuda:1") == "cuda:1"
+
+
+
+def test_a_cuda_device_this_machine_lacks_is_named(monkeypatch) -> None:
+    """The clay's device check, by CUDA device count (no GPU needed: the count is asked):
+    the device's form first, then its index (none: 0) against the count."""
+    import warp as wp
+
+    wp.init()
+    for count, present, absent in ((0, (), ("cuda", "cuda:0")),
+                                   (1, ("cuda", "cuda:0"), ("cuda:1",)),
+                                   (2, ("cuda", "cuda:1"), ("cuda:2", "cuda:3"))):
+        monkeypatch.setattr(wp, "get_cuda_device_count", lambda count=count: count)
+        assert device_problem("cpu") is None
+        assert "got 'gpu'" in device_problem("gpu")  # a bad name, whatever the count
+        for device in present:
+            assert device_problem(device) is None, (count, device)
+        for device in absent:
+            assert device_problem(device) == (
+                f"no CUDA device {device!r} on this machine ({count} found)")
 
 
 needs_cuda = pytest.mark.skipif(not __import__("warp").get_cuda_device_count(),
