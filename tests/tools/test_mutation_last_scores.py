@@ -63,7 +63,7 @@ def test_the_empty_tree_is_gits_own() -> None:
 
 
 def test_the_shipped_record_loads_and_scores_configured_modules() -> None:
+    # a record below the minimum is kept as it was (the CI mode counts its module as changed)
     records = last_scores.load()
     configured = {c.path for c in modules.load(ROOT)}
     assert records and set(records) <= configured
-    assert all(0.9 < r.score <= 1.0 for r in records.values())
