@@ -71,9 +71,11 @@ def cut_row(
     below the inner radius's square (less a 1e-9 margin) lies on the flat bottom, one above
     the outer radius's square (plus the margin) is outside: the same verdicts the distance
     gives, so the cut is the one computed from the distance everywhere (numpy's, to rounding:
-    tests/slave_sim/test_clay.py). A row visits only its chord of the outer circle, widened
-    by two cells each side (a tool off the grid, whose window is clamped away from it, costs
-    almost nothing: bench/clay_bench.py measures the step)."""
+    tests/slave_sim/test_clay.py). A cell already down to the flat bottom (the groove behind
+    the tool) is passed over before its distance: no level is below the bottom's. A row
+    visits only its chord of the outer circle, widened by two cells each side (a tool off
+    the grid, whose window is clamped away from it, costs almost nothing:
+    bench/clay_bench.py measures the step)."""
     px = tool_xy[lane, 0]
     py = tool_xy[lane, 1]
     ix0 = window_start(px, geo.x0, geo.dx, geo.outer_radius, geo.cells_x, geo.window_x)
@@ -102,18 +104,20 @@ def cut_row(
         ddx = geo.x0 + (wp.float64(ix) + half) * geo.dx - px
         distance2 = ddx * ddx + ddy2
         if distance2 < outside2:
-            block = block_id[iy, ix]
-            if block >= 0:
-                level = bottom
-                under = True
-                if distance2 >= bottom2:
-                    distance = wp.sqrt(distance2)
-                    under = distance < geo.outer_radius
-                    level = geo.bottom_height + geo.edge_height * edge_profile(
-                        (distance - geo.inner_radius) * geo.inv_edge_width)
-                if under:
-                    height = heights[lane, iy, ix]
-                    if height > level:
+            height = heights[lane, iy, ix]
+            # every level is at or above the flat bottom's (the chamfer only rises): a cell
+            # already down to it (the groove behind the tool) is passed without the distance
+            if height > bottom:
+                block = block_id[iy, ix]
+                if block >= 0:
+                    level = bottom
+                    under = True
+                    if distance2 >= bottom2:
+                        distance = wp.sqrt(distance2)
+                        under = distance < geo.outer_radius
+                        level = geo.bottom_height + geo.edge_height * edge_profile(
+                            (distance - geo.inner_radius) * geo.inv_edge_width)
+                    if under and height > level:
                         cut = wp.min(height - level, geo.cut_cap)
                         heights[lane, iy, ix] = height - cut
                         volume = cut * geo.cell_area
