@@ -25,6 +25,7 @@ band of the margin is reported in the band, not judged (as the lockstep sweep's 
 
 from __future__ import annotations
 
+import math
 import time
 import uuid
 from dataclasses import dataclass, replace
@@ -65,6 +66,11 @@ class RealLinkCell:
     overruns: int
     steps: int
     attempts: int = 1
+    #: the same lags in wall-clock time (s): from each used message's send to the poll that
+    #: took it, both directions summed. Never below the injected round trip, however late
+    #: the ticks ran; ``measured_round_trip_s`` counts ticks (what the loop's stability
+    #: depends on), fewer of which fit in the delay while the loop runs behind its schedule.
+    wall_round_trip_s: float = math.nan
 
     @property
     def agree(self) -> bool:
@@ -108,13 +114,19 @@ def _energy_ratio(force: np.ndarray, window: int, reference: int) -> float:
 
 class CellRecord:
     """What a cell keeps of each tick ``k`` of ``steps``: the handle force (steps, 2), N,
-    and how many ticks old the message each side used was (NaN: none yet); the tick each
-    side's first message was sent in is its sequence number's origin."""
+    how many ticks old the message each side used was (NaN: none yet) and how old in
+    wall-clock time, s, from its send to the poll that took it; the tick each side's first
+    message was sent in is its sequence number's origin."""
 
     def __init__(self, steps: int) -> None:
         self.handle_force_N = np.empty((steps, 2))
         self.lag_to_slave = np.zeros(steps)
         self.lag_to_master = np.zeros(steps)
+        self.wall_lag_to_slave_s = np.full(steps, np.nan)
+        self.wall_lag_to_master_s = np.full(steps, np.nan)
+        #: perf_counter_ns() at each side's send in tick k (0: not sent)
+        self.handle_sent_ns = np.zeros(steps, np.int64)
+        self.tool_sent_ns = np.zeros(steps, np.int64)
         #: the sequence number of each side's first message (sent in tick 0), None before
         self.first_handle_seq: int | None = None
         self.first_tool_seq: int | None = None
@@ -124,6 +136,15 @@ class CellRecord:
         if latest is None or first_seq is None:
             return np.nan
         return tick - (latest.seq - first_seq)
+
+    @staticmethod
+    def wall_lag_s(tick: int, lag: float, sent_ns: np.ndarray, now_ns: int) -> float:
+        """Seconds from the send of the message ``lag`` ticks old at ``tick`` (the peer's
+        send times ``sent_ns``) to ``now_ns``; NaN where there is none."""
+        if not np.isfinite(lag) or not 0 <= tick - int(lag) < sent_ns.size:
+            return np.nan
+        sent = int(sent_ns[tick - int(lag)])
+        return (now_ns - sent) * 1e-9 if sent else np.nan
 
 
 class CellMasterStages:
@@ -167,7 +188,9 @@ class CellMasterStages:
         if latest is not None:
             self.tool_force_N = np.array([latest.tool_force_N])
         record = self.record
-        record.lag_to_master[tick] = record.lag(tick, latest, record.first_tool_seq)
+        lag = record.lag_to_master[tick] = record.lag(tick, latest, record.first_tool_seq)
+        record.wall_lag_to_master_s[tick] = record.wall_lag_s(
+            tick, lag, record.tool_sent_ns, time.perf_counter_ns())
 
     def read(self, tick: int, _now_ns: int) -> None:
         """The rig at SYNC k, and the sweep's pulse (the ticks enable forces once both
@@ -198,6 +221,7 @@ class CellMasterStages:
                                      tuple(self.inputs.handle_position_m[0].tolist()),
                                      outputs.flags, outputs.gain_k, outputs.energy_J,
                                      float(used.force_scale[0]))
+        self.record.handle_sent_ns[tick] = time.perf_counter_ns()
         if self.record.first_handle_seq is None:
             self.record.first_handle_seq = sent.seq
 
@@ -234,7 +258,10 @@ class CellSlaveStages:
         inputs.silence_s = link.silence_s()
         inputs.peer_alive = link.peer_alive
         record = self.record
-        record.lag_to_slave[tick] = record.lag(tick, link.latest, record.first_handle_seq)
+        lag = record.lag_to_slave[tick] = record.lag(tick, link.latest,
+                                                     record.first_handle_seq)
+        record.wall_lag_to_slave_s[tick] = record.wall_lag_s(
+            tick, lag, record.handle_sent_ns, time.perf_counter_ns())
 
     def step_tick(self, tick: int, _now_ns: int) -> int:
         """The whole tick; returns the clock at its supervise | node boundary."""
@@ -248,6 +275,7 @@ class CellSlaveStages:
                                    tuple(out.tool_position_m[0].tolist()),
                                    tuple(out.tool_velocity_m_s[0].tolist()), 0.0, 0.0,
                                    outputs.flags, outputs.echo_send_time_ns, outputs.energy_J)
+        self.record.tool_sent_ns[tick] = time.perf_counter_ns()
         if self.record.first_tool_seq is None:
             self.record.first_tool_seq = sent.seq
 
@@ -292,13 +320,16 @@ def run_cell(model: TeleopModel, gain_k: float, injected_round_trip_s: float,
     settled = slice(steps // 4, None)
     measured = (np.nanmean(record.lag_to_slave[settled])
                 + np.nanmean(record.lag_to_master[settled]) - 1.0) * ts
+    wall = (np.nanmean(record.wall_lag_to_slave_s[settled])
+            + np.nanmean(record.wall_lag_to_master_s[settled]))
     window = int(round(window_s / ts))
     handle_force = record.handle_force_N
     ratio = _energy_ratio(handle_force, window, 1)
     growing = (not np.all(np.isfinite(handle_force))) or ratio > 1.0
     margin = analytic_margin_s(model, gain_k, ts)
     return RealLinkCell(float(gain_k), injected_round_trip_s, float(measured), bool(growing),
-                        bool(measured < margin), float(margin), ratio, stats.overruns, steps)
+                        bool(measured < margin), float(margin), ratio, stats.overruns, steps,
+                        wall_round_trip_s=float(wall))
 
 
 def run_cell_at(model: TeleopModel, gain_k: float, margin_factor: float,
