@@ -66,3 +66,31 @@ def test_the_tests_a_mutant_runs_are_a_count_of_files_not_a_time(tmp_path: Path)
     first_only = runner.score_module(tmp_path, _tiny_job(tmp_path, 1), [])
     assert first_only.tests == ["test_first.py"]
     assert first_only.survived == first_only.planned > 0
+
+
+STUCK_MODULE = ("def wait_for(ready: bool) -> int:\n    while not ready:\n        pass\n"
+                "    return 0\n")
+FAST_TEST = "import stuck\n\n\ndef test_ready() -> None:\n    assert stuck.wait_for(True) == 0\n"
+SLOW_TEST = "import time\n\n\ndef test_slow() -> None:\n    time.sleep(2.0)\n"
+
+
+def test_a_mutant_stuck_in_a_fast_file_ends_at_that_files_limit(tmp_path: Path) -> None:
+    # Two of the three mutants never return from wait_for(True) (`while ready`, `while not not
+    # ready`); the third returns 1. The run's whole limit is three times the baseline (the
+    # slow file's 2 s and more) plus 20 s; the fast file's own, three times its ~0 s plus 1 s
+    # here, ends each stuck mutant there, so the baseline and all three take less than one
+    # whole limit.
+    (tmp_path / "stuck.py").write_text(STUCK_MODULE)
+    (tmp_path / "test_fast.py").write_text(FAST_TEST)
+    (tmp_path / "test_slow.py").write_text(SLOW_TEST)
+    job = runner.Job("stuck.py", "stuck", ["test_fast.py", "test_slow.py"])
+    result = runner.score_module(tmp_path, job, [], jobs=2, file_allowance_s=1.0)
+    assert result.tests == ["test_fast.py", "test_slow.py"]
+    assert result.planned == 3 and result.killed == 3 and result.timed_out == 2
+    assert result.limit_s > 26.0
+    assert result.seconds < result.limit_s
+
+
+def test_each_files_limit_is_three_baselines_plus_the_allowance() -> None:
+    limits = runner.file_limits({"a.py": 2.0, "b.py": 0.5}, ["a.py", "b.py", "c.py"], 10.0)
+    assert limits == {"a.py": 16.0, "b.py": 11.5, "c.py": 10.0}

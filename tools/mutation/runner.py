@@ -33,6 +33,13 @@ PYTEST_PLUGINS_OFF = ("-p", "no:cacheprovider", "-p", "no:unraisableexception", 
                       "no:pastebin", "-p", "no:doctest")
 #: The longest a baseline (the tests on the unmutated module) may take.
 BASELINE_LIMIT_S = 600.0
+#: A mutant's run may take three times its baseline plus this, s (the whole limit).
+RUN_ALLOWANCE_S = 20.0
+#: Each test file of a mutant's run may take three times its baseline time plus this, s:
+#: room for a mutated Warp module's compile (seconds on the CPU, more on a loaded machine) in
+#: whichever file launches it first. A mutant stuck in a fast file (a receive loop that
+#: never returns) is ended there, not after the whole run's limit.
+FILE_ALLOWANCE_S = 60.0
 
 #: Children running now (pid -> mutant, None for a baseline), ended if the parent stops.
 _RUNNING: dict[int, Mutant | None] = {}
@@ -54,6 +61,7 @@ class ModuleResult:
     generated: int = 0  # all mutants of the module, before sampling
     planned: int = 0  # the mutants to run: sampled, less the equivalent ones
     seconds: float = 0.0
+    limit_s: float = 0.0  # each mutant's run at most, s (its files have their own limits)
     complete: bool = True
     tests: list[str] = field(default_factory=list)  # in the order run, fastest first
     survivors: list[Mutant] = field(default_factory=list)
@@ -69,6 +77,7 @@ class ModuleResult:
                 "timed_out": self.timed_out, "equivalent": self.equivalent,
                 "generated": self.generated, "planned": self.planned,
                 "complete": self.complete, "seconds": round(self.seconds, 1),
+                "limit_s": round(self.limit_s, 1),
                 "tests": self.tests}
 
 
@@ -132,13 +141,44 @@ class _Baseline:
         return 0 if code == 0 and not self.failed else 1
 
 
+class _FileLimits:
+    """A pytest plugin for a mutant's run: from each test file's first test on, the alarm
+    rings after that file's own limit (``limits``, s; files not in it have none) or at the
+    whole run's ``end`` (time.monotonic()), whichever comes first."""
+
+    def __init__(self, limits: dict[str, float], end: float) -> None:
+        self._limits = limits
+        self._end = end
+        self._file: str | None = None
+
+    def pytest_runtest_logstart(self, nodeid: str, location: object) -> None:
+        file = nodeid.split("::")[0]
+        if file == self._file:
+            return
+        self._file = file
+        seconds = self._end - time.monotonic()
+        limit = self._limits.get(file)
+        if limit is not None:
+            seconds = min(seconds, limit)
+        signal.setitimer(signal.ITIMER_REAL, max(seconds, 0.001))
+
+
+def file_limits(seconds: dict[str, float], tests: list[str],
+                allowance_s: float = FILE_ALLOWANCE_S) -> dict[str, float]:
+    """Each of ``tests``' own limit in a mutant's run, s: three times its baseline
+    ``seconds`` plus ``allowance_s``."""
+    return {test: 3.0 * seconds.get(test, 0.0) + allowance_s for test in tests}
+
+
 def _child(root: Path, tests: list[str], timeout_s: float, mutant: tuple[str, Mutant] | None,
-           baseline_file: str | None = None) -> None:
+           baseline_file: str | None = None, limits: dict[str, float] | None = None) -> None:
     """In a forked child: run ``tests`` (on ``mutant``: module name and mutant) and exit 0
-    when they pass; for a baseline (``baseline_file``), write each file's seconds and the
-    files run to their end there (JSON)."""
+    when they pass, within ``timeout_s`` in all and each file within its ``limits`` (s);
+    for a baseline (``baseline_file``), write each file's seconds and the files run to their
+    end there (JSON)."""
     status = 3
     try:
+        end = time.monotonic() + timeout_s
         os.chdir(root)
         null = os.open(os.devnull, os.O_WRONLY)
         os.dup2(null, 1)
@@ -160,8 +200,11 @@ def _child(root: Path, tests: list[str], timeout_s: float, mutant: tuple[str, Mu
         import pytest
 
         plugin = _Baseline()
+        plugins: list[object] = [plugin]
+        if limits:
+            plugins.append(_FileLimits(limits, end))
         code = pytest.main(["-x", "-q", "--no-header", *PYTEST_PLUGINS_OFF,
-                            *(str(root / t) for t in tests)], plugins=[plugin])
+                            *(str(root / t) for t in tests)], plugins=plugins)
         if baseline_file is not None:
             Path(baseline_file).write_text(json.dumps(
                 {"seconds": plugin.seconds, "completed": plugin.completed}))
@@ -195,11 +238,12 @@ def baseline(root: Path, tests: list[str],
 
 
 def run_mutants(root: Path, name: str, tests: list[str], timeout_s: float,
-                found: list[Mutant], jobs: int,
-                deadline: float | None = None) -> Iterator[tuple[Mutant, str]]:
+                found: list[Mutant], jobs: int, deadline: float | None = None,
+                limits: dict[str, float] | None = None) -> Iterator[tuple[Mutant, str]]:
     """Yield (mutant, outcome) for each of ``found`` (module ``name``), ``jobs`` children at a
-    time; past ``deadline`` (time.monotonic()) none is started and the running ones are ended
-    without an outcome."""
+    time, each within ``timeout_s`` and each test file within its ``limits`` (s); past
+    ``deadline`` (time.monotonic()) none is started and the running ones are ended without
+    an outcome."""
     if not tests:
         raise ValueError("no tests to run the mutants against")
     pending = list(reversed(found))
@@ -211,7 +255,7 @@ def run_mutants(root: Path, name: str, tests: list[str], timeout_s: float,
             mutant = pending.pop()
             pid = os.fork()
             if pid == 0:
-                _child(root, tests, timeout_s, (name, mutant))
+                _child(root, tests, timeout_s, (name, mutant), limits=limits)
             _RUNNING[pid] = mutant
         pid, status = os.waitpid(-1, os.WNOHANG)
         if pid == 0:
@@ -290,11 +334,12 @@ def _planned(root: Path, job: Job, result: ModuleResult, everything: bool,
 
 def score_module(root: Path, job: Job, equivalents: list[Equivalent], *, jobs: int = 1,
                  everything: bool = False, progress: bool = False,
-                 deadline: float | None = None) -> ModuleResult:
+                 deadline: float | None = None,
+                 file_allowance_s: float = FILE_ALLOWANCE_S) -> ModuleResult:
     """Baseline (the job's chosen tests must pass unmutated: BaselineError otherwise; its time
-    sets each mutant's limit and its per-file times the order, fastest first), then the
-    mutants. Past ``deadline`` the result
-    is returned incomplete."""
+    sets each mutant's limit, and its per-file times the order, fastest first, and each
+    file's own limit, :func:`file_limits` with ``file_allowance_s``), then the mutants. Past
+    ``deadline`` the result is returned incomplete."""
     result = ModuleResult()
     start = time.monotonic()
     limit = BASELINE_LIMIT_S if deadline is None else max(1.0, min(BASELINE_LIMIT_S,
@@ -321,12 +366,13 @@ def score_module(root: Path, job: Job, equivalents: list[Equivalent], *, jobs: i
               f"{', '.join(result.tests)}", file=sys.stderr, flush=True)
     # A mutated Warp kernel compiles first; a mutant much slower than the baseline is stuck
     # (an endless loop, say) and counts as killed.
-    timeout_s = 3.0 * baseline_s + 20.0
+    timeout_s = result.limit_s = 3.0 * baseline_s + RUN_ALLOWANCE_S
+    limits = file_limits(seconds, result.tests, file_allowance_s)
     runnable = _planned(root, job, result, everything, equivalents)
     original = (root / job.path).read_text()
     mark = {"passed": "SURVIVED", "failed": "killed", "timeout": "killed (timeout)"}
     for number, (mutant, outcome) in enumerate(run_mutants(
-            root, job.name, result.tests, timeout_s, runnable, jobs, deadline), 1):
+            root, job.name, result.tests, timeout_s, runnable, jobs, deadline, limits), 1):
         if outcome == "passed":
             result.survived += 1
             result.survivors.append(mutant)
