@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from haptic.common.config.scenario import load_scenario
+from haptic.slave_sim.clay.clay_numpy import yield_numpy
 from haptic.slave_sim.clay.sim import (
     MIN_DISPLACEMENT_M,
     NumpyClay,
@@ -205,6 +206,65 @@ def test_the_cut_does_not_depend_on_where_the_grid_starts(scenario, impl, tmp_pa
     np.testing.assert_allclose(cuts[1], cuts[0], rtol=0.0, atol=1e-9)
 
 
+#: Cells of 2^-10 m and a tool of outer radius 5 x 2^-10 m: from a tool on a cell's centre,
+#: twelve cell centres lie exactly on the outer radius (offsets (5, 0), (0, 5), (4, 3) and
+#: (3, 4) cells, mirrored), every distance exact in binary. The block stands above the
+#: chamfer's top (2 + 1 mm), so the tool would cut a cell its footprint reached.
+EXACT_SCENARIO = """
+[scenario]
+name = "exact"
+description = "binary-exact cells and tool"
+environment = "clay"
+[grid]
+x_range_m = [0.0, 0.0625]
+y_range_m = [-0.03125, 0.03125]
+cells_x = 64
+cells_y = 64
+[tool]
+radius_m = 0.00390625
+bottom_height_m = 0.002
+reference_depth_m = 0.001
+edge_width_m = 0.001953125
+max_speed_m_s = 0.5
+start_position_m = [0.0, 0.0]
+[operator]
+handle_force_N = [3.0, 0.0]
+[workpiece]
+blocks = ["clay"]
+[blocks.clay]
+shape = "box"
+x_range_m = [0.0, 0.0625]
+y_range_m = [-0.03125, 0.03125]
+height_m = 0.005
+damping_N_s_per_m = 100.0
+"""
+
+
+def test_a_cell_centred_exactly_on_the_outer_radius_is_not_cut(tmp_path, impl) -> None:
+    """The footprint is the open disc: distance < outer radius is cut, = is not."""
+    path = tmp_path / "exact.toml"
+    path.write_text(EXACT_SCENARIO)
+    clay = _clay(load_scenario(str(path)), impl)
+    cell = 2.0 ** -10
+    assert clay.geometry.outer_radius == 5 * cell and clay.geometry.dx == cell
+    state = clay.initial_state(1)
+    position = np.array([[20.5 * cell, -0.03125 + 31.5 * cell]])  # cell (20, 31)'s centre
+    clay.step(state, position, position, np.zeros((1, 2)))
+    cut = clay.workpiece.heights_m - state.heights_m()[0]
+    on_circle = {(31 + sy * dy, 20 + sx * dx) for dx, dy in ((5, 0), (0, 5), (4, 3), (3, 4))
+                 for sx in (-1, 1) for sy in (-1, 1)}
+    assert len(on_circle) == 12
+    for row, column in on_circle:
+        assert cut[row, column] == 0.0, (row, column)
+    # one cell further in along each axis is cut, at the chamfer's height there
+    for row, column in ((31, 24), (31, 16), (35, 20), (27, 20)):
+        assert cut[row, column] > 0.0, (row, column)
+    x, y = clay.workpiece.cell_centers_m()
+    distance = np.hypot(x[None, :] - position[0, 0], y[:, None] - position[0, 1])
+    assert (cut[distance >= clay.geometry.outer_radius] == 0.0).all()
+    assert (cut[distance < clay.geometry.outer_radius] > 0.0).all()
+
+
 def _hand_made_steps(area: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Six lanes' proxy moves (before, after) (6, 2), m, and cut sums (6, 2): removed m^3,
     damping-weighted m^3 N s/m, for the step's bookkeeping."""
@@ -261,12 +321,24 @@ def test_the_warp_yield_kernel_keeps_the_books_numpy_keeps(scenario) -> None:
     arrays["proxy_prev"].numpy()[...] = before
     arrays["proxy"].numpy()[...] = after
     arrays["sums"].numpy()[...] = sums
+    # the resistance and direction from an earlier cut: kept by the lanes that did not move
+    # (lane 2 exactly at the threshold among them), replaced or cleared by those that did
+    earlier_resistance = np.full(6, 7.0)
+    earlier_direction = np.tile([0.6, 0.8], (6, 1))
+    state.resistance.numpy()[...] = earlier_resistance
+    state.direction.numpy()[...] = earlier_direction
     state.runtime["launches"][2].launch()  # the yield kernel alone
     result = state.runtime["host"]["result"]
     np.testing.assert_array_equal(result[:, 0], expected.removed_volume_m3)
     np.testing.assert_array_equal(result[:, 1] > 0.0, expected.cutting)
     np.testing.assert_array_equal(result[:, 2], expected.engagement)
     np.testing.assert_array_equal(result[:, 3], expected.damping_N_s_per_m)
+    resistance, direction = earlier_resistance.copy(), earlier_direction.copy()
+    yield_numpy(after.copy(), before.copy(), sums, resistance, direction, reference.contact)
+    np.testing.assert_array_equal(state.resistance.numpy(), resistance)
+    np.testing.assert_array_equal(state.direction.numpy(), direction)
+    assert resistance[2] == 7.0 and tuple(direction[2]) == (0.6, 0.8)
+    assert resistance[3] == 0.0 and resistance[0] == pytest.approx(64.0 * 0.5, rel=1e-12)
 
 
 def test_a_steady_diagonal_shallow_cut_has_partial_engagement(scenario, impl) -> None:
