@@ -69,7 +69,7 @@ class RealLinkCell:
     #: the same lags in wall-clock time (s): from each used message's send to the poll that
     #: took it, both directions summed. Never below the injected round trip, however late
     #: the ticks ran; ``measured_round_trip_s`` counts ticks (what the loop's stability
-    #: depends on), fewer of which fit in the delay while the loop runs behind its schedule.
+    #: depends on), which late ticks move either way (docs/lockstep.md section 7).
     wall_round_trip_s: float = math.nan
 
     @property
