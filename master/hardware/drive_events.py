@@ -18,6 +18,9 @@ WARNING_TEXT = {0x0080: "warning (bit 7)", cia402.STATUS_REMOTE: "not remote (bi
                 0x2000: "following error (bit 13)"}
 WARNING_BITS = sum(WARNING_TEXT)  # one bit each
 WARNING_IDLE = cia402.STATUS_REMOTE | FOLLOWS_TARGET
+#: The highest EMCY error code of CiA 301's "error reset or no error" group (00xxh): such an
+#: EMCY reports that the drive's errors were cleared, not a new one.
+ERROR_RESET_MAX = 0x00FF
 #: What the EMCY codes of CiA 301/402 the loop meets mean.
 EMCY_TEXT = {
     0x8130: "heartbeat or life guard lost", 0x8210: "PDO shorter than mapped",
@@ -39,16 +42,18 @@ def warning_events(axis: int, before: int, after: int, events: list[str]) -> Non
 
 def emcy_fault(axis: int, data: bytes, faults: list[str]) -> int:
     """The fault of an EMCY of ``axis``'s drive, appended to ``faults``; returns its error
-    code (0: an error reset, no fault; -1: malformed, a fault)."""
+    code (0 for any code of the error-reset group 0x0000-0x00FF, which is no fault; -1:
+    malformed, a fault)."""
     try:
         code, register = cia402.decode_emcy(data)
     except ValueError as error:
         faults.append(f"{AXES[axis]} drive EMCY malformed: {error}")
         return -1
-    if code != 0:
-        meaning = EMCY_TEXT.get(code)
-        faults.append(f"{AXES[axis]} drive EMCY error code 0x{code:04X} "
-                      f"(register 0x{register:02X}" + (f"; {meaning})" if meaning else ")"))
+    if code <= ERROR_RESET_MAX:
+        return 0
+    meaning = EMCY_TEXT.get(code)
+    faults.append(f"{AXES[axis]} drive EMCY error code 0x{code:04X} "
+                  f"(register 0x{register:02X}" + (f"; {meaning})" if meaning else ")"))
     return code
 
 

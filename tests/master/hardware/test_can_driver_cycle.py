@@ -653,14 +653,17 @@ def test_sensor_counts_that_scale_beyond_a_float_are_a_fault_and_nan(axis: int) 
         assert np.isnan(reading.force_N).all()
 
 
-def test_the_smallest_emcy_code_is_logged_and_latches_the_drive_fault() -> None:
-    """Every code but 0 (the error reset) is a fault: reported, logged and quick-stopping
-    the drives, 0x0001 as much as 0x8611."""
+def test_an_error_reset_with_a_low_byte_is_no_fault_and_the_next_group_is() -> None:
+    """CiA 301's 00xxh codes are all "error reset or no error": 0x00FF is neither a fault nor
+    logged; 0x0100, the smallest code past that group, is a fault: reported, logged and
+    quick-stopping the drives, as much as 0x8611."""
     with active_rig() as hardware:
         hardware.read()
-        faults = faults_after(hardware, [(cia402.EMCY_BASE + 1, cia402.emcy_frame(0x0001))])
-        assert "x drive EMCY error code 0x0001 (register 0x01)" in faults
-        assert hardware.driver.emcy_log == [("x", 0x0001)]
+        faults = faults_after(hardware, [(cia402.EMCY_BASE + 1, cia402.emcy_frame(0x00FF))])
+        assert faults == () and hardware.driver.emcy_log == []
+        faults = faults_after(hardware, [(cia402.EMCY_BASE + 1, cia402.emcy_frame(0x0100))])
+        assert "x drive EMCY error code 0x0100 (register 0x01)" in faults
+        assert hardware.driver.emcy_log == [("x", 0x0100)]
         assert any(fault.startswith("quick stop on both drives") for fault in faults), faults
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import struct
 
 import pytest
+from canopen.emcy import EmcyConsumer
 
 from haptic.master.hardware import cia402
 from haptic.master.hardware.cia402 import DriveState
@@ -84,10 +85,31 @@ def test_an_emcy_of_another_code_is_a_fault_without_a_meaning() -> None:
     assert faults == ["x drive EMCY error code 0x5530 (register 0x01)"]
 
 
-def test_an_error_reset_is_no_fault() -> None:
+@pytest.mark.parametrize("code", [0x0000, 0x0001, 0x0010, 0x00FF])
+def test_an_error_reset_of_any_code_of_its_group_is_no_fault(code: int) -> None:
+    """CiA 301's group 00xxh is "error reset or no error": a drive clearing its errors, with
+    a vendor's low byte or without."""
     faults: list[str] = []
-    assert emcy_fault(0, emcy(0x0000, 0x00), faults) == 0
+    assert emcy_fault(0, emcy(code, 0x00), faults) == 0
     assert faults == []
+
+
+@pytest.mark.parametrize("code", [0x0000, 0x0001, 0x00FF, 0x0100, 0x1000, 0x5530, 0x8130,
+                                  0xFF00, 0xFFFF])
+def test_an_emcy_is_a_fault_exactly_when_the_canopen_library_keeps_it_active(code: int) -> None:
+    """The python-canopen library's EMCY consumer (not ours) clears its active errors on an
+    error reset and keeps any other code active: ours faults on the same codes."""
+    consumer = EmcyConsumer()
+    consumer.on_emcy(cia402.EMCY_BASE + 1, emcy(0x8611, 0x81), 0.0)
+    consumer.on_emcy(cia402.EMCY_BASE + 1, emcy(code, 0x01), 0.0)
+    library_active = [error.code for error in consumer.active]
+    faults: list[str] = []
+    ours = emcy_fault(0, emcy(code, 0x01), faults)
+    if library_active:
+        assert library_active == [0x8611, code]
+        assert ours == code and len(faults) == 1
+    else:
+        assert ours == 0 and faults == []
 
 
 def test_a_malformed_emcy_is_a_fault() -> None:
