@@ -38,6 +38,7 @@ from haptic.common.model.passivity import PassivitySettings
 from haptic.common.model.synthesis import synthesize
 from haptic.common.model.teleop import TeleopModel
 from haptic.common.model.work_area import shared_work_area, slave_work_area_m
+from haptic.common.runtime.gc_pauses import frozen_heap
 from haptic.common.wire.injection import InjectionConfig
 from haptic.common.wire.messages import Flags
 from haptic.lockstep.delay_line import source_schedule
@@ -364,7 +365,10 @@ class LockstepSimulator:
         run.recorded = np.asarray([] if record_lanes is None else record_lanes, int)
         run.traces = {name: np.empty((steps, run.recorded.size, 2)) for name in TRACE_NAMES} \
             if run.recorded.size else {}
-        with np.errstate(over="ignore", invalid="ignore"):
+        # the heap from before the run is frozen: a full collection in the middle of the run
+        # (the set-up leaves enough young survivors to start one) would rescan every object
+        # the program holds, Warp's and the analysis' included, for no garbage
+        with np.errstate(over="ignore", invalid="ignore"), frozen_heap(collect=False):
             for k in range(steps):
                 self._master_step(run, k)
                 self._slave_step(run, k)

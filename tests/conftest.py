@@ -1,6 +1,9 @@
-"""Shared fixtures: the paper's configuration and model."""
+"""Shared fixtures: the paper's configuration and model, and a heap with nothing frozen."""
 
 from __future__ import annotations
+
+import gc
+from collections.abc import Iterator
 
 import pytest
 
@@ -18,3 +21,14 @@ def paper_config() -> dict:
 def paper_model(paper_config: dict) -> TeleopModel:
     """The paper's model, k = 1."""
     return model_from_config(paper_config)
+
+
+@pytest.fixture
+def thawed_heap() -> Iterator[None]:
+    """Nothing frozen in the garbage collector during the test, as when a program starts (a
+    mutation run's child freezes its preloaded heap for good); that freeze put back after."""
+    frozen = gc.get_freeze_count()
+    gc.unfreeze()
+    yield
+    if frozen:
+        gc.freeze()

@@ -25,15 +25,24 @@ from typing import Any
 
 
 @contextmanager
-def frozen_heap() -> Iterator[None]:
+def frozen_heap(collect: bool = True) -> Iterator[None]:
     """Collect everything, then freeze the survivors for the block (``gc.freeze``); they go
-    back to the oldest generation after it (``gc.unfreeze``)."""
-    gc.collect()
+    back to the oldest generation after it (``gc.unfreeze``).
+
+    ``collect=False`` freezes without collecting first: for a batch run that starts at once,
+    where one full collection of a large heap costs as much as the ones it saves (the garbage
+    frozen with the rest waits until the block ends). In a heap already frozen (an outer
+    block, or a process that froze its own for good) the block freezes what is new and leaves
+    the thawing to whoever froze first: thawing is all or nothing."""
+    already_frozen = gc.get_freeze_count() > 0
+    if collect:
+        gc.collect()
     gc.freeze()
     try:
         yield
     finally:
-        gc.unfreeze()
+        if not already_frozen:
+            gc.unfreeze()
 
 
 class GcPauses:

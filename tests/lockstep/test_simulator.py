@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import gc
+
 import numpy as np
 import pytest
 
@@ -77,3 +79,28 @@ def test_environment_must_be_known(paper_model) -> None:
     with pytest.raises(ValueError, match="environment"):
         LockstepSimulator(paper_model, load_scenario("constant-rate"),
                           parse_operator_spec("constant:fx=0"), np.array([1.0]), "water")
+
+
+class _FreezeWatch(LockstepSimulator):
+    """Notes the garbage collector's frozen object count at each of its master steps."""
+
+    frozen_during: list[int]
+
+    def _master_step(self, run, k: int) -> None:
+        self.frozen_during.append(gc.get_freeze_count())
+        super()._master_step(run, k)
+
+
+@pytest.mark.usefixtures("thawed_heap")
+def test_a_run_freezes_the_heap_from_before_it_and_thaws_it_after(paper_model) -> None:
+    """What was alive before the run is never scanned by a collection during it (a full
+    collection of the program's heap would stall the run), and is collectable again after."""
+    simulator = _FreezeWatch(paper_model, load_scenario("constant-rate"),
+                             parse_operator_spec("constant:fx=0,fy=0"), np.array([1.0]),
+                             "linear")
+    simulator.frozen_during = []
+    alive_before = len(gc.get_objects())
+    simulator.run(0.01, 2)
+    assert len(simulator.frozen_during) == 19
+    assert min(simulator.frozen_during) >= alive_before
+    assert gc.get_freeze_count() == 0

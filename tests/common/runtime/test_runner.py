@@ -363,6 +363,7 @@ def test_the_run_times_the_collectors_pauses():
                 and type(c.__self__).__name__ == "GcPauses"]  # removed after the run
 
 
+@pytest.mark.usefixtures("thawed_heap")
 def test_a_frozen_heap_is_scanned_no_more_during_the_run_and_thawed_after():
     import gc
 
