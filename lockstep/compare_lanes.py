@@ -47,6 +47,7 @@ from haptic.common.control.law_pairs import (
 )
 from haptic.common.control.law_settings import LawSettings
 from haptic.common.control.tasks import free_motion_sine
+from haptic.common.runtime.gc_pauses import frozen_heap
 from haptic.lockstep.compare_grid import CompareGrid, Lane
 from haptic.lockstep.compare_links import lane_lines
 from haptic.lockstep.compare_records import LaneRecords
@@ -156,7 +157,9 @@ def simulate_lanes(control: str, lanes: list[Lane], grid: CompareGrid,
     clay = LaneClay(tasks)
     handle, tool = lane_devices(grid, count)
     records = LaneRecords.create(PERIOD_S, steps, count)
-    with np.errstate(over="ignore", invalid="ignore"):
+    # the heap from before the run frozen, as in LockstepSimulator.run: no full collection
+    # of the program's objects in mid-run
+    with np.errstate(over="ignore", invalid="ignore"), frozen_heap(collect=False):
         for k in range(steps):
             fh = hand_force_N(grid, tasks, k * PERIOD_S, duration, handle.position_m,
                               handle.velocity_m_per_s)

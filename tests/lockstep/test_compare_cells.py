@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import gc
+
 import numpy as np
 import pytest
 
@@ -118,3 +120,25 @@ def test_a_clay_lane_beside_them_leaves_the_other_lanes_bit_for_bit() -> None:
     for name in ("handle_position_m", "tool_position_m", "handle_force_N",
                  "environment_force_N"):
         assert np.array_equal(getattr(alone, name)[:, 0], getattr(beside, name)[:, 0]), name
+
+
+@pytest.mark.usefixtures("thawed_heap")
+def test_a_lane_run_freezes_the_heap_from_before_it_and_thaws_it_after(monkeypatch) -> None:
+    """As the lockstep simulator's runs: what was alive before is not rescanned by a
+    collection during the run, and is collectable again after."""
+    import haptic.lockstep.compare_lanes as compare_lanes
+
+    frozen_during: list[int] = []
+    hand_force = compare_lanes.hand_force_N
+
+    def watched(*args, **kwargs):
+        frozen_during.append(gc.get_freeze_count())
+        return hand_force(*args, **kwargs)
+
+    monkeypatch.setattr(compare_lanes, "hand_force_N", watched)
+    grid = CompareGrid(("wave",), ("wall",), (0.0,), (0.0,), ("independent",), (0.0,),
+                       (300.0,), TaskSettings(settle_s=0.05))
+    alive_before = len(gc.get_objects())
+    simulate_lanes("wave", [Lane("wall", Network(0.0, 0.0, "independent", 0.0), 300.0)], grid)
+    assert frozen_during and min(frozen_during) >= alive_before
+    assert gc.get_freeze_count() == 0
