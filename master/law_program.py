@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from haptic.common.control.law_pairs import ControlPair
+from haptic.common.control.law_pairs import ControlPair, passivity_account
 from haptic.common.control.law_settings import LawSettings
 from haptic.common.model.work_area import SharedWorkArea
 from haptic.common.records.trace import TraceRecorder
@@ -286,6 +286,9 @@ def _run_linked(options: RunOptions, control: str, settings: LawSettings,
                               final_handle_position_m=np.nan_to_num(
                                   stages.reading.position_m).tolist(),
                               **extra_summary)
+    passivity = passivity_account(pair, "master")
+    if passivity:
+        summary["passivity"] = passivity
     if loop_options.trace_path:
         trace.save(loop_options.trace_path)
         summary["trace"] = str(loop_options.trace_path)

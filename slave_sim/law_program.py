@@ -36,6 +36,7 @@ from haptic.common.control.law_pairs import (
     TOOL_DEVICE_MASS_KG,
     ControlPair,
     Device,
+    passivity_account,
 )
 from haptic.common.control.law_settings import LawSettings
 from haptic.common.records.cutting import cutting_figures, steady_cut_fields
@@ -205,6 +206,9 @@ def run_law_slave(options: Any, control: str, settings: LawSettings, world: LawS
             stages=driver.stage_times[0].summary(), control=control,
             final_tool_position_m=world.tool.position_m[0].tolist(),
             removed_volume_m3=world.removed_volume_m3, **extra_summary)
+        passivity = passivity_account(pair, "slave")
+        if passivity:
+            summary["passivity"] = passivity
     traced = trace.arrays()
     on_samples = {**traced, "time_s": traced["sample_time_s"]} if traced else traced
     summary.update(cutting_figures(on_samples))

@@ -280,6 +280,17 @@ class Device:
         self.position_m[...] = self.position_m + ts * velocity
 
 
+def passivity_account(pair: ControlPair, side: str, lane: int = 0) -> dict[str, float | int]:
+    """The passivity layer's account (:meth:`PassivityPort.account`) of one ``side``
+    ("master" or "slave") of ``pair`` in ``lane``; empty for a law without the layer."""
+    if side not in ("master", "slave"):
+        raise ValueError(f"a side is master or slave (got {side!r})")
+    if not isinstance(pair, PassiveFourChannelPair):
+        return {}
+    port = (pair.master_side if side == "master" else pair.slave_side).port
+    return port.account(lane)
+
+
 def make_pair(control: str, lanes: int, settings: LawSettings | None = None) -> ControlPair:
     """Both sides of ``control`` (one of :data:`LANE_CONTROLS`) over ``lanes`` lanes."""
     if control not in PAIRS:
@@ -292,4 +303,4 @@ __all__ = ["FOUR_CHANNEL_LOCAL", "FOUR_CHANNEL_MANIPULATOR", "HANDLE_DEVICE_DAMP
            "SERVO_FORCE_LIMIT_N", "SERVO_FREQUENCY_RAD_S", "TOOL_DEVICE_DAMPING_N_S_PER_M",
            "TOOL_DEVICE_MASS_KG", "WAVE_IMPEDANCE_N_S_PER_M", "ControlPair", "Device",
            "FourChannelPair", "LawSettings", "ModelMediatedPair", "PassiveFourChannelPair",
-           "WavePair", "four_channel_gains", "make_pair"]
+           "WavePair", "four_channel_gains", "make_pair", "passivity_account"]

@@ -184,6 +184,20 @@ class PassivityPort:
         network has been active at this port beyond what the controller could dissipate."""
         return self.tank_J
 
+    def account(self, lane: int = 0) -> dict[str, float | int]:
+        """One lane's account for a run's summary: the port's input and output (J, the
+        observer's two sums), what it handed to the peer and received from it (J), what it
+        holds now (J; negative: the controller's caps left a deficit), what the controller
+        dissipated and the cap forgot (J), and in how many periods the controller acted."""
+        return {"input_J": float(self.input_energy_J[lane]),
+                "output_J": float(self.output_energy_J[lane]),
+                "sent_J": float(self.sent_J[lane]),
+                "received_J": float(self.peer_sent_J[lane]),
+                "reserve_J": float(self.tank_J[lane]),
+                "dissipated_J": float(self.dissipated_energy_J[lane]),
+                "forgotten_J": float(self.forgotten_energy_J[lane]),
+                "active_steps": int(self.active_steps[lane])}
+
     def _cap_credit(self) -> None:
         """Forget the reserve beyond ``credit_max_J`` (the credit-burst pitfall)."""
         excess = np.maximum(self.tank_J - self.settings.credit_max_J, 0.0)

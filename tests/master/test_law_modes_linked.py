@@ -26,6 +26,10 @@ from tests.helpers.programs import Program, Programs, python_module
 
 WAIT_S = 90.0
 OPERATOR = "constant:fx=1.0,onset=0.05,rise=0.5"
+#: A run long enough for the push to come to rest before the end (s), on a busy machine too:
+#: a tool still moving trails the handle by its speed times the link's age, which an end gap
+#: of 1 mm cannot hold (docs/measurements/two_process_tests.md).
+SETTLED_S = 6.0
 
 
 def _config(tmp_path: Path, mode: str, environment: str = "linear", extra: str = "") -> Path:
@@ -37,16 +41,18 @@ def _config(tmp_path: Path, mode: str, environment: str = "linear", extra: str =
 
 
 def _pair_args(tmp_path: Path, master_mode: str, slave_mode: str, duration_s: float,
-               environment: str = "linear") -> tuple[list[str], list[str]]:
+               environment: str = "linear", extra: str = "") -> tuple[list[str], list[str]]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     common = ["--key-prefix", f"test/{uuid.uuid4().hex[:8]}", "--no-status", "--peer-wait",
               "30"]
     slave = python_module(
-        "haptic.slave_sim.cli", "--config", str(_config(tmp_path, slave_mode, environment)),
+        "haptic.slave_sim.cli", "--config", str(_config(tmp_path, slave_mode, environment,
+                                                       extra)),
         *common, "--connect", endpoint, "--json-summary", str(tmp_path / "slave.json"),
         "--out", str(tmp_path / "slave_out"), "--duration", str(duration_s + 1.5))
     master = python_module(
-        "haptic.master.cli", "--config", str(_config(tmp_path, master_mode, environment)),
+        "haptic.master.cli", "--config", str(_config(tmp_path, master_mode, environment,
+                                                     extra)),
         *common, "--listen", endpoint, "--rig", "model", "--operator", OPERATOR,
         "--json-summary", str(tmp_path / "master.json"), "--duration", str(duration_s))
     return slave, master
@@ -58,12 +64,29 @@ def _ended(program: Program, timeout_s: float) -> subprocess.CompletedProcess[st
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("control", [law for law in LANE_CONTROLS if law != "wave"])
+@pytest.mark.parametrize("control", [law for law in LANE_CONTROLS
+                                     if law not in ("wave", "four-channel-tdpa")])
 def test_each_law_runs_both_programs_bounded_and_aligned(tmp_path, control) -> None:
     """(wave: the session in tests/common/launch/test_session.py runs its two programs on
-    the emulated CAN rig and the clay, ending aligned.)"""
+    the emulated CAN rig and the clay, ending aligned; four-channel-tdpa: the tests below.)"""
+    master_summary, slave_summary, trace = _run_pair(tmp_path, control, SETTLED_S)
+    assert "passivity" not in master_summary and "passivity" not in slave_summary
+    gap_m = _final_gap_m(trace)
+    assert gap_m <= 0.001
+    # and the master's final handle is where the slave's tool stopped, within the motion of
+    # the watchdog's silence limit at the end (the peer's last message may come late)
+    final = np.array(slave_summary["final_tool_position_m"])
+    assert np.hypot(*(final - master_summary["final_handle_position_m"])) <= 0.003
+
+
+def _run_pair(tmp_path: Path, control: str, duration_s: float, extra: str = ""
+              ) -> tuple[dict, dict, dict[str, np.ndarray]]:
+    """Both programs in ``control`` for ``duration_s`` (s), the operator pushing 1 N:
+    (master's summary, slave's summary, slave's trace), after the checks every law passes
+    (exit 0, the law's stages, forces bounded, the tool moved by the push)."""
     with Programs() as programs:
-        started = [programs.start(args) for args in _pair_args(tmp_path, control, control, 3.0)]
+        started = [programs.start(args)
+                   for args in _pair_args(tmp_path, control, control, duration_s, extra=extra)]
         slave, master = (_ended(program, WAIT_S) for program in started)
     assert master.returncode == 0, master.stdout
     assert slave.returncode == 0, slave.stdout
@@ -78,19 +101,67 @@ def test_each_law_runs_both_programs_bounded_and_aligned(tmp_path, control) -> N
     # bounded: the operator pushes 1 N; nothing near the force limits
     assert 0.1 < master_summary["max_abs_force_N"] < 5.0
     assert slave_summary["max_abs_force_N"] < 5.0
-    trace = np.load(tmp_path / "slave_out" / "slave_trace.npz")
+    trace = dict(np.load(tmp_path / "slave_out" / "slave_trace.npz"))
     assert np.all(np.isfinite(trace["tool_position_x_m"]))
-    # the last sample with forces on: the tool where the handle (as its message carried it:
-    # these laws send the handle's position) is, within 1 mm, after the push moved it
     last = np.flatnonzero(trace["forces_enabled"] > 0.5)[-1]
-    tool = np.array([trace["tool_position_x_m"][last], trace["tool_position_y_m"][last]])
-    handle = np.array([trace["handle_position_x_m"][last], trace["handle_position_y_m"][last]])
-    assert tool[0] > 0.005
-    assert np.hypot(*(tool - handle)) <= 0.001
-    # and the master's final handle is where the slave's tool stopped, within the motion of
-    # the watchdog's silence limit at the end (the peer's last message may come late)
-    final = np.array(slave_summary["final_tool_position_m"])
-    assert np.hypot(*(final - master_summary["final_handle_position_m"])) <= 0.003
+    assert trace["tool_position_x_m"][last] > 0.005  # the push moved the tool
+    return master_summary, slave_summary, trace
+
+
+def _final_gap_m(trace: dict[str, np.ndarray]) -> float:
+    """At the last sample with forces on: how far the tool is from the handle as its message
+    carried it (these laws send the handle's position), m."""
+    last = np.flatnonzero(trace["forces_enabled"] > 0.5)[-1]
+    return float(np.hypot(trace["tool_position_x_m"][last] - trace["handle_position_x_m"][last],
+                          trace["tool_position_y_m"][last] - trace["handle_position_y_m"][last]))
+
+
+def _assert_passive(master: dict, slave: dict) -> None:
+    """The passivity layer's contract, from both programs' accounts (J): the link delivered
+    no energy the peer did not hand over; each account closes (what it holds is its input,
+    less its output, plus what it received, less what it handed on or the cap forgot); and
+    no side gave out more than it had but by a deficit the controller's caps left, under
+    1 mJ."""
+    for own, peer in ((master, slave), (slave, master)):
+        assert own["received_J"] <= peer["sent_J"] + 1e-12
+        assert own["reserve_J"] == pytest.approx(
+            own["input_J"] - own["output_J"] + own["received_J"] - own["sent_J"]
+            - own["forgotten_J"], abs=1e-9)
+        assert own["reserve_J"] > -0.001
+
+
+@pytest.mark.slow
+def test_four_channel_tdpa_runs_both_programs_passive_and_reports_its_accounts(tmp_path
+                                                                               ) -> None:
+    """The shipped settings: the master keeps ``master_keep_J`` of the operator's input and
+    hands on the rest, but the slave's environment (the paper's Tt, a damper) takes about all
+    of it, so the slave's account runs short and its layer yields through the push. The
+    yield is not corrected (docs/architectures.md), and how much of it is left at the end
+    depends on the link's timing, so this test asserts the layer's contract and its accounts,
+    not the end gap."""
+    master_summary, slave_summary, trace = _run_pair(tmp_path, "four-channel-tdpa", 3.0)
+    master, slave = master_summary["passivity"], slave_summary["passivity"]
+    _assert_passive(master, slave)
+    assert master["input_J"] > 0.01  # the push worked on the handle
+    # the master handed on all of its own input but what it keeps (master_keep_J, 2 mJ)
+    assert master["reserve_J"] <= 0.002 + master["received_J"] + 1e-9
+    # the slave's layer acted and dissipated what it was short of
+    assert slave["active_steps"] > 0 and slave["dissipated_J"] > 0.0
+    assert np.isfinite(_final_gap_m(trace))
+
+
+@pytest.mark.slow
+def test_four_channel_tdpa_that_keeps_nothing_back_ends_aligned(tmp_path) -> None:
+    """``master_keep_J = 0``: the master hands on all of the operator's input, the slave is
+    no longer short of what its environment takes, its layer hardly acts, and the sides end
+    within 1 mm, as the plain four-channel law's do."""
+    master_summary, slave_summary, trace = _run_pair(tmp_path, "four-channel-tdpa", SETTLED_S,
+                                                     extra="master_keep_J = 0.0\n")
+    master, slave = master_summary["passivity"], slave_summary["passivity"]
+    _assert_passive(master, slave)
+    assert master["reserve_J"] <= master["received_J"] + 1e-9
+    assert slave["dissipated_J"] < 0.1 * master["input_J"]
+    assert _final_gap_m(trace) <= 0.001
 
 
 @pytest.mark.slow

@@ -6,6 +6,7 @@ ones; and the comparison's pair carrying each side's handed-over energy in its m
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from haptic.common.control.four_channel import FourChannelGains, Impedance, side_laws
 from haptic.common.control.four_channel_passivity import (
@@ -15,7 +16,11 @@ from haptic.common.control.four_channel_passivity import (
     passive_side_step_reference,
 )
 from haptic.common.control.four_channel_tdpa_kernel import PassiveFourChannelSideKernel
-from haptic.common.control.law_pairs import PassiveFourChannelPair
+from haptic.common.control.law_pairs import (
+    FourChannelPair,
+    PassiveFourChannelPair,
+    passivity_account,
+)
 from haptic.common.model.passivity import PassivitySettings
 
 MANIPULATOR = Impedance(mass_kg=0.1, damping_N_s_per_m=1.0)
@@ -84,3 +89,26 @@ def test_the_pair_carries_each_sides_handed_over_energy() -> None:
     zero = np.zeros((lanes, 2))
     pair.slave(zero, zero, zero, handle_message, np.array([True, False]), tool_message)
     np.testing.assert_array_equal(pair.slave_side.port.peer_sent_J, [sent[0], 0.0])
+
+
+def test_each_side_reports_its_own_account() -> None:
+    """The programs' summaries: each side's account from its own port, in the lane asked
+    for; a law without the layer has none."""
+    lanes = 2
+    pair = PassiveFourChannelPair(lanes)
+    handle_message, tool_message = pair.initial_messages(lanes)
+    fresh = np.ones(lanes, bool)
+    push = np.array([[0.0, 0.0], [2.0, 0.0]])
+    zero = np.zeros((lanes, 2))
+    for _ in range(200):
+        pair.master(push, tool_message, fresh, handle_message)
+        pair.slave(zero, zero, zero, handle_message, fresh, tool_message)
+    master, slave = passivity_account(pair, "master", 1), passivity_account(pair, "slave", 1)
+    assert master == pair.master_side.port.account(1)
+    assert slave == pair.slave_side.port.account(1)
+    assert master["input_J"] > 0.0 and master["sent_J"] > 0.0
+    assert slave["received_J"] == master["sent_J"] and slave["input_J"] == 0.0
+    assert passivity_account(pair, "master", 0)["input_J"] == 0.0
+    assert passivity_account(FourChannelPair(lanes), "slave") == {}
+    with pytest.raises(ValueError, match="master or slave"):
+        passivity_account(pair, "tool")
