@@ -184,7 +184,7 @@ class PassivityPort:
         network has been active at this port beyond what the controller could dissipate."""
         return self.tank_J
 
-    def account(self, lane: int = 0) -> dict[str, float | int]:
+    def account(self, lane: int) -> dict[str, float | int]:
         """One lane's account for a run's summary: the port's input and output (J, the
         observer's two sums), what it handed to the peer and received from it (J), what it
         holds now (J; negative: the controller's caps left a deficit), what the controller
