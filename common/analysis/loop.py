@@ -41,6 +41,18 @@ def feedthrough(system: control.TransferFunction) -> float:
     return float(num[0] / den[0]) if len(num) == len(den) else 0.0
 
 
+def sample(system: control.TransferFunction, sample_period_s: float,
+           method: str) -> control.TransferFunction:
+    """``system`` discretised at ``sample_period_s`` (s) by ``method`` ("zoh" or "tustin").
+    A zero system (Pt with no environment, Tt = 0) stays zero: discretising it is exact,
+    while SciPy's conversion would strip its all-zero numerator and warn that the result
+    may be meaningless."""
+    num, _ = tf_coefficients(system)
+    if not np.any(num):
+        return control.tf([0.0], [1.0], sample_period_s)
+    return control.sample_system(system, sample_period_s, method=method)
+
+
 @dataclass(frozen=True)
 class LoopTerms:
     """Responses of the loop's parts at the points ``s`` (continuous) or ``z`` (sampled)."""
@@ -79,12 +91,12 @@ class AxisLoop:
             self._pt_feedthrough = 0.0
         else:
             ts = sample_period_s
-            pt_zoh = control.sample_system(pt, ts, method="zoh")
+            pt_zoh = sample(pt, ts, "zoh")
             self._pt_feedthrough = feedthrough(pt_zoh)
             self._parts = {
-                "ph": control.sample_system(ph, ts, method="zoh"),
+                "ph": sample(ph, ts, "zoh"),
                 "pt": pt_zoh,
-                **{name: control.sample_system(system, ts, method="tustin")
+                **{name: sample(system, ts, "tustin")
                    for name, system in (("ch1", comps.ch1), ("ct1", comps.ct1),
                                         ("ch2", comps.ch2), ("ct2", comps.ct2))},
             }
@@ -99,9 +111,9 @@ class AxisLoop:
             extra = {"cp": tf([kp * wc], [1.0, wc]), "gt_": minimal_tf(gt),
                      "gh_": minimal_tf(gh)}
             if sample_period_s is not None:
-                extra = {"cp": control.sample_system(extra["cp"], sample_period_s, "tustin"),
-                         "gt_": control.sample_system(extra["gt_"], sample_period_s, "zoh"),
-                         "gh_": control.sample_system(extra["gh_"], sample_period_s, "zoh")}
+                extra = {"cp": sample(extra["cp"], sample_period_s, "tustin"),
+                         "gt_": sample(extra["gt_"], sample_period_s, "zoh"),
+                         "gh_": sample(extra["gh_"], sample_period_s, "zoh")}
             self._parts.update(extra)
 
     @property

@@ -3,11 +3,15 @@ agrees with a time-domain simulation of the same loop through a delay line."""
 
 from __future__ import annotations
 
+import warnings
+
+import control
 import numpy as np
 import pytest
+from scipy.signal import BadCoefficients
 
 from haptic.common.analysis.linear_loop import LinearLoopSimulator, growth_ratio
-from haptic.common.analysis.loop import AxisLoop
+from haptic.common.analysis.loop import AxisLoop, sample
 from haptic.common.analysis.report import AnalysisSettings, analyse
 from haptic.common.analysis.stability import (
     FrequencyGrid,
@@ -113,3 +117,24 @@ def test_eq30_cannot_hold_with_an_integrating_ch1(paper_model) -> None:
     assert not result.eq30_satisfied
     assert all(axis.eq30_unbounded_at_low_frequency for axis in result.axes)
     assert result.stable
+
+
+def test_a_free_tool_is_sampled_as_zero_without_a_warning(paper_model) -> None:
+    """Tt = 0 (free space, the comparison's free-sine task): Pt is zero, and so is its
+    sampled form, without SciPy's warning that a conversion of it may be meaningless; the
+    loop's delayed term B = Ph Ct1 Pt Ch2 is then zero, and sampling a non-zero part is
+    python-control's own."""
+    axis = paper_model.axes[0].with_environment(np.array([0.0]))
+    ts = paper_model.sample_period_s
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", BadCoefficients)
+        loop = AxisLoop(axis, synthesize_axis(axis, paper_model.ch1), ts)
+        zero = sample(control.tf([0.0], [1.0]), ts, "zoh")
+    assert zero.dt == ts and not np.any(tf_coefficients(zero)[0])
+    s = 1j * np.array([1.0, 100.0, 1000.0]) + 1e-3
+    terms = loop.terms_at(s)
+    assert np.all(terms.b == 0.0) and np.all(np.isfinite(terms.a))
+    plant = control.tf([1.0], [1.0, 2.0, 0.0])
+    ours, theirs = sample(plant, ts, "zoh"), control.sample_system(plant, ts, method="zoh")
+    for mine, reference in zip(tf_coefficients(ours), tf_coefficients(theirs), strict=True):
+        np.testing.assert_array_equal(mine, reference)
