@@ -1,24 +1,26 @@
-"""Two cells over the real Zenoh link (loopback, in this process), far from the boundary so a
-loaded machine's late ticks cannot flip them: the verdicts match the analysis at the round
-trip the link really gave, which in wall-clock time is at least the injected one (in ticks
-it may be less: a loop running behind its schedule fits fewer ticks into the delay)."""
+"""Cells over the real Zenoh link (loopback, in this process): the verdicts match the
+analysis at the round trip the link really gave, which in wall-clock time is at least the
+injected one (in ticks it may be less: a loop running behind its schedule fits fewer ticks
+into the delay, on a busy machine enough to bring twice the margin inside it). So the two
+cells are aimed by the round trip they measure, as the sweep's real-link lanes are, at a
+quarter and twice the sampled margin (docs/measurements/two_process_tests.md)."""
 
 from __future__ import annotations
 
 import pytest
 
 from haptic.lockstep import real_link
-from haptic.lockstep.real_link import RealLinkCell, run_cell, run_cell_at
+from haptic.lockstep.real_link import RealLinkCell, run_cell_at
 from haptic.lockstep.sweep import analytic_margin_s
 
 
-@pytest.mark.parametrize(("injected_s", "growing"), [(0.002, False), (0.016, True)])
-def test_real_link_cells_agree_with_the_analysis(paper_model, injected_s, growing) -> None:
-    cell = run_cell(paper_model, 19.0, injected_s, duration_s=1.5)
+@pytest.mark.parametrize(("margin_factor", "growing"), [(0.25, False), (2.0, True)])
+def test_real_link_cells_agree_with_the_analysis(paper_model, margin_factor, growing) -> None:
+    cell = run_cell_at(paper_model, 19.0, margin_factor, duration_s=1.5)
     assert cell.growing is growing
     assert cell.agree
     # the link holds each message for its injected delay, whatever the ticks did meanwhile
-    assert cell.wall_round_trip_s >= injected_s - 1e-4
+    assert cell.wall_round_trip_s >= cell.injected_round_trip_s - 1e-4
     # the runner never runs ahead of its schedule: the ticks counted fit in the time passed
     assert cell.measured_round_trip_s <= cell.wall_round_trip_s + paper_model.sample_period_s
 
