@@ -38,8 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from haptic.common.control.law_pairs import ControlPair, passivity_account
+from haptic.common.control.law_pairs import ControlPair, passivity_port
 from haptic.common.control.law_settings import LawSettings
+from haptic.common.model.passivity import passivity_summary
 from haptic.common.model.work_area import SharedWorkArea
 from haptic.common.records.trace import TraceRecorder
 from haptic.common.runtime.cli_options import RunOptions
@@ -285,10 +286,8 @@ def _run_linked(options: RunOptions, control: str, settings: LawSettings,
                               non_finite_readings=stages.non_finite_readings,
                               final_handle_position_m=np.nan_to_num(
                                   stages.reading.position_m).tolist(),
+                              **passivity_summary(passivity_port(pair, "master"), False),
                               **extra_summary)
-    passivity = passivity_account(pair, "master")
-    if passivity:
-        summary["passivity"] = passivity
     if loop_options.trace_path:
         trace.save(loop_options.trace_path)
         summary["trace"] = str(loop_options.trace_path)

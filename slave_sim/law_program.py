@@ -36,9 +36,10 @@ from haptic.common.control.law_pairs import (
     TOOL_DEVICE_MASS_KG,
     ControlPair,
     Device,
-    passivity_account,
+    passivity_port,
 )
 from haptic.common.control.law_settings import LawSettings
+from haptic.common.model.passivity import passivity_summary
 from haptic.common.records.cutting import cutting_figures, steady_cut_fields
 from haptic.common.records.trace import TraceRecorder
 from haptic.common.runtime.law_peer import LawPeer, meet_law_peer
@@ -205,10 +206,8 @@ def run_law_slave(options: Any, control: str, settings: LawSettings, world: LawS
             run, peer.watchdog, stages.max_force_N, (peer.watchdog.events, stages.events),
             stages=driver.stage_times[0].summary(), control=control,
             final_tool_position_m=world.tool.position_m[0].tolist(),
-            removed_volume_m3=world.removed_volume_m3, **extra_summary)
-        passivity = passivity_account(pair, "slave")
-        if passivity:
-            summary["passivity"] = passivity
+            removed_volume_m3=world.removed_volume_m3,
+            **passivity_summary(passivity_port(pair, "slave"), False), **extra_summary)
     traced = trace.arrays()
     on_samples = {**traced, "time_s": traced["sample_time_s"]} if traced else traced
     summary.update(cutting_figures(on_samples))

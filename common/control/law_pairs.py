@@ -38,6 +38,7 @@ from haptic.common.control.wave import (
     message_fields,
 )
 from haptic.common.control.wave_kernel import WavePortKernel
+from haptic.common.model.passivity import PassivityPort
 
 #: The handle device without the hand (kg, N s/m); the hand's 0.25 kg rides on it.
 HANDLE_DEVICE_MASS_KG = 0.1
@@ -280,15 +281,15 @@ class Device:
         self.position_m[...] = self.position_m + ts * velocity
 
 
-def passivity_account(pair: ControlPair, side: str, lane: int = 0) -> dict[str, float | int]:
-    """The passivity layer's account (:meth:`PassivityPort.account`) of one ``side``
-    ("master" or "slave") of ``pair`` in ``lane``; empty for a law without the layer."""
+def passivity_port(pair: ControlPair, side: str) -> PassivityPort | None:
+    """The passivity layer's port of one ``side`` ("master" or "slave") of ``pair``, or None
+    for a law without the layer (what
+    :func:`~haptic.common.model.passivity.passivity_summary` reports)."""
     if side not in ("master", "slave"):
         raise ValueError(f"a side is master or slave (got {side!r})")
     if not isinstance(pair, PassiveFourChannelPair):
-        return {}
-    port = (pair.master_side if side == "master" else pair.slave_side).port
-    return port.account(lane)
+        return None
+    return (pair.master_side if side == "master" else pair.slave_side).port
 
 
 def make_pair(control: str, lanes: int, settings: LawSettings | None = None) -> ControlPair:
@@ -303,4 +304,4 @@ __all__ = ["FOUR_CHANNEL_LOCAL", "FOUR_CHANNEL_MANIPULATOR", "HANDLE_DEVICE_DAMP
            "SERVO_FORCE_LIMIT_N", "SERVO_FREQUENCY_RAD_S", "TOOL_DEVICE_DAMPING_N_S_PER_M",
            "TOOL_DEVICE_MASS_KG", "WAVE_IMPEDANCE_N_S_PER_M", "ControlPair", "Device",
            "FourChannelPair", "LawSettings", "ModelMediatedPair", "PassiveFourChannelPair",
-           "WavePair", "four_channel_gains", "make_pair", "passivity_account"]
+           "WavePair", "four_channel_gains", "make_pair", "passivity_port"]

@@ -184,20 +184,6 @@ class PassivityPort:
         network has been active at this port beyond what the controller could dissipate."""
         return self.tank_J
 
-    def account(self, lane: int) -> dict[str, float | int]:
-        """One lane's account for a run's summary: the port's input and output (J, the
-        observer's two sums), what it handed to the peer and received from it (J), what it
-        holds now (J; negative: the controller's caps left a deficit), what the controller
-        dissipated and the cap forgot (J), and in how many periods the controller acted."""
-        return {"input_J": float(self.input_energy_J[lane]),
-                "output_J": float(self.output_energy_J[lane]),
-                "sent_J": float(self.sent_J[lane]),
-                "received_J": float(self.peer_sent_J[lane]),
-                "reserve_J": float(self.tank_J[lane]),
-                "dissipated_J": float(self.dissipated_energy_J[lane]),
-                "forgotten_J": float(self.forgotten_energy_J[lane]),
-                "active_steps": int(self.active_steps[lane])}
-
     def _cap_credit(self) -> None:
         """Forget the reserve beyond ``credit_max_J`` (the credit-burst pitfall)."""
         excess = np.maximum(self.tank_J - self.settings.credit_max_J, 0.0)
@@ -348,7 +334,8 @@ def passivity_summary(port: PassivityPort | None, standby: bool, lane: int = 0
     paper's scheme without it; "tdpa": on all run; "standby": built for the governor's
     run-time switch), ``tdpa_active`` (on at the end), and its energies, J: what it handed
     to the peer and received, what flowed in and out at the port, what the controller
-    dissipated, and the steps it acted."""
+    dissipated and the credit cap forgot, what the account holds at the end (negative: a
+    deficit the controller's caps left), and the steps it acted."""
     if port is None:
         return {"tdpa_layer": "standby" if standby else "off", "tdpa_active": False}
     return {"tdpa_layer": "standby" if standby else "tdpa",
@@ -358,6 +345,8 @@ def passivity_summary(port: PassivityPort | None, standby: bool, lane: int = 0
             "tdpa_input_energy_J": float(port.input_energy_J[lane]),
             "tdpa_output_energy_J": float(port.output_energy_J[lane]),
             "tdpa_dissipated_energy_J": float(port.dissipated_energy_J[lane]),
+            "tdpa_forgotten_energy_J": float(port.forgotten_energy_J[lane]),
+            "tdpa_reserve_J": float(port.tank_J[lane]),
             "tdpa_active_steps": int(port.active_steps[lane])}
 
 

@@ -70,7 +70,7 @@ def test_each_law_runs_both_programs_bounded_and_aligned(tmp_path, control) -> N
     """(wave: the session in tests/common/launch/test_session.py runs its two programs on
     the emulated CAN rig and the clay, ending aligned; four-channel-tdpa: the tests below.)"""
     master_summary, slave_summary, trace = _run_pair(tmp_path, control, SETTLED_S)
-    assert "passivity" not in master_summary and "passivity" not in slave_summary
+    assert master_summary["tdpa_layer"] == slave_summary["tdpa_layer"] == "off"
     gap_m = _final_gap_m(trace)
     assert gap_m <= 0.001
     # and the master's final handle is where the slave's tool stopped, within the motion of
@@ -117,17 +117,18 @@ def _final_gap_m(trace: dict[str, np.ndarray]) -> float:
 
 
 def _assert_passive(master: dict, slave: dict) -> None:
-    """The passivity layer's contract, from both programs' accounts (J): the link delivered
+    """The passivity layer's contract, from both programs' summaries (J): the link delivered
     no energy the peer did not hand over; each account closes (what it holds is its input,
     less its output, plus what it received, less what it handed on or the cap forgot); and
     no side gave out more than it had but by a deficit the controller's caps left, under
     1 mJ."""
     for own, peer in ((master, slave), (slave, master)):
-        assert own["received_J"] <= peer["sent_J"] + 1e-12
-        assert own["reserve_J"] == pytest.approx(
-            own["input_J"] - own["output_J"] + own["received_J"] - own["sent_J"]
-            - own["forgotten_J"], abs=1e-9)
-        assert own["reserve_J"] > -0.001
+        assert own["tdpa_layer"] == "tdpa"
+        assert own["tdpa_received_J"] <= peer["tdpa_sent_J"] + 1e-12
+        assert own["tdpa_reserve_J"] == pytest.approx(
+            own["tdpa_input_energy_J"] - own["tdpa_output_energy_J"] + own["tdpa_received_J"]
+            - own["tdpa_sent_J"] - own["tdpa_forgotten_energy_J"], abs=1e-9)
+        assert own["tdpa_reserve_J"] > -0.001
 
 
 @pytest.mark.slow
@@ -140,13 +141,13 @@ def test_four_channel_tdpa_runs_both_programs_passive_and_reports_its_accounts(t
     depends on the link's timing, so this test asserts the layer's contract and its accounts,
     not the end gap."""
     master_summary, slave_summary, trace = _run_pair(tmp_path, "four-channel-tdpa", 3.0)
-    master, slave = master_summary["passivity"], slave_summary["passivity"]
+    master, slave = master_summary, slave_summary
     _assert_passive(master, slave)
-    assert master["input_J"] > 0.01  # the push worked on the handle
+    assert master["tdpa_input_energy_J"] > 0.01  # the push worked on the handle
     # the master handed on all of its own input but what it keeps (master_keep_J, 2 mJ)
-    assert master["reserve_J"] <= 0.002 + master["received_J"] + 1e-9
+    assert master["tdpa_reserve_J"] <= 0.002 + master["tdpa_received_J"] + 1e-9
     # the slave's layer acted and dissipated what it was short of
-    assert slave["active_steps"] > 0 and slave["dissipated_J"] > 0.0
+    assert slave["tdpa_active_steps"] > 0 and slave["tdpa_dissipated_energy_J"] > 0.0
     assert np.isfinite(_final_gap_m(trace))
 
 
@@ -157,10 +158,10 @@ def test_four_channel_tdpa_that_keeps_nothing_back_ends_aligned(tmp_path) -> Non
     within 1 mm, as the plain four-channel law's do."""
     master_summary, slave_summary, trace = _run_pair(tmp_path, "four-channel-tdpa", SETTLED_S,
                                                      extra="master_keep_J = 0.0\n")
-    master, slave = master_summary["passivity"], slave_summary["passivity"]
+    master, slave = master_summary, slave_summary
     _assert_passive(master, slave)
-    assert master["reserve_J"] <= master["received_J"] + 1e-9
-    assert slave["dissipated_J"] < 0.1 * master["input_J"]
+    assert master["tdpa_reserve_J"] <= master["tdpa_received_J"] + 1e-9
+    assert slave["tdpa_dissipated_energy_J"] < 0.1 * master["tdpa_input_energy_J"]
     assert _final_gap_m(trace) <= 0.001
 
 

@@ -19,7 +19,7 @@ from haptic.common.control.four_channel_tdpa_kernel import PassiveFourChannelSid
 from haptic.common.control.law_pairs import (
     FourChannelPair,
     PassiveFourChannelPair,
-    passivity_account,
+    passivity_port,
 )
 from haptic.common.model.passivity import PassivitySettings
 
@@ -91,9 +91,9 @@ def test_the_pair_carries_each_sides_handed_over_energy() -> None:
     np.testing.assert_array_equal(pair.slave_side.port.peer_sent_J, [sent[0], 0.0])
 
 
-def test_each_side_reports_its_own_account() -> None:
-    """The programs' summaries: each side's account from its own port, in the lane asked
-    for; a law without the layer has none."""
+def test_each_side_reports_its_own_port() -> None:
+    """The programs' summaries: each side's passivity port, the one its messages' energy comes
+    from; a law without the layer has none."""
     lanes = 2
     pair = PassiveFourChannelPair(lanes)
     handle_message, tool_message = pair.initial_messages(lanes)
@@ -103,12 +103,11 @@ def test_each_side_reports_its_own_account() -> None:
     for _ in range(200):
         pair.master(push, tool_message, fresh, handle_message)
         pair.slave(zero, zero, zero, handle_message, fresh, tool_message)
-    master, slave = passivity_account(pair, "master", 1), passivity_account(pair, "slave", 1)
-    assert master == pair.master_side.port.account(1)
-    assert slave == pair.slave_side.port.account(1)
-    assert master["input_J"] > 0.0 and master["sent_J"] > 0.0
-    assert slave["received_J"] == master["sent_J"] and slave["input_J"] == 0.0
-    assert passivity_account(pair, "master", 0)["input_J"] == 0.0
-    assert passivity_account(FourChannelPair(lanes), "slave") == {}
+    master, slave = passivity_port(pair, "master"), passivity_port(pair, "slave")
+    assert master is pair.master_side.port and slave is pair.slave_side.port
+    np.testing.assert_array_equal(master.sent_J, handle_message[:, 6])
+    assert master.sent_J[1] > 0.0 and master.sent_J[0] == 0.0
+    np.testing.assert_array_equal(slave.peer_sent_J, master.sent_J)
+    assert passivity_port(FourChannelPair(lanes), "slave") is None
     with pytest.raises(ValueError, match="master or slave"):
-        passivity_account(pair, "tool")
+        passivity_port(pair, "tool")

@@ -4,8 +4,6 @@ credit spent in bursts, bursts out of the controller)."""
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 
@@ -43,24 +41,6 @@ def test_the_account_conserves_energy_and_hands_over_what_it_does_not_keep() -> 
     q = port(1, keep_J=0.01)
     q.observe(np.array([0.03]))
     assert q.tank_J[0] == pytest.approx(0.01) and q.sent_J[0] == pytest.approx(0.02)
-
-
-def test_the_account_reports_one_lanes_sums_as_plain_numbers() -> None:
-    """What a run's summary shows of the layer: lane 1's sums, not lane 0's, as JSON numbers."""
-    p = port(2, keep_J=0.001)
-    p.observe(np.array([0.0, 0.004]))  # lane 1's own input: 3 mJ over keep_J handed on
-    p.receive(np.array([0.0, 0.002]))
-    p.observe(np.array([0.0, -0.0005]))
-    p.yield_command(np.array([[0.0, 0.0], [5.0, 0.0]]), np.array([[0.0, 0.0], [-0.01, 0.0]]))
-    account = p.account(1)
-    assert account == {"input_J": pytest.approx(0.004), "output_J": pytest.approx(0.0005),
-                       "sent_J": pytest.approx(0.003), "received_J": pytest.approx(0.002),
-                       "reserve_J": pytest.approx(0.0025),
-                       "dissipated_J": pytest.approx(p.dissipated_energy_J[1]),
-                       "forgotten_J": 0.0, "active_steps": 1}
-    assert account["dissipated_J"] > 0.0
-    assert json.loads(json.dumps(account)) == account
-    assert p.account(0)["input_J"] == 0.0 and p.account(0)["active_steps"] == 0
 
 
 def test_the_damper_dissipates_exactly_the_excess() -> None:

@@ -5,6 +5,8 @@ tests/common/model/test_passivity.py tests the controllers' physics."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -126,11 +128,16 @@ def test_the_summary_of_each_layer() -> None:
     p.input_energy_J[...] = (0.5, 9.0)
     p.output_energy_J[...] = (0.75, 9.0)
     p.dissipated_energy_J[...] = (1.5, 9.0)
+    p.forgotten_energy_J[...] = (2.5, 9.0)
+    p.tank_J[...] = (-0.0625, 9.0)
     p.active_steps[...] = (7, 9)
-    assert passivity_summary(p, False) == {
+    summary = passivity_summary(p, False)
+    assert summary == {
         "tdpa_layer": "tdpa", "tdpa_active": True, "tdpa_sent_J": 0.125,
         "tdpa_received_J": 0.25, "tdpa_input_energy_J": 0.5, "tdpa_output_energy_J": 0.75,
-        "tdpa_dissipated_energy_J": 1.5, "tdpa_active_steps": 7}
+        "tdpa_dissipated_energy_J": 1.5, "tdpa_forgotten_energy_J": 2.5,
+        "tdpa_reserve_J": -0.0625, "tdpa_active_steps": 7}
+    assert json.loads(json.dumps(summary)) == summary  # plain numbers for the JSON summary
     standby = passivity_summary(p, True, lane=1)
     assert standby["tdpa_layer"] == "standby" and standby["tdpa_active"] is False
     assert standby["tdpa_active_steps"] == 9
